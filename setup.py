@@ -1,0 +1,56 @@
+"""ament_python package setup: works with ``colcon build`` and with plain ``pip install -e .``."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "dualarm_control"
+
+# The one place where dependency versions are pinned (ranges).
+INSTALL_REQUIRES = [
+    "numpy>=1.26,<3",
+    "scipy>=1.11,<2",
+    "PyYAML>=6,<7",
+    "pin>=3.1,<5",
+    "proxsuite>=0.6,<0.9",
+    "pybullet>=3.2.6,<3.3",
+    "ruckig>=0.12,<0.20",
+    "qpsolvers>=4.3,<5",
+    "quadprog>=0.1.11,<0.2",
+    "matplotlib>=3.8,<4",
+    "rosbags>=0.10,<0.12",
+    "cyclonedds>=0.10.5,<12",
+]
+TEST_REQUIRES = ["pytest>=8,<10", "hypothesis>=6.100,<7", "ruff>=0.5", "mypy>=1.10"]
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(include=["dualarm_control", "dualarm_control.*", "dualarm_sim", "dualarm_sim.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml") + glob("config/*.xml")),
+        (f"share/{PACKAGE}/config/solvers", glob("config/solvers/*.yaml")),
+        (f"share/{PACKAGE}/config/scenarios", glob("config/scenarios/*.yaml")),
+        (f"share/{PACKAGE}/urdf", glob("urdf/*.urdf")),
+        (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
+    ],
+    install_requires=INSTALL_REQUIRES,
+    extras_require={"test": TEST_REQUIRES},
+    python_requires=">=3.10",
+    zip_safe=True,
+    maintainer="dualarm_control developers",
+    maintainer_email="dev@dualarm-control.invalid",
+    description="Sparse hierarchical QP relative-pose control of a simulated dual-arm cell.",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "dualarm = dualarm_control.cli:main",
+            "controller_node = dualarm_control.nodes.controller_node:main",
+            "trajectory_node = dualarm_control.nodes.trajectory_node:main",
+            "sim_node = dualarm_sim.sim_node:main",
+        ],
+    },
+)

@@ -1,0 +1,123 @@
+"""Generate ``dualarm_cell.urdf``: two KUKA LWR4 arms on a fixed torso (BAZAR-like).
+
+Run ``python urdf/make_cell_urdf.py`` after editing; the generated URDF is committed so
+pinocchio and pybullet load the very same file.
+
+Nominal LWR4 kinematics: shoulder 0.3105 m above the base, elbow +0.40 m, wrist +0.39 m,
+flange +0.078 m past the wrist centre (A6 and A7 intersect). Axes z, y, z, y, z, y, z.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+POS_LIMITS_DEG = (170, 120, 170, 120, 170, 120, 170)
+VEL_LIMITS_DEG = (110, 110, 128, 128, 204, 184, 184)
+EFFORT = (176, 176, 100, 100, 100, 38, 38)
+# (parent->joint offset along z [m], axis, link mass [kg], link length for inertia [m])
+CHAIN = (
+    (0.1575, "0 0 1", 2.7, 0.20),
+    (0.1530, "0 1 0", 2.7, 0.20),
+    (0.2000, "0 0 1", 2.7, 0.20),
+    (0.2000, "0 1 0", 2.7, 0.20),
+    (0.2000, "0 0 1", 1.7, 0.19),
+    (0.1900, "0 1 0", 1.6, 0.08),
+    (0.0000, "0 0 1", 0.3, 0.05),
+)
+FLANGE_OFFSET = 0.078
+RADIUS = 0.06
+# Arm mounts on the torso: (side, y offset [m], rpy of the arm base)
+MOUNTS = (("left", 0.26, (-math.pi / 4, 0.0, 0.0)), ("right", -0.26, (math.pi / 4, 0.0, 0.0)))
+TORSO_HEIGHT = 1.0
+
+
+def _inertia(mass: float, length: float, radius: float = RADIUS) -> str:
+    ixx = mass * (3 * radius**2 + length**2) / 12.0
+    izz = mass * radius**2 / 2.0
+    return f'<inertia ixx="{ixx:.6f}" ixy="0" ixz="0" iyy="{ixx:.6f}" iyz="0" izz="{izz:.6f}"/>'
+
+
+def _cyl_link(name: str, mass: float, length: float, rgba: str) -> str:
+    return f"""  <link name="{name}">
+    <inertial><origin xyz="0 0 {length / 2:.4f}"/><mass value="{mass}"/>{_inertia(mass, length)}</inertial>
+    <visual><origin xyz="0 0 {length / 2:.4f}"/><geometry><cylinder radius="{RADIUS}" length="{length}"/></geometry><material name="m_{name}"><color rgba="{rgba}"/></material></visual>
+    <collision><origin xyz="0 0 {length / 2:.4f}"/><geometry><cylinder radius="{RADIUS * 0.9:.3f}" length="{length}"/></geometry></collision>
+  </link>
+"""
+
+
+def _arm(side: str, y: float, rpy: tuple[float, float, float]) -> str:
+    out = [
+        f'  <joint name="{side}_mount" type="fixed"><parent link="torso"/><child link="{side}_link_0"/>'
+        f'<origin xyz="0 {y} {TORSO_HEIGHT}" rpy="{rpy[0]:.6f} {rpy[1]:.6f} {rpy[2]:.6f}"/></joint>\n',
+        _cyl_link(f"{side}_link_0", 2.0, 0.1575, "0.9 0.5 0.1 1"),
+    ]
+    parent = f"{side}_link_0"
+    for i, (dz, axis, mass, length) in enumerate(CHAIN, start=1):
+        lim = math.radians(POS_LIMITS_DEG[i - 1])
+        vel = math.radians(VEL_LIMITS_DEG[i - 1])
+        child = f"{side}_link_{i}"
+        out.append(
+            f'  <joint name="{side}_joint_{i}" type="revolute"><parent link="{parent}"/><child link="{child}"/>'
+            f'<origin xyz="0 0 {dz}"/><axis xyz="{axis}"/>'
+            f'<limit lower="{-lim:.6f}" upper="{lim:.6f}" velocity="{vel:.6f}" effort="{EFFORT[i - 1]}"/>'
+            f'<dynamics damping="0.5" friction="0.0"/></joint>\n'
+        )
+        out.append(_cyl_link(child, mass, length, "0.9 0.5 0.1 1" if i % 2 else "0.8 0.8 0.8 1"))
+        parent = child
+    out.append(
+        f'  <joint name="{side}_flange_joint" type="fixed"><parent link="{parent}"/><child link="{side}_flange"/>'
+        f'<origin xyz="0 0 {FLANGE_OFFSET}"/></joint>\n'
+    )
+    out.append(_tool(side))
+    return "".join(out)
+
+
+def _tool(side: str) -> str:
+    """Left: a block with a hole, tool frame at the hole entrance, z out of the hole.
+    Right: a peg, tool frame at the peg tip, z along the peg pointing out of the tip."""
+    if side == "left":
+        body = (
+            '  <link name="left_flange"><inertial><origin xyz="0 0 0.04"/><mass value="0.6"/>'
+            f'{_inertia(0.6, 0.08, 0.05)}</inertial>'
+            '<visual><origin xyz="0 0 0.04"/><geometry><box size="0.1 0.1 0.08"/></geometry>'
+            '<material name="hole_block"><color rgba="0.2 0.3 0.8 1"/></material></visual>'
+            '<collision><origin xyz="0 0 0.04"/><geometry><box size="0.1 0.1 0.08"/></geometry></collision></link>\n'
+        )
+        tool_xyz = "0 0 0.08"
+    else:
+        body = (
+            '  <link name="right_flange"><inertial><origin xyz="0 0 0.06"/><mass value="0.3"/>'
+            f'{_inertia(0.3, 0.12, 0.015)}</inertial>'
+            '<visual><origin xyz="0 0 0.06"/><geometry><cylinder radius="0.015" length="0.12"/></geometry>'
+            '<material name="peg"><color rgba="0.3 0.8 0.3 1"/></material></visual>'
+            '<collision><origin xyz="0 0 0.06"/><geometry><cylinder radius="0.015" length="0.12"/></geometry></collision></link>\n'
+        )
+        tool_xyz = "0 0 0.12"
+    return body + (
+        f'  <joint name="{side}_tool_joint" type="fixed"><parent link="{side}_flange"/><child link="{side}_tool"/>'
+        f'<origin xyz="{tool_xyz}"/></joint>\n'
+        f'  <link name="{side}_tool"><inertial><mass value="0.001"/>'
+        '<inertia ixx="1e-7" ixy="0" ixz="0" iyy="1e-7" iyz="0" izz="1e-7"/></inertial></link>\n'
+    )
+
+
+def make_urdf() -> str:
+    torso = (
+        '  <link name="world"/>\n'
+        '  <joint name="torso_joint" type="fixed"><parent link="world"/><child link="torso"/></joint>\n'
+        '  <link name="torso"><inertial><origin xyz="0 0 0.5"/><mass value="40"/>'
+        '<inertia ixx="4" ixy="0" ixz="0" iyy="4" iyz="0" izz="1"/></inertial>'
+        '<visual><origin xyz="-0.1 0 0.5"/><geometry><box size="0.2 0.4 1.0"/></geometry>'
+        '<material name="torso"><color rgba="0.5 0.5 0.5 1"/></material></visual>'
+        '<collision><origin xyz="-0.1 0 0.5"/><geometry><box size="0.2 0.4 1.0"/></geometry></collision></link>\n'
+    )
+    arms = "".join(_arm(side, y, rpy) for side, y, rpy in MOUNTS)
+    return f'<?xml version="1.0"?>\n<!-- generated by urdf/make_cell_urdf.py: do not edit by hand -->\n<robot name="dualarm_cell">\n{torso}{arms}</robot>\n'
+
+
+if __name__ == "__main__":
+    out = Path(__file__).with_name("dualarm_cell.urdf")
+    out.write_text(make_urdf())
+    print(f"wrote {out}")
