@@ -28,7 +28,7 @@ CHAIN = (
 FLANGE_OFFSET = 0.078
 RADIUS = 0.06
 # Arm mounts on the torso: (side, y offset [m], rpy of the arm base)
-MOUNTS = (("left", 0.26, (-math.pi / 4, 0.0, 0.0)), ("right", -0.26, (math.pi / 4, 0.0, 0.0)))
+MOUNTS = (("left", 0.26, (0.0, math.pi / 2, math.radians(20))), ("right", -0.26, (0.0, math.pi / 2, -math.radians(20))))
 TORSO_HEIGHT = 1.0
 
 

@@ -1,0 +1,177 @@
+"""One cycle of closed-loop relative control (paper 000, Fig. 3): state + target -> joint velocities.
+
+Used unchanged by the in-process experiment, the controller node and the benchmark.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from dualarm_control.kinematics import DualArmModel, FloatArray, pose_error, rotation_angle
+from dualarm_control.limits import JointLimits, repulsive_velocity, velocity_bounds
+from dualarm_control.params import ParamSpec, non_negative, open_unit_interval, positive, resolve, unit_interval
+from dualarm_control.qp import QPSettings
+from dualarm_control.solvers import ControlProblem, SolverParams, SolverResult, make_solver
+
+
+class RelativeTarget(Protocol):
+    """A desired relative pose and twist (x*, xd*), expressed in the left tool frame F1."""
+
+    position: FloatArray  # (3,) m
+    rotation: FloatArray  # (3, 3)
+    linear_velocity: FloatArray  # (3,) m/s
+    angular_velocity: FloatArray  # (3,) rad/s
+
+
+@dataclass(frozen=True)
+class ControllerParams:
+    """Validated controller parameters (paper 000, Sect. VI defaults).
+
+    Attributes:
+        solver: registered solver name.
+        gain: K of eq (12)-(13) [1/s], > 0; paper: 10.
+        period: control period T of eq (21)-(23) [s], > 0; paper: 0.005.
+        alpha: repulsive activation share of eq (24), in [0, 1]; paper: 0.1.
+        velocity_scale: factor in (0, 1] on the nominal joint velocity limits.
+        solver_params: parameters of the QP solvers.
+    """
+
+    solver: str = "hierarchical_sparse_qp"
+    gain: float = 10.0
+    period: float = 0.005
+    alpha: float = 0.1
+    velocity_scale: float = 1.0
+    solver_params: SolverParams = field(default_factory=SolverParams)
+
+    def __post_init__(self) -> None:
+        for key in ("gain", "period"):
+            value = getattr(self, key)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{key} must be a positive number, got {value}")
+        if not 0.0 <= self.alpha <= 1.0:
+            raise ValueError(f"alpha must be in [0, 1], got {self.alpha}")
+        if not 0.0 < self.velocity_scale <= 1.0:
+            raise ValueError(f"velocity_scale must be in (0, 1], got {self.velocity_scale}")
+
+
+@dataclass(frozen=True)
+class ControlOutput:
+    """Result of one cycle.
+
+    Attributes:
+        velocities: command [rad/s], (n,), finite and inside the eq (23) bounds.
+        result: the solver's record (status, timings, active joints).
+        position: measured relative position p_r^1 [m], (3,) (NaN when the state was invalid).
+        rotation: measured relative rotation R_r^1, (3, 3).
+        position_error: ||p* - p|| [m].
+        orientation_error: geodesic angle between R* and R [rad].
+        cycle_time: wall time of the whole cycle (kinematics + solve) [s].
+    """
+
+    velocities: FloatArray
+    result: SolverResult
+    position: FloatArray
+    rotation: FloatArray
+    position_error: float
+    orientation_error: float
+    cycle_time: float
+
+
+class RelativeController:
+    """Closed-loop relative pose controller: xd* + K e fed to the configured solver."""
+
+    def __init__(self, model: DualArmModel, params: ControllerParams | None = None) -> None:
+        self.model = model
+        self.params = params or ControllerParams()
+        self.limits = JointLimits(model.q_min, model.q_max, model.qd_max).scaled_velocity(self.params.velocity_scale)
+        self.solver = make_solver(self.params.solver, self.params.solver_params)
+
+    def reset(self) -> None:
+        self.solver.reset()
+
+    def step(self, q: FloatArray, target: RelativeTarget) -> ControlOutput:
+        """Compute the joint velocity command for measured positions q (n,) and a target.
+
+        Non-finite q or target never reach the solver: the solver's safe command (zero
+        velocity) is returned with status "invalid_input" and the reason in ``detail``.
+        """
+        start = time.perf_counter()
+        q = self.model.check_q(q)
+        t_parts = (target.position, target.rotation, target.linear_velocity, target.angular_velocity)
+        bad = "joint positions" if not np.all(np.isfinite(q)) else (
+            "relative target" if not all(np.all(np.isfinite(np.asarray(x))) for x in t_parts) else "")
+        n = self.model.nq
+        if bad:
+            nan = np.full(6, np.nan)
+            problem = ControlProblem(np.full((6, n), np.nan), nan, np.zeros(n), np.zeros(n), np.zeros(n))
+            result = self.solver.solve(problem)
+            result = SolverResult(result.velocities, "invalid_input", result.solve_time, 0, 0, float("nan"),
+                                  f"non-finite {bad}")
+            p, r = np.full(3, np.nan), np.full((3, 3), np.nan)
+            return ControlOutput(result.velocities, result, p, r, float("nan"), float("nan"),
+                                 time.perf_counter() - start)
+        state = self.model.relative_state(q)
+        error = pose_error(state.position, state.rotation, np.asarray(target.position), np.asarray(target.rotation))
+        twist = np.concatenate((target.linear_velocity, target.angular_velocity))
+        lower, upper = velocity_bounds(q, self.limits, self.params.period)
+        repulsive = repulsive_velocity(q, self.limits, self.params.alpha)
+        result = self.solver.solve(ControlProblem(state.jacobian, twist + self.params.gain * error,
+                                                  lower, upper, repulsive))
+        return ControlOutput(
+            velocities=result.velocities,
+            result=result,
+            position=state.position,
+            rotation=state.rotation,
+            position_error=float(np.linalg.norm(error[:3])),
+            orientation_error=rotation_angle(state.rotation, np.asarray(target.rotation)),
+            cycle_time=time.perf_counter() - start,
+        )
+
+
+def _solver_choices() -> list[str]:
+    from dualarm_control.solvers import solver_names
+
+    return solver_names()
+
+
+def _backend_choices() -> list[str]:
+    from dualarm_control.qp import available_backends
+
+    return available_backends()
+
+
+CONTROLLER_PARAMETERS: tuple[ParamSpec, ...] = (
+    ParamSpec("solver", "hierarchical_sparse_qp", "kinematic solver (registry name)", choices=_solver_choices),
+    ParamSpec("gain", 10.0, "closed-loop gain K of eq (13) [1/s]", check=positive),
+    ParamSpec("control_period", 0.005, "control period T [s] (200 Hz)", check=positive),
+    ParamSpec("alpha", 0.1, "repulsive activation share alpha of eq (24)", check=unit_interval),
+    ParamSpec("velocity_scale", 1.0, "factor on the nominal joint velocity limits", check=open_unit_interval),
+    ParamSpec("l1_weight", 1e-6, "lambda of eq (17)/(26)", check=positive),
+    ParamSpec("regularization", 1e-6, "standard QP minimum-norm tie-break eps", check=non_negative),
+    ParamSpec("qp_backend", "proxsuite", "QP back-end", choices=_backend_choices),
+    ParamSpec("qp_eps_abs", 1e-9, "QP absolute tolerance", check=positive),
+    ParamSpec("qp_max_iter", 10000, "QP iteration cap", check=positive),
+)
+
+
+def controller_params(values: Mapping[str, Any], node: str = "controller_node") -> ControllerParams:
+    """Build validated ControllerParams from raw parameter values (file, ``-p``, or node)."""
+    v = resolve(CONTROLLER_PARAMETERS, values, node)
+    return ControllerParams(
+        solver=v["solver"],
+        gain=v["gain"],
+        period=v["control_period"],
+        alpha=v["alpha"],
+        velocity_scale=v["velocity_scale"],
+        solver_params=SolverParams(
+            l1_weight=v["l1_weight"],
+            regularization=v["regularization"],
+            qp_backend=v["qp_backend"],
+            qp=QPSettings(eps_abs=v["qp_eps_abs"], max_iter=v["qp_max_iter"]),
+        ),
+    )

@@ -1,0 +1,43 @@
+"""Exceptions that carry the offending value, so a message can name it."""
+
+from __future__ import annotations
+
+
+class DualArmError(Exception):
+    """Base class of the package's errors."""
+
+
+class ParameterError(DualArmError, ValueError):
+    """A parameter has a wrong value or type.
+
+    Attributes:
+        key: fully qualified parameter name (``node.key``).
+        value: the value that was given.
+        expected: human-readable description of the valid values.
+    """
+
+    def __init__(self, key: str, value: object, expected: str) -> None:
+        self.key = key
+        self.value = value
+        self.expected = expected
+        super().__init__(f"parameter '{key}': got {value!r}, expected {expected}")
+
+
+class ScenarioError(DualArmError, ValueError):
+    """A scenario file is malformed or names an unknown scenario."""
+
+
+class UnknownSolverError(DualArmError, KeyError):
+    """A solver name is not in the registry."""
+
+    def __init__(self, name: str, known: list[str]) -> None:
+        self.name = name
+        self.known = known
+        super().__init__(f"unknown solver {name!r}; valid choices: {', '.join(known)}")
+
+    def __str__(self) -> str:  # KeyError quotes its message otherwise
+        return str(self.args[0])
+
+
+class DimensionError(DualArmError, ValueError):
+    """An array has the wrong shape (e.g. a joint vector with the wrong joint count)."""

@@ -1,0 +1,141 @@
+"""Dual-arm relative kinematics (paper 000, Sect. II) with pinocchio.
+
+Conventions: frame F1 is the left tool (the part with the hole), frame F2 the right tool
+(the peg). The relative pose is the right tool in the left tool frame, eq (1)-(2).
+Joint vector order: left joints 1..7 then right joints 1..7 (the URDF's order).
+Twists are ``[v; w]`` (m/s; rad/s), both expressed in F1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import pinocchio as pin
+
+from dualarm_control.errors import DimensionError
+from dualarm_control.paths import urdf_path
+
+FloatArray = npt.NDArray[np.float64]
+
+LEFT_TOOL = "left_tool"
+RIGHT_TOOL = "right_tool"
+
+
+def skew(v: FloatArray) -> FloatArray:
+    """Cross-product matrix S(v), so that S(v) @ w == np.cross(v, w). Shape (3,) -> (3, 3)."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def relative_jacobian(r_b1: FloatArray, p_r1: FloatArray, j1_b: FloatArray, j2_b: FloatArray) -> FloatArray:
+    """Relative Jacobian of eq (5)-(6): J = [-Psi_r^1 Omega_b^1 J_1^b, Omega_b^1 J_2^b].
+
+    Args:
+        r_b1: R_1^b, orientation of F1 in the base frame, (3, 3).
+        p_r1: p_r^1, position of F2 in F1 [m], (3,).
+        j1_b, j2_b: geometric Jacobians of each tool in the base frame (linear velocity of
+            the tool origin, angular velocity), (6, n1) and (6, n2).
+
+    Returns:
+        (6, n1 + n2) matrix mapping joint velocities [rad/s] to the relative twist
+        [v_r^1; w_r^1] of eq (4), expressed in F1.
+    """
+    omega = np.zeros((6, 6))
+    omega[:3, :3] = omega[3:, 3:] = r_b1.T  # Omega_b^1 with R_b^1 = (R_1^b)^T
+    psi = np.eye(6)
+    psi[:3, 3:] = -skew(p_r1)
+    return np.hstack((-psi @ omega @ j1_b, omega @ j2_b))
+
+
+def luh_orientation_error(r_actual: FloatArray, r_desired: FloatArray) -> FloatArray:
+    """Orientation error of Luh et al., eq (10): e_o = 1/2 (n x n* + s x s* + a x a*).
+
+    Args:
+        r_actual: R_r^1, actual relative orientation, columns (n, s, a), (3, 3).
+        r_desired: R_r^1*, desired relative orientation, (3, 3).
+
+    Returns:
+        (3,) error [rad-like, equal to sin(theta) u for a rotation theta about u], in F1.
+    """
+    return 0.5 * np.sum(np.cross(r_actual.T, r_desired.T), axis=0)
+
+
+def pose_error(p: FloatArray, r: FloatArray, p_des: FloatArray, r_des: FloatArray) -> FloatArray:
+    """Task error e = [e_p; e_o] of eq (8)-(10), shape (6,), in F1."""
+    return np.concatenate((p_des - p, luh_orientation_error(r, r_des)))
+
+
+def rotation_angle(r_a: FloatArray, r_b: FloatArray) -> float:
+    """Geodesic angle [rad] between two rotations, in [0, pi]."""
+    c = (np.trace(r_a.T @ r_b) - 1.0) / 2.0
+    return float(np.arccos(np.clip(c, -1.0, 1.0)))
+
+
+@dataclass(frozen=True)
+class RelativeState:
+    """Relative kinematics at one configuration.
+
+    Attributes:
+        position: p_r^1 [m], (3,).
+        rotation: R_r^1, (3, 3).
+        jacobian: relative Jacobian J of eq (5), (6, 14).
+    """
+
+    position: FloatArray
+    rotation: FloatArray
+    jacobian: FloatArray
+
+
+@dataclass
+class DualArmModel:
+    """Pinocchio model of the cell: joint names, limits and relative kinematics."""
+
+    urdf: Path = field(default_factory=urdf_path)
+
+    def __post_init__(self) -> None:
+        self.model = pin.buildModelFromUrdf(str(self.urdf))
+        self.data = self.model.createData()
+        self.joint_names: list[str] = [self.model.names[i] for i in range(1, self.model.njoints)]
+        self.nq: int = self.model.nq
+        self.n_left: int = sum(1 for n in self.joint_names if n.startswith("left_"))
+        self.q_min: FloatArray = self.model.lowerPositionLimit.copy()
+        self.q_max: FloatArray = self.model.upperPositionLimit.copy()
+        self.qd_max: FloatArray = self.model.velocityLimit.copy()
+        self._f1 = self.model.getFrameId(LEFT_TOOL)
+        self._f2 = self.model.getFrameId(RIGHT_TOOL)
+
+    def check_q(self, q: FloatArray, what: str = "joint positions") -> FloatArray:
+        """Return q as a float array of shape (nq,), or raise DimensionError naming the problem."""
+        q = np.asarray(q, dtype=float)
+        if q.shape != (self.nq,):
+            raise DimensionError(f"{what}: expected {self.nq} values, got shape {q.shape}")
+        return q
+
+    def tool_poses(self, q: FloatArray) -> tuple[pin.SE3, pin.SE3]:
+        """World poses of the left and right tool frames at q."""
+        q = self.check_q(q)
+        pin.framesForwardKinematics(self.model, self.data, q)
+        return self.data.oMf[self._f1].copy(), self.data.oMf[self._f2].copy()
+
+    def relative_pose(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """(p_r^1, R_r^1) of eq (1)-(2) at q."""
+        o1, o2 = self.tool_poses(q)
+        rel = o1.actInv(o2)
+        return rel.translation.copy(), rel.rotation.copy()
+
+    def relative_state(self, q: FloatArray) -> RelativeState:
+        """Relative pose and relative Jacobian (eq 5-6) at q, in one kinematics pass."""
+        q = self.check_q(q)
+        pin.computeJointJacobians(self.model, self.data, q)
+        pin.updateFramePlacements(self.model, self.data)
+        frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        j1 = pin.getFrameJacobian(self.model, self.data, self._f1, frame)
+        j2 = pin.getFrameJacobian(self.model, self.data, self._f2, frame)
+        o1, o2 = self.data.oMf[self._f1], self.data.oMf[self._f2]
+        rel = o1.actInv(o2)
+        p_r1 = rel.translation.copy()
+        nl = self.n_left
+        jac = relative_jacobian(o1.rotation, p_r1, j1[:, :nl], j2[:, nl:])
+        return RelativeState(position=p_r1, rotation=rel.rotation.copy(), jacobian=jac)

@@ -1,0 +1,95 @@
+"""Joint limits as velocity bounds and the repulsive joint-limit velocity (paper 000, Sect. IV).
+
+All vectors have shape (n,): positions in rad, velocities in rad/s, the period T in s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Position and velocity limits of eq (20); velocities are symmetric as on the LWR4.
+
+    Attributes:
+        q_min, q_max: position limits [rad], (n,).
+        qd_max: velocity limit magnitude [rad/s], (n,); the lower limit is -qd_max.
+    """
+
+    q_min: FloatArray
+    q_max: FloatArray
+    qd_max: FloatArray
+
+    def __post_init__(self) -> None:
+        n = self.q_min.shape
+        if self.q_max.shape != n or self.qd_max.shape != n:
+            raise ValueError(f"limit shapes differ: {n}, {self.q_max.shape}, {self.qd_max.shape}")
+        if np.any(self.q_min >= self.q_max):
+            raise ValueError(f"q_min must be < q_max, got {self.q_min} and {self.q_max}")
+        if np.any(self.qd_max <= 0):
+            raise ValueError(f"qd_max must be > 0, got {self.qd_max}")
+
+    def scaled_velocity(self, factor: float) -> JointLimits:
+        """Same limits with the velocity limits multiplied by ``factor`` in (0, 1]."""
+        if not 0.0 < factor <= 1.0:
+            raise ValueError(f"velocity scale factor must be in (0, 1], got {factor}")
+        return JointLimits(self.q_min, self.q_max, self.qd_max * factor)
+
+
+def velocity_bounds(q: FloatArray, limits: JointLimits, period: float) -> tuple[FloatArray, FloatArray]:
+    """Velocity bounds of eq (21)-(23) that keep q_{k+1} = q_k + qd T inside the position limits.
+
+        Qd_min = max(-qd_max, (q_min - q_k) / T),   Qd_max = min(qd_max, (q_max - q_k) / T)
+
+    Args:
+        q: current joint positions q_k [rad], (n,).
+        limits: joint limits.
+        period: control period T [s], > 0.
+
+    Returns:
+        (lower, upper) [rad/s], each (n,). If q is outside its position range the bounds
+        can cross (lower > upper); callers treat that as an infeasible problem.
+    """
+    lower = np.maximum(-limits.qd_max, (limits.q_min - q) / period)
+    upper = np.minimum(limits.qd_max, (limits.q_max - q) / period)
+    return lower, upper
+
+
+def repulsive_velocity(q: FloatArray, limits: JointLimits, alpha: float) -> FloatArray:
+    """Repulsive joint-limit velocity of eq (24)-(25).
+
+    Thresholds q*_min = q_min + alpha (q_max - q_min)/2 and q*_max = q_max - alpha (q_max - q_min)/2.
+    Inside ]q*_min, q*_max[ the value is 0; in [q_min, q*_min] it is
+    ((q - q*_min)/(q_min - q*_min))^2 * qd_max (pushing up); in [q*_max, q_max] it is
+    ((q - q*_max)/(q_max - q*_max))^2 * (-qd_max) (pushing down). Beyond the limits the
+    value saturates at +-qd_max.
+
+    Args:
+        q: joint positions [rad], (n,).
+        limits: joint limits.
+        alpha: share of the range where the repulsion acts, in [0, 1].
+
+    Returns:
+        qd_r [rad/s], (n,).
+    """
+    if not 0.0 <= alpha <= 1.0:
+        raise ValueError(f"alpha must be in [0, 1], got {alpha}")
+    half = alpha * (limits.q_max - limits.q_min) / 2.0
+    low_star = limits.q_min + half
+    high_star = limits.q_max - half
+    out = np.zeros_like(q, dtype=float)
+    if alpha == 0.0:
+        return out
+    low = q <= low_star
+    high = q >= high_star
+    ratio_low = np.clip((q - low_star) / (limits.q_min - low_star), 0.0, 1.0)
+    ratio_high = np.clip((q - high_star) / (limits.q_max - high_star), 0.0, 1.0)
+    out[low] = (ratio_low**2 * limits.qd_max)[low]
+    out[high] = (ratio_high**2 * -limits.qd_max)[high]
+    return out

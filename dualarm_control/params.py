@@ -1,0 +1,167 @@
+"""ROS-style YAML parameter files and typed, validated parameter declarations.
+
+A file holds ``<node name>:`` (or ``/**:``, or ``/ns/node``) -> ``ros__parameters:`` -> keys;
+nested maps become dotted names (``scenario.limits.max_linear_velocity``), as in ROS 2.
+Types follow ROS 2: a declared double refuses an integer (write ``200.0``, not ``200``).
+The same declarations serve the in-process experiment (reading files directly) and the
+nodes (declaring them through the middleware), so both validate identically.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from dualarm_control.errors import ParameterError
+
+ParamValue = bool | int | float | str | list[Any]
+
+
+class ParameterFileError(ParameterError):
+    """A parameter file is missing or malformed."""
+
+    def __init__(self, path: str | Path, reason: str) -> None:
+        self.path = str(path)
+        super().__init__(f"params file {path}", str(path), reason)
+        self.args = (f"parameter file {path}: {reason}",)
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+def flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Flatten nested maps into dotted parameter names (ROS 2 convention)."""
+    out: dict[str, Any] = {}
+    for key, value in tree.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            out.update(flatten(value, f"{name}."))
+        else:
+            out[name] = value
+    return out
+
+
+def _node_keys(node_name: str, namespace: str) -> list[str]:
+    ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
+    return ["/**", f"{ns}/**" if ns else "/**", node_name, f"/{node_name}", f"{ns}/{node_name}"]
+
+
+def read_params_file(path: str | Path, node_name: str, namespace: str = "/") -> dict[str, Any]:
+    """Parameters that ``path`` gives to node ``node_name`` in ``namespace``, flattened.
+
+    Sections are applied in ROS order: ``/**`` wildcards first, then the node's own.
+    Raises ParameterFileError (missing file, bad YAML with its line, wrong layout).
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise ParameterFileError(p, "file not found")
+    try:
+        doc = yaml.safe_load(p.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        raise ParameterFileError(p, f"malformed YAML{where}: {getattr(exc, 'problem', exc)}") from None
+    if doc is None:
+        return {}
+    if not isinstance(doc, Mapping):
+        raise ParameterFileError(p, "expected a map of node names at the top level")
+    out: dict[str, Any] = {}
+    seen: set[str] = set()
+    for key in _node_keys(node_name, namespace):
+        if key in seen or key not in doc:
+            continue
+        seen.add(key)
+        section = doc[key]
+        if not isinstance(section, Mapping) or "ros__parameters" not in section:
+            raise ParameterFileError(p, f"section '{key}' must contain 'ros__parameters:'")
+        params = section["ros__parameters"] or {}
+        if not isinstance(params, Mapping):
+            raise ParameterFileError(p, f"'{key}: ros__parameters' must be a map")
+        out.update(flatten(params))
+    return out
+
+
+def read_params_files(paths: Iterable[str | Path], node_name: str, namespace: str = "/") -> dict[str, Any]:
+    """Merge several files in order (later files win), like repeated ``--params-file``."""
+    out: dict[str, Any] = {}
+    for path in paths:
+        out.update(read_params_file(path, node_name, namespace))
+    return out
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """A declared parameter: name, default (fixes the ROS type), description, optional check.
+
+    ``choices`` returns the valid values (evaluated lazily, e.g. the solver registry);
+    ``check`` returns an error description for a bad value, or ''.
+    """
+
+    name: str
+    default: ParamValue
+    description: str
+    choices: Callable[[], list[str]] | None = None
+    check: Callable[[Any], str] | None = None
+
+    @property
+    def type_name(self) -> str:
+        return _type_name(self.default)
+
+    def validate(self, value: Any, node: str = "") -> ParamValue:
+        """Return ``value`` if it has this parameter's type and passes the checks, else raise."""
+        key = f"{node}.{self.name}" if node else self.name
+        expected = self.type_name
+        if _type_name(value) != expected:
+            hint = ""
+            if expected == "double" and _type_name(value) == "integer":
+                hint = f" (write {value}.0, not {value})"
+            raise ParameterError(key, value, f"a {expected}{hint}")
+        if self.choices is not None:
+            valid = self.choices()
+            if value not in valid:
+                raise ParameterError(key, value, "one of: " + ", ".join(valid))
+        if self.check is not None:
+            problem = self.check(value)
+            if problem:
+                raise ParameterError(key, value, problem)
+        return value
+
+
+def _type_name(value: Any) -> str:
+    if isinstance(value, bool):
+        return "bool"
+    if isinstance(value, int):
+        return "integer"
+    if isinstance(value, float):
+        return "double"
+    if isinstance(value, str):
+        return "string"
+    if isinstance(value, list):
+        inner = {_type_name(v) for v in value}
+        return f"{inner.pop()} array" if len(inner) == 1 else ("double array" if not value else "mixed array")
+    return type(value).__name__
+
+
+def resolve(specs: Iterable[ParamSpec], given: Mapping[str, Any], node: str = "") -> dict[str, Any]:
+    """Validated values of ``specs``: the given value when present, else the default."""
+    return {s.name: s.validate(given[s.name], node) if s.name in given else s.default for s in specs}
+
+
+def positive(value: Any) -> str:
+    return "" if value > 0 else "a value > 0"
+
+
+def non_negative(value: Any) -> str:
+    return "" if value >= 0 else "a value >= 0"
+
+
+def unit_interval(value: Any) -> str:
+    return "" if 0 <= value <= 1 else "a value in [0, 1]"
+
+
+def open_unit_interval(value: Any) -> str:
+    return "" if 0 < value <= 1 else "a value in (0, 1]"

@@ -1,0 +1,36 @@
+"""Locate the package's shared files (urdf/, config/) in a source tree, a pip or a colcon install."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+PACKAGE = "dualarm_control"
+
+
+def share_dir() -> Path:
+    """Return the directory that holds ``urdf/`` and ``config/``.
+
+    Order: the source tree next to this package (editable installs, tests), the
+    ament index (colcon installs), then ``<prefix>/share/dualarm_control`` (pip installs).
+    """
+    source = Path(__file__).resolve().parents[1]
+    if (source / "urdf").is_dir() and (source / "config").is_dir():
+        return source
+    try:  # colcon install with ROS 2 sourced
+        from ament_index_python.packages import get_package_share_directory
+
+        return Path(get_package_share_directory(PACKAGE))
+    except Exception:  # noqa: BLE001 - ament_index absent or package not indexed
+        pass
+    return Path(sys.prefix) / "share" / PACKAGE
+
+
+def urdf_path() -> Path:
+    """Path of the cell's URDF, loaded by pinocchio and pybullet alike."""
+    return share_dir() / "urdf" / "dualarm_cell.urdf"
+
+
+def config_path(*parts: str) -> Path:
+    """Path inside ``config/`` (e.g. ``config_path('solvers', 'sparse_qp.yaml')``)."""
+    return share_dir().joinpath("config", *parts)

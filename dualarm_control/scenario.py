@@ -1,0 +1,176 @@
+"""Scenarios: initial configuration + relative motion segments, read from ROS-style YAML.
+
+A scenario file is a parameter file (``/**: ros__parameters: scenario: ...``) so the sim
+node (initial configuration), the trajectory node (segments) and the in-process experiment
+read the same keys. Registry: every ``config/scenarios/<name>.yaml`` is scenario ``<name>``.
+
+Keys under ``scenario.`` (flattened names):
+  name, description, initial_positions_deg (14 doubles: left 1..7, right 1..7),
+  settle_time [s], limits.<MotionLimits field>, segments (ordered list of names), and per
+  segment ``<seg>.type``: ``pose`` (``position`` [m] and ``rpy_deg`` of the peg frame F2 in
+  the hole frame F1) or ``screw`` (``axis`` in F1, ``angle_deg``, ``advance`` [m]); ``<seg>.hold`` [s].
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from dualarm_control.errors import ScenarioError
+from dualarm_control.kinematics import FloatArray
+from dualarm_control.params import ParameterError, read_params_file
+from dualarm_control.paths import config_path
+from dualarm_control.trajectory import MotionLimits, RelativeTrajectory, Segment
+
+PREFIX = "scenario."
+
+
+@dataclass(frozen=True)
+class SegmentSpec:
+    """One segment as written in the file (resolved against the start pose later)."""
+
+    name: str
+    kind: str  # "pose" | "screw"
+    position: FloatArray | None = None
+    rotation: FloatArray | None = None
+    axis: FloatArray | None = None
+    angle: float = 0.0
+    advance: float = 0.0
+    hold: float = 0.0
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario.
+
+    Attributes:
+        name, description: labels.
+        initial_positions: joint positions at start [rad], (14,).
+        segments: motion segments in order.
+        limits: ruckig limits of the relative motion.
+        settle_time: control time after the trajectory ends [s] (error convergence).
+        source: file it came from.
+    """
+
+    name: str
+    description: str
+    initial_positions: FloatArray
+    segments: tuple[SegmentSpec, ...]
+    limits: MotionLimits
+    settle_time: float
+    source: Path
+
+    def trajectory(self, start_position: FloatArray, start_rotation: FloatArray) -> RelativeTrajectory:
+        """The ruckig relative trajectory from the measured start pose through all segments."""
+        segments: list[Segment] = []
+        p, r = np.asarray(start_position, float), np.asarray(start_rotation, float)
+        for spec in self.segments:
+            if spec.kind == "pose":
+                assert spec.position is not None and spec.rotation is not None
+                seg = Segment.to_pose(spec.name, r, spec.position, spec.rotation, hold=spec.hold)
+            else:
+                assert spec.axis is not None
+                seg = Segment.screw(spec.name, p, spec.axis, spec.angle, spec.advance, hold=spec.hold)
+            segments.append(seg)
+            p = np.asarray(seg.position)
+            r = pin.exp3(seg.axis * seg.angle) @ r
+        return RelativeTrajectory(start_position, start_rotation, segments, self.limits)
+
+
+def scenario_names() -> list[str]:
+    """Names of the scenarios shipped in config/scenarios/."""
+    return sorted(p.stem for p in config_path("scenarios").glob("*.yaml"))
+
+
+def scenario_file(name_or_path: str) -> Path:
+    """Path of a scenario given by registry name or file path (ScenarioError if unknown)."""
+    path = Path(name_or_path)
+    if path.suffix in (".yaml", ".yml"):
+        if not path.is_file():
+            raise ScenarioError(f"scenario file not found: {path}")
+        return path
+    candidate = config_path("scenarios", f"{name_or_path}.yaml")
+    if not candidate.is_file():
+        raise ScenarioError(f"unknown scenario {name_or_path!r}; valid choices: {', '.join(scenario_names())}")
+    return candidate
+
+
+def load_scenario(name_or_path: str) -> Scenario:
+    """Load and validate a scenario by registry name or path."""
+    path = scenario_file(name_or_path)
+    try:
+        flat = read_params_file(path, "trajectory_node")
+    except ParameterError as exc:
+        raise ScenarioError(str(exc)) from None
+    return scenario_from_parameters(flat, path)
+
+
+def _get(flat: Mapping[str, Any], key: str, default: Any = None) -> Any:
+    full = PREFIX + key
+    if full in flat:
+        return flat[full]
+    if default is None:
+        raise ScenarioError(f"scenario parameter '{full}' is missing")
+    return default
+
+
+def _vector(flat: Mapping[str, Any], key: str, size: int) -> FloatArray:
+    value = _get(flat, key)
+    if not isinstance(value, list) or len(value) != size or not all(
+        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in value
+    ):
+        raise ScenarioError(f"scenario parameter '{PREFIX}{key}': got {value!r}, expected a list of {size} numbers")
+    return np.array(value, dtype=float)
+
+
+def _number(flat: Mapping[str, Any], key: str, default: float) -> float:
+    value = _get(flat, key, default)
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ScenarioError(f"scenario parameter '{PREFIX}{key}': got {value!r}, expected a number")
+    return float(value)
+
+
+def scenario_from_parameters(flat: Mapping[str, Any], source: Path) -> Scenario:
+    """Build a Scenario from flattened parameters (as read from the file or declared in a node)."""
+    names = _get(flat, "segments")
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+        raise ScenarioError(f"scenario parameter '{PREFIX}segments': got {names!r}, expected a list of segment names")
+    specs = []
+    for seg in names:
+        kind = _get(flat, f"{seg}.type")
+        hold = _number(flat, f"{seg}.hold", 0.0)
+        if kind == "pose":
+            rpy = np.radians(_vector(flat, f"{seg}.rpy_deg", 3))
+            specs.append(SegmentSpec(seg, "pose", position=_vector(flat, f"{seg}.position", 3),
+                                     rotation=pin.rpy.rpyToMatrix(*rpy), hold=hold))
+        elif kind == "screw":
+            specs.append(SegmentSpec(seg, "screw", axis=_vector(flat, f"{seg}.axis", 3),
+                                     angle=math.radians(_number(flat, f"{seg}.angle_deg", 0.0)),
+                                     advance=_number(flat, f"{seg}.advance", 0.0), hold=hold))
+        else:
+            raise ScenarioError(f"scenario parameter '{PREFIX}{seg}.type': got {kind!r}, expected one of: pose, screw")
+    limit_values = {k[len(PREFIX) + 7:]: v for k, v in flat.items() if k.startswith(PREFIX + "limits.")}
+    try:
+        limits = MotionLimits(**limit_values)
+    except TypeError as exc:
+        raise ScenarioError(f"scenario limits: {exc}") from None
+    except ValueError as exc:
+        raise ScenarioError(f"scenario limits: {exc}") from None
+    settle = _number(flat, "settle_time", 1.0)
+    if settle < 0:
+        raise ScenarioError(f"scenario parameter '{PREFIX}settle_time': got {settle}, expected >= 0")
+    return Scenario(
+        name=str(_get(flat, "name")),
+        description=str(_get(flat, "description", "")),
+        initial_positions=np.radians(_vector(flat, "initial_positions_deg", 14)),
+        segments=tuple(specs),
+        limits=limits,
+        settle_time=settle,
+        source=source,
+    )

@@ -1,0 +1,175 @@
+"""What every kinematic solver takes and returns, and the safe fallback.
+
+A solver is a pure function of the problem (Jacobian, reference twist, velocity bounds,
+repulsive velocity) to joint velocities, plus its own warm-start memory. The same object
+serves the in-process experiment, the controller node and the benchmark.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from dualarm_control.qp import QPSettings, QPSolution, make_backend
+
+FloatArray = npt.NDArray[np.float64]
+
+ACTIVITY_THRESHOLD = 1e-3
+"""A joint is active when |qd_i| > 1e-3 rad/s (paper 000, Fig. 5 and Table I)."""
+
+FAILURE_STATUSES = frozenset({"infeasible", "failed", "invalid_input"})
+
+
+@dataclass(frozen=True)
+class ControlProblem:
+    """Inputs of one control cycle.
+
+    Attributes:
+        jacobian: relative Jacobian J of eq (5), (6, n).
+        reference: closed-loop reference twist xd* + K e of eq (13)/(26) [m/s; rad/s], (6,).
+        lower, upper: joint velocity bounds Qd_min, Qd_max of eq (23) [rad/s], (n,).
+        repulsive: repulsive joint velocity qd_r of eq (25) [rad/s], (n,); used by the
+            hierarchical solver's secondary task only.
+    """
+
+    jacobian: FloatArray
+    reference: FloatArray
+    lower: FloatArray
+    upper: FloatArray
+    repulsive: FloatArray
+
+    def problem_with_invalid_input(self) -> str:
+        """Return a description of what is wrong with the inputs, or '' when they are usable."""
+        n = self.jacobian.shape[1] if self.jacobian.ndim == 2 else -1
+        if self.jacobian.shape != (6, n) or self.reference.shape != (6,):
+            return f"bad shapes: J {self.jacobian.shape}, reference {self.reference.shape}"
+        for name in ("lower", "upper", "repulsive"):
+            if getattr(self, name).shape != (n,):
+                return f"bad shape of {name}: {getattr(self, name).shape}, expected ({n},)"
+        for name in ("jacobian", "reference", "lower", "upper", "repulsive"):
+            if not np.all(np.isfinite(getattr(self, name))):
+                return f"non-finite values in {name}"
+        if np.any(self.lower > self.upper + 1e-12):
+            i = int(np.argmax(self.lower - self.upper))
+            return f"velocity bounds cross at joint {i}: lower {self.lower[i]:.4g} > upper {self.upper[i]:.4g} (joint outside its position range)"
+        return ""
+
+
+@dataclass(frozen=True)
+class SolverResult:
+    """One solver call.
+
+    Attributes:
+        velocities: joint velocities to command [rad/s], (n,); always finite and inside
+            the bounds (the safe command on failure).
+        status: "solved", "max_iter" (best iterate, clipped to the bounds, used),
+            "scaled" (pseudo-inverse shrunk into the bounds), or a failure:
+            "infeasible", "failed", "invalid_input" (then velocities is the safe command).
+        solve_time: wall time of the whole call [s].
+        iterations: QP iterations summed over the QPs solved (0 for closed forms).
+        active_joints: count of |qd_i| > 1e-3 rad/s.
+        task_residual: ||J qd - reference||_2 [m/s, rad/s mixed].
+        detail: human-readable reason for a fallback or a degraded result, else ''.
+    """
+
+    velocities: FloatArray
+    status: str
+    solve_time: float
+    iterations: int
+    active_joints: int
+    task_residual: float
+    detail: str = ""
+
+    @property
+    def failed(self) -> bool:
+        return self.status in FAILURE_STATUSES
+
+
+@dataclass(frozen=True)
+class SolverParams:
+    """Parameters of the kinematic solvers (validated).
+
+    Attributes:
+        l1_weight: lambda of eq (17)/(26) [ (m/s)^2 per rad/s ], > 0; paper: 1e-6.
+        regularization: epsilon of the standard QP's tie-break term eps/2 ||qd||^2 that selects
+            the minimum-norm solution among the least-squares ones, like J^+ (eq 13-14), >= 0.
+        qp_backend: "proxsuite" or a qpsolvers solver name (see dualarm_control.qp).
+        qp: numerical settings of the QP back-end.
+    """
+
+    l1_weight: float = 1e-6
+    regularization: float = 1e-6
+    qp_backend: str = "proxsuite"
+    qp: QPSettings = field(default_factory=QPSettings)
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.l1_weight) and self.l1_weight > 0):
+            raise ValueError(f"l1_weight must be > 0, got {self.l1_weight}")
+        if not (np.isfinite(self.regularization) and self.regularization >= 0):
+            raise ValueError(f"regularization must be >= 0, got {self.regularization}")
+
+
+class Solver:
+    """Base class: validation, timing, clipping and the safe fallback around ``_solve``.
+
+    The safe command on failure is zero joint velocity (arms hold still), which is what a
+    velocity-controlled LWR4/ros2_control hardware does on a stop. It is always inside the
+    bounds of eq (23) while the joints are inside their position range.
+    """
+
+    name = "base"
+
+    def __init__(self, params: SolverParams | None = None) -> None:
+        self.params = params or SolverParams()
+
+    def reset(self) -> None:
+        """Forget warm-start memory (e.g. after a discontinuity)."""
+
+    def _backend(self):  # noqa: ANN202 - returns a QPBackend
+        return make_backend(self.params.qp_backend, self.params.qp)
+
+    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
+        """Return (velocities or None, status, iterations, detail)."""
+        raise NotImplementedError
+
+    def solve(self, problem: ControlProblem) -> SolverResult:
+        """Solve one cycle; never raises on numerical trouble, never returns NaN."""
+        start = time.perf_counter()
+        n = problem.jacobian.shape[1] if problem.jacobian.ndim == 2 else problem.lower.shape[0]
+        invalid = problem.problem_with_invalid_input()
+        if invalid:
+            qd, status, iters, detail = None, "invalid_input", 0, invalid
+        else:
+            try:
+                qd, status, iters, detail = self._solve(problem)
+            except (ValueError, np.linalg.LinAlgError, RuntimeError) as exc:
+                qd, status, iters, detail = None, "failed", 0, f"{type(exc).__name__}: {exc}"
+        if qd is None or not np.all(np.isfinite(qd)):
+            if status not in FAILURE_STATUSES:
+                status, detail = "failed", detail or "solver returned non-finite velocities"
+            self.reset()
+            qd = np.zeros(max(n, 0))
+        elif not invalid:
+            qd = np.clip(qd, problem.lower, problem.upper)  # remove solver-tolerance overshoot
+        residual = float(np.linalg.norm(problem.jacobian @ qd - problem.reference)) if not invalid else float("nan")
+        return SolverResult(
+            velocities=qd,
+            status=status,
+            solve_time=time.perf_counter() - start,
+            iterations=iters,
+            active_joints=int(np.count_nonzero(np.abs(qd) > ACTIVITY_THRESHOLD)),
+            task_residual=residual,
+            detail=detail,
+        )
+
+
+def from_qp(solution: QPSolution, transform=None) -> tuple[FloatArray | None, str, int, str]:  # noqa: ANN001
+    """Map a QP solution to the ``_solve`` tuple, applying ``transform`` to x when usable."""
+    if solution.x is None:
+        return None, solution.status, solution.iterations, f"QP {solution.status}"
+    x = solution.x if transform is None else transform(solution.x)
+    detail = "" if solution.status == "solved" else f"QP {solution.status}; best iterate used"
+    return x, solution.status, solution.iterations, detail

@@ -1,0 +1,133 @@
+"""The kinematic solvers of paper 000, one class each, registered by name.
+
+Notation: J (6, n) relative Jacobian, r = xd* + K e (6,) reference twist, Qd_min/Qd_max
+velocity bounds of eq (23), qd_r repulsive velocity of eq (25). Units rad/s, m/s.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dualarm_control.qp import QPProblem
+from dualarm_control.solvers.base import ControlProblem, FloatArray, Solver, SolverParams, from_qp
+from dualarm_control.solvers.registry import register
+
+
+@register("pseudo_inverse")
+class PseudoInverse(Solver):
+    """Closed-loop pseudo-inverse, eq (13): qd = J^+ (xd* + K e).
+
+    Eq (13) has no constraints; to never command beyond eq (23) the result is shrunk
+    uniformly (direction kept) until it fits the bounds, and the status is then "scaled".
+    """
+
+    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
+        qd = np.linalg.pinv(problem.jacobian, rcond=1e-6) @ problem.reference
+        scale = 1.0
+        for value, lo, hi in zip(qd, problem.lower, problem.upper, strict=True):
+            if value > hi and value > 0:
+                scale = min(scale, max(hi, 0.0) / value)
+            elif value < lo and value < 0:
+                scale = min(scale, min(lo, 0.0) / value)
+        if scale < 1.0:
+            return qd * scale, "scaled", 0, f"scaled by {scale:.3g} into the joint bounds"
+        return qd, "solved", 0, ""
+
+
+def _least_squares_terms(problem: ControlProblem) -> tuple[FloatArray, FloatArray]:
+    """J^T J (n, n) and J^T r (n,) of 1/2 ||J qd - r||^2."""
+    j = problem.jacobian
+    return j.T @ j, j.T @ problem.reference
+
+
+@register("standard_qp")
+class StandardQP(Solver):
+    """Standard QP, eq (14): min 1/2 ||J qd - r||^2 + eps/2 ||qd||^2  s.t. Qd_min <= qd <= Qd_max.
+
+    J^T J has rank 6 < n, so eq (14) alone has a whole affine set of minimisers; the tiny
+    term eps (``regularization``, default 1e-6) selects the minimum-norm one, as J^+ does.
+    """
+
+    def __init__(self, params: SolverParams | None = None) -> None:
+        super().__init__(params)
+        self._qp = self._backend()
+
+    def reset(self) -> None:
+        self._qp.reset()
+
+    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
+        jtj, jtr = _least_squares_terms(problem)
+        n = jtj.shape[0]
+        h = jtj + self.params.regularization * np.eye(n)
+        return from_qp(self._qp.solve(QPProblem(H=h, g=-jtr, lb=problem.lower, ub=problem.upper)))
+
+
+@register("sparse_qp")
+class SparseQP(Solver):
+    """Lasso QP, eq (17)-(19) with the bounds of eq (23) (QP1 of eq (26)).
+
+    min 1/2 ||J qd - r||^2 + lambda ||qd||_1  s.t. Qd_min <= qd <= Qd_max, solved as the
+    standard QP of eq (19) in 2n variables z = [qd+; qd-] >= 0, qd = qd+ - qd-:
+    H = [[J^T J, -J^T J], [-J^T J, J^T J]], g = lambda 1_2n - [J^T r; -J^T r],
+    Qd_min <= [I, -I] z <= Qd_max. The box 0 <= qd+ <= max(Qd_max, 0), 0 <= qd- <= max(-Qd_min, 0)
+    is implied by the other constraints and only tightens the solver's search.
+    """
+
+    def __init__(self, params: SolverParams | None = None) -> None:
+        super().__init__(params)
+        self._qp = self._backend()
+
+    def reset(self) -> None:
+        self._qp.reset()
+
+    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
+        jtj, jtr = _least_squares_terms(problem)
+        n = jtj.shape[0]
+        h = np.block([[jtj, -jtj], [-jtj, jtj]])
+        g = self.params.l1_weight * np.ones(2 * n) - np.concatenate((jtr, -jtr))
+        c = np.hstack((np.eye(n), -np.eye(n)))
+        lb = np.zeros(2 * n)
+        ub = np.concatenate((np.maximum(problem.upper, 0.0), np.maximum(-problem.lower, 0.0)))
+        qp = QPProblem(H=h, g=g, C=c, l=problem.lower, u=problem.upper, lb=lb, ub=ub)
+        return from_qp(self._qp.solve(qp), lambda z: z[:n] - z[n:])
+
+
+@register("hierarchical_sparse_qp")
+class HierarchicalSparseQP(Solver):
+    """Hierarchical sparse QP, eq (26)-(28).
+
+    QP1 (eq 26) is :class:`SparseQP`. QP2 (eq 27) moves in the null space of the task toward
+    the repulsive velocity of eq (25):
+
+        qd2 = argmin 1/2 ||qd - qd_r||^2  s.t.  J qd = 0,  Qd_min - qd1 <= qd <= Qd_max - qd1,
+
+    and the command is qd1 + qd2 (eq 28). The printed eq (27) reads ||qd - qd1||, which would
+    pull the secondary motion toward the primary one; the text says QP2 realises the
+    repulsive vector qd_r of Sect. IV-B, so qd_r is the target here. When qd_r = 0 (every
+    joint inside its activation thresholds) qd2 = 0 is the exact optimum and QP2 is skipped.
+    If QP2 fails, qd1 alone is commanded (the primary task is kept) and ``detail`` says so.
+    """
+
+    def __init__(self, params: SolverParams | None = None) -> None:
+        super().__init__(params)
+        self._primary = SparseQP(self.params)
+        self._secondary = self._backend()
+
+    def reset(self) -> None:
+        self._primary.reset()
+        self._secondary.reset()
+
+    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
+        qd1, status, iters, detail = self._primary._solve(problem)
+        if qd1 is None or not np.any(problem.repulsive):
+            return qd1, status, iters, detail
+        qd1 = np.clip(qd1, problem.lower, problem.upper)
+        n = qd1.shape[0]
+        qp2 = QPProblem(
+            H=np.eye(n), g=-problem.repulsive, A=problem.jacobian, b=np.zeros(6),
+            lb=problem.lower - qd1, ub=problem.upper - qd1,
+        )
+        sol = self._secondary.solve(qp2)
+        if sol.x is None:
+            return qd1, status, iters + sol.iterations, f"secondary QP {sol.status}; primary task only"
+        return qd1 + sol.x, status, iters + sol.iterations, detail

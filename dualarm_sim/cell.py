@@ -1,0 +1,394 @@
+"""Step-driven pybullet simulation of the dual-arm cell, velocity-commanded like KUKA FRI.
+
+One :meth:`DualArmCell.step` advances exactly one control period (default 5 ms) made of
+``physics_rate_hz * control_period`` physics substeps. The arms follow joint velocity
+commands through pybullet's velocity motors; the state returned is read back from the
+physics (``getJointStates``), never integrated from the command. Real-time pacing is left
+to the caller (the ROS node), so the class also runs in lockstep in tests.
+
+Physics choices (all measured on ``urdf/dualarm_cell.urdf``):
+
+* Motor forces are ``motor_force_scale`` (default 10) times the URDF effort limits. The
+  upstream controller is kinematic and expects FRI-like behaviour, where the robot's own
+  high-gain joint controller makes joints follow the commanded velocity. With the bare
+  URDF efforts the shoulder joints (2 and 4) saturate for about 15 ms after a 0.5 rad/s
+  step under gravity; at 10x they are within 1e-3 rad/s after 2 ms (1 kHz physics).
+* Link linear/angular damping (pybullet defaults 0.04) is set to 0; the URDF joint damping
+  (0.5 N m s/rad) is kept, the motors overcome it.
+* Inertias come from the URDF (``URDF_USE_INERTIA_FROM_FILE``), as in pinocchio.
+* No contact model between the arms: self-collision is not enabled when loading, so links
+  of the cell (torso, both arms, hole block and peg) never collide with each other; the
+  peg enters the hole kinematically. Collisions between the two tools and flanges are also
+  filtered explicitly (``setCollisionFilterPair``) in case self-collision is turned on later.
+* Joint position limits ARE enforced by pybullet (it creates joint-limit constraints from
+  the URDF ``<limit>``, also in velocity mode): a joint commanded past its limit stops
+  there (overshoot of a few 1e-5 rad). Keeping away from the limits is still the
+  controller's job.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+import pybullet as p
+
+from dualarm_control.errors import DimensionError
+from dualarm_control.paths import urdf_path
+
+if TYPE_CHECKING:  # typing.Self is 3.11+ but ROS Humble runs 3.10: type-checking only
+    from typing import Self
+
+FloatArray = npt.NDArray[np.float64]
+
+SENSOR_JOINT = "right_tool_joint"
+TOOL_LINKS = ("left_flange", "left_tool", "right_flange", "right_tool")
+MIN_PHYSICS_RATE_HZ = 1000.0
+_RATE_TOL = 1e-9  # relative tolerance of the "integer multiple" check
+
+
+def _check_positive(name: str, value: float) -> None:
+    if not (math.isfinite(value) and value > 0.0):
+        raise ValueError(f"{name}={value!r} must be a finite positive number")
+
+
+@dataclass(frozen=True)
+class CellConfig:
+    """Simulation settings.
+
+    Attributes:
+        urdf: cell URDF, the same file pinocchio loads.
+        control_period: duration of one :meth:`DualArmCell.step` [s]; one command per period.
+        physics_rate_hz: physics substep rate [Hz]; >= 1000 and an integer multiple of
+            ``1 / control_period``.
+        command_timeout: sim time [s] a command stays in force; afterwards the arms are
+            brought to rest (zero velocity command), like FRI / ros2_control.
+        gravity: gravity along world z [m/s^2].
+        motor_force_scale: velocity-motor force limit as a multiple of the URDF effort
+            limits [-]; see the module docstring for why it is 10.
+    """
+
+    urdf: Path = field(default_factory=urdf_path)
+    control_period: float = 0.005
+    physics_rate_hz: float = 1000.0
+    command_timeout: float = 0.05
+    gravity: float = -9.81
+    motor_force_scale: float = 10.0
+
+    def __post_init__(self) -> None:
+        _check_positive("control_period", self.control_period)
+        _check_positive("command_timeout", self.command_timeout)
+        _check_positive("motor_force_scale", self.motor_force_scale)
+        if not math.isfinite(self.gravity):
+            raise ValueError(f"gravity={self.gravity!r} must be finite")
+        rate = self.physics_rate_hz
+        if not (math.isfinite(rate) and rate >= MIN_PHYSICS_RATE_HZ):
+            raise ValueError(f"physics_rate_hz={rate!r} must be >= {MIN_PHYSICS_RATE_HZ:g} Hz")
+        ratio = rate * self.control_period
+        if abs(ratio - round(ratio)) > _RATE_TOL * max(1.0, ratio):
+            raise ValueError(
+                f"physics_rate_hz={rate!r} must be an integer multiple of 1/control_period = "
+                f"{1.0 / self.control_period:g} Hz"
+            )
+
+    @property
+    def substeps(self) -> int:
+        """Physics substeps per control period [-]."""
+        return round(self.physics_rate_hz * self.control_period)
+
+    @property
+    def physics_dt(self) -> float:
+        """Physics substep duration [s]."""
+        return self.control_period / self.substeps
+
+    @property
+    def timeout_periods(self) -> int:
+        """Number of control periods a command stays in force after the one it was sent for [-]."""
+        return math.floor(self.command_timeout / self.control_period + 1e-9)
+
+
+@dataclass(frozen=True)
+class JointSample:
+    """Joint state read from the physics.
+
+    Attributes:
+        time: sim time [s] since the last reset.
+        positions: joint positions [rad], (14,), left 1..7 then right 1..7 (read-only array).
+        velocities: joint velocities [rad/s], (14,), same order (read-only array).
+    """
+
+    time: float
+    positions: FloatArray
+    velocities: FloatArray
+
+
+@dataclass(frozen=True)
+class CommandReport:
+    """Outcome of :meth:`DualArmCell.apply_command`.
+
+    Attributes:
+        accepted: False if the command was rejected (the arms are then commanded to rest).
+        clipped: number of joints whose velocity was clipped to the URDF limit [-].
+        reason: human-readable explanation naming the joints; empty if nothing happened.
+    """
+
+    accepted: bool
+    clipped: int = 0
+    reason: str = ""
+
+
+def _readonly(a: FloatArray) -> FloatArray:
+    a.setflags(write=False)
+    return a
+
+
+class DualArmCell:
+    """The simulated cell: two 7-DOF arms, joint velocity commands in, joint states out.
+
+    Each instance owns its own pybullet DIRECT client, so several cells can coexist in a
+    process. Usage::
+
+        with DualArmCell() as cell:
+            report = cell.apply_command(qd)    # once per control period
+            sample = cell.step()              # advance one period, read the physics
+
+    A command stays in force for ``command_timeout`` of sim time; with no fresher command
+    the arms are commanded to zero velocity and :attr:`timed_out` becomes True.
+    Before the first command the arms are held at zero velocity (not a time-out).
+    """
+
+    def __init__(self, config: CellConfig | None = None, initial_positions: FloatArray | None = None) -> None:
+        """Connect a DIRECT pybullet client, load the URDF and reset to ``initial_positions``.
+
+        Args:
+            config: simulation settings (defaults to ``CellConfig()``).
+            initial_positions: joint positions [rad], (14,); zeros if None.
+        """
+        self.config = config if config is not None else CellConfig()
+        if not Path(self.config.urdf).is_file():
+            raise FileNotFoundError(f"cell URDF not found: {self.config.urdf}")
+        cid = p.connect(p.DIRECT)
+        if cid < 0:
+            raise RuntimeError("pybullet: could not create a DIRECT physics client")
+        self._cid: int | None = cid
+        try:
+            self._load()
+            self.reset(np.zeros(len(self.joint_names)) if initial_positions is None else initial_positions)
+        except BaseException:
+            self.close()
+            raise
+
+    # ---- setup -------------------------------------------------------------------------
+    def _load(self) -> None:
+        cid = self._client
+        p.setGravity(0.0, 0.0, self.config.gravity, physicsClientId=cid)
+        p.setPhysicsEngineParameter(fixedTimeStep=self.config.physics_dt, numSubSteps=0, physicsClientId=cid)
+        self._body = p.loadURDF(
+            str(self.config.urdf), useFixedBase=True, flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=cid
+        )
+        n_joints = p.getNumJoints(self._body, physicsClientId=cid)
+        infos = [p.getJointInfo(self._body, j, physicsClientId=cid) for j in range(n_joints)]
+        self._joint_index = {info[1].decode(): j for j, info in enumerate(infos)}
+        self._link_index = {info[12].decode(): j for j, info in enumerate(infos)}
+        movable = [j for j, info in enumerate(infos) if info[2] != p.JOINT_FIXED]
+        self.joint_names: list[str] = [infos[j][1].decode() for j in movable]
+        self._idx = movable
+        self._q_min = _readonly(np.array([infos[j][8] for j in movable]))
+        self._q_max = _readonly(np.array([infos[j][9] for j in movable]))
+        self._effort = _readonly(np.array([infos[j][10] for j in movable]))
+        self._qd_max = _readonly(np.array([infos[j][11] for j in movable]))
+        self._forces = (self.config.motor_force_scale * self._effort).tolist()
+        for link in range(-1, len(infos)):
+            p.changeDynamics(self._body, link, linearDamping=0.0, angularDamping=0.0, physicsClientId=cid)
+        self._filter_tool_collisions()
+        self._sensor = self._joint_index[SENSOR_JOINT]
+        p.enableJointForceTorqueSensor(self._body, self._sensor, True, physicsClientId=cid)
+
+    def _filter_tool_collisions(self) -> None:
+        """Disable contacts between the left and right tools/flanges (see module docstring)."""
+        left = [self._link_index[n] for n in TOOL_LINKS if n.startswith("left_")]
+        right = [self._link_index[n] for n in TOOL_LINKS if n.startswith("right_")]
+        for a in left:
+            for b in right:
+                p.setCollisionFilterPair(self._body, self._body, a, b, 0, physicsClientId=self._client)
+
+    def _require_open(self) -> int:
+        """Return the pybullet client id; raise RuntimeError once the cell is closed."""
+        if self._cid is None:
+            raise RuntimeError("DualArmCell is closed")
+        return self._cid
+
+    @property
+    def _client(self) -> int:
+        return self._require_open()
+
+    # ---- read-only properties ----------------------------------------------------------
+    @property
+    def client_id(self) -> int:
+        """pybullet physics client id (for inspection/visualisation; do not step it directly)."""
+        return self._client
+
+    @property
+    def body_id(self) -> int:
+        """pybullet body id of the cell in :attr:`client_id`."""
+        return self._body
+
+    @property
+    def position_limits(self) -> tuple[FloatArray, FloatArray]:
+        """(lower, upper) joint position limits [rad], each (14,), from the URDF."""
+        return self._q_min, self._q_max
+
+    @property
+    def velocity_limits(self) -> FloatArray:
+        """Joint velocity limits [rad/s], (14,), from the URDF; commands are clipped to them."""
+        return self._qd_max
+
+    @property
+    def effort_limits(self) -> FloatArray:
+        """URDF joint effort limits [N m], (14,) (motor forces are these times motor_force_scale)."""
+        return self._effort
+
+    @property
+    def time(self) -> float:
+        """Sim time [s] since the last reset."""
+        return self._steps * self.config.control_period
+
+    @property
+    def timed_out(self) -> bool:
+        """True if the last accepted command is older than ``command_timeout`` (sim time).
+
+        Then the next :meth:`step` commands zero velocity. False before the first command.
+        """
+        return self._cmd_step is not None and self._steps - self._cmd_step > self.config.timeout_periods
+
+    # ---- commands and stepping ---------------------------------------------------------
+    def reset(self, positions: FloatArray) -> None:
+        """Teleport the joints to ``positions`` [rad] (14,), zero velocity, sim time 0, no command.
+
+        Raises:
+            DimensionError: wrong shape.
+            ValueError: non-finite value or a position outside the URDF limits.
+        """
+        q = self._check_vector(positions, "reset positions")
+        bad = [
+            f"{n}={float(v)!r}"
+            for n, v, lo, hi in zip(self.joint_names, q, self._q_min, self._q_max)
+            if not lo <= v <= hi
+        ]
+        if bad:
+            raise ValueError(f"reset positions outside the joint limits or non-finite: {', '.join(bad)}")
+        for j, qj in zip(self._idx, q):
+            p.resetJointState(self._body, j, float(qj), 0.0, physicsClientId=self._client)
+        self._target = np.zeros(len(self._idx))
+        self._cmd_step: int | None = None
+        self._steps = 0
+        self._stepped = False
+
+    def apply_command(self, velocities: FloatArray) -> CommandReport:
+        """Set the joint velocity command [rad/s], (14,), for the coming control periods.
+
+        Non-finite commands are rejected and the arms commanded to rest; values beyond the
+        URDF velocity limits are clipped. Both are reported.
+
+        Raises:
+            DimensionError: wrong shape.
+        """
+        self._require_open()
+        qd = self._check_vector(velocities, "velocity command")
+        finite = np.isfinite(qd)
+        if not finite.all():
+            self._target = np.zeros_like(qd)
+            names = [n for n, ok in zip(self.joint_names, finite) if not ok]
+            return CommandReport(False, 0, f"non-finite velocity at {', '.join(names)}; arms commanded to rest")
+        over = np.abs(qd) > self._qd_max
+        self._target = np.clip(qd, -self._qd_max, self._qd_max)
+        self._cmd_step = self._steps
+        if not over.any():
+            return CommandReport(True)
+        names = [n for n, o in zip(self.joint_names, over) if o]
+        return CommandReport(True, int(over.sum()), f"clipped to the velocity limits: {', '.join(names)}")
+
+    def step(self) -> JointSample:
+        """Advance one control period (``substeps`` physics steps) and return the measured state."""
+        cid = self._client
+        target = np.zeros_like(self._target) if self.timed_out else self._target
+        p.setJointMotorControlArray(
+            self._body,
+            self._idx,
+            p.VELOCITY_CONTROL,
+            targetVelocities=target.tolist(),
+            forces=self._forces,
+            physicsClientId=cid,
+        )
+        for _ in range(self.config.substeps):
+            p.stepSimulation(physicsClientId=cid)
+        self._steps += 1
+        self._stepped = True
+        return self.state()
+
+    def state(self) -> JointSample:
+        """Current joint state read from the physics, without stepping."""
+        states = p.getJointStates(self._body, self._idx, physicsClientId=self._client)
+        q = np.array([s[0] for s in states])
+        qd = np.array([s[1] for s in states])
+        return JointSample(time=self.time, positions=_readonly(q), velocities=_readonly(qd))
+
+    def wrench(self) -> FloatArray:
+        """Force/torque [Fx, Fy, Fz (N), Mx, My, Mz (N m)] measured at ``right_tool_joint``, (6,).
+
+        As pybullet gives it: the wrench the right flange exerts on the ``right_tool`` link,
+        about the tool-frame origin (the peg tip), expressed in the ``right_tool`` frame,
+        from the last physics substep. So an external force F on the peg reads as -F; at
+        rest the reading is the tool link's weight (1 g, ~0.0098 N) pointing up. Zeros until
+        the first step after a reset.
+        """
+        if not self._stepped:
+            return np.zeros(6)
+        return np.array(p.getJointState(self._body, self._sensor, physicsClientId=self._client)[2], dtype=float)
+
+    def link_pose(self, link: str) -> tuple[FloatArray, FloatArray]:
+        """World pose of a URDF link frame from pybullet's forward kinematics.
+
+        Returns:
+            position [m], (3,), and rotation matrix, (3, 3).
+        """
+        if link not in self._link_index:
+            raise KeyError(f"unknown link {link!r}")
+        ls = p.getLinkState(
+            self._body, self._link_index[link], computeForwardKinematics=True, physicsClientId=self._client
+        )
+        rot = np.array(p.getMatrixFromQuaternion(ls[5])).reshape(3, 3)
+        return np.array(ls[4]), rot
+
+    # ---- helpers and lifetime ----------------------------------------------------------
+    def _check_vector(self, values: FloatArray, what: str) -> FloatArray:
+        v = np.asarray(values, dtype=float)
+        if v.shape != (len(self._idx),):
+            raise DimensionError(f"{what}: expected {len(self._idx)} values, got shape {v.shape}")
+        return v.copy()
+
+    def close(self) -> None:
+        """Disconnect the pybullet client; idempotent."""
+        cid = getattr(self, "_cid", None)  # absent if __init__ failed early
+        if cid is not None:
+            self._cid = None
+            if p.isConnected(cid):
+                p.disconnect(cid)
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        with contextlib.suppress(Exception):  # interpreter shutdown: pybullet may be gone
+            self.close()
