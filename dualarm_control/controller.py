@@ -12,20 +12,44 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from dualarm_control.kinematics import DualArmModel, FloatArray, pose_error, rotation_angle
+from dualarm_control.kinematics import (
+    DualArmModel,
+    FloatArray,
+    pose_error,
+    rotation_angle,
+)
 from dualarm_control.limits import JointLimits, repulsive_velocity, velocity_bounds
-from dualarm_control.params import ParamSpec, non_negative, open_unit_interval, positive, resolve, unit_interval
+from dualarm_control.params import (
+    ParamSpec,
+    non_negative,
+    open_unit_interval,
+    positive,
+    resolve,
+    unit_interval,
+)
 from dualarm_control.qp import QPSettings
-from dualarm_control.solvers import ControlProblem, SolverParams, SolverResult, make_solver
+from dualarm_control.solvers import (
+    ControlProblem,
+    SolverParams,
+    SolverResult,
+    make_solver,
+)
 
 
 class RelativeTarget(Protocol):
     """A desired relative pose and twist (x*, xd*), expressed in the left tool frame F1."""
 
-    position: FloatArray  # (3,) m
-    rotation: FloatArray  # (3, 3)
-    linear_velocity: FloatArray  # (3,) m/s
-    angular_velocity: FloatArray  # (3,) rad/s
+    @property
+    def position(self) -> FloatArray: ...  # (3,) m
+
+    @property
+    def rotation(self) -> FloatArray: ...  # (3, 3)
+
+    @property
+    def linear_velocity(self) -> FloatArray: ...  # (3,) m/s
+
+    @property
+    def angular_velocity(self) -> FloatArray: ...  # (3,) rad/s
 
 
 @dataclass(frozen=True)

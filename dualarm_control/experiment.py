@@ -93,3 +93,20 @@ def final_errors(log: RunLog, scenario: Scenario, model: DualArmModel) -> tuple[
     end = trajectory.sample(trajectory.duration)
     p, r = model.relative_pose(log.final_positions)
     return float(np.linalg.norm(p - end.position)), rotation_angle(r, end.rotation)
+
+
+def summarize_log(log: RunLog, scenario: Scenario, model: DualArmModel) -> dict[str, float | int]:
+    """The metrics.json record of an in-process run (see :func:`dualarm_control.report.summarize`)."""
+    from dualarm_control.report import summarize
+
+    return summarize(
+        commands=log.commands,
+        positions=np.vstack((log.positions, log.final_positions)),
+        velocities=log.velocities,
+        period=log.period,
+        statuses=log.status,
+        cycle_times=log.cycle_time,
+        final_errors=final_errors(log, scenario, model),
+        q_limits=(model.q_min, model.q_max),
+        qd_max=model.qd_max,
+    )

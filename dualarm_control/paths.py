@@ -18,11 +18,17 @@ def share_dir() -> Path:
     if (source / "urdf").is_dir() and (source / "config").is_dir():
         return source
     try:  # colcon install with ROS 2 sourced
-        from ament_index_python.packages import get_package_share_directory
-
-        return Path(get_package_share_directory(PACKAGE))
-    except Exception:  # noqa: BLE001 - ament_index absent or package not indexed
+        from ament_index_python.packages import (
+            PackageNotFoundError,
+            get_package_share_directory,
+        )
+    except ImportError:
         pass
+    else:
+        try:
+            return Path(get_package_share_directory(PACKAGE))
+        except PackageNotFoundError:
+            pass
     return Path(sys.prefix) / "share" / PACKAGE
 
 

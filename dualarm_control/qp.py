@@ -53,7 +53,7 @@ class QPProblem:
     A: FloatArray | None = None
     b: FloatArray | None = None
     C: FloatArray | None = None
-    l: FloatArray | None = None  # noqa: E741 - the usual QP notation
+    l: FloatArray | None = None
     u: FloatArray | None = None
     lb: FloatArray | None = None
     ub: FloatArray | None = None
@@ -159,10 +159,11 @@ class QpsolversBackend(QPBackend):
     def solve(self, problem: QPProblem) -> QPSolution:
         import qpsolvers
 
-        G = h = None
-        if problem.C is not None:  # l <= C x <= u  ->  [C; -C] x <= [u; -l]
-            G = np.vstack((problem.C, -problem.C))
-            h = np.concatenate((problem.u, -problem.l))  # type: ignore[arg-type]
+        G: FloatArray | None = None
+        h: FloatArray | None = None
+        if problem.C is not None and problem.l is not None and problem.u is not None:
+            G = np.vstack((problem.C, -problem.C))  # l <= C x <= u  ->  [C; -C] x <= [u; -l]
+            h = np.concatenate((problem.u, -problem.l))
         start = time.perf_counter()
         try:
             x = qpsolvers.solve_qp(

@@ -49,8 +49,10 @@ def _cyl_link(name: str, mass: float, length: float, rgba: str) -> str:
 
 def _arm(side: str, y: float, rpy: tuple[float, float, float]) -> str:
     out = [
-        f'  <joint name="{side}_mount" type="fixed"><parent link="torso"/><child link="{side}_link_0"/>'
-        f'<origin xyz="0 {y} {TORSO_HEIGHT}" rpy="{rpy[0]:.6f} {rpy[1]:.6f} {rpy[2]:.6f}"/></joint>\n',
+        (
+            f'  <joint name="{side}_mount" type="fixed"><parent link="torso"/><child link="{side}_link_0"/>'
+            f'<origin xyz="0 {y} {TORSO_HEIGHT}" rpy="{rpy[0]:.6f} {rpy[1]:.6f} {rpy[2]:.6f}"/></joint>\n'
+        ),
         _cyl_link(f"{side}_link_0", 2.0, 0.1575, "0.9 0.5 0.1 1"),
     ]
     parent = f"{side}_link_0"

@@ -149,8 +149,20 @@ def parse_value(text: str, what: str = "value") -> ParameterValue:
     try:
         value = yaml.load(text, Loader=_Loader) if text.strip() else ""
     except yaml.YAMLError as exc:
-        raise RosArgsError(f"{what}: cannot read {text!r} as YAML: {exc}") from None
+        raise RosArgsError(f"{what}: cannot read {text!r} as YAML{_yaml_where(exc)}") from None
     return check_value(value, what)
+
+
+def _yaml_where(exc: yaml.YAMLError) -> str:
+    """`` at line L, column C: problem`` from a PyYAML error, on one line."""
+    mark = getattr(exc, "problem_mark", None)
+    problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+    context = getattr(exc, "context", None)
+    context_mark = getattr(exc, "context_mark", None)
+    if context and context_mark is not None:
+        context += f" started at line {context_mark.line + 1}"
+    where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+    return f"{where}: {problem}" + (f" ({context})" if context else "")
 
 
 def check_value(value: Any, what: str) -> ParameterValue:
@@ -194,7 +206,7 @@ def load_params_file(path: str | Path) -> list[ParamRule]:
     try:
         doc = yaml.load(text, Loader=_Loader)
     except yaml.YAMLError as exc:
-        raise RosArgsError(f"--params-file {path}: malformed YAML: {exc}") from None
+        raise RosArgsError(f"--params-file {path}: malformed YAML{_yaml_where(exc)}") from None
     if doc is None:
         return []
     if not isinstance(doc, dict):
@@ -276,11 +288,12 @@ def parse_ros_args(argv: list[str] | None) -> RosArgs:
     i = 0
     while i < len(args):
         arg = args[i]
+        nxt = args[i + 1] if i + 1 < len(args) else None
 
-        def value_of(flag: str) -> str:
-            if i + 1 >= len(args):
+        def value_of(flag: str, nxt: str | None = nxt) -> str:
+            if nxt is None:
                 raise RosArgsError(f"{flag} needs a value")
-            return args[i + 1]
+            return nxt
 
         if arg in ("-p", "--param"):
             text = value_of(arg)

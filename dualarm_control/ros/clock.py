@@ -22,7 +22,7 @@ class Duration:
     nanoseconds: int = 0
 
     def __init__(self, *, seconds: float = 0, nanoseconds: int = 0) -> None:
-        object.__setattr__(self, "nanoseconds", int(round(seconds * _NS)) + int(nanoseconds))
+        object.__setattr__(self, "nanoseconds", round(seconds * _NS) + int(nanoseconds))
 
     def to_msg(self) -> msgs.Duration:
         """builtin_interfaces/Duration (nanosec is always in [0, 1e9))."""
@@ -42,7 +42,7 @@ class Time:
     nanoseconds: int = 0
 
     def __init__(self, *, seconds: float = 0, nanoseconds: int = 0) -> None:
-        total = int(round(seconds * _NS)) + int(nanoseconds)
+        total = round(seconds * _NS) + int(nanoseconds)
         if total < 0:
             raise ValueError(f"Time must be non-negative, got {total} ns")
         object.__setattr__(self, "nanoseconds", total)

@@ -31,6 +31,7 @@ from collections.abc import Callable
 from types import FrameType
 from typing import Any
 
+from cyclonedds._clayer import ddspy_take
 from cyclonedds.core import (
     DDSException,
     Entity,
@@ -312,8 +313,6 @@ class Subscription:
         out: list[Any] = []
         while True:
             if self.raw:
-                from cyclonedds._clayer import ddspy_take
-
                 got = ddspy_take(reader._ref, SampleState.Any | ViewState.Any | InstanceState.Any, _TAKE_BATCH)
                 if isinstance(got, int):
                     raise DDSException(got, f"take on '{self.topic_name}'")
@@ -341,12 +340,13 @@ class Timer:
     def __init__(self, node: Node, period_s: float, callback: Callable[[], Any]) -> None:
         if period_s <= 0:
             raise ValueError(f"timer period must be > 0 s, got {period_s}")
-        self.timer_period_ns = int(round(period_s * 1e9))
+        self.timer_period_ns = round(period_s * 1e9)
         self.callback = callback
         self.missed_calls = 0
         self._node = node
         self._canceled = False
         self._next_ns = time.monotonic_ns() + self.timer_period_ns
+        self._last_ns: int | None = None
 
     def cancel(self) -> None:
         """Stop calling the callback until ``reset()``."""
@@ -375,7 +375,13 @@ class Timer:
         """Monotonic time (ns) of the next call."""
         return self._next_ns
 
+    @property
+    def last_deadline_ns(self) -> int | None:
+        """Monotonic deadline (ns) of the call being run or last run (None before the first)."""
+        return self._last_ns
+
     def _advance(self, now_ns: int) -> None:
+        self._last_ns = self._next_ns
         self._next_ns += self.timer_period_ns
         if self._next_ns <= now_ns:
             behind = now_ns - self._next_ns

@@ -128,7 +128,7 @@ class Solver:
     def reset(self) -> None:
         """Forget warm-start memory (e.g. after a discontinuity)."""
 
-    def _backend(self):  # noqa: ANN202 - returns a QPBackend
+    def _backend(self):
         return make_backend(self.params.qp_backend, self.params.qp)
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
@@ -166,7 +166,7 @@ class Solver:
         )
 
 
-def from_qp(solution: QPSolution, transform=None) -> tuple[FloatArray | None, str, int, str]:  # noqa: ANN001
+def from_qp(solution: QPSolution, transform=None) -> tuple[FloatArray | None, str, int, str]:
     """Map a QP solution to the ``_solve`` tuple, applying ``transform`` to x when usable."""
     if solution.x is None:
         return None, solution.status, solution.iterations, f"QP {solution.status}"

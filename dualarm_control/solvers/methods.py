@@ -9,7 +9,13 @@ from __future__ import annotations
 import numpy as np
 
 from dualarm_control.qp import QPProblem
-from dualarm_control.solvers.base import ControlProblem, FloatArray, Solver, SolverParams, from_qp
+from dualarm_control.solvers.base import (
+    ControlProblem,
+    FloatArray,
+    Solver,
+    SolverParams,
+    from_qp,
+)
 from dualarm_control.solvers.registry import register
 
 

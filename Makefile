@@ -1,0 +1,34 @@
+# Two commands do all the set-up on a fresh machine (Python 3.10+ with venv):
+#   make demo   - the assembly task, a bag and a report (creates .venv on first use)
+#   make test   - lint, type check and the test suite (creates .venv on first use)
+PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+OUT ?= out
+
+.PHONY: demo test experiment bench lint clean
+
+$(VENV)/.installed: setup.py
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	touch $@
+
+demo: $(VENV)/.installed
+	$(VENV)/bin/dualarm demo --output $(OUT)/demo
+
+experiment: $(VENV)/.installed
+	$(VENV)/bin/dualarm experiment assembly --output $(OUT)/experiment
+
+bench: $(VENV)/.installed
+	$(VENV)/bin/dualarm bench --output $(OUT)/bench
+
+lint: $(VENV)/.installed
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy
+
+test: lint
+	$(PY) -m pytest -q
+
+clean:
+	rm -rf $(VENV) $(OUT) build *.egg-info .pytest_cache .mypy_cache .ruff_cache

@@ -1,0 +1,158 @@
+"""The ``dualarm`` command: experiments, benchmarks, and ros2-like verbs for machines without ROS.
+
+Run ``dualarm --help`` or ``dualarm <verb> --help``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from dualarm_control.errors import DualArmError
+
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+
+def _progress_printer(label: str) -> Callable[[float, str], None]:
+    """Progress on stderr: a live line on a terminal, a line per 10 % otherwise."""
+    tty = sys.stderr.isatty()
+    state = {"last": -1}
+
+    def show(fraction: float, segment: str) -> None:
+        pct = int(fraction * 100)
+        if tty:
+            print(f"\r[{label}] {pct:3d}% {segment:<12}", end="" if pct < 100 else "\n", file=sys.stderr, flush=True)
+        elif pct // 10 != state["last"] // 10 or pct == 100 and state["last"] != 100:
+            print(f"[{label}] {pct:3d}% ({segment})", file=sys.stderr, flush=True)
+        state["last"] = pct
+
+    return show
+
+
+def cmd_experiment(args: argparse.Namespace) -> int:
+    """Run a scenario in-process (lockstep) for each solver; write metrics.json and plots."""
+    from dualarm_control.controller import controller_params
+    from dualarm_control.experiment import run_scenario, summarize_log
+    from dualarm_control.kinematics import DualArmModel
+    from dualarm_control.params import read_params_files
+    from dualarm_control.report import format_table, plot_velocity_norms, write_metrics
+    from dualarm_control.scenario import load_scenario
+
+    scenario = load_scenario(args.scenario)
+    base = read_params_files(args.params, "controller_node")
+    solvers = [s.strip() for s in args.solver.split(",") if s.strip()]
+    configs = {name: controller_params({**base, "solver": name}) for name in solvers}  # validates all first
+    out = Path(args.output)
+    model = DualArmModel()
+    results: dict[str, dict[str, float | int]] = {}
+    runs = {}
+    print(f"scenario {scenario.name!r} ({scenario.source}); solvers: {', '.join(solvers)}; output: {out}", file=sys.stderr)
+    try:
+        for name, params in configs.items():
+            start = time.perf_counter()
+            log = run_scenario(scenario, params, model, progress=_progress_printer(name))
+            results[name] = summarize_log(log, scenario, model)
+            runs[name] = (log.time, log.commands)
+            print(f"[{name}] done: {len(log.time)} cycles in {time.perf_counter() - start:.1f} s wall", file=sys.stderr)
+    except KeyboardInterrupt:
+        print("\ninterrupted: writing what is complete", file=sys.stderr)
+        if results:
+            write_metrics(out / "metrics.json", results)
+        return EXIT_INTERRUPTED
+    write_metrics(out / "metrics.json", results)
+    plot_velocity_norms(runs, out / "velocity_norms.png", title=f"{scenario.name}: |qd_i| and active joints")
+    print(format_table(results))
+    print(f"\nwrote {out / 'metrics.json'} and {out / 'velocity_norms.png'}")
+    return 0
+
+
+def cmd_launch(args: argparse.Namespace) -> int:
+    """Start the three nodes as processes on a scenario; optionally record a bag."""
+    from dualarm_control.launcher import launch_scenario
+    from dualarm_control.scenario import scenario_file
+
+    scenario_file(args.scenario)  # fail early (exit 2) on an unknown scenario
+    for f in args.params:
+        if not Path(f).is_file():
+            raise DualArmError(f"--params {f}: file not found")
+    extra = []
+    if args.solver:
+        extra += ["-p", f"solver:={args.solver}"]
+    record = Path(args.record) if args.record else None
+    return launch_scenario(args.scenario, args.params, extra, args.lockstep, record, args.timeout)
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    """Run one node in the foreground (like ``ros2 run dualarm_control NODE``)."""
+    import os
+
+    from dualarm_control.launcher import NODES, node_command
+
+    if args.node not in NODES:
+        raise DualArmError(f"unknown node {args.node!r}; valid choices: {', '.join(NODES)}")
+    cmd = node_command(args.node, args.ros_args)
+    os.execv(cmd[0], cmd)
+    return 0  # not reached
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="dualarm",
+        description="Sparse hierarchical QP control of a simulated dual-arm cell (ROS 2 package dualarm_control).",
+    )
+    sub = parser.add_subparsers(dest="verb", metavar="VERB")
+    sub.required = True
+
+    exp = sub.add_parser(
+        "experiment",
+        help="run a scenario in-process for several solvers (Table I, Fig. 5)",
+        description="Run SCENARIO in one process in lockstep (pybullet cell + controller + ruckig targets) "
+        "for each solver; print a Table-I-style table, write DIR/metrics.json and DIR/velocity_norms.png.",
+    )
+    exp.add_argument("scenario", help="scenario name (config/scenarios/<name>.yaml) or a YAML path")
+    exp.add_argument("--solver", default="standard_qp,sparse_qp,hierarchical_sparse_qp",
+                     help="comma-separated solver names (default: %(default)s)")
+    exp.add_argument("--params", action="append", default=[], metavar="FILE",
+                     help="ROS-style parameter file for controller_node (repeatable; later files win)")
+    exp.add_argument("--output", default="out/experiment", metavar="DIR", help="output directory (default: %(default)s)")
+    exp.set_defaults(func=cmd_experiment)
+
+    run = sub.add_parser("run", help="run one node (like ros2 run dualarm_control NODE)",
+                         description="Run NODE (sim_node, controller_node, trajectory_node) in the foreground. "
+                         "Arguments after the node are ROS arguments: --ros-args --params-file F -p k:=v -r a:=b.")
+    run.add_argument("node", help="sim_node, controller_node or trajectory_node")
+    run.add_argument("ros_args", nargs=argparse.REMAINDER, help="--ros-args ...")
+    run.set_defaults(func=cmd_run)
+
+    lau = sub.add_parser("launch", help="start the three nodes as processes on a scenario",
+                         description="Start sim_node, controller_node and trajectory_node as separate processes "
+                         "over DDS (loopback by default), prefix their output, and stop everything when the "
+                         "scenario is complete or on Ctrl-C. Exit status is non-zero if a node failed.")
+    lau.add_argument("scenario", help="scenario name or YAML path")
+    lau.add_argument("--params", action="append", default=[], metavar="FILE",
+                     help="ROS-style parameter file passed to every node (repeatable)")
+    lau.add_argument("--solver", help="shortcut for -p solver:=NAME on the controller")
+    lau.add_argument("--lockstep", action="store_true",
+                     help="deterministic: the simulator steps only when the command for the step arrives")
+    lau.add_argument("--record", metavar="BAG", help="record the graph's topics to this rosbag2 directory")
+    lau.add_argument("--timeout", type=float, default=None, metavar="S", help="stop after S seconds")
+    lau.set_defaults(func=cmd_launch)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except DualArmError as exc:
+        print(f"dualarm {args.verb}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+
+
+if __name__ == "__main__":
+    sys.exit(main())

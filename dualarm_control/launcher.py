@@ -1,0 +1,145 @@
+"""Start nodes as separate processes (the ``dualarm launch`` / ``dualarm run`` verbs).
+
+Output lines are prefixed with the node name. Everything stops cleanly on Ctrl-C/SIGTERM
+or when the trajectory node reports the scenario complete (exits 0); the exit code is
+non-zero if any process failed.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+NODES = {
+    "sim_node": "dualarm_sim.sim_node",
+    "controller_node": "dualarm_control.nodes.controller_node",
+    "trajectory_node": "dualarm_control.nodes.trajectory_node",
+}
+STOP_GRACE_S = 10.0
+
+
+def node_command(node: str, ros_args: Sequence[str]) -> list[str]:
+    """Command line running ``node`` with this interpreter; KeyError lists the valid nodes."""
+    if node not in NODES:
+        raise KeyError(f"unknown node {node!r}; valid choices: {', '.join(NODES)}")
+    args = list(ros_args)
+    return [sys.executable, "-u", "-m", NODES[node], *(args if args[:1] == ["--ros-args"] or not args
+                                                         else ["--ros-args", *args])]
+
+
+@dataclass
+class Process:
+    name: str
+    popen: subprocess.Popen[str]
+    lines: list[str] = field(default_factory=list)
+    ready: threading.Event = field(default_factory=threading.Event)
+
+
+class Launch:
+    """A group of child processes with prefixed output and orderly shutdown."""
+
+    def __init__(self, ready_marker: str = "bag: ready") -> None:
+        self.procs: list[Process] = []
+        self.ready_marker = ready_marker
+        self._lock = threading.Lock()
+
+    def start(self, name: str, cmd: list[str]) -> Process:
+        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        popen = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
+                                 start_new_session=True)
+        proc = Process(name, popen)
+        threading.Thread(target=self._pump, args=(proc,), daemon=True).start()
+        self.procs.append(proc)
+        return proc
+
+    def _pump(self, proc: Process) -> None:
+        assert proc.popen.stdout is not None
+        for line in proc.popen.stdout:
+            line = line.rstrip("\n")
+            if self.ready_marker in line:
+                proc.ready.set()
+            if "pybullet build time" in line:
+                continue
+            with self._lock:
+                print(f"[{proc.name}] {line}", flush=True)
+
+    def wait_until(self, finished: str, timeout: float | None = None) -> dict[str, int | None]:
+        """Wait until process ``finished`` exits, any process fails, or ``timeout`` [s]; then stop all."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        try:
+            while True:
+                codes = {p.name: p.popen.poll() for p in self.procs}
+                if codes.get(finished) is not None or any(c not in (None, 0) for c in codes.values()):
+                    break
+                if deadline is not None and time.monotonic() > deadline:
+                    print(f"[launch] timeout after {timeout:.0f} s", flush=True)
+                    break
+                time.sleep(0.05)
+        finally:
+            self.stop()
+        return {p.name: p.popen.returncode for p in self.procs}
+
+    def stop(self) -> None:
+        """SIGINT every live child (like Ctrl-C), escalate to SIGTERM/SIGKILL after a grace period."""
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+            alive = [p for p in self.procs if p.popen.poll() is None]
+            if not alive:
+                return
+            for p in alive:
+                try:
+                    os.killpg(p.popen.pid, sig)
+                except ProcessLookupError:
+                    pass
+            end = time.monotonic() + STOP_GRACE_S
+            while time.monotonic() < end and any(p.popen.poll() is None for p in alive):
+                time.sleep(0.05)
+
+
+def launch_scenario(
+    scenario: str,
+    params: Sequence[str],
+    extra: Sequence[str],
+    lockstep: bool,
+    record: Path | None,
+    timeout: float | None = None,
+) -> int:
+    """Run the three nodes (and a recorder) on ``scenario``; return 0 if the scenario completed cleanly."""
+    common = ["-p", f"lockstep:={'true' if lockstep else 'false'}"]
+    with_scenario = ["-p", f"scenario:={scenario}"]
+    for f in params:
+        common += ["--params-file", str(Path(f).resolve())]
+    common += list(extra)
+    launch = Launch()
+    interrupted = False
+    try:
+        if record is not None:
+            rec = launch.start("bag", [sys.executable, "-u", "-m", "dualarm_control.cli", "bag", "record", "-o",
+                                       str(record)])
+            if not rec.ready.wait(30.0):
+                print("[launch] the recorder did not get ready within 30 s", flush=True)
+                launch.stop()
+                return 1
+        readers = 2 + (record is not None)
+        launch.start("controller_node", node_command("controller_node", common))
+        launch.start("trajectory_node", node_command("trajectory_node", [*common, *with_scenario]))
+        launch.start("sim_node", node_command("sim_node", [*common, *with_scenario,
+                                                            "-p", f"lockstep_subscribers:={readers}"]))
+        codes = launch.wait_until("trajectory_node", timeout)
+    except KeyboardInterrupt:
+        interrupted = True
+        launch.stop()
+        codes = {p.name: p.popen.returncode for p in launch.procs}
+    failed = {n: c for n, c in codes.items() if c not in (0,)}
+    if failed:
+        print(f"[launch] failed: {', '.join(f'{n} (exit {c})' for n, c in failed.items())}", flush=True)
+    done = codes.get("trajectory_node") == 0
+    if interrupted:
+        return 130
+    return 0 if done and not failed else 1

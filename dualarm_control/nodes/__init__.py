@@ -1,0 +1,1 @@
+"""Thin node shells: parse parameters, wire topics, call the core."""

@@ -1,0 +1,99 @@
+"""trajectory_node: streams the ruckig relative targets of a scenario on ``/relative_target``.
+
+The trajectory starts from the relative pose of the first ``/joint_states`` (forward
+kinematics). Real-time mode: one target per control period on a drift-free timer, timed
+from the first joint state. Lockstep mode: one target per joint state, stamped with the
+joint state's stamp, so the controller can pair them. When the trajectory plus the
+scenario's settle time has elapsed the node logs completion, publishes a final
+``/diagnostics`` status "complete" and exits 0.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from dualarm_control import ros
+from dualarm_control.kinematics import DualArmModel
+from dualarm_control.nodes.common import NodeFinished, declare, run_node
+from dualarm_control.params import ParamSpec, positive
+from dualarm_control.ros import convert
+from dualarm_control.scenario import load_scenario
+from dualarm_control.trajectory import RelativeTrajectory
+
+PARAMETERS = (
+    ParamSpec("scenario", "assembly", "scenario name (config/scenarios/<name>.yaml) or YAML path"),
+    ParamSpec("control_period", 0.005, "target period in real-time mode [s]", check=positive),
+    ParamSpec("lockstep", False, "publish one target per joint state, with its stamp"),
+)
+
+
+class TrajectoryNode:
+    """Node shell around :class:`RelativeTrajectory`."""
+
+    def __init__(self) -> None:
+        self.node = ros.Node("trajectory_node")
+        p = declare(self.node, PARAMETERS)
+        self.scenario = load_scenario(p["scenario"])
+        self.lockstep = bool(p["lockstep"])
+        self.model = DualArmModel()
+        self.order = {name: i for i, name in enumerate(self.model.joint_names)}
+        n = self.node
+        self.pub = n.create_publisher(ros.msgs.MultiDOFJointTrajectory, "/relative_target", 10)
+        self.pub_diag = n.create_publisher(ros.msgs.DiagnosticArray, "/diagnostics", 10)
+        n.create_subscription(ros.msgs.JointState, "/joint_states", self.on_joint_state, 10)
+        self.log = n.get_logger()
+        self.trajectory: RelativeTrajectory | None = None
+        self.start_ns = 0
+        self.segment = -1
+        self.end_s = 0.0
+        if not self.lockstep:
+            n.create_timer(p["control_period"], self.on_tick)
+        self.log.info(f"scenario '{self.scenario.name}': {len(self.scenario.segments)} segments, "
+                      f"{'lockstep' if self.lockstep else 'real-time'}; waiting for /joint_states")
+
+    def on_joint_state(self, msg: Any) -> None:
+        stamp = convert.stamp_ns(msg.header.stamp)
+        if self.trajectory is None:
+            decoded = convert.joint_vectors(msg, self.order)
+            if isinstance(decoded, str):
+                self.log.error(f"cannot start from this joint state: {decoded}")
+                return
+            self.trajectory = self.scenario.trajectory(*self.model.relative_pose(decoded[0]))
+            self.start_ns = stamp
+            self.end_s = self.trajectory.duration + self.scenario.settle_time
+            self.log.info(f"trajectory: {self.trajectory.duration:.2f} s + settle {self.scenario.settle_time:.2f} s")
+        if self.lockstep:
+            self.publish(stamp, stamp - self.start_ns)
+
+    def on_tick(self) -> None:
+        if self.trajectory is not None:
+            now = time.time_ns()
+            self.publish(now, now - self.start_ns)
+
+    def publish(self, stamp: int, elapsed_ns: int) -> None:
+        assert self.trajectory is not None
+        t = elapsed_ns / 1e9
+        sample = self.trajectory.sample(t)
+        self.pub.publish(convert.target_message(stamp, elapsed_ns, sample))
+        if sample.segment != self.segment and not sample.done:
+            self.segment = sample.segment
+            self.log.info(f"t={t:.2f} s: segment {sample.segment + 1}/{len(self.trajectory.segments)} "
+                          f"'{sample.segment_name}'")
+            self._status(stamp, 0, f"segment {sample.segment_name}", t)
+        if t >= self.end_s:
+            self.log.info(f"scenario '{self.scenario.name}' complete at t={t:.2f} s")
+            self._status(stamp, 0, "complete", t)
+            raise NodeFinished
+
+    def _status(self, stamp: int, level: int, message: str, t: float) -> None:
+        values = {"scenario": self.scenario.name, "time_s": f"{t:.3f}", "duration_s": f"{self.end_s:.3f}"}
+        self.pub_diag.publish(convert.diagnostics(stamp, "trajectory_node", level, message, values))
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node(TrajectoryNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,145 @@
+"""Conversions between the core's values and the standard messages (no control math here).
+
+Works with both backends: ``msgs`` is ``dualarm_control.ros.msgs`` (the real rclpy message
+classes under ROS, or the Cyclone IdlStructs) and field names are identical.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from dualarm_control import ros
+
+LEFT_FRAME = "left_tool"
+RIGHT_FRAME = "right_tool"
+NS = 1_000_000_000
+
+
+def stamp(ns: int) -> Any:
+    """builtin_interfaces/Time from integer nanoseconds."""
+    return ros.msgs.Time(sec=int(ns // NS), nanosec=int(ns % NS))
+
+
+def stamp_ns(msg_stamp: Any) -> int:
+    """Integer nanoseconds of a builtin_interfaces/Time."""
+    return int(msg_stamp.sec) * NS + int(msg_stamp.nanosec)
+
+
+def header(ns: int, frame_id: str = "") -> Any:
+    return ros.msgs.Header(stamp=stamp(ns), frame_id=frame_id)
+
+
+def joint_state(names: Sequence[str], ns: int, q: np.ndarray, qd: np.ndarray) -> Any:
+    """sensor_msgs/JointState with positions [rad] and velocities [rad/s]; effort left empty."""
+    return ros.msgs.JointState(header=header(ns), name=list(names), position=[float(v) for v in q],
+                               velocity=[float(v) for v in qd], effort=[])
+
+
+def joint_vectors(msg: Any, order: Mapping[str, int]) -> tuple[np.ndarray, np.ndarray] | str:
+    """(q, qd) in the model's joint order from a JointState, or a reason string if unusable."""
+    names = list(msg.name)
+    missing = [n for n in order if n not in names]
+    if missing or len(msg.position) != len(names):
+        return f"joint_states with {len(names)} names / {len(msg.position)} positions; missing {missing[:3]}"
+    idx = [names.index(n) for n in order]
+    q = np.asarray(msg.position, dtype=float)[idx]
+    qd = np.asarray(msg.velocity, dtype=float)[idx] if len(msg.velocity) == len(names) else np.zeros(len(idx))
+    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
+        return "joint_states contains NaN or inf"
+    return q, qd
+
+
+def float_array(values: np.ndarray) -> Any:
+    """std_msgs/Float64MultiArray (JointGroupVelocityController convention: layout empty)."""
+    return ros.msgs.Float64MultiArray(data=[float(v) for v in values])
+
+
+def quaternion(rotation: np.ndarray) -> Any:
+    qt = pin.Quaternion(np.asarray(rotation, dtype=float))
+    qt.normalize()
+    return ros.msgs.Quaternion(x=float(qt.x), y=float(qt.y), z=float(qt.z), w=float(qt.w))
+
+
+def rotation(q: Any) -> np.ndarray:
+    """Rotation matrix of a geometry_msgs/Quaternion (normalised; NaN stays NaN)."""
+    v = np.array([q.x, q.y, q.z, q.w], dtype=float)
+    if not np.all(np.isfinite(v)) or np.linalg.norm(v) < 1e-9:
+        return np.full((3, 3), np.nan)
+    v /= np.linalg.norm(v)
+    return pin.Quaternion(v[3], v[0], v[1], v[2]).toRotationMatrix()
+
+
+def pose_stamped(ns: int, position: np.ndarray, rot: np.ndarray) -> Any:
+    """Measured relative pose (right tool in left tool frame)."""
+    p = ros.msgs.Point(x=float(position[0]), y=float(position[1]), z=float(position[2]))
+    return ros.msgs.PoseStamped(header=header(ns, LEFT_FRAME), pose=ros.msgs.Pose(position=p, orientation=quaternion(rot)))
+
+
+def _vec3(v: np.ndarray) -> Any:
+    return ros.msgs.Vector3(x=float(v[0]), y=float(v[1]), z=float(v[2]))
+
+
+@dataclass(frozen=True)
+class TargetValue:
+    """A relative target decoded from a message (fields as the controller's RelativeTarget)."""
+
+    stamp_ns: int
+    position: np.ndarray
+    rotation: np.ndarray
+    linear_velocity: np.ndarray
+    angular_velocity: np.ndarray
+
+
+def target_message(ns: int, elapsed_ns: int, sample: Any) -> Any:
+    """trajectory_msgs/MultiDOFJointTrajectory carrying one sample atomically: pose, twist, acceleration."""
+    m = ros.msgs
+    transform = m.Transform(translation=_vec3(sample.position), rotation=quaternion(sample.rotation))
+    twist = m.Twist(linear=_vec3(sample.linear_velocity), angular=_vec3(sample.angular_velocity))
+    accel = m.Twist(linear=_vec3(sample.linear_acceleration), angular=_vec3(sample.angular_acceleration))
+    point = m.MultiDOFJointTrajectoryPoint(
+        transforms=[transform], velocities=[twist], accelerations=[accel],
+        time_from_start=m.Duration(sec=int(elapsed_ns // NS), nanosec=int(elapsed_ns % NS)),
+    )
+    return m.MultiDOFJointTrajectory(header=header(ns, LEFT_FRAME), joint_names=[RIGHT_FRAME], points=[point])
+
+
+def target_value(msg: Any) -> TargetValue | str:
+    """Decode a relative target message, or return why it is unusable."""
+    if len(msg.points) != 1 or len(msg.points[0].transforms) != 1 or len(msg.points[0].velocities) != 1:
+        return "relative_target must carry exactly one point with one transform and one velocity"
+    tr, tw = msg.points[0].transforms[0], msg.points[0].velocities[0]
+    value = TargetValue(
+        stamp_ns=stamp_ns(msg.header.stamp),
+        position=np.array([tr.translation.x, tr.translation.y, tr.translation.z], dtype=float),
+        rotation=rotation(tr.rotation),
+        linear_velocity=np.array([tw.linear.x, tw.linear.y, tw.linear.z], dtype=float),
+        angular_velocity=np.array([tw.angular.x, tw.angular.y, tw.angular.z], dtype=float),
+    )
+    parts = (value.position, value.rotation, value.linear_velocity, value.angular_velocity)
+    if not all(np.all(np.isfinite(x)) for x in parts):
+        return "relative_target contains NaN or inf"
+    return value
+
+
+def _level(level: int) -> Any:
+    return bytes([level]) if ros.BACKEND == "rclpy" else level
+
+
+def diagnostics(ns: int, name: str, level: int, message: str, values: Mapping[str, Any]) -> Any:
+    """diagnostic_msgs/DiagnosticArray with one status whose values are ``key: str(value)``."""
+    m = ros.msgs
+    status = m.DiagnosticStatus(
+        level=_level(level), name=name, message=message, hardware_id="dualarm_cell",
+        values=[m.KeyValue(key=k, value=str(v)) for k, v in values.items()],
+    )
+    return m.DiagnosticArray(header=header(ns), status=[status])
+
+
+def wrench_stamped(ns: int, wrench: np.ndarray, frame_id: str = RIGHT_FRAME) -> Any:
+    m = ros.msgs
+    return m.WrenchStamped(header=header(ns, frame_id), wrench=m.Wrench(force=_vec3(wrench[:3]), torque=_vec3(wrench[3:])))

@@ -1,0 +1,123 @@
+"""sim_node: the pybullet cell as a velocity-controlled robot (FRI / ros2_control stand-in).
+
+Publishes ``/joint_states`` (and ``/wrench``) every control period; applies
+``/velocity_controller/commands`` (Float64MultiArray, 14 values, controller joint order).
+A command older than ``command_timeout`` brings the arms to rest.
+
+Real-time mode: a drift-free timer steps the physics one control period per tick, stamps
+are the wall clock. Lockstep mode (``lockstep:=true``): the state of step k (stamped with
+sim time k*T) is published, and the physics advances only when the command for it arrives;
+the first state is sent once ``lockstep_subscribers`` readers of /joint_states are matched.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from dualarm_control import ros
+from dualarm_control.nodes.common import declare, run_node
+from dualarm_control.params import ParamSpec, non_negative, positive
+from dualarm_control.ros import convert
+from dualarm_control.scenario import load_scenario, scenario_names
+from dualarm_sim.cell import CellConfig, DualArmCell
+
+PARAMETERS = (
+    ParamSpec("scenario", "assembly", "scenario name or YAML path (initial configuration)"),
+    ParamSpec("control_period", 0.005, "control period [s]", check=positive),
+    ParamSpec("physics_rate_hz", 1000.0, "physics rate [Hz] (>= 1000)", check=positive),
+    ParamSpec("command_timeout", 0.05, "command age that brings the arms to rest [s]", check=positive),
+    ParamSpec("lockstep", False, "advance one period per received command"),
+    ParamSpec("lockstep_subscribers", 2, "joint_states readers to wait for before the first lockstep state",
+              check=non_negative),
+    ParamSpec("lockstep_resend", 0.5, "re-publish the pending state after this long without a command [s]",
+              check=positive),
+)
+
+
+class SimNode:
+    """Node shell around :class:`DualArmCell`."""
+
+    def __init__(self) -> None:
+        self.node = ros.Node("sim_node")
+        p = declare(self.node, PARAMETERS)
+        scenario = load_scenario(p["scenario"])
+        self.cell = DualArmCell(
+            CellConfig(control_period=p["control_period"], physics_rate_hz=p["physics_rate_hz"],
+                       command_timeout=p["command_timeout"]),
+            initial_positions=scenario.initial_positions,
+        )
+        self.period_ns = round(p["control_period"] * 1e9)
+        self.lockstep = bool(p["lockstep"])
+        self.wait_for = int(p["lockstep_subscribers"])
+        self.resend_s = float(p["lockstep_resend"])
+        n = self.node
+        self.pub_js = n.create_publisher(ros.msgs.JointState, "/joint_states", 10)
+        self.pub_wrench = n.create_publisher(ros.msgs.WrenchStamped, "/wrench", 10)
+        n.create_subscription(ros.msgs.Float64MultiArray, "/velocity_controller/commands", self.on_command, 10)
+        self.log = n.get_logger()
+        self.steps = 0
+        self.started = False
+        self.last_publish = 0.0
+        self.rejected = 0
+        if self.lockstep:
+            n.create_timer(0.05, self.lockstep_watchdog)
+        else:
+            n.create_timer(p["control_period"], self.on_tick)
+        self.log.info(f"scenario '{scenario.name}', {'lockstep' if self.lockstep else 'real-time'} at "
+                      f"{1.0 / p['control_period']:.0f} Hz, physics {p['physics_rate_hz']:.0f} Hz "
+                      f"(known scenarios: {', '.join(scenario_names())})")
+
+    def close(self) -> None:
+        self.log.info(f"stopping after {self.steps} steps ({self.steps * self.period_ns / 1e9:.3f} s sim time)")
+        self.cell.close()
+
+    def _stamp_ns(self) -> int:
+        return self.steps * self.period_ns if self.lockstep else time.time_ns()
+
+    def publish_state(self) -> None:
+        sample = self.cell.state()
+        ns = self._stamp_ns()
+        self.pub_js.publish(convert.joint_state(self.cell.joint_names, ns, sample.positions, sample.velocities))
+        self.pub_wrench.publish(convert.wrench_stamped(ns, self.cell.wrench()))
+        self.last_publish = time.monotonic()
+
+    def on_command(self, msg: Any) -> None:
+        data = np.asarray(msg.data, dtype=float)
+        if data.shape != (len(self.cell.joint_names),):
+            self.rejected += 1
+            self.log.error(f"command with {data.shape[0]} values rejected: expected {len(self.cell.joint_names)}")
+            return
+        report = self.cell.apply_command(data)
+        if not report.accepted or report.clipped:
+            self.log.warning(f"command: {report.reason}")
+        if self.lockstep and self.started:
+            self.cell.step()
+            self.steps += 1
+            self.publish_state()
+
+    def on_tick(self) -> None:
+        self.cell.step()
+        self.steps += 1
+        self.publish_state()
+
+    def lockstep_watchdog(self) -> None:
+        """Start once the readers are matched; re-send a state that got no command (discovery races)."""
+        if not self.started:
+            if self.node.count_subscribers("/joint_states") < self.wait_for:
+                return
+            self.started = True
+            self.log.info(f"{self.wait_for} joint_states readers matched: starting lockstep")
+            self.publish_state()
+        elif time.monotonic() - self.last_publish > self.resend_s:
+            self.publish_state()
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node(SimNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,60 @@
+"""The assembly experiment of paper 000 end to end through the `dualarm experiment` command.
+
+Checks the acceptance figures of the core issue on the real pybullet cell: tracking,
+limits, solver failures and Table I sparsity ratios (ours vs the paper's 0.357 and 0.471).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from dualarm_control.cli import main
+from dualarm_control.report import METRIC_KEYS
+
+SOLVERS = ("standard_qp", "sparse_qp", "hierarchical_sparse_qp")
+
+
+@pytest.fixture(scope="module")
+def metrics(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict[str, float]]:
+    out = tmp_path_factory.mktemp("experiment")
+    assert main(["experiment", "assembly", "--solver", ",".join(SOLVERS), "--output", str(out)]) == 0
+    assert (out / "velocity_norms.png").stat().st_size > 10_000
+    return json.loads((out / "metrics.json").read_text())
+
+
+def test_metrics_file_has_every_key(metrics: dict[str, dict[str, float]]) -> None:
+    """metrics.json lists each solver with exactly the documented keys."""
+    assert list(metrics) == list(SOLVERS)
+    for record in metrics.values():
+        assert tuple(record) == METRIC_KEYS
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_task_is_tracked_within_limits(metrics: dict[str, dict[str, float]], solver: str) -> None:
+    """Final relative error < 1 mm and 0.01 rad; no limit violation; no solver failure."""
+    m = metrics[solver]
+    assert m["final_position_error_m"] < 1e-3
+    assert m["final_orientation_error_rad"] < 1e-2
+    assert m["joint_position_limit_violations"] == 0
+    assert m["joint_velocity_limit_violations"] == 0
+    assert m["solver_failures"] == 0
+
+
+def test_sparsity_at_least_as_strong_as_the_paper(metrics: dict[str, dict[str, float]]) -> None:
+    """Table I ratios: l0(sparse)/l0(std) <= 0.36, l0(hier)/l0(std) <= 0.47, l1(sparse) < l1(std)."""
+    std, sparse, hier = (metrics[s] for s in SOLVERS)
+    assert sparse["l0_mean"] / std["l0_mean"] <= 0.36
+    assert hier["l0_mean"] / std["l0_mean"] <= 0.47
+    assert sparse["l1_mean"] < std["l1_mean"]
+    for m in (std, sparse, hier):
+        assert m["l0_integral"] == pytest.approx(m["l0_mean"] * m["duration_s"])
+
+
+def test_bad_solver_name_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """An unknown solver exits with code 2 and names the valid choices."""
+    assert main(["experiment", "assembly", "--solver", "nope", "--output", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "nope" in err and "sparse_qp" in err
