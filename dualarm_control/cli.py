@@ -99,6 +99,51 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0  # not reached
 
 
+def cmd_demo(args: argparse.Namespace) -> int:
+    """The main job: for each solver, three processes over DDS in lockstep with a bag, then
+    ``dualarm report`` on the bag, then the in-process experiment, and a comparison of both."""
+    import json
+
+    from dualarm_control.launcher import launch_scenario
+
+    out = Path(args.output)
+    solvers = [s.strip() for s in args.solver.split(",") if s.strip()]
+    reports: dict[str, dict[str, float]] = {}
+    for name in solvers:
+        bag = out / name / "bag"
+        if bag.exists():
+            import shutil
+
+            shutil.rmtree(bag)
+        bag.parent.mkdir(parents=True, exist_ok=True)
+        print(f"=== {name}: sim_node + controller_node + trajectory_node over DDS (lockstep), bag {bag}", flush=True)
+        code = launch_scenario(args.scenario, [], ["-p", f"solver:={name}"], True, bag, args.timeout)
+        if code != 0:
+            print(f"demo: the {name} run failed (exit {code})", file=sys.stderr)
+            return code
+        code = main(["report", str(bag), "--output", str(out / name / "report")])
+        if code != 0:
+            return code
+        reports[name] = json.loads((out / name / "report" / "metrics.json").read_text())[name]
+    print("=== in-process experiment (same scenario and solvers) for comparison", flush=True)
+    code = main(["experiment", args.scenario, "--solver", ",".join(solvers), "--output", str(out / "experiment")])
+    if code != 0:
+        return code
+    experiment = json.loads((out / "experiment" / "metrics.json").read_text())
+    comparison = {}
+    print(f"\n{'solver':<24}{'metric':<9}{'bag (DDS)':>12}{'in-process':>12}{'rel. diff':>11}")
+    for name in solvers:
+        comparison[name] = {}
+        for key in ("l0_mean", "l1_mean", "l2_mean"):
+            a, b = reports[name][key], experiment[name][key]
+            diff = abs(a - b) / max(abs(b), 1e-12)
+            comparison[name][key] = {"bag": a, "experiment": b, "relative_difference": diff}
+            print(f"{name:<24}{key:<9}{a:>12.4f}{b:>12.4f}{diff:>10.2%}")
+    (out / "comparison.json").write_text(json.dumps(comparison, indent=2) + "\n")
+    print(f"\nwrote {out}/<solver>/bag, {out}/<solver>/report/, {out}/experiment/ and {out}/comparison.json")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="dualarm",
@@ -120,6 +165,17 @@ def build_parser() -> argparse.ArgumentParser:
                      help="ROS-style parameter file for controller_node (repeatable; later files win)")
     exp.add_argument("--output", default="out/experiment", metavar="DIR", help="output directory (default: %(default)s)")
     exp.set_defaults(func=cmd_experiment)
+
+    demo = sub.add_parser("demo", help="the main job: three nodes over DDS per solver, bags, reports",
+                          description="For each solver: launch the three nodes over DDS in lockstep on the "
+                          "scenario while recording a bag, run 'dualarm report' on the bag, then run the "
+                          "in-process experiment and print how the bag metrics compare.")
+    demo.add_argument("--scenario", default="assembly", help="scenario (default: %(default)s)")
+    demo.add_argument("--solver", default="standard_qp,sparse_qp,hierarchical_sparse_qp",
+                      help="comma-separated solvers (default: %(default)s)")
+    demo.add_argument("--output", default="out/demo", metavar="DIR", help="output directory (default: %(default)s)")
+    demo.add_argument("--timeout", type=float, default=600.0, metavar="S", help="per-run time limit (default: 600)")
+    demo.set_defaults(func=cmd_demo)
 
     run = sub.add_parser("run", help="run one node (like ros2 run dualarm_control NODE)",
                          description="Run NODE (sim_node, controller_node, trajectory_node) in the foreground. "
