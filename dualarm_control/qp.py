@@ -127,6 +127,12 @@ class ProxsuiteBackend(QPBackend):
             qp.settings.eps_rel = 0.0
             qp.settings.max_iter = self.settings.max_iter
             qp.settings.verbose = False
+            # Without a duality-gap test "solved" only means small primal/dual residuals; with
+            # active bounds (and after a warm start from another problem) that accepted
+            # iterates whose objective was up to 1e-3 above the optimum.
+            qp.settings.check_duality_gap = True
+            qp.settings.eps_duality_gap_abs = self.settings.eps_abs
+            qp.settings.eps_duality_gap_rel = 0.0
             qp.init(*args, *box_args)
             self._qp, self._dims = qp, dims
         else:

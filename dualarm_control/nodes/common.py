@@ -29,7 +29,7 @@ def declare(node: Any, specs: Iterable[ParamSpec]) -> dict[str, Any]:
         try:
             value = node.declare_parameter(spec.name, spec.default, description=spec.description).value
         except ros.InvalidParameterTypeException as exc:
-            raise DualArmError(f"parameter '{name}.{spec.name}': {exc} (expected a {spec.type_name})") from None
+            raise DualArmError(str(exc)) from None  # names the parameter, value and expected type
         values[spec.name] = spec.validate(value, name)
     for key in node.undeclared_overrides():
         node.get_logger().warning(f"ignoring unknown parameter '{key}' (not declared by {name})")
@@ -43,9 +43,9 @@ def run_node(make: Callable[[], Any], args: Sequence[str] | None = None) -> int:
     ``close()`` called once on the way out (Ctrl-C, SIGTERM, NodeFinished or error).
     """
     argv = list(sys.argv if args is None else args)
-    ros.init(args=argv)
     shell = None
     try:
+        ros.init(args=argv)
         shell = make()
         ros.spin(getattr(shell, "node", shell))
     except NodeFinished:

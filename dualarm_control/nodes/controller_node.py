@@ -78,9 +78,13 @@ class ControllerNode:
                       f"{'lockstep' if self.lockstep else 'real-time'})")
 
     def close(self) -> None:
-        jp = percentiles(np.array(self.jitter)) if self.jitter else (float("nan"),) * 2
+        nan2 = (float("nan"),) * 2
+        jp = percentiles(np.array(self.jitter)) if self.jitter else nan2
+        lp = percentiles(np.array(self.latency)) if self.latency else nan2
         self.log.info(f"{self.cycles} cycles, {self.missed} missed deadlines, {self.failures} solver failures, "
-                      f"jitter p50/p99 {jp[0] * 1e3:.3f}/{jp[1] * 1e3:.3f} ms")
+                      f"period jitter p50/p99 {jp[0] * 1e3:.3f}/{jp[1] * 1e3:.3f} ms, "
+                      f"state-to-command latency p50/p99 {lp[0] * 1e3:.3f}/{lp[1] * 1e3:.3f} ms "
+                      f"(last {WINDOW} cycles)")
 
     # --- inputs -----------------------------------------------------------------
     def on_joint_state(self, msg: Any) -> None:
