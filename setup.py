@@ -44,7 +44,6 @@ setup(
     maintainer_email="dev@dualarm-control.invalid",
     description="Sparse hierarchical QP relative-pose control of a simulated dual-arm cell.",
     license="Apache-2.0",
-    tests_require=["pytest"],
     entry_points={
         "console_scripts": [
             "dualarm = dualarm_control.cli:main",

@@ -144,6 +144,158 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    """Time every solver on a scenario; write DIR/bench.md and DIR/bench.json."""
+    from dualarm_control.bench import bench_solvers, format_bench, write_bench
+    from dualarm_control.scenario import load_scenario
+
+    scenario = load_scenario(args.scenario)
+    solvers = [s.strip() for s in args.solver.split(",") if s.strip()]
+    from dualarm_control.solvers import make_solver
+
+    for name in solvers:
+        make_solver(name)  # unknown names exit 2 before any run
+    rows = bench_solvers(scenario, solvers, args.reference, progress=_progress_printer)
+    write_bench(Path(args.output), rows, args.reference, scenario.name)
+    print(format_bench(rows, args.reference))
+    print(f"\nwrote {Path(args.output) / 'bench.md'} and bench.json")
+    return 0
+
+
+def cmd_bag_record(args: argparse.Namespace) -> int:
+    """Record topics to a rosbag2 directory (MCAP, version 9) until Ctrl-C/SIGTERM or --duration."""
+    from dualarm_control.bag import default_bag_path, record, resolve_record_topics
+
+    topics = resolve_record_topics(args.topics, args.all)
+    return record(Path(args.output) if args.output else default_bag_path(), topics, duration=args.duration)
+
+
+def cmd_bag_info(args: argparse.Namespace) -> int:
+    """Print a ``ros2 bag info``-style summary."""
+    from dualarm_control.bag import bag_info
+
+    print(bag_info(Path(args.bag)))
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    """Metrics of a recorded run: DIR/metrics.json, DIR/velocity_norms.png and the table."""
+    from dualarm_control.bag import report
+    from dualarm_control.report import format_table
+
+    out = Path(args.output)
+    results = report(Path(args.bag), out)
+    print(format_table(results))
+    print(f"\nwrote {out / 'metrics.json'} and {out / 'velocity_norms.png'}")
+    return 0
+
+
+def cmd_topic_list(args: argparse.Namespace) -> int:
+    """``ros2 topic list``."""
+    from dualarm_control.ros.graph_tools import format_topic_list, list_topics
+
+    text = format_topic_list(list_topics(args.spin_time, args.discovery), args.show_types)
+    if text:
+        print(text)
+    return 0
+
+
+def cmd_topic_echo(args: argparse.Namespace) -> int:
+    """``ros2 topic echo``."""
+    from dualarm_control.ros.graph_tools import echo
+
+    count = 1 if args.once else args.count
+    try:
+        return echo(args.topic, count=count, timeout=args.timeout, spin_time=args.spin_time)
+    except KeyboardInterrupt:
+        return 0
+
+
+def cmd_topic_hz(args: argparse.Namespace) -> int:
+    """``ros2 topic hz``."""
+    from dualarm_control.ros.graph_tools import hz
+
+    try:
+        return hz(args.topic, window=args.window, duration=args.duration, spin_time=args.spin_time)
+    except KeyboardInterrupt:
+        return 0
+
+
+def cmd_topic_info(args: argparse.Namespace) -> int:
+    """``ros2 topic info``."""
+    from dualarm_control.ros.graph_tools import format_topic_info, topic_info
+
+    info = topic_info(args.topic, args.spin_time)
+    if info.publishers == 0 and info.subscriptions == 0:
+        print(f"Unknown topic '{info.name}'", file=sys.stderr)
+        return 1
+    print(format_topic_info(info))
+    return 0
+
+
+def _add_bag_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    bag = sub.add_parser("bag", help="record and inspect rosbag2 bags (like ros2 bag)",
+                         description="rosbag2 bags as ROS 2 Jazzy writes them (MCAP storage, metadata version 9).")
+    verbs = bag.add_subparsers(dest="bag_verb", metavar="BAG_VERB")
+    verbs.required = True
+    rec = verbs.add_parser("record", help="record topics until Ctrl-C, SIGTERM or --duration",
+                           description="Subscribe (raw CDR; reliable, volatile, keep-last 1000) and write a rosbag2 "
+                           "directory (MCAP, version 9, Jazzy message definitions). Prints 'bag: ready' on stdout "
+                           "once subscribed; progress on stderr; the bag is closed cleanly on Ctrl-C/SIGTERM.")
+    rec.add_argument("-o", "--output", metavar="DIR", help="bag directory (default: rosbag2_YYYY_MM_DD-HH_MM_SS)")
+    rec.add_argument("--topics", nargs="+", default=[], metavar="T",
+                     help="topics to record (default: the graph's topics)")
+    rec.add_argument("-a", "--all", action="store_true",
+                     help="the graph's topics plus every topic discovery finds")
+    rec.add_argument("-d", "--duration", type=float, metavar="S", help="stop after S seconds")
+    rec.set_defaults(func=cmd_bag_record)
+    info = verbs.add_parser("info", help="summary of a bag (like ros2 bag info)")
+    info.add_argument("bag", help="rosbag2 directory")
+    info.set_defaults(func=cmd_bag_info)
+
+
+def _add_topic_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    topic = sub.add_parser("topic", help="inspect topics (like ros2 topic)",
+                           description="Graph tools over Cyclone DDS. Discovery probes the graph's known topics "
+                           "(the builtin discovery topics crash cyclonedds 11.0.1's Python binding).")
+    verbs = topic.add_subparsers(dest="topic_verb", metavar="TOPIC_VERB")
+    verbs.required = True
+    spin = {"type": float, "default": 1.0, "metavar": "S", "help": "discovery wait (default: %(default)s s)"}
+    lst = verbs.add_parser("list", help="topics with publishers or subscriptions")
+    lst.add_argument("-t", "--show-types", action="store_true", help="also print each topic's type")
+    lst.add_argument("--discovery", choices=("auto", "probe", "builtin"), default="auto",
+                     help="auto: builtin discovery topics in a child process if they work, else probe")
+    lst.add_argument("--spin-time", **spin)
+    lst.set_defaults(func=cmd_topic_list)
+    ech = verbs.add_parser("echo", help="print messages as YAML")
+    ech.add_argument("topic")
+    ech.add_argument("--once", action="store_true", help="print one message and exit")
+    ech.add_argument("-n", "--count", type=int, metavar="N", help="print N messages and exit")
+    ech.add_argument("--timeout", type=float, metavar="S", help="exit 1 if no message comes for S seconds")
+    ech.add_argument("--spin-time", **spin)
+    ech.set_defaults(func=cmd_topic_echo)
+    hz_ = verbs.add_parser("hz", help="print the publishing rate")
+    hz_.add_argument("topic")
+    hz_.add_argument("-w", "--window", type=int, default=10_000, metavar="N",
+                     help="messages in the rate window (default: %(default)s)")
+    hz_.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    hz_.add_argument("--spin-time", **spin)
+    hz_.set_defaults(func=cmd_topic_hz)
+    inf = verbs.add_parser("info", help="type and endpoint counts")
+    inf.add_argument("topic")
+    inf.add_argument("--spin-time", **spin)
+    inf.set_defaults(func=cmd_topic_info)
+
+
+def _add_report_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    rep = sub.add_parser("report", help="metrics of a recorded run (metrics.json, velocity_norms.png, table)",
+                         description="Read a bag of a run (commands, joint states, diagnostics, relative pose "
+                         "and target) and write DIR/metrics.json and DIR/velocity_norms.png like 'experiment'.")
+    rep.add_argument("bag", help="rosbag2 directory")
+    rep.add_argument("--output", default="out/report", metavar="DIR", help="output directory (default: %(default)s)")
+    rep.set_defaults(func=cmd_report)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="dualarm",
@@ -177,6 +329,16 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--timeout", type=float, default=600.0, metavar="S", help="per-run time limit (default: 600)")
     demo.set_defaults(func=cmd_demo)
 
+    ben = sub.add_parser("bench", help="solver timing table (percentiles and ratios)",
+                         description="Run the scenario in-process for each solver and write a table of solve/cycle "
+                         "time p50/p99 and ratios to a reference solver measured in the same run.")
+    ben.add_argument("--scenario", default="assembly", help="scenario (default: %(default)s)")
+    ben.add_argument("--solver", default="pseudo_inverse,standard_qp,sparse_qp,hierarchical_sparse_qp",
+                     help="comma-separated solvers (default: %(default)s)")
+    ben.add_argument("--reference", default="standard_qp", help="ratio reference (default: %(default)s)")
+    ben.add_argument("--output", default="out/bench", metavar="DIR", help="output directory (default: %(default)s)")
+    ben.set_defaults(func=cmd_bench)
+
     run = sub.add_parser("run", help="run one node (like ros2 run dualarm_control NODE)",
                          description="Run NODE (sim_node, controller_node, trajectory_node) in the foreground. "
                          "Arguments after the node are ROS arguments: --ros-args --params-file F -p k:=v -r a:=b.")
@@ -197,6 +359,9 @@ def build_parser() -> argparse.ArgumentParser:
     lau.add_argument("--record", metavar="BAG", help="record the graph's topics to this rosbag2 directory")
     lau.add_argument("--timeout", type=float, default=None, metavar="S", help="stop after S seconds")
     lau.set_defaults(func=cmd_launch)
+    _add_bag_parser(sub)
+    _add_topic_parser(sub)
+    _add_report_parser(sub)
     return parser
 
 

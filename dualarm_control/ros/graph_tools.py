@@ -25,6 +25,7 @@ is a subscription); a node that waits for N subscribers may count them.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 import math
 import subprocess
@@ -34,7 +35,7 @@ from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any, TextIO
+from typing import Any, Self, TextIO
 
 import yaml
 from cyclonedds.core import (
@@ -194,7 +195,7 @@ class GraphProbe:
         if self._own:
             delete_entity(self.participant)
 
-    def __enter__(self) -> GraphProbe:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -506,7 +507,7 @@ class TopicReader:
             self._waitset.attached = []
         delete_entity(self.participant)
 
-    def __enter__(self) -> TopicReader:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -580,7 +581,7 @@ class RateMeter:
         if len(self._times) < 2:
             return None
         times = list(self._times)
-        deltas = [b - a for a, b in zip(times, times[1:], strict=False)]
+        deltas = [b - a for a, b in itertools.pairwise(times)]
         mean = sum(deltas) / len(deltas)
         std = math.sqrt(sum((d - mean) ** 2 for d in deltas) / len(deltas))
         return RateStats(1.0 / mean if mean > 0 else 0.0, min(deltas), max(deltas), std, len(times))

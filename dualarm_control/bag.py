@@ -1,0 +1,646 @@
+"""rosbag2 recording (MCAP, metadata version 9, as Jazzy writes it), ``bag info`` and the bag report.
+
+Recording subscribes with raw CDR (reliable, volatile, keep-last 1000) through
+:mod:`dualarm_control.ros` and writes the bytes unchanged with ``rosbags``: a
+connection per topic, created when its first publisher is matched (or its first
+message arrives), with the ROS type name, the Jazzy message definition and type hash
+(``Stores.ROS2_JAZZY``) so any rosbag2 reader decodes the bag, and the publishers'
+offered QoS. Timestamps are receive times (system clock, ns).
+
+The report reads a bag with ``rosbags.highlevel.AnyReader`` and builds the same
+metrics record as an in-process experiment (:func:`dualarm_control.report.summarize`).
+
+Only this module's recording needs DDS; it is imported lazily, so the reading side
+works with numpy + rosbags alone.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+from types import FrameType
+from typing import Any, Final, TextIO
+
+import numpy as np
+import numpy.typing as npt
+from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.interfaces import (
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
+from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+from rosbags.typesys import Stores, get_typestore
+
+from dualarm_control.errors import DualArmError
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+BAG_VERSION: Final = 9
+"""rosbag2 metadata version written by Jazzy."""
+RECORD_DEPTH = 1000
+"""Keep-last depth of the recording subscriptions."""
+PROGRESS_INTERVAL_S = 2.0
+READY_LINE = "bag: ready"
+"""Printed on stdout once every subscription exists (launchers wait for it)."""
+
+COMMANDS_TOPIC = "/velocity_controller/commands"
+JOINT_STATES_TOPIC = "/joint_states"
+DIAGNOSTICS_TOPIC = "/diagnostics"
+POSE_TOPIC = "/relative_pose"
+TARGET_TOPIC = "/relative_target"
+REPORT_TOPICS = (COMMANDS_TOPIC, JOINT_STATES_TOPIC, DIAGNOSTICS_TOPIC, POSE_TOPIC, TARGET_TOPIC)
+"""Topics :func:`read_run` needs (each with at least one message)."""
+CONTROLLER_STATUS = "controller_node"
+"""``DiagnosticStatus.name`` of the controller's per-cycle status."""
+DEFAULT_PERIOD_S = 0.005
+
+
+class BagError(DualArmError):
+    """A bag cannot be written, read or summarised (missing topics, bad content...)."""
+
+
+def jazzy_typestore() -> Any:
+    """The ``rosbags`` typestore with ROS 2 Jazzy's message definitions."""
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+# ===================================================================== recording
+
+
+def default_bag_path(now: datetime | None = None) -> Path:
+    """``rosbag2_YYYY_MM_DD-HH_MM_SS`` in the current directory, as ``ros2 bag record`` names it."""
+    return Path((now or datetime.now()).strftime("rosbag2_%Y_%m_%d-%H_%M_%S"))
+
+
+def _qos_time(ns: int) -> QosTime:
+    return QosTime(sec=ns // 1_000_000_000, nsec=ns % 1_000_000_000)
+
+
+def to_bag_qos(offered: Any) -> Qos:
+    """A :class:`dualarm_control.ros.graph_tools.OfferedQos` as a rosbag2 offered QoS profile.
+
+    History is ``unknown`` with depth 0, as ``rmw_cyclonedds_cpp`` reports remote writers.
+    """
+    return Qos(
+        history=QosHistory.UNKNOWN,
+        depth=0,
+        reliability=QosReliability[offered.reliability.upper()],
+        durability=QosDurability[offered.durability.upper()],
+        deadline=_qos_time(offered.deadline_ns),
+        lifespan=_qos_time(offered.lifespan_ns),
+        liveliness=QosLiveliness[offered.liveliness.upper()],
+        liveliness_lease_duration=_qos_time(offered.liveliness_lease_ns),
+        avoid_ros_namespace_conventions=False,
+    )
+
+
+class BagWriter:
+    """A rosbag2 directory (MCAP storage, version 9) receiving raw CDR messages per topic."""
+
+    def __init__(self, path: Path, topic_types: Mapping[str, str]) -> None:
+        self.path = Path(path)
+        self.topic_types = dict(topic_types)
+        self.counts: dict[str, int] = dict.fromkeys(self.topic_types, 0)
+        self._typestore = jazzy_typestore()
+        unknown = [t for t in self.topic_types.values() if t not in self._typestore.types]
+        if unknown:
+            raise BagError(f"no Jazzy message definition for {', '.join(sorted(set(unknown)))}")
+        self._writer = Writer(self.path, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
+        self._connections: dict[str, Any] = {}
+        try:
+            self._writer.open()
+        except WriterError as exc:
+            raise BagError(str(exc)) from exc
+        self._open = True
+
+    def has_connection(self, topic: str) -> bool:
+        """Whether ``topic`` already has its connection in the bag."""
+        return topic in self._connections
+
+    def add_connection(self, topic: str, offered_qos: Sequence[Qos] = ()) -> None:
+        """Create the connection of ``topic`` (once) with its type, definition and QoS."""
+        if topic in self._connections:
+            return
+        self._connections[topic] = self._writer.add_connection(
+            topic, self.topic_types[topic], typestore=self._typestore,
+            serialization_format="cdr", offered_qos_profiles=list(offered_qos),
+        )
+
+    def write(self, topic: str, data: bytes, stamp_ns: int) -> None:
+        """Append one CDR message received at ``stamp_ns``."""
+        if topic not in self._connections:
+            self.add_connection(topic)
+        self._writer.write(self._connections[topic], stamp_ns, data)
+        self.counts[topic] += 1
+
+    @property
+    def total(self) -> int:
+        """Messages written so far."""
+        return sum(self.counts.values())
+
+    def close(self) -> None:
+        """Finish the MCAP file and write metadata.yaml (idempotent)."""
+        if self._open:
+            self._open = False
+            self._writer.close()
+
+
+class StopFlag:
+    """Set by SIGINT/SIGTERM (handlers installed by :meth:`install`, restored by :meth:`restore`)."""
+
+    def __init__(self) -> None:
+        self.signal: int | None = None
+        self._previous: dict[int, Any] = {}
+
+    def __bool__(self) -> bool:
+        return self.signal is not None
+
+    def _handle(self, signum: int, frame: FrameType | None) -> None:
+        self.signal = signum
+
+    def install(self) -> None:
+        """Catch SIGINT and SIGTERM (main thread only)."""
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._previous[sig] = signal.signal(sig, self._handle)
+
+    def restore(self) -> None:
+        """Put the previous handlers back."""
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        self._previous.clear()
+
+
+def _progress_line(bag: BagWriter, elapsed: float) -> str:
+    per_topic = ", ".join(f"{t} {n}" for t, n in bag.counts.items())
+    return f"[bag] {elapsed:6.1f} s: {bag.total} messages ({per_topic})"
+
+
+def resolve_record_topics(topics: Sequence[str], record_all: bool, spin_time: float = 1.0) -> dict[str, str]:
+    """Topic -> ROS type for ``bag record``: the graph topics by default, else the named ones.
+
+    ``record_all`` adds every topic discovery finds (see ``dualarm topic list``).
+    Names outside the package's graph get their type by probing the DDS graph.
+    """
+    from dualarm_control.ros import graph_tools
+
+    chosen: dict[str, str] = {}
+    if record_all or not topics:
+        chosen.update(graph_tools.GRAPH_TOPICS)
+    if record_all:
+        for ep in graph_tools.list_topics(spin_time, extra=topics):
+            chosen.setdefault(ep.name, ep.type_name)
+    for topic in topics:
+        fq = topic if topic.startswith("/") else "/" + topic
+        if fq not in chosen:
+            try:
+                chosen[fq] = graph_tools.resolve_type(fq, spin_time)
+            except graph_tools.GraphToolError as exc:
+                raise BagError(f"{exc}; the known topics are {', '.join(graph_tools.GRAPH_TOPICS)}") from exc
+    return chosen
+
+
+def record(path: Path, topic_types: Mapping[str, str], *, duration: float | None = None,
+           progress_interval: float = PROGRESS_INTERVAL_S, log: TextIO = sys.stderr) -> int:
+    """Record ``topic_types`` into the bag directory ``path`` until SIGINT/SIGTERM or ``duration``.
+
+    Prints ``recording to PATH`` (stderr) and :data:`READY_LINE` (stdout) once subscribed,
+    progress on stderr. The bag is always closed with a valid metadata.yaml.
+    Returns 0 (also when stopped by a signal).
+    """
+    from dualarm_control import ros
+    from dualarm_control.ros.graph_tools import subscription_offered_qos
+
+    bag = BagWriter(path, topic_types)
+    stop = StopFlag()
+    try:
+        ros.init(args=[])
+        stop.install()
+        node = ros.Node("dualarm_bag_recorder")
+        qos = ros.QoSProfile(depth=RECORD_DEPTH, reliability=ros.ReliabilityPolicy.RELIABLE,
+                             durability=ros.DurabilityPolicy.VOLATILE)
+        subs = {
+            topic: node.create_subscription(ros.msgs.msg_type_by_name(type_name), topic,
+                                            _writer_callback(bag, topic), qos, raw=True)
+            for topic, type_name in topic_types.items()
+        }
+        executor = ros.SingleThreadedExecutor()
+        executor.add_node(node)
+        print(f"recording to {path} ({len(subs)} topics: {', '.join(subs)})", file=log, flush=True)
+        print(READY_LINE, flush=True)
+        _spin_until_stopped(executor, stop, duration, progress_interval, log, bag,
+                            lambda: _add_matched_connections(bag, subs, subscription_offered_qos))
+    except (KeyboardInterrupt, ros.ExternalShutdownException):
+        pass
+    finally:
+        stop.restore()
+        bag.close()
+        ros.try_shutdown()
+    reason = f" (signal {signal.Signals(stop.signal).name})" if stop.signal is not None else ""
+    print(f"bag closed{reason}: {path}, {bag.total} messages", file=log, flush=True)
+    return 0
+
+
+def _writer_callback(bag: BagWriter, topic: str) -> Callable[[bytes], None]:
+    def on_message(data: bytes) -> None:
+        bag.write(topic, data, time.time_ns())
+
+    return on_message
+
+
+def _add_matched_connections(bag: BagWriter, subs: Mapping[str, Any],
+                             qos_of: Callable[[Any], list[Any]]) -> None:
+    """Create the connection of every topic that has a publisher now, with its offered QoS."""
+    for topic, sub in subs.items():
+        if not bag.has_connection(topic) and sub.get_publisher_count() > 0:
+            bag.add_connection(topic, [to_bag_qos(q) for q in qos_of(sub)])
+
+
+def _spin_until_stopped(executor: Any, stop: StopFlag, duration: float | None, progress_interval: float,
+                        log: TextIO, bag: BagWriter, on_poll: Callable[[], None]) -> None:
+    """Run the subscription callbacks until a signal or ``duration``, with periodic progress."""
+    from dualarm_control import ros
+
+    start = time.monotonic()
+    next_poll = next_progress = start
+    while not stop and ros.ok():
+        now = time.monotonic()
+        if duration is not None and now - start >= duration:
+            break
+        if now >= next_poll:
+            on_poll()
+            next_poll = now + 0.25
+        if now >= next_progress:
+            if now > start:
+                print(_progress_line(bag, now - start), file=log, flush=True)
+            next_progress = now + progress_interval
+        executor.spin_once(timeout_sec=0.05)
+
+
+# ===================================================================== bag info
+
+
+def _format_stamp(ns: int) -> str:
+    secs, rest = divmod(ns, 1_000_000_000)
+    human = datetime.fromtimestamp(secs).strftime("%b %e %Y %H:%M:%S")
+    return f"{human}.{rest:09d} ({secs}.{rest:09d})"
+
+
+def _format_size(n: int) -> str:
+    size = float(n)
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if size < 1024 or unit == "GiB":
+            return f"{size:.1f} {unit}" if unit != "B" else f"{n} B"
+        size /= 1024
+    return f"{n} B"
+
+
+def _bag_metadata(path: Path) -> dict[str, Any]:
+    """``rosbag2_bagfile_information`` of a bag directory ({} for a bare file)."""
+    import yaml
+
+    meta_file = path / "metadata.yaml"
+    if not meta_file.is_file():
+        return {}
+    data = yaml.safe_load(meta_file.read_text()) or {}
+    info = data.get("rosbag2_bagfile_information", {})
+    return info if isinstance(info, dict) else {}
+
+
+def open_reader(path: Path) -> AnyReader:
+    """An opened AnyReader on a rosbag2 directory (Jazzy typestore as fallback); BagError if unreadable."""
+    path = Path(path)
+    if not path.exists():
+        raise BagError(f"no bag at {path}")
+    try:
+        reader = AnyReader([path], default_typestore=jazzy_typestore())
+        reader.open()
+    except (AnyReaderError, FileNotFoundError) as exc:
+        raise BagError(f"cannot read bag {path}: {exc}") from exc
+    return reader
+
+
+def bag_info(path: Path) -> str:
+    """``ros2 bag info``-style summary of a bag directory."""
+    path = Path(path)
+    meta = _bag_metadata(path)
+    reader = open_reader(path)
+    try:
+        files = meta.get("relative_file_paths", []) or [path.name]
+        size = sum(f.stat().st_size for f in (path.iterdir() if path.is_dir() else [path]) if f.is_file())
+        count = reader.message_count
+        start, end = (reader.start_time, reader.end_time) if count else (0, 0)
+        if count:
+            end = max(start, end - 1)  # rosbags: end_time is one ns after the last message
+        duration = end - start
+        topics = [
+            (name, info.msgtype or "?", info.msgcount, _serialization_format(info.connections))
+            for name, info in sorted(reader.topics.items())
+        ]
+    finally:
+        reader.close()
+    label = [
+        ("Files:", "\n".join(f"{'':19}{f}" if i else str(f) for i, f in enumerate(files))),
+        ("Bag size:", _format_size(size)),
+        ("Storage id:", str(meta.get("storage_identifier", "?"))),
+        ("ROS Distro:", str(meta.get("ros_distro", "?"))),
+        ("Version:", str(meta.get("version", "?"))),
+        ("Duration:", f"{duration / 1e9:.9f}s"),
+        ("Start:", _format_stamp(start)),
+        ("End:", _format_stamp(end)),
+        ("Messages:", str(count)),
+    ]
+    lines = [f"{k:<19}{v}" for k, v in label]
+    for i, (name, typ, n, fmt) in enumerate(topics):
+        head = "Topic information:" if i == 0 else ""
+        lines.append(f"{head:<19}Topic: {name} | Type: {typ} | Count: {n} | Serialization Format: {fmt}")
+    if not topics:
+        lines.append("Topic information:")
+    return "\n".join(lines)
+
+
+def _serialization_format(connections: Iterable[Any]) -> str:
+    formats = {getattr(c.ext, "serialization_format", "?") for c in connections}
+    return ",".join(sorted(formats)) or "?"
+
+
+# ===================================================================== reading a run
+
+
+@dataclass
+class TimedSeries:
+    """Samples of one topic: receive times ``t`` [ns] (N,) and ``values`` (N, ...)."""
+
+    t: IntArray
+    values: FloatArray
+
+
+@dataclass
+class ControllerDiagnostics:
+    """The controller's per-cycle status from ``/diagnostics`` (one entry per cycle)."""
+
+    t: IntArray
+    solver: list[str] = field(default_factory=list)
+    status: list[str] = field(default_factory=list)
+    cycle_time: list[float] = field(default_factory=list)
+    period: list[float] = field(default_factory=list)
+    stamp_ns: list[int | None] = field(default_factory=list)
+
+
+@dataclass
+class RunData:
+    """What a report needs from a bag, joint vectors in the model's joint order."""
+
+    commands: TimedSeries
+    positions: TimedSeries
+    velocities: FloatArray
+    poses: TimedSeries
+    targets: TimedSeries
+    diagnostics: ControllerDiagnostics
+
+
+def _float(text: str | None, default: float = float("nan")) -> float:
+    try:
+        return float(text) if text is not None else default
+    except ValueError:
+        return default
+
+
+def _int_or_none(text: str | None) -> int | None:
+    try:
+        return int(text) if text is not None else None
+    except ValueError:
+        return None
+
+
+def _pose_vector(translation: Any, rotation: Any) -> list[float]:
+    return [float(translation.x), float(translation.y), float(translation.z),
+            float(rotation.x), float(rotation.y), float(rotation.z), float(rotation.w)]
+
+
+class _RunCollector:
+    """Accumulates the messages of one bag pass, topic by topic."""
+
+    def __init__(self, joint_names: Sequence[str]) -> None:
+        self.joint_names = list(joint_names)
+        self.rows: dict[str, list[tuple[int, Any]]] = {t: [] for t in REPORT_TOPICS}
+        self.velocities: list[FloatArray] = []
+        self.diag = ControllerDiagnostics(t=np.zeros(0, dtype=np.int64))
+        self.diag_t: list[int] = []
+        self._order: dict[tuple[str, ...], list[int]] = {}
+
+    def add(self, topic: str, t: int, msg: Any) -> None:
+        handler = {
+            COMMANDS_TOPIC: lambda: self.rows[topic].append((t, np.asarray(msg.data, dtype=float))),
+            JOINT_STATES_TOPIC: lambda: self._joint_state(t, msg),
+            DIAGNOSTICS_TOPIC: lambda: self._diagnostics(t, msg),
+            POSE_TOPIC: lambda: self.rows[topic].append((t, _pose_vector(msg.pose.position, msg.pose.orientation))),
+            TARGET_TOPIC: lambda: self._target(t, msg),
+        }[topic]
+        handler()
+
+    def _reorder(self, names: Sequence[str]) -> list[int]:
+        key = tuple(names)
+        if key not in self._order:
+            missing = [j for j in self.joint_names if j not in key]
+            if missing:
+                raise BagError(f"{JOINT_STATES_TOPIC} lacks joints {', '.join(missing)} (has {', '.join(key)})")
+            self._order[key] = [key.index(j) for j in self.joint_names]
+        return self._order[key]
+
+    def _joint_state(self, t: int, msg: Any) -> None:
+        idx = self._reorder(list(msg.name))
+        self.rows[JOINT_STATES_TOPIC].append((t, np.asarray(msg.position, dtype=float)[idx]))
+        if len(msg.velocity) == len(msg.name):
+            self.velocities.append(np.asarray(msg.velocity, dtype=float)[idx])
+
+    def _target(self, t: int, msg: Any) -> None:
+        if msg.points and msg.points[0].transforms:
+            tf = msg.points[0].transforms[0]
+            self.rows[TARGET_TOPIC].append((t, _pose_vector(tf.translation, tf.rotation)))
+
+    def _diagnostics(self, t: int, msg: Any) -> None:
+        for status in msg.status:
+            if status.name != CONTROLLER_STATUS:
+                continue
+            values = {kv.key: kv.value for kv in status.values}
+            self.diag_t.append(t)
+            self.diag.solver.append(values.get("solver", "unknown"))
+            self.diag.status.append(values.get("status", ""))
+            self.diag.cycle_time.append(_float(values.get("cycle_time_s")))
+            self.diag.period.append(_float(values.get("control_period_s")))
+            self.diag.stamp_ns.append(_int_or_none(values.get("stamp_ns")))
+
+    def series(self, topic: str, width: int) -> TimedSeries:
+        rows = self.rows[topic]
+        t = np.array([r[0] for r in rows], dtype=np.int64)
+        values = np.array([r[1] for r in rows], dtype=float).reshape(len(rows), width)
+        return TimedSeries(t, values)
+
+    def finish(self) -> RunData:
+        n = len(self.joint_names)
+        widths = {len(v) for _, v in self.rows[COMMANDS_TOPIC]}
+        if widths != {n}:
+            raise BagError(f"{COMMANDS_TOPIC} data must have {n} values (one per joint), got lengths {sorted(widths)}")
+        if not self.diag_t:
+            raise BagError(f"{DIAGNOSTICS_TOPIC} has no status named '{CONTROLLER_STATUS}'")
+        self.diag.t = np.array(self.diag_t, dtype=np.int64)
+        positions = self.series(JOINT_STATES_TOPIC, n)
+        velocities = np.array(self.velocities, dtype=float).reshape(len(self.velocities), n)
+        return RunData(self.series(COMMANDS_TOPIC, n), positions, velocities,
+                       self.series(POSE_TOPIC, 7), self.series(TARGET_TOPIC, 7), self.diag)
+
+
+def missing_topics(reader: AnyReader, needed: Iterable[str] = REPORT_TOPICS) -> list[str]:
+    """Needed topics absent from the bag or without messages."""
+    topics = reader.topics
+    return [t for t in needed if t not in topics or topics[t].msgcount == 0]
+
+
+def read_run(path: Path, joint_names: Sequence[str]) -> RunData:
+    """Read the report topics of a bag; BagError naming the topics it lacks."""
+    reader = open_reader(path)
+    try:
+        missing = missing_topics(reader)
+        if missing:
+            raise BagError(f"bag {path} lacks {', '.join(missing)} (the report needs {', '.join(REPORT_TOPICS)})")
+        collector = _RunCollector(joint_names)
+        connections = [c for c in reader.connections if c.topic in REPORT_TOPICS]
+        for conn, t, raw in reader.messages(connections=connections):
+            collector.add(conn.topic, t, reader.deserialize(raw, conn.msgtype))
+        return collector.finish()
+    finally:
+        reader.close()
+
+
+# ===================================================================== summarising a run
+
+
+def quaternion_angle(q_a: npt.ArrayLike, q_b: npt.ArrayLike) -> float:
+    """Rotation angle [rad] between two (x, y, z, w) quaternions, in [0, pi] (robust near 0)."""
+    a = np.asarray(q_a, dtype=float)
+    b = np.asarray(q_b, dtype=float)
+    a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
+    if float(a @ b) < 0.0:
+        b = -b
+    return float(4.0 * np.arctan2(np.linalg.norm(a - b), np.linalg.norm(a + b)))
+
+
+def pose_error(pose: npt.ArrayLike, target: npt.ArrayLike) -> tuple[float, float]:
+    """(position [m], orientation [rad]) distance of two ``[x, y, z, qx, qy, qz, qw]`` poses."""
+    p, q = np.asarray(pose, dtype=float), np.asarray(target, dtype=float)
+    return float(np.linalg.norm(p[:3] - q[:3])), quaternion_angle(p[3:], q[3:])
+
+
+def nearest_labels(t: IntArray, ref_t: IntArray, labels: Sequence[str]) -> npt.NDArray[np.str_]:
+    """For each time in ``t``, the label of the nearest time in ``ref_t`` (sorted, non-empty)."""
+    lab = np.asarray(labels, dtype=str)
+    if t.size == 0:
+        return np.zeros(0, dtype=lab.dtype)
+    right = np.clip(np.searchsorted(ref_t, t), 0, len(ref_t) - 1)
+    left = np.clip(right - 1, 0, len(ref_t) - 1)
+    use_left = np.abs(t - ref_t[left]) <= np.abs(ref_t[right] - t)
+    return lab[np.where(use_left, left, right)]
+
+
+@dataclass
+class SolverRun:
+    """One solver's slice of a bag: its metrics record and its command time series."""
+
+    solver: str
+    record: dict[str, float | int]
+    time: FloatArray
+    commands: FloatArray
+
+
+def _last_in(series: TimedSeries, mask: npt.NDArray[np.bool_]) -> FloatArray:
+    """The last value selected by ``mask`` (the last overall when the mask selects none)."""
+    values = series.values[mask] if mask.any() else series.values
+    return values[-1]
+
+
+def _finite(values: Iterable[float]) -> FloatArray:
+    arr = np.asarray(list(values), dtype=float)
+    return arr[np.isfinite(arr)]
+
+
+def summarize_run(run: RunData, model: Any) -> list[SolverRun]:
+    """Per solver in the controller diagnostics, the metrics record and command series.
+
+    Messages are attributed to the solver of the nearest controller diagnostics in
+    receive time (a bag normally holds one solver). ``model`` gives joint limits
+    (``q_min``, ``q_max``, ``qd_max``).
+    """
+    from dualarm_control.report import summarize
+
+    diag = run.diagnostics
+    solvers = list(dict.fromkeys(diag.solver))
+    per_msg = {
+        "commands": nearest_labels(run.commands.t, diag.t, diag.solver),
+        "positions": nearest_labels(run.positions.t, diag.t, diag.solver),
+        "poses": nearest_labels(run.poses.t, diag.t, diag.solver),
+        "targets": nearest_labels(run.targets.t, diag.t, diag.solver),
+    }
+    velocity_labels = per_msg["positions"] if len(run.velocities) == len(run.positions.t) else None
+    out = []
+    for solver in solvers:
+        in_diag = np.array([s == solver for s in diag.solver])
+        commands = run.commands.values[per_msg["commands"] == solver]
+        if commands.shape[0] == 0:
+            continue
+        periods = _finite(np.array(diag.period)[in_diag])
+        period = float(np.median(periods)) if periods.size else DEFAULT_PERIOD_S
+        velocities = (run.velocities[velocity_labels == solver] if velocity_labels is not None
+                      else np.zeros((0, commands.shape[1])))
+        record = summarize(
+            commands=commands,
+            positions=run.positions.values[per_msg["positions"] == solver],
+            velocities=velocities,
+            period=period,
+            statuses=[s for s, keep in zip(diag.status, in_diag, strict=True) if keep],
+            cycle_times=_finite(np.array(diag.cycle_time)[in_diag]),
+            final_errors=pose_error(_last_in(run.poses, per_msg["poses"] == solver),
+                                    _last_in(run.targets, per_msg["targets"] == solver)),
+            q_limits=(model.q_min, model.q_max),
+            qd_max=model.qd_max,
+        )
+        stamps = [s for s, keep in zip(diag.stamp_ns, in_diag, strict=True) if keep]
+        out.append(SolverRun(solver, record, _time_axis(stamps, commands.shape[0], period), commands))
+    return out
+
+
+def _time_axis(stamps: Sequence[int | None], n: int, period: float) -> FloatArray:
+    """Seconds from the diagnostics' joint-state stamps when they match the commands, else k * period."""
+    if len(stamps) == n and n > 0 and all(s is not None for s in stamps):
+        arr = np.array(stamps, dtype=np.int64)
+        return (arr - arr[0]).astype(float) * 1e-9
+    return np.arange(n, dtype=float) * period
+
+
+def report(path: Path, output: Path) -> dict[str, dict[str, float | int]]:
+    """Summarise a recorded run: ``output/metrics.json`` and ``output/velocity_norms.png``.
+
+    Returns ``{solver: record}``; BagError when the bag lacks needed topics.
+    """
+    from dualarm_control.kinematics import DualArmModel
+    from dualarm_control.report import plot_velocity_norms, write_metrics
+
+    model = DualArmModel()
+    runs = summarize_run(read_run(Path(path), model.joint_names), model)
+    if not runs:
+        raise BagError(f"bag {path}: no {COMMANDS_TOPIC} message could be attributed to a solver")
+    results = {r.solver: r.record for r in runs}
+    output = Path(output)
+    write_metrics(output / "metrics.json", results)
+    plot_velocity_norms({r.solver: (r.time, r.commands) for r in runs}, output / "velocity_norms.png",
+                        title=f"{Path(path).name}: |qd_i| and active joints")
+    return results
