@@ -276,17 +276,24 @@ def test_wrong_shapes_give_invalid_input(name: str) -> None:
     assert res.status == "invalid_input" and "lower" in res.detail
 
 
+def raise_linalg_error(problem: Problem) -> tuple:
+    raise np.linalg.LinAlgError("singular matrix")
+
+
+def raise_runtime_error(problem: Problem) -> tuple:
+    raise RuntimeError("backend crashed")
+
+
+def return_infinite(problem: Problem) -> tuple:
+    return np.full(problem.jacobian.shape[1], np.inf), "solved", 1, ""
+
+
+def return_nothing(problem: Problem) -> tuple:
+    return None, "infeasible", 4, "QP infeasible"
+
+
 @pytest.mark.parametrize("name", solver_names())
-@pytest.mark.parametrize(
-    "failure",
-    [
-        lambda p: (_ for _ in ()).throw(np.linalg.LinAlgError("singular")),
-        lambda p: (_ for _ in ()).throw(RuntimeError("backend crashed")),
-        lambda p: (np.full(p.jacobian.shape[1], np.inf), "solved", 1, ""),
-        lambda p: (None, "infeasible", 4, "QP infeasible"),
-    ],
-    ids=["linalg-error", "runtime-error", "non-finite", "infeasible"],
-)
+@pytest.mark.parametrize("failure", [raise_linalg_error, raise_runtime_error, return_infinite, return_nothing])
 def test_numerical_failures_never_raise(name: str, failure: Callable, monkeypatch: pytest.MonkeyPatch) -> None:
     """Whatever _solve does (raise, inf, no solution), solve() returns a failure status and zero velocities."""
     solver = make_solver(name)
@@ -386,11 +393,11 @@ def test_standard_qp_warm_start_from_another_problem_is_still_optimal() -> None:
     """
     for seed in (220, 1, 50, 217):
         rng = np.random.default_rng(seed)
-        mk = lambda: Problem(  # noqa: E731
-            rng.standard_normal((6, 14)), rng.standard_normal(6), -rng.uniform(0, 0.2, 14), rng.uniform(0, 0.2, 14),
-            np.zeros(14),
+        a, b = (
+            Problem(rng.standard_normal((6, 14)), rng.standard_normal(6), -rng.uniform(0, 0.2, 14),
+                    rng.uniform(0, 0.2, 14), np.zeros(14))
+            for _ in range(2)
         )
-        a, b = mk(), mk()
         solver = make_solver("standard_qp")
         solver.solve(a)
         res = solver.solve(b)

@@ -1,0 +1,79 @@
+"""Tests of dualarm_control.metrics (Table I norms, limit violations, percentiles) on hand-made data."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dualarm_control.metrics import (
+    l0_norms,
+    limit_violations,
+    percentiles,
+    velocity_norm_metrics,
+)
+
+
+def test_norms_of_two_hand_made_samples() -> None:
+    """Two samples of 3 joints, period 0.5 s: every mean and integral computed by hand."""
+    qd = np.array([[3.0, -4.0, 0.0], [1e-3, 0.0, -2.0]])  # 1e-3 exactly is NOT active (strict >)
+    m = velocity_norm_metrics(qd, period=0.5)
+    assert m.duration_s == 1.0
+    assert m.l0_mean == pytest.approx((2 + 1) / 2)
+    assert m.l1_mean == pytest.approx((7.0 + 2.001) / 2)
+    assert m.l2_mean == pytest.approx((5.0 + math.sqrt(4.0 + 1e-6)) / 2)
+    assert m.l0_integral == pytest.approx(3 * 0.5)
+    assert m.l1_integral == pytest.approx(9.001 * 0.5)
+    assert m.l2_integral == pytest.approx((5.0 + math.sqrt(4.000001)) * 0.5)
+
+
+def test_activity_threshold_is_strict() -> None:
+    """|qd| = 1e-3 is inactive, the next double above it is active, sign does not matter."""
+    above = np.nextafter(1e-3, 1.0)
+    qd = np.array([[1e-3, -1e-3, above, -above, 0.0]])
+    np.testing.assert_array_equal(l0_norms(qd), [2.0])
+    assert velocity_norm_metrics(qd, 0.005).l0_mean == 2.0
+    np.testing.assert_array_equal(l0_norms(qd, threshold=0.0), [4.0])
+
+
+def test_integral_is_mean_times_duration() -> None:
+    """For random data (seeded), each integral equals its mean times N * period (zero-order hold)."""
+    rng = np.random.default_rng(3)
+    qd = rng.normal(0.0, 0.01, (37, 14))
+    period = 0.005
+    m = velocity_norm_metrics(qd, period)
+    assert m.duration_s == pytest.approx(37 * period)
+    for p in ("l0", "l1", "l2"):
+        assert getattr(m, f"{p}_integral") == pytest.approx(getattr(m, f"{p}_mean") * m.duration_s, rel=1e-12)
+    assert m.l1_integral == pytest.approx(np.abs(qd).sum() * period, rel=1e-12)
+    assert m.l2_integral == pytest.approx(sum(math.sqrt(float(row @ row)) for row in qd) * period, rel=1e-12)
+
+
+@pytest.mark.parametrize("bad", [np.zeros((0, 14)), np.zeros(14), np.zeros((2, 3, 4))])
+def test_norm_metrics_reject_bad_shapes(bad: np.ndarray) -> None:
+    """Empty or non-2D arrays raise ValueError naming the shape."""
+    with pytest.raises(ValueError, match="shape"):
+        velocity_norm_metrics(bad, 0.005)
+
+
+def test_limit_violations_count_rows() -> None:
+    """Rows with any joint outside [lower - tol, upper + tol] are counted once, hand-checked."""
+    lower, upper = np.array([-1.0, -2.0]), np.array([1.0, 2.0])
+    values = np.array([
+        [0.0, 0.0],  # inside
+        [1.05, 2.5],  # two joints out: one row
+        [-1.0, 2.0],  # on the limits: inside
+        [1.0 + 0.5e-3, 0.0],  # within the tolerance
+        [0.0, -2.01],  # out
+    ])
+    assert limit_violations(values, lower, upper, tolerance=1e-3) == 2
+    assert limit_violations(values, lower, upper, tolerance=0.0) == 3
+    assert limit_violations(values, lower, upper, tolerance=1.0) == 0
+
+
+def test_percentiles() -> None:
+    """Median and p99 of 0..100 are 50 and 99; an empty sample gives NaNs."""
+    assert percentiles(np.arange(101.0)) == (50.0, 99.0)
+    assert percentiles(np.arange(101.0), (0.0, 100.0)) == (0.0, 100.0)
+    assert all(math.isnan(v) for v in percentiles(np.array([])))
