@@ -115,9 +115,11 @@ class BagWriter:
         unknown = [t for t in self.topic_types.values() if t not in self._typestore.types]
         if unknown:
             raise BagError(f"no Jazzy message definition for {', '.join(sorted(set(unknown)))}")
-        self._writer = Writer(self.path, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
         self._connections: dict[str, Any] = {}
+        self.qos_for: Callable[[str], Sequence[Qos]] = lambda topic: ()
+        """Offered QoS of a topic's publishers, asked when its connection is created."""
         try:
+            self._writer = Writer(self.path, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
             self._writer.open()
         except WriterError as exc:
             raise BagError(str(exc)) from exc
@@ -127,13 +129,13 @@ class BagWriter:
         """Whether ``topic`` already has its connection in the bag."""
         return topic in self._connections
 
-    def add_connection(self, topic: str, offered_qos: Sequence[Qos] = ()) -> None:
-        """Create the connection of ``topic`` (once) with its type, definition and QoS."""
+    def add_connection(self, topic: str) -> None:
+        """Create the connection of ``topic`` (once): type, Jazzy definition, offered QoS."""
         if topic in self._connections:
             return
         self._connections[topic] = self._writer.add_connection(
             topic, self.topic_types[topic], typestore=self._typestore,
-            serialization_format="cdr", offered_qos_profiles=list(offered_qos),
+            serialization_format="cdr", offered_qos_profiles=list(self.qos_for(topic)),
         )
 
     def write(self, topic: str, data: bytes, stamp_ns: int) -> None:
@@ -182,7 +184,7 @@ class StopFlag:
 
 def _progress_line(bag: BagWriter, elapsed: float) -> str:
     per_topic = ", ".join(f"{t} {n}" for t, n in bag.counts.items())
-    return f"[bag] {elapsed:6.1f} s: {bag.total} messages ({per_topic})"
+    return f"recorded {bag.total} messages in {elapsed:.1f} s ({per_topic})"
 
 
 def resolve_record_topics(topics: Sequence[str], record_all: bool, spin_time: float = 1.0) -> dict[str, str]:
@@ -233,12 +235,13 @@ def record(path: Path, topic_types: Mapping[str, str], *, duration: float | None
                                             _writer_callback(bag, topic), qos, raw=True)
             for topic, type_name in topic_types.items()
         }
+        bag.qos_for = lambda topic: [to_bag_qos(q) for q in subscription_offered_qos(subs[topic])]
         executor = ros.SingleThreadedExecutor()
         executor.add_node(node)
         print(f"recording to {path} ({len(subs)} topics: {', '.join(subs)})", file=log, flush=True)
         print(READY_LINE, flush=True)
         _spin_until_stopped(executor, stop, duration, progress_interval, log, bag,
-                            lambda: _add_matched_connections(bag, subs, subscription_offered_qos))
+                            lambda: _add_matched_connections(bag, node))
     except (KeyboardInterrupt, ros.ExternalShutdownException):
         pass
     finally:
@@ -257,12 +260,11 @@ def _writer_callback(bag: BagWriter, topic: str) -> Callable[[bytes], None]:
     return on_message
 
 
-def _add_matched_connections(bag: BagWriter, subs: Mapping[str, Any],
-                             qos_of: Callable[[Any], list[Any]]) -> None:
-    """Create the connection of every topic that has a publisher now, with its offered QoS."""
-    for topic, sub in subs.items():
-        if not bag.has_connection(topic) and sub.get_publisher_count() > 0:
-            bag.add_connection(topic, [to_bag_qos(q) for q in qos_of(sub)])
+def _add_matched_connections(bag: BagWriter, node: Any) -> None:
+    """Create the connection of every topic that has a publisher now (as rosbag2 does on discovery)."""
+    for topic in bag.topic_types:
+        if not bag.has_connection(topic) and node.count_publishers(topic) > 0:
+            bag.add_connection(topic)
 
 
 def _spin_until_stopped(executor: Any, stop: StopFlag, duration: float | None, progress_interval: float,
@@ -271,7 +273,7 @@ def _spin_until_stopped(executor: Any, stop: StopFlag, duration: float | None, p
     from dualarm_control import ros
 
     start = time.monotonic()
-    next_poll = next_progress = start
+    next_poll, next_progress = start, start + progress_interval
     while not stop and ros.ok():
         now = time.monotonic()
         if duration is not None and now - start >= duration:
@@ -280,8 +282,7 @@ def _spin_until_stopped(executor: Any, stop: StopFlag, duration: float | None, p
             on_poll()
             next_poll = now + 0.25
         if now >= next_progress:
-            if now > start:
-                print(_progress_line(bag, now - start), file=log, flush=True)
+            print(_progress_line(bag, now - start), file=log, flush=True)
             next_progress = now + progress_interval
         executor.spin_once(timeout_sec=0.05)
 

@@ -269,10 +269,14 @@ def builtin_discovery_works(timeout: float = 10.0) -> bool:
 
 def _builtin_list_main(spin_time: float, exclude: str) -> int:
     """Child process: print the ROS endpoints from the builtin topics as JSON (may crash)."""
+    import resource
+
     from cyclonedds.builtin import (
         BuiltinTopicDcpsPublication,
         BuiltinTopicDcpsSubscription,
     )
+
+    resource.setrlimit(resource.RLIMIT_CORE, (0, 0))  # a crash here is expected: leave no core file
 
     dp = create_participant()
     readers = {
@@ -414,10 +418,12 @@ def message_to_dict(value: Any) -> Any:
     """A message as plain Python data (dicts in field order, lists, numbers, strings).
 
     Works for every dataclass message: the IdlStruct classes of
-    :mod:`dualarm_control.ros.msgs` and the ``rosbags`` message classes.
+    :mod:`dualarm_control.ros.msgs` and the ``rosbags`` message classes (whose
+    ``__msgtype__`` field is left out).
     """
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: message_to_dict(getattr(value, f.name)) for f in dataclasses.fields(value)}
+        return {f.name: message_to_dict(getattr(value, f.name))
+                for f in dataclasses.fields(value) if not f.name.startswith("__")}
     if isinstance(value, (bytes, bytearray)):
         return list(value)
     if isinstance(value, (list, tuple)):
