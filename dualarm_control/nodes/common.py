@@ -36,6 +36,20 @@ def declare(node: Any, specs: Iterable[ParamSpec]) -> dict[str, Any]:
     return values
 
 
+def request_realtime_priority(priority: int) -> str:
+    """Put this process (and threads it creates later) under SCHED_FIFO ``priority`` (1-99), like
+    ros2_control's ``thread_priority``. Returns '' on success, else why not (callers warn and go on)."""
+    import os
+
+    if priority <= 0:
+        return "disabled"
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(min(priority, 99)))
+    except (AttributeError, PermissionError, OSError) as exc:
+        return f"SCHED_FIFO {priority} not permitted ({exc}); running with normal priority"
+    return ""
+
+
 def run_node(make: Callable[[], Any], args: Sequence[str] | None = None) -> int:
     """Init the middleware, build the node shell with ``make()``, spin until done; return the exit code.
 

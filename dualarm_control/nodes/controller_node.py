@@ -29,14 +29,17 @@ from dualarm_control.controller import (
 )
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.metrics import percentiles
-from dualarm_control.nodes.common import declare, run_node
+from dualarm_control.nodes.common import declare, request_realtime_priority, run_node
 from dualarm_control.params import ParamSpec, positive
 from dualarm_control.ros import convert
 
 NODE_PARAMETERS = (
     ParamSpec("lockstep", False, "compute one command per joint-state stamp (deterministic runs)"),
     ParamSpec("stale_timeout", 0.05, "joint states older than this give a zero command [s]", check=positive),
+    ParamSpec("thread_priority", 50, "SCHED_FIFO priority of the control loop (0: normal scheduling)",
+              check=lambda v: "" if 0 <= v <= 99 else "an integer in [0, 99]"),
 )
+DEFAULT_PRIORITY = 50
 WINDOW = 2000  # samples kept for jitter/latency percentiles
 STATS_EVERY = 200  # cycles between percentile updates
 
@@ -44,7 +47,7 @@ STATS_EVERY = 200  # cycles between percentile updates
 class ControllerNode:
     """Node shell around :class:`RelativeController`."""
 
-    def __init__(self) -> None:
+    def __init__(self, priority_note: str = "disabled") -> None:
         self.node = ros.Node("controller_node")
         values = declare(self.node, CONTROLLER_PARAMETERS + NODE_PARAMETERS)
         self.params = controller_params(values, self.node.get_name())
@@ -76,6 +79,10 @@ class ControllerNode:
             n.create_timer(self.params.period, self.on_tick)
         self.log.info(f"solver '{self.params.solver}' (K={self.params.gain}, T={self.params.period} s, "
                       f"{'lockstep' if self.lockstep else 'real-time'})")
+        if priority_note and priority_note != "disabled":
+            self.log.warning(priority_note)
+        elif not priority_note:
+            self.log.info(f"running under SCHED_FIFO priority {values['thread_priority']}")
 
     def close(self) -> None:
         nan2 = (float("nan"),) * 2
@@ -206,7 +213,20 @@ class ControllerNode:
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(ControllerNode, args)
+    import sys
+
+    argv = list(sys.argv if args is None else args)
+    # Before any DDS thread exists, so they inherit it; the parameter is read from the raw args
+    # because the node (and its parameter machinery) does not exist yet.
+    priority = DEFAULT_PRIORITY
+    for i, a in enumerate(argv[:-1]):
+        if a == "-p" and argv[i + 1].startswith("thread_priority:="):
+            try:
+                priority = int(argv[i + 1].split(":=", 1)[1])
+            except ValueError:
+                pass  # declare() rejects it with exit 2
+    why_not = request_realtime_priority(priority)
+    return run_node(lambda: ControllerNode(why_not), argv)
 
 
 if __name__ == "__main__":
