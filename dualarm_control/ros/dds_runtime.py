@@ -71,7 +71,7 @@ class NotInitializedError(RuntimeError):
     """A node or executor was used before ``init()`` or after ``shutdown()``."""
 
 
-def _delete(entity: Entity | None) -> None:
+def delete_entity(entity: Entity | None) -> None:
     """Delete a DDS entity now instead of at garbage collection (errors ignored)."""
     if entity is None:
         return
@@ -164,7 +164,7 @@ class Context:
         if self.executor is not None:
             self.executor._drop_waitset()
         self._topics.clear()
-        _delete(self.participant)
+        delete_entity(self.participant)
 
 
 _context: Context | None = None
@@ -514,7 +514,7 @@ class Node:
         writer, publisher._writer = publisher._writer, None
         if writer in self._entities.writers:
             self._entities.writers.remove(writer)
-        _delete(writer)
+        delete_entity(writer)
         self.context.graph_changed(readers_changed=False)
         return True
 
@@ -530,8 +530,8 @@ class Node:
         self.context.graph_changed(readers_changed=True)
         if self.context.executor is not None:
             self.context.executor._drop_waitset()
-        _delete(condition)
-        _delete(reader)
+        delete_entity(condition)
+        delete_entity(reader)
         return True
 
     def destroy_timer(self, timer: Timer) -> bool:
@@ -710,7 +710,7 @@ class SingleThreadedExecutor:
     def _drop_waitset(self) -> None:
         if self._waitset is not None:
             self._waitset.attached = []  # the conditions may be deleted already; nothing to detach
-            _delete(self._waitset)
+            delete_entity(self._waitset)
             self._waitset = None
         self._waitset_key = None
 

@@ -40,7 +40,6 @@ from typing import Any, Self, TextIO
 import yaml
 from cyclonedds.core import (
     DDSException,
-    Entity,
     InstanceState,
     Policy,
     Qos,
@@ -56,7 +55,7 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 
 from dualarm_control.errors import DualArmError
-from dualarm_control.ros import dds_env, msgs, names
+from dualarm_control.ros import dds_env, dds_runtime, msgs, names
 from dualarm_control.ros.qos import (
     DurabilityPolicy,
     QoSProfile,
@@ -96,14 +95,7 @@ def create_participant() -> DomainParticipant:
     return DomainParticipant(dds_env.domain_id())
 
 
-def delete_entity(entity: Entity | None) -> None:
-    """Delete a DDS entity now (errors ignored)."""
-    if entity is None:
-        return
-    try:
-        Entity.__del__(entity)
-    except DDSException:
-        pass
+delete_entity = dds_runtime.delete_entity
 
 
 def _fq_topic(topic: str) -> str:

@@ -46,13 +46,8 @@ def _least_squares_terms(problem: ControlProblem) -> tuple[FloatArray, FloatArra
     return j.T @ j, j.T @ problem.reference
 
 
-@register("standard_qp")
-class StandardQP(Solver):
-    """Standard QP, eq (14): min 1/2 ||J qd - r||^2 + eps/2 ||qd||^2  s.t. Qd_min <= qd <= Qd_max.
-
-    J^T J has rank 6 < n, so eq (14) alone has a whole affine set of minimisers; the tiny
-    term eps (``regularization``, default 1e-6) selects the minimum-norm one, as J^+ does.
-    """
+class _QPSolver(Solver):
+    """A solver that owns one QP back-end (and its warm-start memory)."""
 
     def __init__(self, params: SolverParams | None = None) -> None:
         super().__init__(params)
@@ -60,6 +55,15 @@ class StandardQP(Solver):
 
     def reset(self) -> None:
         self._qp.reset()
+
+
+@register("standard_qp")
+class StandardQP(_QPSolver):
+    """Standard QP, eq (14): min 1/2 ||J qd - r||^2 + eps/2 ||qd||^2  s.t. Qd_min <= qd <= Qd_max.
+
+    J^T J has rank 6 < n, so eq (14) alone has a whole affine set of minimisers; the tiny
+    term eps (``regularization``, default 1e-6) selects the minimum-norm one, as J^+ does.
+    """
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
         jtj, jtr = _least_squares_terms(problem)
@@ -69,7 +73,7 @@ class StandardQP(Solver):
 
 
 @register("sparse_qp")
-class SparseQP(Solver):
+class SparseQP(_QPSolver):
     """Lasso QP, eq (17)-(19) with the bounds of eq (23) (QP1 of eq (26)).
 
     min 1/2 ||J qd - r||^2 + lambda ||qd||_1  s.t. Qd_min <= qd <= Qd_max, solved as the
@@ -78,13 +82,6 @@ class SparseQP(Solver):
     Qd_min <= [I, -I] z <= Qd_max. The box 0 <= qd+ <= max(Qd_max, 0), 0 <= qd- <= max(-Qd_min, 0)
     is implied by the other constraints and only tightens the solver's search.
     """
-
-    def __init__(self, params: SolverParams | None = None) -> None:
-        super().__init__(params)
-        self._qp = self._backend()
-
-    def reset(self) -> None:
-        self._qp.reset()
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
         jtj, jtr = _least_squares_terms(problem)
