@@ -83,12 +83,16 @@ class SparseQP(_QPSolver):
     is implied by the other constraints and only tightens the solver's search.
     """
 
+    _split: FloatArray | None = None  # [I, -I] of eq (19)
+
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
         jtj, jtr = _least_squares_terms(problem)
         n = jtj.shape[0]
         h = np.block([[jtj, -jtj], [-jtj, jtj]])
-        g = self.params.l1_weight * np.ones(2 * n) - np.concatenate((jtr, -jtr))
-        c = np.hstack((np.eye(n), -np.eye(n)))
+        if self._split is None or self._split.shape[0] != n:  # constant per n: built once, not per cycle
+            self._split = np.hstack((np.eye(n), -np.eye(n)))
+        c = self._split
+        g = self.params.l1_weight - np.concatenate((jtr, -jtr))
         lb = np.zeros(2 * n)
         ub = np.concatenate((np.maximum(problem.upper, 0.0), np.maximum(-problem.lower, 0.0)))
         qp = QPProblem(H=h, g=g, C=c, l=problem.lower, u=problem.upper, lb=lb, ub=ub)
