@@ -46,7 +46,7 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "dualarm = dualarm_control.cli:main",
+            "dualarm = dualarm_control.app.cli:main",
             "controller_node = dualarm_control.nodes.controller_node:main",
             "trajectory_node = dualarm_control.nodes.trajectory_node:main",
             "sim_node = dualarm_sim.sim_node:main",

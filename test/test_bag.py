@@ -1,6 +1,6 @@
 """``dualarm bag record|info`` and ``dualarm report``: real processes over loopback DDS, rosbags as the reader.
 
-The recorder runs as ``python -m dualarm_control.cli bag record`` next to a tiny publisher
+The recorder runs as ``python -m dualarm_control.app.cli bag record`` next to a tiny publisher
 process; it is stopped by SIGINT/SIGTERM like the launcher does, and the bag is read back
 with ``rosbags.highlevel.AnyReader``. The report is checked on a bag written here with the
 rosbags Writer, against numbers computed by hand.
@@ -25,8 +25,8 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from dualarm_control import cli
-from dualarm_control.bag import nearest_labels, pose_error, quaternion_angle
+from dualarm_control.app import cli
+from dualarm_control.app.bag import nearest_labels, pose_error, quaternion_angle
 
 REPO = Path(__file__).resolve().parents[1]
 N_MSGS = 40
@@ -104,7 +104,7 @@ class Proc:
 
 
 def dualarm(*args: str) -> list[str]:
-    return [sys.executable, "-m", "dualarm_control.cli", *args]
+    return [sys.executable, "-m", "dualarm_control.app.cli", *args]
 
 
 def record_with_publisher(tmp_path: Path, name: str, sig: int, n: int = N_MSGS) -> tuple[Path, int, str]:

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from dualarm_control.cli import main
-from dualarm_control.report import METRIC_KEYS
+from dualarm_control.app.cli import main
+from dualarm_control.app.report import METRIC_KEYS
 
 SOLVERS = ("standard_qp", "sparse_qp", "hierarchical_sparse_qp")
 

@@ -14,17 +14,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from dualarm_control.app.experiment import run_scenario
+from dualarm_control.app.launcher import launch_scenario
 from dualarm_control.controller import controller_params
-from dualarm_control.experiment import run_scenario
 from dualarm_control.kinematics import DualArmModel
-from dualarm_control.launcher import launch_scenario
 from dualarm_control.scenario import load_scenario
 
 SHORT = Path(__file__).parent / "data" / "short.yaml"
 
 
 def run_cli(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "dualarm_control.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "dualarm_control.app.cli", *args], capture_output=True, text=True,
                           timeout=timeout, check=False)
 
 

@@ -53,7 +53,7 @@ finally:
 
 
 def dualarm(*args: str, timeout: float = 30.0) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "dualarm_control.cli", *args], cwd=REPO,
+    return subprocess.run([sys.executable, "-m", "dualarm_control.app.cli", *args], cwd=REPO,
                           capture_output=True, text=True, timeout=timeout, check=False)
 
 

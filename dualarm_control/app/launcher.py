@@ -120,7 +120,7 @@ def launch_scenario(
     interrupted = False
     try:
         if record is not None:
-            rec = launch.start("bag", [sys.executable, "-u", "-m", "dualarm_control.cli", "bag", "record", "-o",
+            rec = launch.start("bag", [sys.executable, "-u", "-m", "dualarm_control.app.cli", "bag", "record", "-o",
                                        str(record)])
             if not rec.ready.wait(30.0):
                 print("[launch] the recorder did not get ready within 30 s", flush=True)

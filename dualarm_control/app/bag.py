@@ -8,7 +8,7 @@ message arrives), with the ROS type name, the Jazzy message definition and type 
 offered QoS. Timestamps are receive times (system clock, ns).
 
 The report reads a bag with ``rosbags.highlevel.AnyReader`` and builds the same
-metrics record as an in-process experiment (:func:`dualarm_control.report.summarize`).
+metrics record as an in-process experiment (:func:`dualarm_control.app.report.summarize`).
 
 Only this module's recording needs DDS; it is imported lazily, so the reading side
 works with numpy + rosbags alone.
@@ -581,7 +581,7 @@ def summarize_run(run: RunData, model: Any) -> list[SolverRun]:
     receive time (a bag normally holds one solver). ``model`` gives joint limits
     (``q_min``, ``q_max``, ``qd_max``).
     """
-    from dualarm_control.report import summarize
+    from dualarm_control.app.report import summarize
 
     diag = run.diagnostics
     solvers = list(dict.fromkeys(diag.solver))
@@ -632,8 +632,8 @@ def report(path: Path, output: Path) -> dict[str, dict[str, float | int]]:
 
     Returns ``{solver: record}``; BagError when the bag lacks needed topics.
     """
+    from dualarm_control.app.report import plot_velocity_norms, write_metrics
     from dualarm_control.kinematics import DualArmModel
-    from dualarm_control.report import plot_velocity_norms, write_metrics
 
     model = DualArmModel()
     runs = summarize_run(read_run(Path(path), model.joint_names), model)

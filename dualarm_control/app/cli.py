@@ -35,11 +35,15 @@ def _progress_printer(label: str) -> Callable[[float, str], None]:
 
 def cmd_experiment(args: argparse.Namespace) -> int:
     """Run a scenario in-process (lockstep) for each solver; write metrics.json and plots."""
+    from dualarm_control.app.experiment import run_scenario, summarize_log
+    from dualarm_control.app.report import (
+        format_table,
+        plot_velocity_norms,
+        write_metrics,
+    )
     from dualarm_control.controller import controller_params
-    from dualarm_control.experiment import run_scenario, summarize_log
     from dualarm_control.kinematics import DualArmModel
     from dualarm_control.params import read_params_files
-    from dualarm_control.report import format_table, plot_velocity_norms, write_metrics
     from dualarm_control.scenario import load_scenario
 
     scenario = load_scenario(args.scenario)
@@ -72,7 +76,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
 def cmd_launch(args: argparse.Namespace) -> int:
     """Start the three nodes as processes on a scenario; optionally record a bag."""
-    from dualarm_control.launcher import launch_scenario
+    from dualarm_control.app.launcher import launch_scenario
     from dualarm_control.scenario import scenario_file
 
     scenario_file(args.scenario)  # fail early (exit 2) on an unknown scenario
@@ -90,7 +94,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     """Run one node in the foreground (like ``ros2 run dualarm_control NODE``)."""
     import os
 
-    from dualarm_control.launcher import NODES, node_command
+    from dualarm_control.app.launcher import NODES, node_command
 
     if args.node not in NODES:
         raise DualArmError(f"unknown node {args.node!r}; valid choices: {', '.join(NODES)}")
@@ -104,7 +108,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     ``dualarm report`` on the bag, then the in-process experiment, and a comparison of both."""
     import json
 
-    from dualarm_control.launcher import launch_scenario
+    from dualarm_control.app.launcher import launch_scenario
 
     out = Path(args.output)
     solvers = [s.strip() for s in args.solver.split(",") if s.strip()]
@@ -146,7 +150,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def cmd_bench(args: argparse.Namespace) -> int:
     """Time every solver on a scenario; write DIR/bench.md and DIR/bench.json."""
-    from dualarm_control.bench import bench_solvers, format_bench, write_bench
+    from dualarm_control.app.bench import bench_solvers, format_bench, write_bench
     from dualarm_control.scenario import load_scenario
 
     scenario = load_scenario(args.scenario)
@@ -164,7 +168,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 def cmd_bag_record(args: argparse.Namespace) -> int:
     """Record topics to a rosbag2 directory (MCAP, version 9) until Ctrl-C/SIGTERM or --duration."""
-    from dualarm_control.bag import default_bag_path, record, resolve_record_topics
+    from dualarm_control.app.bag import default_bag_path, record, resolve_record_topics
 
     topics = resolve_record_topics(args.topics, args.all)
     return record(Path(args.output) if args.output else default_bag_path(), topics, duration=args.duration)
@@ -172,7 +176,7 @@ def cmd_bag_record(args: argparse.Namespace) -> int:
 
 def cmd_bag_info(args: argparse.Namespace) -> int:
     """Print a ``ros2 bag info``-style summary."""
-    from dualarm_control.bag import bag_info
+    from dualarm_control.app.bag import bag_info
 
     print(bag_info(Path(args.bag)))
     return 0
@@ -180,8 +184,8 @@ def cmd_bag_info(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Metrics of a recorded run: DIR/metrics.json, DIR/velocity_norms.png and the table."""
-    from dualarm_control.bag import report
-    from dualarm_control.report import format_table
+    from dualarm_control.app.bag import report
+    from dualarm_control.app.report import format_table
 
     out = Path(args.output)
     results = report(Path(args.bag), out)

@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from dualarm_control.app.experiment import run_scenario
 from dualarm_control.controller import controller_params
-from dualarm_control.experiment import run_scenario
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.metrics import percentiles
 from dualarm_control.scenario import Scenario

@@ -1,0 +1,1 @@
+"""Applications on top of the core: the `dualarm` command, launcher, bags, reports, experiments, benchmarks."""
