@@ -172,7 +172,7 @@ def _backend_choices() -> list[str]:
 CONTROLLER_PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("solver", "hierarchical_sparse_qp", "kinematic solver (registry name)", choices=_solver_choices),
     ParamSpec("gain", 10.0, "closed-loop gain K of eq (13) [1/s]", check=positive),
-    ParamSpec("control_period", 0.005, "control period T [s] (200 Hz)", check=positive),
+    ParamSpec("control_period", 0.005, "control period T [s] (200 Hz)", check=positive, read_only=True),
     ParamSpec("alpha", 0.1, "repulsive activation share alpha of eq (24)", check=unit_interval),
     ParamSpec("velocity_scale", 1.0, "factor on the nominal joint velocity limits", check=open_unit_interval),
     ParamSpec("l1_weight", 1e-6, "lambda of eq (17)/(26)", check=positive),

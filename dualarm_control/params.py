@@ -98,7 +98,9 @@ class ParamSpec:
     """A declared parameter: name, default (fixes the ROS type), description, optional check.
 
     ``choices`` returns the valid values (evaluated lazily, e.g. the solver registry);
-    ``check`` returns an error description for a bad value, or ''.
+    ``check`` returns an error description for a bad value, or '' (its docstring states the
+    rule, shown as the ROS parameter descriptor's ``additional_constraints``);
+    ``read_only`` parameters cannot change on a running node (ROS descriptor ``read_only``).
     """
 
     name: str
@@ -106,6 +108,14 @@ class ParamSpec:
     description: str
     choices: Callable[[], list[str]] | None = None
     check: Callable[[Any], str] | None = None
+    read_only: bool = False
+
+    @property
+    def constraints(self) -> str:
+        """Human-readable rule for valid values ('' when any value of the type is valid)."""
+        if self.choices is not None:
+            return "one of: " + ", ".join(self.choices())
+        return (self.check.__doc__ or "").strip() if self.check is not None else ""
 
     @property
     def type_name(self) -> str:
@@ -152,16 +162,20 @@ def resolve(specs: Iterable[ParamSpec], given: Mapping[str, Any], node: str = ""
 
 
 def positive(value: Any) -> str:
+    """a value > 0"""
     return "" if value > 0 else "a value > 0"
 
 
 def non_negative(value: Any) -> str:
+    """a value >= 0"""
     return "" if value >= 0 else "a value >= 0"
 
 
 def unit_interval(value: Any) -> str:
+    """a value in [0, 1]"""
     return "" if 0 <= value <= 1 else "a value in [0, 1]"
 
 
 def open_unit_interval(value: Any) -> str:
+    """a value in (0, 1]"""
     return "" if 0 < value <= 1 else "a value in (0, 1]"

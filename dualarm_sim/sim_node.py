@@ -1,6 +1,7 @@
 """sim_node: the pybullet cell as a velocity-controlled robot (FRI / ros2_control stand-in).
 
-Publishes ``/joint_states`` (and ``/wrench``) every control period; applies
+Publishes ``/joint_states``, ``/wrench`` and ``/clock`` (simulation time, steps x period)
+every control period; applies
 ``/velocity_controller/commands`` (Float64MultiArray, 14 values, controller joint order).
 A command older than ``command_timeout`` brings the arms to rest.
 
@@ -12,36 +13,50 @@ the first state is sent once ``lockstep_subscribers`` readers of /joint_states a
 
 from __future__ import annotations
 
+import sys
 import time
 from typing import Any
 
 import numpy as np
+from geometry_msgs.msg import WrenchStamped
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
 
-from dualarm_control import ros
-from dualarm_control.nodes.common import declare, run_node
 from dualarm_control.params import ParamSpec, non_negative, positive
 from dualarm_control.ros import convert
+from dualarm_control.ros.node import (
+    declare,
+    priority_from_args,
+    request_realtime_priority,
+    run,
+)
 from dualarm_control.scenario import load_scenario, scenario_names
 from dualarm_sim.cell import CellConfig, DualArmCell
 
 PARAMETERS = (
-    ParamSpec("scenario", "assembly", "scenario name or YAML path (initial configuration)"),
-    ParamSpec("control_period", 0.005, "control period [s]", check=positive),
-    ParamSpec("physics_rate_hz", 1000.0, "physics rate [Hz] (>= 1000)", check=positive),
+    ParamSpec("scenario", "assembly", "scenario name or YAML path (initial configuration)", read_only=True),
+    ParamSpec("control_period", 0.005, "control period [s]", check=positive, read_only=True),
+    ParamSpec("physics_rate_hz", 1000.0, "physics rate [Hz] (>= 1000)", check=positive, read_only=True),
     ParamSpec("command_timeout", 0.05, "command age that brings the arms to rest [s]", check=positive),
-    ParamSpec("lockstep", False, "advance one period per received command"),
+    ParamSpec("lockstep", False, "advance one period per received command", read_only=True),
+    ParamSpec("thread_priority", 50, "SCHED_FIFO priority of the physics loop (0: normal scheduling)",
+              check=lambda v: "" if 0 <= v <= 99 else "an integer in [0, 99]", read_only=True),
     ParamSpec("lockstep_subscribers", 2, "joint_states readers to wait for before the first lockstep state",
               check=non_negative),
     ParamSpec("lockstep_resend", 0.5, "re-publish the pending state after this long without a command [s]",
               check=positive),
 )
 
+DEFAULT_PRIORITY = 50
+
 
 class SimNode:
     """Node shell around :class:`DualArmCell`."""
 
-    def __init__(self) -> None:
-        self.node = ros.Node("sim_node")
+    def __init__(self, context: Any, priority_note: str = "disabled") -> None:
+        self.node = Node("sim_node", context=context)
         p = declare(self.node, PARAMETERS)
         scenario = load_scenario(p["scenario"])
         self.cell = DualArmCell(
@@ -54,9 +69,10 @@ class SimNode:
         self.wait_for = int(p["lockstep_subscribers"])
         self.resend_s = float(p["lockstep_resend"])
         n = self.node
-        self.pub_js = n.create_publisher(ros.msgs.JointState, "/joint_states", 10)
-        self.pub_wrench = n.create_publisher(ros.msgs.WrenchStamped, "/wrench", 10)
-        n.create_subscription(ros.msgs.Float64MultiArray, "/velocity_controller/commands", self.on_command, 10)
+        self.pub_js = n.create_publisher(JointState, "/joint_states", 10)
+        self.pub_wrench = n.create_publisher(WrenchStamped, "/wrench", 10)
+        self.pub_clock = n.create_publisher(Clock, "/clock", 10)
+        n.create_subscription(Float64MultiArray, "/velocity_controller/commands", self.on_command, 10)
         self.log = n.get_logger()
         self.steps = 0
         self.started = False
@@ -69,6 +85,8 @@ class SimNode:
         self.log.info(f"scenario '{scenario.name}', {'lockstep' if self.lockstep else 'real-time'} at "
                       f"{1.0 / p['control_period']:.0f} Hz, physics {p['physics_rate_hz']:.0f} Hz "
                       f"(known scenarios: {', '.join(scenario_names())})")
+        if priority_note and priority_note != "disabled":
+            self.log.warning(priority_note)
 
     def close(self) -> None:
         self.log.info(f"stopping after {self.steps} steps ({self.steps * self.period_ns / 1e9:.3f} s sim time)")
@@ -80,6 +98,7 @@ class SimNode:
     def publish_state(self) -> None:
         sample = self.cell.state()
         ns = self._stamp_ns()
+        self.pub_clock.publish(convert.clock(self.steps * self.period_ns))
         self.pub_js.publish(convert.joint_state(self.cell.joint_names, ns, sample.positions, sample.velocities))
         self.pub_wrench.publish(convert.wrench_stamped(ns, self.cell.wrench()))
         self.last_publish = time.monotonic()
@@ -116,7 +135,9 @@ class SimNode:
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(SimNode, args)
+    argv = list(sys.argv if args is None else args)
+    why_not = request_realtime_priority(priority_from_args(argv, DEFAULT_PRIORITY))
+    return run(lambda context: SimNode(context, why_not), argv)
 
 
 if __name__ == "__main__":

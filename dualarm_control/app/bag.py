@@ -1,43 +1,21 @@
-"""rosbag2 recording (MCAP, metadata version 9, as Jazzy writes it), ``bag info`` and the bag report.
+"""``bag info`` and the bag report: reading rosbag2 bags with ``rosbags`` (no ROS needed).
 
-Recording subscribes with raw CDR (reliable, volatile, keep-last 1000) through
-:mod:`dualarm_control.ros` and writes the bytes unchanged with ``rosbags``: a
-connection per topic, created when its first publisher is matched (or its first
-message arrives), with the ROS type name, the Jazzy message definition and type hash
-(``Stores.ROS2_JAZZY``) so any rosbag2 reader decodes the bag, and the publishers'
-offered QoS. Timestamps are receive times (system clock, ns).
-
-The report reads a bag with ``rosbags.highlevel.AnyReader`` and builds the same
-metrics record as an in-process experiment (:func:`dualarm_control.app.report.summarize`).
-
-Only this module's recording needs DDS; it is imported lazily, so the reading side
-works with numpy + rosbags alone.
+Recording is :mod:`dualarm_control.ros.recorder` (rclpy). The report reads a bag with
+``rosbags.highlevel.AnyReader`` and builds the same metrics record as an in-process
+experiment (:func:`dualarm_control.app.report.summarize`).
 """
 
 from __future__ import annotations
 
-import signal
-import sys
-import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from types import FrameType
-from typing import Any, Final, TextIO
+from typing import Any, Final
 
 import numpy as np
 import numpy.typing as npt
 from rosbags.highlevel import AnyReader, AnyReaderError
-from rosbags.interfaces import (
-    Qos,
-    QosDurability,
-    QosHistory,
-    QosLiveliness,
-    QosReliability,
-    QosTime,
-)
-from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_typestore
 
 from dualarm_control.errors import DualArmError
@@ -72,219 +50,6 @@ class BagError(DualArmError):
 def jazzy_typestore() -> Any:
     """The ``rosbags`` typestore with ROS 2 Jazzy's message definitions."""
     return get_typestore(Stores.ROS2_JAZZY)
-
-
-# ===================================================================== recording
-
-
-def default_bag_path(now: datetime | None = None) -> Path:
-    """``rosbag2_YYYY_MM_DD-HH_MM_SS`` in the current directory, as ``ros2 bag record`` names it."""
-    return Path((now or datetime.now()).strftime("rosbag2_%Y_%m_%d-%H_%M_%S"))
-
-
-def _qos_time(ns: int) -> QosTime:
-    return QosTime(sec=ns // 1_000_000_000, nsec=ns % 1_000_000_000)
-
-
-def to_bag_qos(offered: Any) -> Qos:
-    """A :class:`dualarm_control.ros.graph_tools.OfferedQos` as a rosbag2 offered QoS profile.
-
-    History is ``unknown`` with depth 0, as ``rmw_cyclonedds_cpp`` reports remote writers.
-    """
-    return Qos(
-        history=QosHistory.UNKNOWN,
-        depth=0,
-        reliability=QosReliability[offered.reliability.upper()],
-        durability=QosDurability[offered.durability.upper()],
-        deadline=_qos_time(offered.deadline_ns),
-        lifespan=_qos_time(offered.lifespan_ns),
-        liveliness=QosLiveliness[offered.liveliness.upper()],
-        liveliness_lease_duration=_qos_time(offered.liveliness_lease_ns),
-        avoid_ros_namespace_conventions=False,
-    )
-
-
-class BagWriter:
-    """A rosbag2 directory (MCAP storage, version 9) receiving raw CDR messages per topic."""
-
-    def __init__(self, path: Path, topic_types: Mapping[str, str]) -> None:
-        self.path = Path(path)
-        self.topic_types = dict(topic_types)
-        self.counts: dict[str, int] = dict.fromkeys(self.topic_types, 0)
-        self._typestore = jazzy_typestore()
-        unknown = [t for t in self.topic_types.values() if t not in self._typestore.types]
-        if unknown:
-            raise BagError(f"no Jazzy message definition for {', '.join(sorted(set(unknown)))}")
-        self._connections: dict[str, Any] = {}
-        self.qos_for: Callable[[str], Sequence[Qos]] = lambda topic: ()
-        """Offered QoS of a topic's publishers, asked when its connection is created."""
-        try:
-            self._writer = Writer(self.path, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
-            self._writer.open()
-        except WriterError as exc:
-            raise BagError(str(exc)) from exc
-        self._open = True
-
-    def has_connection(self, topic: str) -> bool:
-        """Whether ``topic`` already has its connection in the bag."""
-        return topic in self._connections
-
-    def add_connection(self, topic: str) -> None:
-        """Create the connection of ``topic`` (once): type, Jazzy definition, offered QoS."""
-        if topic in self._connections:
-            return
-        self._connections[topic] = self._writer.add_connection(
-            topic, self.topic_types[topic], typestore=self._typestore,
-            serialization_format="cdr", offered_qos_profiles=list(self.qos_for(topic)),
-        )
-
-    def write(self, topic: str, data: bytes, stamp_ns: int) -> None:
-        """Append one CDR message received at ``stamp_ns``."""
-        if topic not in self._connections:
-            self.add_connection(topic)
-        self._writer.write(self._connections[topic], stamp_ns, data)
-        self.counts[topic] += 1
-
-    @property
-    def total(self) -> int:
-        """Messages written so far."""
-        return sum(self.counts.values())
-
-    def close(self) -> None:
-        """Finish the MCAP file and write metadata.yaml (idempotent)."""
-        if self._open:
-            self._open = False
-            self._writer.close()
-
-
-class StopFlag:
-    """Set by SIGINT/SIGTERM (handlers installed by :meth:`install`, restored by :meth:`restore`)."""
-
-    def __init__(self) -> None:
-        self.signal: int | None = None
-        self._previous: dict[int, Any] = {}
-
-    def __bool__(self) -> bool:
-        return self.signal is not None
-
-    def _handle(self, signum: int, frame: FrameType | None) -> None:
-        self.signal = signum
-
-    def install(self) -> None:
-        """Catch SIGINT and SIGTERM (main thread only)."""
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            self._previous[sig] = signal.signal(sig, self._handle)
-
-    def restore(self) -> None:
-        """Put the previous handlers back."""
-        for sig, handler in self._previous.items():
-            signal.signal(sig, handler)
-        self._previous.clear()
-
-
-def _progress_line(bag: BagWriter, elapsed: float) -> str:
-    per_topic = ", ".join(f"{t} {n}" for t, n in bag.counts.items())
-    return f"recorded {bag.total} messages in {elapsed:.1f} s ({per_topic})"
-
-
-def resolve_record_topics(topics: Sequence[str], record_all: bool, spin_time: float = 1.0) -> dict[str, str]:
-    """Topic -> ROS type for ``bag record``: the graph topics by default, else the named ones.
-
-    ``record_all`` adds every topic discovery finds (see ``dualarm topic list``).
-    Names outside the package's graph get their type by probing the DDS graph.
-    """
-    from dualarm_control.ros import graph_tools
-
-    chosen: dict[str, str] = {}
-    if record_all or not topics:
-        chosen.update(graph_tools.GRAPH_TOPICS)
-    if record_all:
-        for ep in graph_tools.list_topics(spin_time, extra=topics):
-            chosen.setdefault(ep.name, ep.type_name)
-    for topic in topics:
-        fq = topic if topic.startswith("/") else "/" + topic
-        if fq not in chosen:
-            try:
-                chosen[fq] = graph_tools.resolve_type(fq, spin_time)
-            except graph_tools.GraphToolError as exc:
-                raise BagError(f"{exc}; the known topics are {', '.join(graph_tools.GRAPH_TOPICS)}") from exc
-    return chosen
-
-
-def record(path: Path, topic_types: Mapping[str, str], *, duration: float | None = None,
-           progress_interval: float = PROGRESS_INTERVAL_S, log: TextIO = sys.stderr) -> int:
-    """Record ``topic_types`` into the bag directory ``path`` until SIGINT/SIGTERM or ``duration``.
-
-    Prints ``recording to PATH`` (stderr) and :data:`READY_LINE` (stdout) once subscribed,
-    progress on stderr. The bag is always closed with a valid metadata.yaml.
-    Returns 0 (also when stopped by a signal).
-    """
-    from dualarm_control import ros
-    from dualarm_control.ros.graph_tools import subscription_offered_qos
-
-    bag = BagWriter(path, topic_types)
-    stop = StopFlag()
-    try:
-        ros.init(args=[])
-        stop.install()
-        node = ros.Node("dualarm_bag_recorder")
-        qos = ros.QoSProfile(depth=RECORD_DEPTH, reliability=ros.ReliabilityPolicy.RELIABLE,
-                             durability=ros.DurabilityPolicy.VOLATILE)
-        subs = {
-            topic: node.create_subscription(ros.msgs.msg_type_by_name(type_name), topic,
-                                            _writer_callback(bag, topic), qos, raw=True)
-            for topic, type_name in topic_types.items()
-        }
-        bag.qos_for = lambda topic: [to_bag_qos(q) for q in subscription_offered_qos(subs[topic])]
-        executor = ros.SingleThreadedExecutor()
-        executor.add_node(node)
-        print(f"recording to {path} ({len(subs)} topics: {', '.join(subs)})", file=log, flush=True)
-        print(READY_LINE, flush=True)
-        _spin_until_stopped(executor, stop, duration, progress_interval, log, bag,
-                            lambda: _add_matched_connections(bag, node))
-    except (KeyboardInterrupt, ros.ExternalShutdownException):
-        pass
-    finally:
-        stop.restore()
-        bag.close()
-        ros.try_shutdown()
-    reason = f" (signal {signal.Signals(stop.signal).name})" if stop.signal is not None else ""
-    print(f"bag closed{reason}: {path}, {bag.total} messages", file=log, flush=True)
-    return 0
-
-
-def _writer_callback(bag: BagWriter, topic: str) -> Callable[[bytes], None]:
-    def on_message(data: bytes) -> None:
-        bag.write(topic, data, time.time_ns())
-
-    return on_message
-
-
-def _add_matched_connections(bag: BagWriter, node: Any) -> None:
-    """Create the connection of every topic that has a publisher now (as rosbag2 does on discovery)."""
-    for topic in bag.topic_types:
-        if not bag.has_connection(topic) and node.count_publishers(topic) > 0:
-            bag.add_connection(topic)
-
-
-def _spin_until_stopped(executor: Any, stop: StopFlag, duration: float | None, progress_interval: float,
-                        log: TextIO, bag: BagWriter, on_poll: Callable[[], None]) -> None:
-    """Run the subscription callbacks until a signal or ``duration``, with periodic progress."""
-    from dualarm_control import ros
-
-    start = time.monotonic()
-    next_poll, next_progress = start, start + progress_interval
-    while not stop and ros.ok():
-        now = time.monotonic()
-        if duration is not None and now - start >= duration:
-            break
-        if now >= next_poll:
-            on_poll()
-            next_poll = now + 0.25
-        if now >= next_progress:
-            print(_progress_line(bag, now - start), file=log, flush=True)
-            next_progress = now + progress_interval
-        executor.spin_once(timeout_sec=0.05)
 
 
 # ===================================================================== bag info

@@ -168,10 +168,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 def cmd_bag_record(args: argparse.Namespace) -> int:
     """Record topics to a rosbag2 directory (MCAP, version 9) until Ctrl-C/SIGTERM or --duration."""
-    from dualarm_control.app.bag import default_bag_path, record, resolve_record_topics
+    from dualarm_control.ros.recorder import default_bag_path, record
 
-    topics = resolve_record_topics(args.topics, args.all)
-    return record(Path(args.output) if args.output else default_bag_path(), topics, duration=args.duration)
+    path = Path(args.output) if args.output else default_bag_path()
+    return record(path, args.topics, record_all=args.all, duration=args.duration, use_sim_time=args.use_sim_time)
 
 
 def cmd_bag_info(args: argparse.Namespace) -> int:
@@ -196,9 +196,9 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def cmd_topic_list(args: argparse.Namespace) -> int:
     """``ros2 topic list``."""
-    from dualarm_control.ros.graph_tools import format_topic_list, list_topics
+    from dualarm_control.ros.graph import format_topic_list, list_topics
 
-    text = format_topic_list(list_topics(args.spin_time, args.discovery), args.show_types)
+    text = format_topic_list(list_topics(args.spin_time), args.show_types)
     if text:
         print(text)
     return 0
@@ -206,7 +206,7 @@ def cmd_topic_list(args: argparse.Namespace) -> int:
 
 def cmd_topic_echo(args: argparse.Namespace) -> int:
     """``ros2 topic echo``."""
-    from dualarm_control.ros.graph_tools import echo
+    from dualarm_control.ros.graph import echo
 
     count = 1 if args.once else args.count
     try:
@@ -217,7 +217,7 @@ def cmd_topic_echo(args: argparse.Namespace) -> int:
 
 def cmd_topic_hz(args: argparse.Namespace) -> int:
     """``ros2 topic hz``."""
-    from dualarm_control.ros.graph_tools import hz
+    from dualarm_control.ros.graph import hz
 
     try:
         return hz(args.topic, window=args.window, duration=args.duration, spin_time=args.spin_time)
@@ -227,7 +227,7 @@ def cmd_topic_hz(args: argparse.Namespace) -> int:
 
 def cmd_topic_info(args: argparse.Namespace) -> int:
     """``ros2 topic info``."""
-    from dualarm_control.ros.graph_tools import format_topic_info, topic_info
+    from dualarm_control.ros.graph import format_topic_info, topic_info
 
     info = topic_info(args.topic, args.spin_time)
     if info.publishers == 0 and info.subscriptions == 0:
@@ -243,14 +243,18 @@ def _add_bag_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     verbs = bag.add_subparsers(dest="bag_verb", metavar="BAG_VERB")
     verbs.required = True
     rec = verbs.add_parser("record", help="record topics until Ctrl-C, SIGTERM or --duration",
-                           description="Subscribe (raw CDR; reliable, volatile, keep-last 1000) and write a rosbag2 "
-                           "directory (MCAP, version 9, Jazzy message definitions). Prints 'bag: ready' on stdout "
-                           "once subscribed; progress on stderr; the bag is closed cleanly on Ctrl-C/SIGTERM.")
+                           description="Subscribe raw (serialized CDR, QoS adapted to the publishers, keep-last "
+                           "1000) and write a rosbag2 directory as Jazzy does (DIR/DIR_0.mcap, metadata version 9 "
+                           "with offered QoS and type hashes from the graph). Prints 'bag: ready' on stdout once the "
+                           "named topics are subscribed; progress on stderr; the bag is closed cleanly on "
+                           "Ctrl-C/SIGTERM with every message received.")
     rec.add_argument("-o", "--output", metavar="DIR", help="bag directory (default: rosbag2_YYYY_MM_DD-HH_MM_SS)")
-    rec.add_argument("--topics", nargs="+", default=[], metavar="T",
-                     help="topics to record (default: the graph's topics)")
+    rec.add_argument("topics", nargs="*", default=[], metavar="TOPIC",
+                     help="topics to record (subscribed once all have a publisher)")
     rec.add_argument("-a", "--all", action="store_true",
-                     help="the graph's topics plus every topic discovery finds")
+                     help="every topic discovery finds, as they appear (not /rosout, /parameter_events)")
+    rec.add_argument("--use-sim-time", action="store_true",
+                     help="stamp messages with /clock (simulation time), as rosbag2 does with use_sim_time")
     rec.add_argument("-d", "--duration", type=float, metavar="S", help="stop after S seconds")
     rec.set_defaults(func=cmd_bag_record)
     info = verbs.add_parser("info", help="summary of a bag (like ros2 bag info)")
@@ -260,15 +264,13 @@ def _add_bag_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 def _add_topic_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     topic = sub.add_parser("topic", help="inspect topics (like ros2 topic)",
-                           description="Graph tools over Cyclone DDS. Discovery probes the graph's known topics "
-                           "(the builtin discovery topics crash cyclonedds 11.0.1's Python binding).")
+                           description="Graph tools on rclpy (any installed message type); localhost discovery "
+                           "unless ROS_AUTOMATIC_DISCOVERY_RANGE / ROS_STATIC_PEERS / a DDS profile is set.")
     verbs = topic.add_subparsers(dest="topic_verb", metavar="TOPIC_VERB")
     verbs.required = True
     spin = {"type": float, "default": 1.0, "metavar": "S", "help": "discovery wait (default: %(default)s s)"}
     lst = verbs.add_parser("list", help="topics with publishers or subscriptions")
     lst.add_argument("-t", "--show-types", action="store_true", help="also print each topic's type")
-    lst.add_argument("--discovery", choices=("auto", "probe", "builtin"), default="auto",
-                     help="auto: builtin discovery topics in a child process if they work, else probe")
     lst.add_argument("--spin-time", **spin)
     lst.set_defaults(func=cmd_topic_list)
     ech = verbs.add_parser("echo", help="print messages as YAML")
@@ -289,6 +291,43 @@ def _add_topic_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     inf.add_argument("topic")
     inf.add_argument("--spin-time", **spin)
     inf.set_defaults(func=cmd_topic_info)
+
+
+def cmd_param(args: argparse.Namespace) -> int:
+    """``ros2 param list|get|set|describe`` on a running node."""
+    from dualarm_control.ros import params_client as pc
+
+    node = args.node if args.node.startswith("/") else "/" + args.node
+    if args.param_verb == "list":
+        print("\n".join(f"  {name}" for name in pc.list_parameters(node)))
+    elif args.param_verb == "get":
+        value = pc.get_parameter(node, args.name)
+        kind = {bool: "Boolean", int: "Integer", float: "Double", str: "String"}.get(type(value), "Value")
+        print(f"{kind} value is: {value}")
+    elif args.param_verb == "describe":
+        print(pc.describe_parameter(node, args.name))
+    else:
+        print(pc.set_parameter(node, args.name, pc.yaml_value(args.value)))
+    return 0
+
+
+def _add_param_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    par = sub.add_parser("param", help="parameters of a running node (like ros2 param)",
+                         description="List, get, describe or set a running node's parameters through its "
+                         "parameter services. A refused 'set' (e.g. solver:=nope) exits 2 with the node's reason; "
+                         "the controller applies accepted changes at the next cycle boundary.")
+    verbs = par.add_subparsers(dest="param_verb", metavar="PARAM_VERB")
+    verbs.required = True
+    verbs.add_parser("list", help="parameter names").add_argument("node", help="node name, e.g. /controller_node")
+    for verb, helptext in (("get", "a parameter's value"), ("describe", "type, description, constraints")):
+        v = verbs.add_parser(verb, help=helptext)
+        v.add_argument("node")
+        v.add_argument("name")
+    st = verbs.add_parser("set", help="set a parameter (value read as YAML: 10.0 double, 10 integer)")
+    st.add_argument("node")
+    st.add_argument("name")
+    st.add_argument("value")
+    par.set_defaults(func=cmd_param)
 
 
 def _add_report_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -365,6 +404,7 @@ def build_parser() -> argparse.ArgumentParser:
     lau.set_defaults(func=cmd_launch)
     _add_bag_parser(sub)
     _add_topic_parser(sub)
+    _add_param_parser(sub)
     _add_report_parser(sub)
     return parser
 

@@ -17,12 +17,17 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from dualarm_control.ros.env import localhost_environment
+
 NODES = {
     "sim_node": "dualarm_sim.sim_node",
     "controller_node": "dualarm_control.nodes.controller_node",
     "trajectory_node": "dualarm_control.nodes.trajectory_node",
 }
 STOP_GRACE_S = 10.0
+GRAPH_TOPICS = ("/joint_states", "/velocity_controller/commands", "/relative_target", "/relative_pose",
+                "/diagnostics", "/wrench", "/clock")
+"""What ``--record`` records: the cell's graph."""
 
 
 def node_command(node: str, ros_args: Sequence[str]) -> list[str]:
@@ -51,7 +56,7 @@ class Launch:
         self._lock = threading.Lock()
 
     def start(self, name: str, cmd: list[str]) -> Process:
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        env = dict(localhost_environment(os.environ), PYTHONUNBUFFERED="1")
         popen = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
                                  start_new_session=True)
         proc = Process(name, popen)
@@ -105,7 +110,7 @@ class Launch:
 def launch_scenario(
     scenario: str,
     params: Sequence[str],
-    extra: Sequence[str],
+    controller_args: Sequence[str],
     lockstep: bool,
     record: Path | None,
     timeout: float | None = None,
@@ -113,33 +118,33 @@ def launch_scenario(
     """Run the three nodes (and a recorder) on ``scenario``; return 0 if the scenario completed cleanly."""
     common = ["-p", f"lockstep:={'true' if lockstep else 'false'}"]
     with_scenario = ["-p", f"scenario:={scenario}"]
+    sim_time = ["-p", "use_sim_time:=true"] if lockstep else []  # lockstep stamps are simulation time
     for f in params:
         common += ["--params-file", str(Path(f).resolve())]
-    common += list(extra)
     launch = Launch()
     interrupted = False
     try:
-        if record is not None:
-            rec = launch.start("bag", [sys.executable, "-u", "-m", "dualarm_control.app.cli", "bag", "record", "-o",
-                                       str(record)])
-            if not rec.ready.wait(30.0):
-                print("[launch] the recorder did not get ready within 30 s", flush=True)
-                launch.stop()
-                return 1
+        if record is not None:  # subscribes the graph's topics once they all have a publisher
+            launch.start("bag", [sys.executable, "-u", "-m", "dualarm_control.app.cli", "bag", "record", "-o",
+                                 str(record), *GRAPH_TOPICS, *(["--use-sim-time"] if lockstep else [])])
         readers = 2 + (record is not None)
-        launch.start("controller_node", node_command("controller_node", common))
-        launch.start("trajectory_node", node_command("trajectory_node", [*common, *with_scenario]))
+        launch.start("controller_node", node_command("controller_node", [*common, *sim_time, *controller_args]))
+        launch.start("trajectory_node", node_command("trajectory_node", [*common, *sim_time, *with_scenario]))
         launch.start("sim_node", node_command("sim_node", [*common, *with_scenario,
                                                             "-p", f"lockstep_subscribers:={readers}"]))
         codes = launch.wait_until("trajectory_node", timeout)
     except KeyboardInterrupt:
         interrupted = True
+        print("[launch] Ctrl-C: stopping every node", flush=True)
         launch.stop()
         codes = {p.name: p.popen.returncode for p in launch.procs}
-    failed = {n: c for n, c in codes.items() if c not in (0,)}
+    failed = {n: c for n, c in codes.items() if c != 0}
     if failed:
         print(f"[launch] failed: {', '.join(f'{n} (exit {c})' for n, c in failed.items())}", flush=True)
-    done = codes.get("trajectory_node") == 0
+    elif interrupted:
+        print(f"[launch] stopped cleanly: {', '.join(codes)} exited 0", flush=True)
+    else:
+        print(f"[launch] scenario complete: {', '.join(codes)} exited 0", flush=True)
     if interrupted:
         return 130
-    return 0 if done and not failed else 1
+    return 0 if codes.get("trajectory_node") == 0 and not failed else 1

@@ -1,112 +1,173 @@
-"""controller_node: closed-loop relative pose control at 200 Hz (paper 000, Fig. 3).
+"""controller_node: closed-loop relative pose control (paper 000, Fig. 3), 200 Hz by default.
 
 Subscribes ``/joint_states`` and ``/relative_target``; publishes
 ``/velocity_controller/commands``, ``/relative_pose`` and ``/diagnostics`` (one per cycle).
 All control math is :class:`dualarm_control.controller.RelativeController`.
 
-Safe behaviour (documented): no joint state yet, a stale one (older than ``stale_timeout``),
-an unusable message (wrong joint count, NaN) or no target yet -> a zero-velocity command,
-with the reason in /diagnostics and the log. Solver failures give the solver's safe command.
+Cycle (real-time mode): event-driven, read -> update -> write as ros2_control does: a
+command is computed as soon as a joint state arrives. A timer at the control period is only
+the watchdog: no joint state yet, or none for more than ``stale_timeout``, gives a
+zero-velocity command with the reason on /diagnostics and in the log. Lockstep mode: one
+command per joint-state stamp, computed when the target with the same stamp has arrived.
 
-Real-time mode: a drift-free timer; jitter, missed deadlines and state-to-command latency
-are measured and reported. Lockstep mode: one command per joint-state stamp, computed when
-the target with the same stamp has arrived.
+Safe behaviour (documented): an unusable message (wrong joint count or names, NaN) is
+rejected and the last valid state kept (it goes stale -> zero command); no target yet -> zero
+command; solver failures give the solver's safe command.
+
+Live parameters: ``solver``, ``gain``, ``l1_weight``, the QP tolerances (every controller
+parameter that is not read-only) can be set on the running node (``dualarm param set`` or
+``ros2 param set``). A value the core refuses is refused with its reason; an accepted change
+takes effect at the next cycle boundary, is logged and counted on /diagnostics.
 """
 
 from __future__ import annotations
 
+import sys
 import time
 from typing import Any
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from trajectory_msgs.msg import MultiDOFJointTrajectory
 
-from dualarm_control import ros
 from dualarm_control.controller import (
     CONTROLLER_PARAMETERS,
     ControlOutput,
     RelativeController,
     controller_params,
 )
+from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.metrics import percentiles
-from dualarm_control.nodes.common import declare, request_realtime_priority, run_node
 from dualarm_control.params import ParamSpec, positive
 from dualarm_control.ros import convert
+from dualarm_control.ros.node import (
+    declare,
+    priority_from_args,
+    request_realtime_priority,
+    run,
+)
 
 NODE_PARAMETERS = (
-    ParamSpec("lockstep", False, "compute one command per joint-state stamp (deterministic runs)"),
-    ParamSpec("stale_timeout", 0.05, "joint states older than this give a zero command [s]", check=positive),
+    ParamSpec("lockstep", False, "compute one command per joint-state stamp (deterministic runs)", read_only=True),
+    ParamSpec("stale_timeout", 0.015, "joint states older than this give a zero command [s] (3 periods)",
+              check=positive),
     ParamSpec("thread_priority", 50, "SCHED_FIFO priority of the control loop (0: normal scheduling)",
-              check=lambda v: "" if 0 <= v <= 99 else "an integer in [0, 99]"),
+              check=lambda v: "" if 0 <= v <= 99 else "an integer in [0, 99]", read_only=True),
 )
 DEFAULT_PRIORITY = 50
 WINDOW = 2000  # samples kept for jitter/latency percentiles
 STATS_EVERY = 200  # cycles between percentile updates
+NAN2 = (float("nan"), float("nan"))
 
 
 class ControllerNode:
     """Node shell around :class:`RelativeController`."""
 
-    def __init__(self, priority_note: str = "disabled") -> None:
-        self.node = ros.Node("controller_node")
-        values = declare(self.node, CONTROLLER_PARAMETERS + NODE_PARAMETERS)
-        self.params = controller_params(values, self.node.get_name())
-        self.lockstep = bool(values["lockstep"])
-        self.stale_ns = int(values["stale_timeout"] * 1e9)
+    def __init__(self, context: Any, priority_note: str = "disabled") -> None:
+        self.node = Node("controller_node", context=context)
+        self.specs = {s.name: s for s in CONTROLLER_PARAMETERS + NODE_PARAMETERS}
+        self.values = declare(self.node, self.specs.values())
+        self.params = controller_params(self.values, self.node.get_name())
+        self.lockstep = bool(self.values["lockstep"])
+        self.stale_ns = int(self.values["stale_timeout"] * 1e9)
         self.model = DualArmModel()
         self.controller = RelativeController(self.model, self.params)
+        self.pending: tuple[dict[str, Any], RelativeController] | None = None
         self.order = {name: i for i, name in enumerate(self.model.joint_names)}
         n = self.node
-        self.pub_cmd = n.create_publisher(ros.msgs.Float64MultiArray, "/velocity_controller/commands", 10)
-        self.pub_pose = n.create_publisher(ros.msgs.PoseStamped, "/relative_pose", 10)
-        self.pub_diag = n.create_publisher(ros.msgs.DiagnosticArray, "/diagnostics", 10)
-        n.create_subscription(ros.msgs.JointState, "/joint_states", self.on_joint_state, 10)
-        n.create_subscription(ros.msgs.MultiDOFJointTrajectory, "/relative_target", self.on_target, 10)
+        self.pub_cmd = n.create_publisher(Float64MultiArray, "/velocity_controller/commands", 10)
+        self.pub_pose = n.create_publisher(PoseStamped, "/relative_pose", 10)
+        self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        n.create_subscription(JointState, "/joint_states", self.on_joint_state, 10)
+        n.create_subscription(MultiDOFJointTrajectory, "/relative_target", self.on_target, 10)
+        n.add_on_set_parameters_callback(self.on_set_parameters)
         self.log = n.get_logger()
         self.state: tuple[int, np.ndarray, int] | None = None  # (stamp_ns, q, received monotonic ns)
         self.target: convert.TargetValue | None = None
         self.targets: dict[int, convert.TargetValue] = {}  # lockstep: by stamp
         self.last_commanded_stamp: int | None = None
-        self.cycles = 0
+        self.cycles = self.missed = self.failures = self.switches = self.safe_commands = 0
         self.last_warning = 0.0
-        self.missed = 0
-        self.failures = 0
-        self.last_tick_ns: int | None = None
+        self.last_arrival_ns: int | None = None
         self.jitter: list[float] = []
         self.latency: list[float] = []
-        self.stats: tuple[tuple[float, ...], tuple[float, ...]] = ((float("nan"),) * 2, (float("nan"),) * 2)
+        self.stats: tuple[tuple[float, float], tuple[float, float]] = (NAN2, NAN2)
         if not self.lockstep:
-            n.create_timer(self.params.period, self.on_tick)
+            n.create_timer(self.params.period, self.on_watchdog)
         self.log.info(f"solver '{self.params.solver}' (K={self.params.gain}, T={self.params.period} s, "
-                      f"{'lockstep' if self.lockstep else 'real-time'})")
+                      f"{'lockstep' if self.lockstep else 'real-time, event-driven'})")
         if priority_note and priority_note != "disabled":
             self.log.warning(priority_note)
         elif not priority_note:
-            self.log.info(f"running under SCHED_FIFO priority {values['thread_priority']}")
+            self.log.info(f"running under SCHED_FIFO priority {self.values['thread_priority']}")
 
     def close(self) -> None:
-        nan2 = (float("nan"),) * 2
-        jp = percentiles(np.array(self.jitter)) if self.jitter else nan2
-        lp = percentiles(np.array(self.latency)) if self.latency else nan2
+        jp = percentiles(np.array(self.jitter)) if self.jitter else NAN2
+        lp = percentiles(np.array(self.latency)) if self.latency else NAN2
         self.log.info(f"{self.cycles} cycles, {self.missed} missed deadlines, {self.failures} solver failures, "
+                      f"{self.safe_commands} safe commands, {self.switches} parameter switches, "
                       f"period jitter p50/p99 {jp[0] * 1e3:.3f}/{jp[1] * 1e3:.3f} ms, "
                       f"state-to-command latency p50/p99 {lp[0] * 1e3:.3f}/{lp[1] * 1e3:.3f} ms "
                       f"(last {WINDOW} cycles)")
 
+    # --- live parameters ------------------------------------------------------------
+    def on_set_parameters(self, parameters: list[Any]) -> SetParametersResult:
+        """Validate a live change with the core's rules; build the new controller now, swap it in
+        at the next cycle boundary. A refused change leaves the running controller untouched."""
+        changes = {p.name: p.value for p in parameters if p.name in self.specs}
+        if not changes:
+            return SetParametersResult(successful=True)
+        name = self.node.get_name()
+        try:
+            for key, value in changes.items():
+                self.specs[key].validate(value, name)
+            merged = {**self.values, **changes}
+            controller = RelativeController(self.model, controller_params(merged, name))
+        except (DualArmError, ValueError) as exc:
+            self.log.warning(f"parameter change refused: {exc}")
+            return SetParametersResult(successful=False, reason=str(exc))
+        self.pending = (merged, controller)
+        return SetParametersResult(successful=True)
+
+    def apply_pending(self) -> None:
+        if self.pending is None:
+            return
+        merged, controller = self.pending
+        self.pending = None
+        changed = {k: v for k, v in merged.items() if self.values.get(k) != v}
+        self.values, self.controller, self.params = merged, controller, controller.params
+        self.stale_ns = int(merged["stale_timeout"] * 1e9)
+        self.switches += 1
+        self.log.info(f"parameters changed at cycle {self.cycles}: "
+                      + ", ".join(f"{k}={v!r}" for k, v in changed.items()))
+
     # --- inputs -----------------------------------------------------------------
     def on_joint_state(self, msg: Any) -> None:
         decoded = convert.joint_vectors(msg, self.order)
+        stamp = convert.stamp_ns(msg.header.stamp)
         if isinstance(decoded, str):  # keep the last good state; it goes stale -> safe command
-            self.report_rejected(convert.stamp_ns(msg.header.stamp), decoded)
+            self.report(stamp, decoded, "input_rejected")
             return
-        self.state = (convert.stamp_ns(msg.header.stamp), decoded[0], time.monotonic_ns())
+        now = time.monotonic_ns()
+        self.track_arrival(now)
+        self.state = (stamp, decoded[0], now)
         if self.lockstep:
             self.try_lockstep()
+        elif self.target is None:
+            self.publish_safe(stamp, "waiting for relative_target")
+        else:
+            self.cycle(self.target)
 
     def on_target(self, msg: Any) -> None:
         value = convert.target_value(msg)
         if isinstance(value, str):
-            self.log.error(f"relative_target rejected: {value}")
+            self.report(convert.stamp_ns(msg.header.stamp), f"relative_target rejected: {value}", "input_rejected")
             return
         self.target = value
         if self.lockstep:
@@ -114,6 +175,16 @@ class ControllerNode:
             self.try_lockstep()
 
     # --- cycles -----------------------------------------------------------------
+    def track_arrival(self, now: int) -> None:
+        """Period jitter and missed periods of the joint-state stream that drives the cycle."""
+        period_ns = self.params.period * 1e9
+        if self.last_arrival_ns is not None and not self.lockstep:
+            dt = now - self.last_arrival_ns
+            self._keep(self.jitter, abs(dt - period_ns) / 1e9)
+            if dt > 1.5 * period_ns:
+                self.missed += round(dt / period_ns) - 1
+        self.last_arrival_ns = now
+
     def try_lockstep(self) -> None:
         if self.state is None or self.state[0] == self.last_commanded_stamp:
             return
@@ -124,63 +195,60 @@ class ControllerNode:
             del self.targets[old]
         self.cycle(target)
 
-    def on_tick(self) -> None:
-        now = time.monotonic_ns()
-        period_ns = self.params.period * 1e9
-        if self.last_tick_ns is not None:
-            dt = now - self.last_tick_ns
-            self._keep(self.jitter, abs(dt - period_ns) / 1e9)
-            if dt > 1.5 * period_ns:
-                self.missed += round(dt / period_ns) - 1
-        self.last_tick_ns = now
+    def on_watchdog(self) -> None:
+        """Real-time mode: zero command while there is no joint state or it is stale."""
         if self.state is None:
-            self.publish_safe(0, "waiting for joint_states")
+            self.publish_safe(self.node.get_clock().now().nanoseconds, "waiting for joint_states")
             return
-        if time.time_ns() - self.state[0] > self.stale_ns:
-            self.publish_safe(self.state[0], f"joint_states stale by {(time.time_ns() - self.state[0]) / 1e6:.1f} ms")
-            return
-        if self.target is None:
-            self.publish_safe(self.state[0], "waiting for relative_target")
-            return
-        self.cycle(self.target)
-        if (time.monotonic_ns() - now) > period_ns:
-            self.missed += 1
+        age = time.monotonic_ns() - self.state[2]
+        if age > self.stale_ns:
+            self.publish_safe(self.state[0], f"joint_states stale by {age / 1e6:.1f} ms")
 
     def cycle(self, target: convert.TargetValue) -> None:
         assert self.state is not None
+        self.apply_pending()
         stamp, q, received = self.state
         out = self.controller.step(q, target)
         self.pub_cmd.publish(convert.float_array(out.velocities))
-        latency = (time.monotonic_ns() - received) / 1e9
+        # Real time: from the state's stamp (its publication, wall clock) to the command's
+        # publication, transport included. Lockstep stamps are simulation time: from receipt.
+        latency = (time.monotonic_ns() - received if self.lockstep else time.time_ns() - stamp) / 1e9
         self._keep(self.latency, latency)
+        if not self.lockstep and latency > self.params.period:
+            self.missed += 1
         self.last_commanded_stamp = stamp
         self.cycles += 1
         if out.result.failed:
             self.failures += 1
-            self.log.warning(f"solver {out.result.status}: {out.result.detail}; safe command sent")
+            self.warn(f"solver {out.result.status}: {out.result.detail}; safe command sent")
         if np.all(np.isfinite(out.position)):
             self.pub_pose.publish(convert.pose_stamped(stamp, out.position, out.rotation))
         self.publish_diagnostics(stamp, out, latency)
 
     def publish_safe(self, stamp: int, reason: str) -> None:
-        """Zero-velocity command with the reason on /diagnostics (throttled in the log)."""
+        """Zero-velocity command with the reason on /diagnostics and in the (throttled) log."""
         self.pub_cmd.publish(convert.float_array(np.zeros(self.model.nq)))
-        self.report_rejected(stamp, reason, status="safe_command")
+        self.safe_commands += 1
+        self.report(stamp, reason, "safe_command")
 
-    def report_rejected(self, stamp: int, reason: str, status: str = "input_rejected") -> None:
-        """Reason on /diagnostics (every time) and in the log (at most once a second)."""
+    def warn(self, text: str) -> None:
+        """Log at most once a second."""
         now = time.monotonic()
         if now - self.last_warning > 1.0:
             self.last_warning = now
-            self.log.warning(f"{status}: {reason}")
-        self.pub_diag.publish(convert.diagnostics(stamp or time.time_ns(), "controller_node", 1, reason,
+            self.log.warning(text)
+
+    def report(self, stamp: int, reason: str, status: str) -> None:
+        """Reason on /diagnostics (every time, WARN) and in the log (throttled)."""
+        self.warn(f"{status}: {reason}")
+        self.pub_diag.publish(convert.diagnostics(stamp, "controller_node", 1, reason,
                                                   {"solver": self.params.solver, "status": status}))
 
     def publish_diagnostics(self, stamp: int, out: ControlOutput, latency: float) -> None:
         r = out.result
         level = 2 if r.failed else (1 if r.status != "solved" else 0)
         if self.cycles % STATS_EVERY == 1:  # percentiles once a second, not every cycle
-            self.stats = (percentiles(np.array(self.jitter)) if self.jitter else (float("nan"),) * 2,
+            self.stats = (percentiles(np.array(self.jitter)) if self.jitter else NAN2,
                           percentiles(np.array(self.latency)))
         jit, lat = self.stats
         values = {
@@ -197,9 +265,12 @@ class ControllerNode:
             "cycles": self.cycles,
             "missed_deadlines": self.missed,
             "solver_failures": self.failures,
+            "safe_commands": self.safe_commands,
+            "parameter_switches": self.switches,
             "period_jitter_p50_s": f"{jit[0]:.6e}",
             "period_jitter_p99_s": f"{jit[1]:.6e}",
             "state_to_command_latency_s": f"{latency:.6e}",
+            "state_to_command_latency_p50_s": f"{lat[0]:.6e}",
             "state_to_command_latency_p99_s": f"{lat[1]:.6e}",
             "mode": "lockstep" if self.lockstep else "realtime",
         }
@@ -213,20 +284,10 @@ class ControllerNode:
 
 
 def main(args: list[str] | None = None) -> int:
-    import sys
-
     argv = list(sys.argv if args is None else args)
-    # Before any DDS thread exists, so they inherit it; the parameter is read from the raw args
-    # because the node (and its parameter machinery) does not exist yet.
-    priority = DEFAULT_PRIORITY
-    for i, a in enumerate(argv[:-1]):
-        if a == "-p" and argv[i + 1].startswith("thread_priority:="):
-            try:
-                priority = int(argv[i + 1].split(":=", 1)[1])
-            except ValueError:
-                pass  # declare() rejects it with exit 2
-    why_not = request_realtime_priority(priority)
-    return run_node(lambda: ControllerNode(why_not), argv)
+    # Before any middleware thread exists, so they inherit the scheduling.
+    why_not = request_realtime_priority(priority_from_args(argv, DEFAULT_PRIORITY))
+    return run(lambda context: ControllerNode(context, why_not), argv)
 
 
 if __name__ == "__main__":

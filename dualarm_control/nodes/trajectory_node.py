@@ -2,7 +2,7 @@
 
 The trajectory starts from the relative pose of the first ``/joint_states`` (forward
 kinematics). Real-time mode: one target per control period on a drift-free timer, timed
-from the first joint state. Lockstep mode: one target per joint state, stamped with the
+from the first joint state on the node's clock (simulation time with ``use_sim_time``). Lockstep mode: one target per joint state, stamped with the
 joint state's stamp, so the controller can pair them. When the trajectory plus the
 scenario's settle time has elapsed the node logs completion, publishes a final
 ``/diagnostics`` status "complete" and exits 0.
@@ -10,38 +10,41 @@ scenario's settle time has elapsed the node logs completion, publishes a final
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
-from dualarm_control import ros
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import MultiDOFJointTrajectory
+
 from dualarm_control.kinematics import DualArmModel
-from dualarm_control.nodes.common import NodeFinished, declare, run_node
 from dualarm_control.params import ParamSpec, positive
 from dualarm_control.ros import convert
+from dualarm_control.ros.node import NodeFinished, declare, run
 from dualarm_control.scenario import load_scenario
 from dualarm_control.trajectory import RelativeTrajectory
 
 PARAMETERS = (
-    ParamSpec("scenario", "assembly", "scenario name (config/scenarios/<name>.yaml) or YAML path"),
-    ParamSpec("control_period", 0.005, "target period in real-time mode [s]", check=positive),
-    ParamSpec("lockstep", False, "publish one target per joint state, with its stamp"),
+    ParamSpec("scenario", "assembly", "scenario name (config/scenarios/<name>.yaml) or YAML path", read_only=True),
+    ParamSpec("control_period", 0.005, "target period in real-time mode [s]", check=positive, read_only=True),
+    ParamSpec("lockstep", False, "publish one target per joint state, with its stamp", read_only=True),
 )
 
 
 class TrajectoryNode:
     """Node shell around :class:`RelativeTrajectory`."""
 
-    def __init__(self) -> None:
-        self.node = ros.Node("trajectory_node")
+    def __init__(self, context: Any) -> None:
+        self.node = Node("trajectory_node", context=context)
         p = declare(self.node, PARAMETERS)
         self.scenario = load_scenario(p["scenario"])
         self.lockstep = bool(p["lockstep"])
         self.model = DualArmModel()
         self.order = {name: i for i, name in enumerate(self.model.joint_names)}
         n = self.node
-        self.pub = n.create_publisher(ros.msgs.MultiDOFJointTrajectory, "/relative_target", 10)
-        self.pub_diag = n.create_publisher(ros.msgs.DiagnosticArray, "/diagnostics", 10)
-        n.create_subscription(ros.msgs.JointState, "/joint_states", self.on_joint_state, 10)
+        self.pub = n.create_publisher(MultiDOFJointTrajectory, "/relative_target", 10)
+        self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        n.create_subscription(JointState, "/joint_states", self.on_joint_state, 10)
         self.log = n.get_logger()
         self.trajectory: RelativeTrajectory | None = None
         self.start_ns = 0
@@ -60,7 +63,7 @@ class TrajectoryNode:
                 self.log.error(f"cannot start from this joint state: {decoded}")
                 return
             self.trajectory = self.scenario.trajectory(*self.model.relative_pose(decoded[0]))
-            self.start_ns = stamp
+            self.start_ns = stamp if self.lockstep else self.node.get_clock().now().nanoseconds
             self.end_s = self.trajectory.duration + self.scenario.settle_time
             self.log.info(f"trajectory: {self.trajectory.duration:.2f} s + settle {self.scenario.settle_time:.2f} s")
         if self.lockstep:
@@ -68,7 +71,7 @@ class TrajectoryNode:
 
     def on_tick(self) -> None:
         if self.trajectory is not None:
-            now = time.time_ns()
+            now = self.node.get_clock().now().nanoseconds
             self.publish(now, now - self.start_ns)
 
     def publish(self, stamp: int, elapsed_ns: int) -> None:
@@ -92,7 +95,7 @@ class TrajectoryNode:
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(TrajectoryNode, args)
+    return run(TrajectoryNode, args)
 
 
 if __name__ == "__main__":

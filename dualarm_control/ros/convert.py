@@ -1,7 +1,6 @@
-"""Conversions between the core's values and the standard messages (no control math here).
+"""Conversions between the core's values and the standard ROS 2 messages (no control math here).
 
-Works with both backends: ``msgs`` is ``dualarm_control.ros.msgs`` (the real rclpy message
-classes under ROS, or the Cyclone IdlStructs) and field names are identical.
+Only ``common_interfaces`` types, so any ROS tool reads what the nodes publish.
 """
 
 from __future__ import annotations
@@ -12,8 +11,23 @@ from typing import Any
 
 import numpy as np
 import pinocchio as pin
-
-from dualarm_control import ros
+from builtin_interfaces.msg import Duration, Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import (
+    Point,
+    Pose,
+    PoseStamped,
+    Quaternion,
+    Transform,
+    Twist,
+    Vector3,
+    Wrench,
+    WrenchStamped,
+)
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, Header
+from trajectory_msgs.msg import MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint
 
 LEFT_FRAME = "left_tool"
 RIGHT_FRAME = "right_tool"
@@ -22,7 +36,7 @@ NS = 1_000_000_000
 
 def stamp(ns: int) -> Any:
     """builtin_interfaces/Time from integer nanoseconds."""
-    return ros.msgs.Time(sec=int(ns // NS), nanosec=int(ns % NS))
+    return Time(sec=int(ns // NS), nanosec=int(ns % NS))
 
 
 def stamp_ns(msg_stamp: Any) -> int:
@@ -31,12 +45,12 @@ def stamp_ns(msg_stamp: Any) -> int:
 
 
 def header(ns: int, frame_id: str = "") -> Any:
-    return ros.msgs.Header(stamp=stamp(ns), frame_id=frame_id)
+    return Header(stamp=stamp(ns), frame_id=frame_id)
 
 
 def joint_state(names: Sequence[str], ns: int, q: np.ndarray, qd: np.ndarray) -> Any:
     """sensor_msgs/JointState with positions [rad] and velocities [rad/s]; effort left empty."""
-    return ros.msgs.JointState(header=header(ns), name=list(names), position=[float(v) for v in q],
+    return JointState(header=header(ns), name=list(names), position=[float(v) for v in q],
                                velocity=[float(v) for v in qd], effort=[])
 
 
@@ -56,13 +70,13 @@ def joint_vectors(msg: Any, order: Mapping[str, int]) -> tuple[np.ndarray, np.nd
 
 def float_array(values: np.ndarray) -> Any:
     """std_msgs/Float64MultiArray (JointGroupVelocityController convention: layout empty)."""
-    return ros.msgs.Float64MultiArray(data=[float(v) for v in values])
+    return Float64MultiArray(data=[float(v) for v in values])
 
 
 def quaternion(rotation: np.ndarray) -> Any:
     qt = pin.Quaternion(np.asarray(rotation, dtype=float))
     qt.normalize()
-    return ros.msgs.Quaternion(x=float(qt.x), y=float(qt.y), z=float(qt.z), w=float(qt.w))
+    return Quaternion(x=float(qt.x), y=float(qt.y), z=float(qt.z), w=float(qt.w))
 
 
 def rotation(q: Any) -> np.ndarray:
@@ -76,12 +90,12 @@ def rotation(q: Any) -> np.ndarray:
 
 def pose_stamped(ns: int, position: np.ndarray, rot: np.ndarray) -> Any:
     """Measured relative pose (right tool in left tool frame)."""
-    p = ros.msgs.Point(x=float(position[0]), y=float(position[1]), z=float(position[2]))
-    return ros.msgs.PoseStamped(header=header(ns, LEFT_FRAME), pose=ros.msgs.Pose(position=p, orientation=quaternion(rot)))
+    p = Point(x=float(position[0]), y=float(position[1]), z=float(position[2]))
+    return PoseStamped(header=header(ns, LEFT_FRAME), pose=Pose(position=p, orientation=quaternion(rot)))
 
 
 def _vec3(v: np.ndarray) -> Any:
-    return ros.msgs.Vector3(x=float(v[0]), y=float(v[1]), z=float(v[2]))
+    return Vector3(x=float(v[0]), y=float(v[1]), z=float(v[2]))
 
 
 @dataclass(frozen=True)
@@ -97,15 +111,14 @@ class TargetValue:
 
 def target_message(ns: int, elapsed_ns: int, sample: Any) -> Any:
     """trajectory_msgs/MultiDOFJointTrajectory carrying one sample atomically: pose, twist, acceleration."""
-    m = ros.msgs
-    transform = m.Transform(translation=_vec3(sample.position), rotation=quaternion(sample.rotation))
-    twist = m.Twist(linear=_vec3(sample.linear_velocity), angular=_vec3(sample.angular_velocity))
-    accel = m.Twist(linear=_vec3(sample.linear_acceleration), angular=_vec3(sample.angular_acceleration))
-    point = m.MultiDOFJointTrajectoryPoint(
+    transform = Transform(translation=_vec3(sample.position), rotation=quaternion(sample.rotation))
+    twist = Twist(linear=_vec3(sample.linear_velocity), angular=_vec3(sample.angular_velocity))
+    accel = Twist(linear=_vec3(sample.linear_acceleration), angular=_vec3(sample.angular_acceleration))
+    point = MultiDOFJointTrajectoryPoint(
         transforms=[transform], velocities=[twist], accelerations=[accel],
-        time_from_start=m.Duration(sec=int(elapsed_ns // NS), nanosec=int(elapsed_ns % NS)),
+        time_from_start=Duration(sec=int(elapsed_ns // NS), nanosec=int(elapsed_ns % NS)),
     )
-    return m.MultiDOFJointTrajectory(header=header(ns, LEFT_FRAME), joint_names=[RIGHT_FRAME], points=[point])
+    return MultiDOFJointTrajectory(header=header(ns, LEFT_FRAME), joint_names=[RIGHT_FRAME], points=[point])
 
 
 def target_value(msg: Any) -> TargetValue | str:
@@ -126,20 +139,19 @@ def target_value(msg: Any) -> TargetValue | str:
     return value
 
 
-def _level(level: int) -> Any:
-    return bytes([level]) if ros.BACKEND == "rclpy" else level
-
-
 def diagnostics(ns: int, name: str, level: int, message: str, values: Mapping[str, Any]) -> Any:
     """diagnostic_msgs/DiagnosticArray with one status whose values are ``key: str(value)``."""
-    m = ros.msgs
-    status = m.DiagnosticStatus(
-        level=_level(level), name=name, message=message, hardware_id="dualarm_cell",
-        values=[m.KeyValue(key=k, value=str(v)) for k, v in values.items()],
+    status = DiagnosticStatus(
+        level=bytes([level]), name=name, message=message, hardware_id="dualarm_cell",
+        values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
     )
-    return m.DiagnosticArray(header=header(ns), status=[status])
+    return DiagnosticArray(header=header(ns), status=[status])
 
 
 def wrench_stamped(ns: int, wrench: np.ndarray, frame_id: str = RIGHT_FRAME) -> Any:
-    m = ros.msgs
-    return m.WrenchStamped(header=header(ns, frame_id), wrench=m.Wrench(force=_vec3(wrench[:3]), torque=_vec3(wrench[3:])))
+    return WrenchStamped(header=header(ns, frame_id), wrench=Wrench(force=_vec3(wrench[:3]), torque=_vec3(wrench[3:])))
+
+
+def clock(ns: int) -> Any:
+    """rosgraph_msgs/Clock at ``ns`` (simulation time)."""
+    return Clock(clock=stamp(ns))

@@ -1,0 +1,214 @@
+"""Node plumbing shared by the three nodes and the tool verbs, on plain rclpy.
+
+* :func:`declare` declares the core's :class:`~dualarm_control.params.ParamSpec` list on an
+  rclpy node with descriptors (description, constraints, read-only) and validates the
+  values with the core's rules, so a bad value from a file, ``-p`` or a live ``param set``
+  is refused with the same message.
+* :func:`run` is a node's ``main``: it checks ``--params-file`` files, initialises rclpy with
+  localhost discovery by default, spins until the node finishes, Ctrl-C or SIGTERM, then
+  closes the shell, destroys the node and shuts rclpy down in that order (so no "publisher's
+  context is invalid"). Exit codes: 0 normal end or signal, 2 bad parameters, 1 other errors.
+* :func:`tool_node` gives the tool verbs a short-lived node and executor.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from types import FrameType
+from typing import Any, Self
+
+from dualarm_control.errors import DualArmError, ParameterError
+from dualarm_control.params import ParamSpec, read_params_files
+from dualarm_control.ros.env import apply_localhost_default
+
+EXIT_OK = 0
+EXIT_ERROR = 1
+EXIT_PARAMS = 2
+SPIN_TIMEOUT_S = 0.1
+
+
+class NodeFinished(Exception):
+    """Raised by a node's callback to end spinning normally (e.g. scenario complete)."""
+
+
+def descriptor(spec: ParamSpec) -> Any:
+    """rcl_interfaces/ParameterDescriptor of ``spec``: description, constraints, read-only."""
+    from rcl_interfaces.msg import ParameterDescriptor
+
+    return ParameterDescriptor(description=spec.description, additional_constraints=spec.constraints,
+                               read_only=spec.read_only)
+
+
+def declare(node: Any, specs: Iterable[ParamSpec]) -> dict[str, Any]:
+    """Declare ``specs`` on ``node``; return their validated values (ParameterError if bad).
+
+    A value of the wrong ROS type (``-p gain:=10`` for a double) is reported with the same
+    message as the core's check; unknown overrides for this node are warned about.
+    """
+    from rclpy.exceptions import InvalidParameterTypeException
+
+    values: dict[str, Any] = {}
+    name = node.get_name()
+    overrides: Mapping[str, Any] = getattr(node, "_parameter_overrides", {})
+    specs = list(specs)
+    for spec in specs:
+        try:
+            value = node.declare_parameter(spec.name, spec.default, descriptor(spec)).value
+        except InvalidParameterTypeException as exc:
+            given = overrides[spec.name].value if spec.name in overrides else str(exc)
+            spec.validate(given, name)  # raises ParameterError naming key, value and type
+            raise DualArmError(str(exc)) from None
+        values[spec.name] = spec.validate(value, name)
+    declared = {s.name for s in specs} | {"use_sim_time", "start_type_description_service"}
+    for key in overrides:
+        if key not in declared and not node.has_parameter(key):
+            node.get_logger().warning(f"ignoring unknown parameter '{key}' (not declared by {name})")
+    return values
+
+
+def params_files(argv: Sequence[str]) -> list[str]:
+    """The ``--params-file`` arguments of a ``--ros-args`` command line, in order."""
+    files: list[str] = []
+    in_ros = False
+    for i, arg in enumerate(argv):
+        if arg == "--ros-args":
+            in_ros = True
+        elif arg == "--":
+            in_ros = False
+        elif in_ros and arg == "--params-file" and i + 1 < len(argv):
+            files.append(argv[i + 1])
+    return files
+
+
+class _StopOnSignal:
+    """SIGINT/SIGTERM set a flag that the spin loop checks (rclpy's own handlers are off, so the
+    context stays valid until the node is destroyed)."""
+
+    def __init__(self) -> None:
+        self.signal: int | None = None
+        self._previous: dict[int, Any] = {}
+
+    def _handle(self, signum: int, frame: FrameType | None) -> None:
+        self.signal = signum
+
+    def __enter__(self) -> Self:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            self._previous[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+
+
+def init_rclpy(argv: Sequence[str]) -> Any:
+    """``rclpy.init`` with localhost discovery by default and no rclpy signal handlers; returns the context."""
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
+    apply_localhost_default()
+    context = rclpy.Context()
+    rclpy.init(args=list(argv), context=context, signal_handler_options=SignalHandlerOptions.NO)
+    return context
+
+
+def spin_until_stopped(executor: Any, stop: _StopOnSignal, until: Callable[[], bool] = lambda: False) -> None:
+    """Run callbacks until a signal, ``until()`` or a :class:`NodeFinished` from a callback."""
+    while stop.signal is None and not until():
+        executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+
+
+def run(make: Callable[[Any], Any], args: Sequence[str] | None = None) -> int:
+    """A node's main: build the shell with ``make(context)``, spin it, shut down cleanly.
+
+    ``make`` returns a shell object with a ``node`` attribute and an optional ``close()``
+    (called once on the way out, while the node can still log).
+    """
+    from rclpy.executors import SingleThreadedExecutor
+
+    argv = list(sys.argv if args is None else args)
+    shell = None
+    context = None
+    with _StopOnSignal() as stop:
+        try:
+            read_params_files(params_files(argv), "_check_")  # missing or malformed file: exit 2
+            context = init_rclpy(argv)
+            shell = make(context)
+            executor = SingleThreadedExecutor(context=context)
+            executor.add_node(shell.node)
+            spin_until_stopped(executor, stop)
+        except NodeFinished:
+            pass
+        except ParameterError as exc:
+            print(f"error: {exc}", file=sys.stderr, flush=True)
+            return EXIT_PARAMS
+        except DualArmError as exc:
+            print(f"error: {exc}", file=sys.stderr, flush=True)
+            return EXIT_PARAMS
+        except KeyboardInterrupt:
+            pass
+        except Exception as exc:  # rcl's own argument errors (e.g. a malformed -p) are usage errors
+            if type(exc).__name__ in ("RCLError", "InvalidROSArgsError", "RCLInvalidROSArgsError"):
+                print(f"error: invalid ROS arguments: {exc}", file=sys.stderr, flush=True)
+                return EXIT_PARAMS
+            raise
+        finally:
+            if shell is not None:
+                close = getattr(shell, "close", None)
+                if close is not None:
+                    close()
+                shell.node.destroy_node()
+            if context is not None:
+                context.try_shutdown()
+    return EXIT_OK
+
+
+@contextmanager
+def tool_node(name: str) -> Iterator[tuple[Any, Any, _StopOnSignal]]:
+    """A node, its executor and a stop flag for a tool verb; torn down in the right order."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+
+    context = init_rclpy([])
+    node = None
+    try:
+        with _StopOnSignal() as stop:
+            node = Node(name, context=context, start_parameter_services=False)
+            executor = SingleThreadedExecutor(context=context)
+            executor.add_node(node)
+            yield node, executor, stop
+    finally:
+        if node is not None:
+            node.destroy_node()
+        context.try_shutdown()
+
+
+def priority_from_args(argv: Sequence[str], default: int) -> int:
+    """``thread_priority`` from ``-p thread_priority:=N`` in ``argv`` (read before rclpy exists, so
+    the middleware's threads inherit the scheduling); ``default`` when absent or malformed
+    (:func:`declare` then reports a malformed value with exit 2)."""
+    priority = default
+    for i, arg in enumerate(argv[:-1]):
+        if arg == "-p" and argv[i + 1].startswith("thread_priority:="):
+            try:
+                priority = int(argv[i + 1].split(":=", 1)[1])
+            except ValueError:
+                pass
+    return priority
+
+
+def request_realtime_priority(priority: int) -> str:
+    """Put this process (and threads it creates later) under SCHED_FIFO ``priority`` (1-99), like
+    ros2_control's ``thread_priority``. Returns '' on success, else why not (callers warn and go on)."""
+    import os
+
+    if priority <= 0:
+        return "disabled"
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(min(priority, 99)))
+    except (AttributeError, PermissionError, OSError) as exc:
+        return f"SCHED_FIFO {priority} not permitted ({exc}); running with normal priority"
+    return ""

@@ -1,0 +1,261 @@
+"""``dualarm bag record``: rosbag2 recording on rclpy raw subscriptions, written with ``rosbags``.
+
+The layout is what ``ros2 bag record -s mcap`` writes on Jazzy: ``DIR/metadata.yaml``
+(version 9, ``ros_distro: jazzy``) and ``DIR/DIR_0.mcap``. Each topic gets a connection
+when its first publisher is discovered, with the type, the message definition, the type
+description hash and the offered QoS of its publishers, all from the graph; the CDR bytes
+are stored as received (``raw=True``). Receive times come from the recorder node's clock,
+so with ``use_sim_time`` a bag of a lockstep run is on the simulation clock.
+Ctrl-C, SIGTERM or ``--duration`` close the bag with everything received so far.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable, Sequence
+from datetime import datetime
+from pathlib import Path
+from typing import Any, Final, TextIO
+
+import yaml
+from rosbags.interfaces import (
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
+from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from dualarm_control.errors import DualArmError
+from dualarm_control.ros.graph import adapted_qos, fq_topic, message_class
+from dualarm_control.ros.node import tool_node
+
+BAG_VERSION: Final = 9
+"""rosbag2 metadata version written by Jazzy."""
+RECORD_DEPTH = 1000
+"""Keep-last depth of the recording subscriptions."""
+PROGRESS_INTERVAL_S = 2.0
+POLL_INTERVAL_S = 0.25
+READY_LINE = "bag: ready"
+"""Printed on stdout once every named topic is subscribed (launchers wait for it)."""
+EXCLUDED_BY_ALL = ("/rosout", "/parameter_events")
+
+
+class BagError(DualArmError):
+    """A bag cannot be written."""
+
+
+def default_bag_path(now: datetime | None = None) -> Path:
+    """``rosbag2_YYYY_MM_DD-HH_MM_SS`` in the current directory, as ``ros2 bag record`` names it."""
+    return Path((now or datetime.now()).strftime("rosbag2_%Y_%m_%d-%H_%M_%S"))
+
+
+def _qos_time(duration: Any) -> QosTime:
+    ns = int(duration.nanoseconds)
+    return QosTime(sec=ns // 1_000_000_000, nsec=ns % 1_000_000_000)
+
+
+def to_bag_qos(profile: Any) -> Qos:
+    """An rclpy QoSProfile (a publisher's offered QoS) as a rosbag2 metadata QoS profile."""
+    return Qos(
+        history=QosHistory[profile.history.name],
+        depth=int(profile.depth),
+        reliability=QosReliability[profile.reliability.name],
+        durability=QosDurability[profile.durability.name],
+        deadline=_qos_time(profile.deadline),
+        lifespan=_qos_time(profile.lifespan),
+        liveliness=QosLiveliness[profile.liveliness.name],
+        liveliness_lease_duration=_qos_time(profile.liveliness_lease_duration),
+        avoid_ros_namespace_conventions=bool(profile.avoid_ros_namespace_conventions),
+    )
+
+
+def type_hash_text(type_hash: Any) -> str:
+    """``RIHS01_<hex>`` of an rclpy TypeHash."""
+    return f"RIHS{int(type_hash.version):02d}_" + bytes(type_hash.value).hex()
+
+
+def _msg_file(type_name: str) -> Path | None:
+    """``share/<pkg>/msg/<Type>.msg`` of an installed message type (ament index)."""
+    pkg, _, typ = type_name.split("/")
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        path = Path(get_package_share_directory(pkg)) / "msg" / f"{typ}.msg"
+    except (ImportError, LookupError, ValueError):
+        return None
+    return path if path.is_file() else None
+
+
+def typestore_with(type_name: str, store: Any) -> None:
+    """Add ``type_name`` (and the types it uses) to ``store`` from the installed .msg files when
+    the Jazzy store lacks it; BagError naming the type when no definition is installed."""
+    pending = [type_name]
+    while pending:
+        name = pending.pop()
+        if name in store.types:
+            continue
+        path = _msg_file(name)
+        if path is None:
+            raise BagError(f"no message definition for '{name}' (neither rosbags' Jazzy store nor an installed .msg)")
+        types = get_types_from_msg(path.read_text(), name)
+        store.register(types)
+        for fields in types.values():
+            for _, field in fields[1]:
+                for part in str(field).replace("'", " ").replace(",", " ").replace("(", " ").split():
+                    if part.count("/") == 2 and part not in store.types:
+                        pending.append(part)
+
+
+class BagWriter:
+    """A rosbag2 directory (MCAP storage, version 9) receiving raw CDR messages per topic."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        self.counts: dict[str, int] = {}
+        self._store = get_typestore(Stores.ROS2_JAZZY)
+        self._connections: dict[str, Any] = {}
+        try:
+            self._writer = Writer(self.path, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
+            self._writer.open()
+        except WriterError as exc:
+            raise BagError(str(exc)) from exc
+        self._open = True
+
+    def add_connection(self, topic: str, type_name: str, type_hash: str, offered: Sequence[Qos]) -> None:
+        """Create the connection of ``topic`` (once)."""
+        if topic in self._connections:
+            return
+        typestore_with(type_name, self._store)
+        msgdef, _ = self._store.generate_msgdef(type_name, ros_version=2)
+        self._connections[topic] = self._writer.add_connection(
+            topic, type_name, msgdef=msgdef, rihs01=type_hash or self._store.hash_rihs01(type_name),
+            serialization_format="cdr", offered_qos_profiles=list(offered))
+        self.counts[topic] = 0
+
+    def write(self, topic: str, data: bytes, stamp_ns: int) -> None:
+        """Append one CDR message received at ``stamp_ns``."""
+        self._writer.write(self._connections[topic], stamp_ns, data)
+        self.counts[topic] += 1
+
+    @property
+    def total(self) -> int:
+        return sum(self.counts.values())
+
+    def close(self) -> None:
+        """Finish the MCAP file and write metadata.yaml as rosbag2 does (idempotent)."""
+        if not self._open:
+            return
+        self._open = False
+        self._writer.close()
+        self._rosbag2_layout()
+
+    def _rosbag2_layout(self) -> None:
+        """``DIR_0.mcap`` and ``ros_distro: jazzy``, the names rosbag2 itself writes."""
+        meta_file = self.path / "metadata.yaml"
+        meta = yaml.safe_load(meta_file.read_text())
+        info = meta["rosbag2_bagfile_information"]
+        new_name = f"{self.path.name}_0.mcap"
+        for i, rel in enumerate(info.get("relative_file_paths", [])):
+            if rel != new_name:
+                (self.path / rel).rename(self.path / new_name)
+                info["relative_file_paths"][i] = new_name
+                for entry in info.get("files", []):
+                    if entry.get("path") == rel:
+                        entry["path"] = new_name
+        info["ros_distro"] = "jazzy"
+        meta_file.write_text(yaml.safe_dump(meta, sort_keys=False))
+
+
+class Recorder:
+    """Subscribes topics as discovery finds them and writes every message to a :class:`BagWriter`."""
+
+    def __init__(self, node: Any, bag: BagWriter, topics: Sequence[str], record_all: bool) -> None:
+        self.node, self.bag = node, bag
+        self.named = [fq_topic(t) for t in topics]
+        self.record_all = record_all
+        self.subscriptions: dict[str, Any] = {}
+
+    def _callback(self, topic: str) -> Callable[[bytes], None]:
+        clock = self.node.get_clock()
+
+        def on_message(data: bytes) -> None:
+            self.bag.write(topic, data, clock.now().nanoseconds)
+
+        return on_message
+
+    def poll(self) -> None:
+        """Subscribe the wanted topics that have a publisher now (named ones all at once)."""
+        known = dict(self.node.get_topic_names_and_types())
+        wanted = [t for t in self.named if t not in self.subscriptions]
+        if wanted and all(t in known and self.node.count_publishers(t) for t in wanted):
+            for topic in wanted:
+                self._subscribe(topic, known[topic][0])
+        if self.record_all:
+            for topic, types in known.items():
+                if (topic not in self.subscriptions and topic not in EXCLUDED_BY_ALL
+                        and self.node.count_publishers(topic) and not topic.startswith("/_")):
+                    self._subscribe(topic, types[0])
+
+    @property
+    def ready(self) -> bool:
+        return all(t in self.subscriptions for t in self.named)
+
+    def _subscribe(self, topic: str, type_name: str) -> None:
+        infos = self.node.get_publishers_info_by_topic(topic)
+        type_hash = type_hash_text(infos[0].topic_type_hash) if infos else ""
+        self.bag.add_connection(topic, type_name, type_hash, [to_bag_qos(i.qos_profile) for i in infos])
+        qos = adapted_qos(self.node, topic, RECORD_DEPTH)
+        self.subscriptions[topic] = self.node.create_subscription(
+            message_class(type_name), topic, self._callback(topic), qos, raw=True)
+
+
+def record(path: Path, topics: Sequence[str], *, record_all: bool = False, duration: float | None = None,
+           use_sim_time: bool = False, log: TextIO = sys.stderr) -> int:
+    """Record into the bag directory ``path`` until SIGINT/SIGTERM or ``duration`` [s]; return 0.
+
+    ``topics`` are recorded as soon as all of them have a publisher; ``record_all`` adds every
+    topic discovery finds (but /rosout and /parameter_events). Prints :data:`READY_LINE` on
+    stdout once the named topics are subscribed, progress on stderr.
+    """
+    if not topics and not record_all:
+        raise BagError("name the topics to record, or use -a/--all")
+    from rclpy.parameter import Parameter
+
+    bag = BagWriter(path)
+    stopped_by = ""
+    try:
+        with tool_node("_dualarm_bag_recorder") as (node, executor, stop):
+            if use_sim_time:
+                node.set_parameters([Parameter("use_sim_time", value=True)])
+            recorder = Recorder(node, bag, topics, record_all)
+            print(f"recording to {path} ({', '.join(recorder.named) or 'all topics'})", file=log, flush=True)
+            start = time.monotonic()
+            next_poll = next_progress = start
+            announced = False
+            while stop.signal is None and (duration is None or time.monotonic() - start < duration):
+                now = time.monotonic()
+                if now >= next_poll:
+                    recorder.poll()
+                    next_poll = now + POLL_INTERVAL_S
+                    if recorder.ready and not announced:
+                        announced = True
+                        print(READY_LINE, flush=True)
+                if now >= next_progress:
+                    per_topic = ", ".join(f"{t} {n}" for t, n in bag.counts.items())
+                    print(f"recorded {bag.total} messages in {now - start:.1f} s ({per_topic})", file=log, flush=True)
+                    next_progress = now + PROGRESS_INTERVAL_S
+                executor.spin_once(timeout_sec=0.02)
+            if stop.signal is not None:
+                stopped_by = f" (signal {stop.signal})"
+                drain_end = time.monotonic() + 0.2  # what already arrived is kept
+                while time.monotonic() < drain_end:
+                    executor.spin_once(timeout_sec=0.01)
+    finally:
+        bag.close()
+    print(f"bag closed{stopped_by}: {path}, {bag.total} messages", file=log, flush=True)
+    return 0
