@@ -34,30 +34,37 @@ TS = get_typestore(Stores.ROS2_JAZZY)
 
 PUBLISHER = r'''
 import sys, time
-from dualarm_control import ros
-M = ros.msgs
-ros.init([])
-node = ros.Node("bag_test_publisher")
-qos = ros.QoSProfile(depth=200)
-pubs = [node.create_publisher(M.JointState, "/joint_states", qos),
-        node.create_publisher(M.Float64MultiArray, "/velocity_controller/commands", qos),
-        node.create_publisher(M.DiagnosticArray, "/diagnostics", qos)]
+import rclpy
+from rclpy.qos import QoSProfile
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, Header
+
+rclpy.init()
+node = rclpy.create_node("bag_test_publisher")
+qos = QoSProfile(depth=200)
+pubs = [node.create_publisher(JointState, "/joint_states", qos),
+        node.create_publisher(Float64MultiArray, "/velocity_controller/commands", qos),
+        node.create_publisher(DiagnosticArray, "/diagnostics", qos)]
 deadline = time.monotonic() + 15.0
 while min(p.get_subscription_count() for p in pubs) < 1:
     if time.monotonic() > deadline:
         sys.exit("no subscriber")
     time.sleep(0.01)
+time.sleep(0.2)
 for i in range(int(sys.argv[1])):
-    pubs[0].publish(M.JointState(header=M.Header(stamp=M.Time(sec=i, nanosec=7), frame_id="world"),
-                                 name=[f"j{k}" for k in range(14)], position=[i + 0.1 * k for k in range(14)],
-                                 velocity=[-1.0 * k for k in range(14)]))
-    pubs[1].publish(M.Float64MultiArray(data=[0.5 * i + k for k in range(14)]))
-    pubs[2].publish(M.DiagnosticArray(status=[M.DiagnosticStatus(
-        level=1, name="controller_node", values=[M.KeyValue(key="i", value=str(i))])]))
+    pubs[0].publish(JointState(header=Header(stamp=Time(sec=i, nanosec=7), frame_id="world"),
+                               name=[f"j{k}" for k in range(14)], position=[i + 0.1 * k for k in range(14)],
+                               velocity=[-1.0 * k for k in range(14)]))
+    pubs[1].publish(Float64MultiArray(data=[0.5 * i + k for k in range(14)]))
+    pubs[2].publish(DiagnosticArray(status=[DiagnosticStatus(
+        level=b"\x01", name="controller_node", values=[KeyValue(key="i", value=str(i))])]))
     time.sleep(0.005)
 print("published", flush=True)
 time.sleep(30.0)
 '''
+TOPICS = ("/joint_states", "/velocity_controller/commands", "/diagnostics")
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -112,11 +119,10 @@ def record_with_publisher(tmp_path: Path, name: str, sig: int, n: int = N_MSGS) 
     bag = tmp_path / name
     script = tmp_path / "publisher.py"
     script.write_text(PUBLISHER)
-    rec = Proc(dualarm("bag", "record", "-o", str(bag)), tmp_path / f"{name}.rec.err")
-    pub = None
+    rec = Proc(dualarm("bag", "record", "-o", str(bag), *TOPICS), tmp_path / f"{name}.rec.err")
+    pub = Proc([sys.executable, str(script), str(n)], tmp_path / f"{name}.pub.err")
     try:
         assert rec.wait_line("bag: ready", 30.0), f"recorder not ready: {rec.stderr()}"
-        pub = Proc([sys.executable, str(script), str(n)], tmp_path / f"{name}.pub.err")
         assert pub.wait_line("published", 30.0), f"publisher failed: {pub.stderr()}"
         wait_for_progress(rec, n)
         code = rec.stop(sig)
@@ -161,7 +167,8 @@ def test_sigint_closes_a_jazzy_style_bag(sigint_bag: tuple[Path, int, str]) -> N
     meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert meta["version"] == 9
     assert meta["storage_identifier"] == "mcap"
-    assert all(Path(f).suffix == ".mcap" and (bag / f).is_file() for f in meta["relative_file_paths"])
+    assert meta["relative_file_paths"] == [f"{bag.name}_0.mcap"] and (bag / f"{bag.name}_0.mcap").is_file()
+    assert meta["ros_distro"] == "jazzy"
     topics = {t["topic_metadata"]["name"]: t for t in meta["topics_with_message_count"]}
     assert topics["/joint_states"]["topic_metadata"]["type"] == "sensor_msgs/msg/JointState"
     assert topics["/joint_states"]["topic_metadata"]["type_description_hash"].startswith("RIHS01_")
@@ -212,11 +219,10 @@ def test_sigterm_also_leaves_a_valid_bag(tmp_path: Path) -> None:
 
 def test_duration_stops_and_closes(tmp_path: Path) -> None:
     bag = tmp_path / "empty"
-    out = subprocess.run(dualarm("bag", "record", "-o", str(bag), "--duration", "0.5",
-                                 "--topics", "/joint_states"),
+    out = subprocess.run(dualarm("bag", "record", "-o", str(bag), "--duration", "0.5", "/no_publisher_here"),
                          cwd=REPO, capture_output=True, text=True, timeout=30, check=False)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.splitlines() == ["bag: ready"]
+    assert out.stdout.splitlines() == []  # never ready: the topic has no publisher
     assert "recording to" in out.stderr
     meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert meta["message_count"] == 0 and meta["version"] == 9

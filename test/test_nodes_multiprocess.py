@@ -1,4 +1,4 @@
-"""The three nodes as real processes over loopback DDS.
+"""The three nodes as real rclpy processes (localhost discovery, a private ROS_DOMAIN_ID).
 
 Lockstep runs must reproduce the in-process experiment exactly (same physics, same solver
 path), bags must be readable by rosbags, and bad parameters must exit 2 with a message
@@ -18,9 +18,11 @@ from dualarm_control.app.experiment import run_scenario
 from dualarm_control.app.launcher import launch_scenario
 from dualarm_control.controller import controller_params
 from dualarm_control.kinematics import DualArmModel
+from dualarm_control.params import read_params_files
 from dualarm_control.scenario import load_scenario
 
 SHORT = Path(__file__).parent / "data" / "short.yaml"
+SOLVERS = ("pseudo_inverse", "standard_qp", "sparse_qp", "hierarchical_sparse_qp")
 
 
 def run_cli(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess[str]:
@@ -67,39 +69,62 @@ def _read_bag(bag: Path) -> dict[str, list[object]]:
 
 
 @pytest.fixture(scope="module")
-def lockstep_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    bag = tmp_path_factory.mktemp("lockstep") / "bag"
-    params = [str(Path(__file__).parents[1] / "config" / "solvers" / "sparse_qp.yaml")]
-    assert launch_scenario(str(SHORT), params, [], True, bag, timeout=240.0) == 0
-    return bag
+def lockstep_bags(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """One recorded lockstep launch of the short scenario per solver (its solver parameter file)."""
+    bags = {}
+    for solver in SOLVERS:
+        bag = tmp_path_factory.mktemp("lockstep") / solver
+        params = [str(Path(__file__).parents[1] / "config" / "solvers" / f"{solver}.yaml")]
+        assert launch_scenario(str(SHORT), params, [], True, bag, timeout=240.0) == 0
+        bags[solver] = bag
+    return bags
 
 
-def test_lockstep_run_matches_in_process_experiment(lockstep_bag: Path) -> None:
-    """Commands and joint states over DDS equal the in-process lockstep run of the same scenario."""
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_lockstep_run_matches_in_process_experiment(lockstep_bags: dict[str, Path], solver: str) -> None:
+    """Commands and joint states over ROS equal the in-process lockstep run of the same scenario."""
     scenario = load_scenario(str(SHORT))
-    log = run_scenario(scenario, controller_params({"solver": "sparse_qp"}), DualArmModel())
-    topics = _read_bag(lockstep_bag)
+    values = read_params_files([Path(__file__).parents[1] / "config" / "solvers" / f"{solver}.yaml"],
+                               "controller_node")
+    log = run_scenario(scenario, controller_params(values), DualArmModel())
+    topics = _read_bag(lockstep_bags[solver])
     commands = np.array([m.data for m in topics["/velocity_controller/commands"]])  # type: ignore[attr-defined]
-    n = min(len(commands), len(log.commands))
-    assert n >= len(log.commands) - 2, (len(commands), len(log.commands))
-    np.testing.assert_allclose(commands[:n], log.commands[:n], atol=1e-9)
-    states = topics["/joint_states"]
-    positions = np.array([s.position for s in states[:n]])  # type: ignore[attr-defined]
-    np.testing.assert_allclose(positions, log.positions[:n], atol=1e-9)
+    n = len(log.commands)  # the trajectory node ends at t >= duration: the ROS run has one cycle more
+    assert len(commands) in (n, n + 1), (len(commands), n)
+    np.testing.assert_allclose(commands[:n], log.commands, atol=1e-9, rtol=0)
+    positions = np.array([s.position for s in topics["/joint_states"][:n]])  # type: ignore[attr-defined]
+    np.testing.assert_allclose(positions, log.positions, atol=1e-9, rtol=0)
 
 
-def test_bag_has_the_graph_with_standard_types(lockstep_bag: Path) -> None:
+def test_lockstep_bag_is_on_the_simulation_clock(lockstep_bags: dict[str, Path]) -> None:
+    """Stamps and the bag's receive times are simulation time: k * 5 ms from zero, /clock included."""
+    from rosbags.highlevel import AnyReader
+
+    bag = lockstep_bags["sparse_qp"]
+    topics = _read_bag(bag)
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in topics["/joint_states"]]  # type: ignore[attr-defined]
+    assert stamps[:3] == [0, 5_000_000, 10_000_000]
+    np.testing.assert_array_equal(np.diff(stamps), 5_000_000)
+    clock = [m.clock.sec * 10**9 + m.clock.nanosec for m in topics["/clock"]]  # type: ignore[attr-defined]
+    assert clock == stamps
+    with AnyReader([bag]) as reader:
+        assert reader.end_time - 1 <= stamps[-1] + 5_000_000  # receive times on the sim clock, not the wall
+
+
+def test_bag_has_the_graph_with_standard_types(lockstep_bags: dict[str, Path]) -> None:
     """Every graph topic is in the bag with its common_interfaces type; diagnostics name the solver."""
     from rosbags.highlevel import AnyReader
 
-    with AnyReader([lockstep_bag]) as reader:
+    bag = lockstep_bags["sparse_qp"]
+    with AnyReader([bag]) as reader:
         types = {c.topic: c.msgtype for c in reader.connections}
     assert types["/joint_states"] == "sensor_msgs/msg/JointState"
     assert types["/velocity_controller/commands"] == "std_msgs/msg/Float64MultiArray"
     assert types["/relative_target"] == "trajectory_msgs/msg/MultiDOFJointTrajectory"
     assert types["/relative_pose"] == "geometry_msgs/msg/PoseStamped"
     assert types["/diagnostics"] == "diagnostic_msgs/msg/DiagnosticArray"
-    diags = _read_bag(lockstep_bag)["/diagnostics"]
+    assert types["/clock"] == "rosgraph_msgs/msg/Clock"
+    diags = _read_bag(bag)["/diagnostics"]
     solvers = {kv.value for d in diags for s in d.status if s.name == "controller_node"  # type: ignore[attr-defined]
                for kv in s.values if kv.key == "solver"}
     assert solvers == {"sparse_qp"}

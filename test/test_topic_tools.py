@@ -12,11 +12,17 @@ import pytest
 import yaml
 from rosbags.typesys import Stores, get_typestore
 
-from dualarm_control.ros import msgs
-from dualarm_control.ros.graph_tools import (
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped, Transform, Twist, WrenchStamped
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, Header
+from trajectory_msgs.msg import MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint
+
+from dualarm_control.ros.graph import (
     RateMeter,
     RateStats,
-    builtin_discovery_works,
     format_rate,
     message_to_dict,
     message_to_yaml,
@@ -24,31 +30,35 @@ from dualarm_control.ros.graph_tools import (
 
 REPO = Path(__file__).resolve().parents[1]
 
+# A plain rclpy publisher: nothing from this package.
 PUBLISHER = r'''
-from dualarm_control import ros
-M = ros.msgs
-ros.init([])
-node = ros.Node("topic_test_publisher")
-js = node.create_publisher(M.JointState, "/joint_states", 10)
-diag = node.create_publisher(M.DiagnosticArray, "/diagnostics", 10)
-node.create_subscription(M.Float64MultiArray, "/velocity_controller/commands", lambda m: None, 10)
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, Header
+
+rclpy.init()
+node = rclpy.create_node("topic_test_publisher")
+js = node.create_publisher(JointState, "/joint_states", 10)
+diag = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
+node.create_subscription(Float64MultiArray, "/velocity_controller/commands", lambda m: None, 10)
 count = [0]
 
 def tick():
     count[0] += 1
-    js.publish(M.JointState(header=M.Header(stamp=M.Time(sec=count[0], nanosec=5), frame_id="base"),
-                            name=["left_joint_1", "left_joint_2"], position=[0.25, -1.5], velocity=[0.0, 2.0]))
-    diag.publish(M.DiagnosticArray(status=[M.DiagnosticStatus(level=M.DiagnosticStatus.WARN, name="controller_node",
-                                                              values=[M.KeyValue(key="solver", value="sparse_qp")])]))
+    js.publish(JointState(header=Header(stamp=Time(sec=count[0], nanosec=5), frame_id="base"),
+                          name=["left_joint_1", "left_joint_2"], position=[0.25, -1.5], velocity=[0.0, 2.0]))
+    diag.publish(DiagnosticArray(status=[DiagnosticStatus(level=DiagnosticStatus.WARN, name="controller_node",
+                                                          values=[KeyValue(key="solver", value="sparse_qp")])]))
 
 node.create_timer(0.02, tick)
 print("publishing", flush=True)
 try:
-    ros.spin(node)
-except (KeyboardInterrupt, ros.ExternalShutdownException):
+    rclpy.spin(node)
+except (KeyboardInterrupt, ExternalShutdownException):
     pass
-finally:
-    ros.try_shutdown()
 '''
 
 
@@ -126,36 +136,37 @@ def test_list_shows_topics_with_endpoints(publisher: subprocess.Popen[str]) -> N
     assert "/wrench [geometry_msgs/msg/WrenchStamped]" not in lines
 
 
-def test_unknown_topic_type_is_a_clear_error() -> None:
+def test_unknown_topic_is_a_clear_error() -> None:
     out = dualarm("topic", "echo", "/no_such_topic", "--once", "--spin-time", "0.3")
     assert out.returncode == 2
-    assert "could not determine the type of '/no_such_topic'" in out.stderr
-
-
-def test_builtin_discovery_check_is_isolated() -> None:
-    # cyclonedds 11.0.1 segfaults reading the builtin topics; the check runs in a child process
-    assert builtin_discovery_works() in (True, False)
+    assert "no publisher of '/no_such_topic' found within 0.3 s" in out.stderr
 
 
 # ----------------------------------------------------------------------------- units
 
 
-@pytest.mark.parametrize("cls", msgs.ALL_TYPES, ids=lambda c: c.__name__)
+GRAPH_TYPES = (JointState, Float64MultiArray, MultiDOFJointTrajectory, PoseStamped, DiagnosticArray,
+               WrenchStamped, Clock)
+
+
+@pytest.mark.parametrize("cls", GRAPH_TYPES, ids=lambda c: c.__name__)
 def test_every_message_class_converts_to_yaml(cls: type) -> None:
     msg = cls()
     text = message_to_yaml(msg)
     assert yaml.safe_load(text) == message_to_dict(msg)
-    assert list(message_to_dict(msg)) == list(cls.__dataclass_fields__)
+    assert list(message_to_dict(msg)) == list(cls.get_fields_and_field_types())  # type: ignore[attr-defined]
 
 
 def test_nested_message_to_dict() -> None:
-    msg = msgs.MultiDOFJointTrajectory(
-        header=msgs.Header(frame_id="left_tool"), joint_names=["right_tool"],
-        points=[msgs.MultiDOFJointTrajectoryPoint(transforms=[msgs.Transform()], velocities=[msgs.Twist()])])
+    msg = MultiDOFJointTrajectory(
+        header=Header(frame_id="left_tool", stamp=Time(sec=3)), joint_names=["right_tool"],
+        points=[MultiDOFJointTrajectoryPoint(transforms=[Transform()], velocities=[Twist()])])
     d = message_to_dict(msg)
     assert d["points"][0]["transforms"][0]["rotation"] == {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
     assert d["points"][0]["accelerations"] == [] and d["joint_names"] == ["right_tool"]
-    assert message_to_dict(msgs.Gid(data=bytes(range(16))))["data"] == list(range(16))
+    assert d["header"]["stamp"] == {"sec": 3, "nanosec": 0}
+    status = DiagnosticArray(status=[DiagnosticStatus(level=DiagnosticStatus.ERROR, values=[KeyValue(key="k")])])
+    assert message_to_dict(status)["status"][0]["level"] == 2
 
 
 def test_rosbags_messages_convert_too() -> None:

@@ -268,7 +268,8 @@ def _add_topic_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
                            "unless ROS_AUTOMATIC_DISCOVERY_RANGE / ROS_STATIC_PEERS / a DDS profile is set.")
     verbs = topic.add_subparsers(dest="topic_verb", metavar="TOPIC_VERB")
     verbs.required = True
-    spin = {"type": float, "default": 1.0, "metavar": "S", "help": "discovery wait (default: %(default)s s)"}
+    spin = {"type": float, "default": 3.0, "metavar": "S",
+            "help": "discovery wait; echo, hz and info answer as soon as the topic is found (default: %(default)s s)"}
     lst = verbs.add_parser("list", help="topics with publishers or subscriptions")
     lst.add_argument("-t", "--show-types", action="store_true", help="also print each topic's type")
     lst.add_argument("--spin-time", **spin)

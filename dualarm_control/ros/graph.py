@@ -24,8 +24,10 @@ import yaml
 from dualarm_control.errors import DualArmError
 from dualarm_control.ros.node import tool_node
 
-DEFAULT_SPIN_TIME = 1.0
-"""Seconds to wait for discovery before answering (``ros2 topic --spin-time``)."""
+DEFAULT_SPIN_TIME = 3.0
+"""Seconds to wait for discovery before answering (``ros2 topic --spin-time``): on a loaded
+machine Fast DDS discovery of a new participant took up to 2.5 s here. Verbs that look for
+one topic answer as soon as it is found."""
 
 
 class GraphToolError(DualArmError):
@@ -94,9 +96,14 @@ def topic_info(topic: str, spin_time: float = DEFAULT_SPIN_TIME) -> TopicEndpoin
     """Type and endpoint counts of ``topic`` (zero counts when nobody uses it)."""
     name = fq_topic(topic)
     with tool_node("_dualarm_topic_info") as (node, executor, stop):
-        spin_for(executor, spin_time, stop)
-        types = dict(node.get_topic_names_and_types()).get(name, [])
-        return TopicEndpoints(name, tuple(types), node.count_publishers(name), node.count_subscribers(name))
+        end = time.monotonic() + spin_time
+        while True:
+            types = dict(node.get_topic_names_and_types()).get(name, [])
+            if (types and node.count_publishers(name) + node.count_subscribers(name)) or time.monotonic() > end:
+                spin_for(executor, 0.2, stop)  # the topic's other endpoints, discovered with it
+                types = dict(node.get_topic_names_and_types()).get(name, [])
+                return TopicEndpoints(name, tuple(types), node.count_publishers(name), node.count_subscribers(name))
+            spin_for(executor, 0.05, stop)
 
 
 def format_topic_info(info: TopicEndpoints) -> str:
@@ -176,7 +183,7 @@ def echo(topic: str, *, count: int | None = None, timeout: float | None = None,
     received: deque[Any] = deque()
     with tool_node("_dualarm_topic_echo") as (node, executor, stop), _stdout_closed_ok():
         cls = message_class(wait_for_type(node, executor, stop, name, spin_time))
-        node.create_subscription(cls, name, received.append, adapted_qos(node, name))
+        node.create_subscription(cls, name, lambda msg: received.append(msg), adapted_qos(node, name))
         printed, last = 0, time.monotonic()
         while stop.signal is None and (count is None or printed < count):
             executor.spin_once(timeout_sec=0.1)

@@ -11,6 +11,7 @@ Ctrl-C, SIGTERM or ``--duration`` close the bag with everything received so far.
 
 from __future__ import annotations
 
+import signal
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -251,7 +252,7 @@ def record(path: Path, topics: Sequence[str], *, record_all: bool = False, durat
                     next_progress = now + PROGRESS_INTERVAL_S
                 executor.spin_once(timeout_sec=0.02)
             if stop.signal is not None:
-                stopped_by = f" (signal {stop.signal})"
+                stopped_by = f" (signal {signal.Signals(stop.signal).name})"
                 drain_end = time.monotonic() + 0.2  # what already arrived is kept
                 while time.monotonic() < drain_end:
                     executor.spin_once(timeout_sec=0.01)
