@@ -47,6 +47,8 @@ PARAMETERS = (
               check=non_negative),
     ParamSpec("lockstep_resend", 0.5, "re-publish the pending state after this long without a command [s]",
               check=positive),
+    ParamSpec("lockstep_start_delay", 0.5, "wait after the joint_states readers matched, so that their other "
+              "subscriptions (a recorder's /clock, /wrench) match too [s]", check=non_negative, read_only=True),
 )
 
 DEFAULT_PRIORITY = 50
@@ -68,6 +70,8 @@ class SimNode:
         self.lockstep = bool(p["lockstep"])
         self.wait_for = int(p["lockstep_subscribers"])
         self.resend_s = float(p["lockstep_resend"])
+        self.start_delay = float(p["lockstep_start_delay"])
+        self.readers_matched_at: float | None = None
         n = self.node
         self.pub_js = n.create_publisher(JointState, "/joint_states", 10)
         self.pub_wrench = n.create_publisher(WrenchStamped, "/wrench", 10)
@@ -126,6 +130,10 @@ class SimNode:
         """Start once the readers are matched; re-send a state that got no command (discovery races)."""
         if not self.started:
             if self.node.count_subscribers("/joint_states") < self.wait_for:
+                return
+            if self.readers_matched_at is None:
+                self.readers_matched_at = time.monotonic()
+            if time.monotonic() - self.readers_matched_at < self.start_delay:
                 return
             self.started = True
             self.log.info(f"{self.wait_for} joint_states readers matched: starting lockstep")
