@@ -31,6 +31,7 @@ from dualarm_control.ros.node import (
     priority_from_args,
     request_realtime_priority,
     run,
+    usage,
 )
 from dualarm_control.scenario import load_scenario, scenario_names
 from dualarm_sim.cell import CellConfig, DualArmCell
@@ -145,7 +146,8 @@ class SimNode:
 def main(args: list[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
     why_not = request_realtime_priority(priority_from_args(argv, DEFAULT_PRIORITY))
-    return run(lambda context: SimNode(context, why_not), argv)
+    help_text = usage("sim_node", __doc__ or "", PARAMETERS)
+    return run(lambda context: SimNode(context, why_not), argv, help_text)
 
 
 if __name__ == "__main__":

@@ -51,6 +51,7 @@ from dualarm_control.ros.node import (
     priority_from_args,
     request_realtime_priority,
     run,
+    usage,
 )
 
 NODE_PARAMETERS = (
@@ -287,7 +288,8 @@ def main(args: list[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
     # Before any middleware thread exists, so they inherit the scheduling.
     why_not = request_realtime_priority(priority_from_args(argv, DEFAULT_PRIORITY))
-    return run(lambda context: ControllerNode(context, why_not), argv)
+    help_text = usage("controller_node", __doc__ or "", CONTROLLER_PARAMETERS + NODE_PARAMETERS)
+    return run(lambda context: ControllerNode(context, why_not), argv, help_text)
 
 
 if __name__ == "__main__":

@@ -1,9 +1,9 @@
 """trajectory_node: streams the ruckig relative targets of a scenario on ``/relative_target``.
 
 The trajectory starts from the relative pose of the first ``/joint_states`` (forward
-kinematics). Real-time mode: one target per control period on a drift-free timer, timed
-from the first joint state on the node's clock (simulation time with ``use_sim_time``). Lockstep mode: one target per joint state, stamped with the
-joint state's stamp, so the controller can pair them. When the trajectory plus the
+kinematics). Real-time mode: one target per control period on a timer, timed from the first
+joint state on the node's clock (simulation time with ``use_sim_time``). Lockstep mode: one
+target per joint state, stamped with the joint state's stamp, so the controller can pair them. When the trajectory plus the
 scenario's settle time has elapsed the node logs completion, publishes a final
 ``/diagnostics`` status "complete" and exits 0.
 """
@@ -20,7 +20,7 @@ from trajectory_msgs.msg import MultiDOFJointTrajectory
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import ParamSpec, positive
 from dualarm_control.ros import convert
-from dualarm_control.ros.node import NodeFinished, declare, run
+from dualarm_control.ros.node import NodeFinished, declare, run, usage
 from dualarm_control.scenario import load_scenario
 from dualarm_control.trajectory import RelativeTrajectory
 
@@ -95,7 +95,7 @@ class TrajectoryNode:
 
 
 def main(args: list[str] | None = None) -> int:
-    return run(TrajectoryNode, args)
+    return run(TrajectoryNode, args, usage("trajectory_node", __doc__ or "", PARAMETERS))
 
 
 if __name__ == "__main__":

@@ -121,15 +121,38 @@ def spin_until_stopped(executor: Any, stop: _StopOnSignal, until: Callable[[], b
         executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
 
 
-def run(make: Callable[[Any], Any], args: Sequence[str] | None = None) -> int:
+def usage(name: str, doc: str, specs: Iterable[ParamSpec]) -> str:
+    """``--help`` text of a node: its docstring and its parameters (type, default, rule)."""
+    lines = [f"usage: {name} [--ros-args [-p NAME:=VALUE] [--params-file FILE] [-r FROM:=TO] ...]", "",
+             doc.strip(), "", "parameters:"]
+    for spec in specs:
+        rule = f"; {spec.constraints}" if spec.constraints else ""
+        ro = ", read-only" if spec.read_only else ""
+        lines.append(f"  {spec.name} ({spec.type_name}, default {spec.default!r}{ro}): {spec.description}{rule}")
+    lines.append("  use_sim_time (bool, default False): stamp with /clock (simulation time)")
+    return "\n".join(lines)
+
+
+def wants_help(argv: Sequence[str]) -> bool:
+    """``-h``/``--help`` before any ``--ros-args``."""
+    head = list(argv[1:]) if argv else []
+    head = head[: head.index("--ros-args")] if "--ros-args" in head else head
+    return "-h" in head or "--help" in head
+
+
+def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text: str = "") -> int:
     """A node's main: build the shell with ``make(context)``, spin it, shut down cleanly.
 
     ``make`` returns a shell object with a ``node`` attribute and an optional ``close()``
-    (called once on the way out, while the node can still log).
+    (called once on the way out, while the node can still log). ``-h``/``--help`` prints
+    ``help_text`` and exits 0.
     """
     from rclpy.executors import SingleThreadedExecutor
 
     argv = list(sys.argv if args is None else args)
+    if wants_help(argv):
+        print(help_text)
+        return EXIT_OK
     shell = None
     context = None
     with _StopOnSignal() as stop:
