@@ -19,9 +19,18 @@ INSTALL_REQUIRES = [
     "quadprog>=0.1.11,<0.2",
     "matplotlib>=3.8,<4",
     "rosbags>=0.10,<0.12",
-    "cyclonedds>=0.10.5,<12",
 ]
-TEST_REQUIRES = ["pytest>=8,<10", "hypothesis>=6.100,<7", "ruff>=0.5", "mypy>=1.10"]
+# ROS 2 Jazzy from PyPI (rclpy, the message packages of the graph, Jazzy's default RMW).
+# An extra, so that on a machine with ROS 2 from apt (colcon workspace, sourced setup) the
+# system rclpy is used and nothing from PyPI shadows it: there, install without "[ros]".
+ROS_REQUIRES = [
+    "ros-jazzy-rclpy>=7.1,<8",
+    "ros-jazzy-common-interfaces>=5.3,<6",
+    "ros-jazzy-rmw-fastrtps-cpp>=8.4,<9",
+    "ros-jazzy-ament-index-python>=1.8,<2",
+]
+TEST_REQUIRES = ["pytest>=8,<10", "hypothesis>=6.100,<7", "ruff>=0.5", "mypy>=1.10",
+                 "colcon-common-extensions>=0.3,<1"]
 
 setup(
     name=PACKAGE,
@@ -37,7 +46,7 @@ setup(
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
     install_requires=INSTALL_REQUIRES,
-    extras_require={"test": TEST_REQUIRES},
+    extras_require={"ros": ROS_REQUIRES, "test": TEST_REQUIRES},
     python_requires=">=3.10",
     zip_safe=True,
     maintainer="dualarm_control developers",

@@ -134,10 +134,10 @@ def test_plain_rclpy_script_sees_the_graph(launch_slow: Launch, tmp_path: Path) 
     """A script that knows nothing of this package receives the 200 Hz streams."""
     script = tmp_path / "listener.py"
     script.write_text(FOREIGN_LISTENER)
-    out = subprocess.run([sys.executable, str(script), "4.0"], capture_output=True, text=True, timeout=60, check=False)
+    out = subprocess.run([sys.executable, str(script), "5.0"], capture_output=True, text=True, timeout=60, check=False)
     assert out.returncode == 0, out.stderr
     js, cmd, diag = (int(v) for v in out.stdout.split())
-    assert js > 200 and cmd > 200 and diag > 200, out.stdout  # 200 Hz for (4 s - discovery)
+    assert js > 200 and cmd > 200 and diag > 200, out.stdout  # 200 Hz for (5 s - discovery)
 
 
 FOREIGN_DRIVER = r'''

@@ -87,7 +87,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
     if args.solver:
         extra += ["-p", f"solver:={args.solver}"]
     record = Path(args.record) if args.record else None
-    return launch_scenario(args.scenario, args.params, extra, args.lockstep, record, args.timeout)
+    return launch_scenario(args.scenario, args.params, extra, args.lockstep, record, args.timeout, args.rate)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -148,8 +148,32 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_realtime(args: argparse.Namespace) -> int:
+    """Real-time runs over ROS per solver and rate; write DIR/realtime.md and DIR/realtime.json."""
+    from dualarm_control.app.realtime_bench import (
+        format_realtime,
+        run_realtime,
+        write_realtime,
+    )
+    from dualarm_control.scenario import scenario_file
+    from dualarm_control.solvers import make_solver
+
+    scenario_file(args.scenario)
+    solvers = [s.strip() for s in args.solver.split(",") if s.strip()]
+    for name in solvers:
+        make_solver(name)
+    rates = [float(r) for r in args.rates.split(",") if r.strip()]
+    rows = run_realtime(args.scenario, solvers, rates)
+    write_realtime(Path(args.output), rows, args.scenario)
+    print(format_realtime(rows))
+    print(f"\nwrote {Path(args.output) / 'realtime.md'} and realtime.json")
+    return 0
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     """Time every solver on a scenario; write DIR/bench.md and DIR/bench.json."""
+    if args.realtime:
+        return cmd_bench_realtime(args)
     from dualarm_control.app.bench import bench_solvers, format_bench, write_bench
     from dualarm_control.scenario import load_scenario
 
@@ -381,6 +405,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="comma-separated solvers (default: %(default)s)")
     ben.add_argument("--reference", default="standard_qp", help="ratio reference (default: %(default)s)")
     ben.add_argument("--output", default="out/bench", metavar="DIR", help="output directory (default: %(default)s)")
+    ben.add_argument("--realtime", action="store_true",
+                     help="instead: the three nodes over ROS in real time per solver and --rates; missed deadlines, "
+                     "period jitter and state-to-command latency over every cycle (realtime.md/json)")
+    ben.add_argument("--rates", default="200,500,1000", metavar="HZ,...",
+                     help="control rates of --realtime (default: %(default)s)")
     ben.set_defaults(func=cmd_bench)
 
     run = sub.add_parser("run", help="run one node (like ros2 run dualarm_control NODE)",
@@ -401,6 +430,7 @@ def build_parser() -> argparse.ArgumentParser:
     lau.add_argument("--lockstep", action="store_true",
                      help="deterministic: the simulator steps only when the command for the step arrives")
     lau.add_argument("--record", metavar="BAG", help="record the graph's topics to this rosbag2 directory")
+    lau.add_argument("--rate", type=float, metavar="HZ", help="control rate of every node (default: 200 Hz)")
     lau.add_argument("--timeout", type=float, default=None, metavar="S", help="stop after S seconds")
     lau.set_defaults(func=cmd_launch)
     _add_bag_parser(sub)

@@ -114,9 +114,14 @@ def launch_scenario(
     lockstep: bool,
     record: Path | None,
     timeout: float | None = None,
+    rate_hz: float | None = None,
+    record_topics: Sequence[str] = GRAPH_TOPICS,
 ) -> int:
-    """Run the three nodes (and a recorder) on ``scenario``; return 0 if the scenario completed cleanly."""
+    """Run the three nodes (and a recorder of ``record_topics``) on ``scenario``; ``rate_hz`` sets every
+    node's control period. Returns 0 if the scenario completed cleanly, 130 on Ctrl-C."""
     common = ["-p", f"lockstep:={'true' if lockstep else 'false'}"]
+    if rate_hz is not None:
+        common += ["-p", f"control_period:={1.0 / rate_hz!r}"]
     with_scenario = ["-p", f"scenario:={scenario}"]
     sim_time = ["-p", "use_sim_time:=true"] if lockstep else []  # lockstep stamps are simulation time
     for f in params:
@@ -126,7 +131,7 @@ def launch_scenario(
     try:
         if record is not None:  # subscribes the graph's topics once they all have a publisher
             launch.start("bag", [sys.executable, "-u", "-m", "dualarm_control.app.cli", "bag", "record", "-o",
-                                 str(record), *GRAPH_TOPICS, *(["--use-sim-time"] if lockstep else [])])
+                                 str(record), *record_topics, *(["--use-sim-time"] if lockstep else [])])
         readers = 2 + (record is not None)
         launch.start("controller_node", node_command("controller_node", [*common, *sim_time, *controller_args]))
         launch.start("trajectory_node", node_command("trajectory_node", [*common, *sim_time, *with_scenario]))

@@ -96,6 +96,7 @@ class ControllerNode:
         self.cycles = self.missed = self.failures = self.switches = self.safe_commands = 0
         self.last_warning = 0.0
         self.last_arrival_ns: int | None = None
+        self.interval = float("nan")  # last joint-state inter-arrival time [s]
         self.jitter: list[float] = []
         self.latency: list[float] = []
         self.stats: tuple[tuple[float, float], tuple[float, float]] = (NAN2, NAN2)
@@ -181,6 +182,7 @@ class ControllerNode:
         period_ns = self.params.period * 1e9
         if self.last_arrival_ns is not None and not self.lockstep:
             dt = now - self.last_arrival_ns
+            self.interval = dt / 1e9
             self._keep(self.jitter, abs(dt - period_ns) / 1e9)
             if dt > 1.5 * period_ns:
                 self.missed += round(dt / period_ns) - 1
@@ -270,6 +272,7 @@ class ControllerNode:
             "parameter_switches": self.switches,
             "period_jitter_p50_s": f"{jit[0]:.6e}",
             "period_jitter_p99_s": f"{jit[1]:.6e}",
+            "state_interval_s": f"{self.interval:.6e}",
             "state_to_command_latency_s": f"{latency:.6e}",
             "state_to_command_latency_p50_s": f"{lat[0]:.6e}",
             "state_to_command_latency_p99_s": f"{lat[1]:.6e}",

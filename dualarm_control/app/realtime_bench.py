@@ -1,0 +1,102 @@
+"""Real-time runs over ROS: missed deadlines, period jitter and state-to-command latency.
+
+For each (solver, rate) the three nodes run the scenario in real time (``dualarm launch``)
+while only ``/diagnostics`` is recorded; the figures are computed from every controller cycle
+of the run (not a window): the controller publishes, per cycle, the joint-state inter-arrival
+time and the state-to-command latency (state stamp to command publication, wall clock,
+transport included), and its cumulative missed-deadline count. Percentiles only: the machine
+is shared and noisy.
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dualarm_control.metrics import percentiles
+
+
+def controller_cycles(bag: Path) -> dict[str, np.ndarray]:
+    """Per-cycle controller figures from a bag's /diagnostics (status ``controller_node`` with a solver status)."""
+    from rosbags.highlevel import AnyReader
+
+    rows: dict[str, list[float]] = {"interval": [], "latency": [], "missed": [], "cycles": [], "failures": []}
+    with AnyReader([bag]) as reader:
+        conns = [c for c in reader.connections if c.topic == "/diagnostics"]
+        for conn, _, raw in reader.messages(connections=conns):
+            for status in reader.deserialize(raw, conn.msgtype).status:
+                values = {kv.key: kv.value for kv in status.values}
+                if status.name != "controller_node" or "cycles" not in values:
+                    continue
+                rows["interval"].append(float(values["state_interval_s"]))
+                rows["latency"].append(float(values["state_to_command_latency_s"]))
+                rows["missed"].append(float(values["missed_deadlines"]))
+                rows["cycles"].append(float(values["cycles"]))
+                rows["failures"].append(float(values["solver_failures"]))
+    return {k: np.array(v) for k, v in rows.items()}
+
+
+def summarize_cycles(cycles: dict[str, np.ndarray], period: float) -> dict[str, Any]:
+    """Missed deadlines (count and share), jitter |interval - T| and latency p50/p99 [ms]."""
+    if not len(cycles["cycles"]):
+        return {"cycles": 0}
+    interval = cycles["interval"][np.isfinite(cycles["interval"])]
+    jitter = np.abs(interval - period)
+    n = int(cycles["cycles"][-1])
+    missed = int(cycles["missed"][-1])
+    j50, j99 = percentiles(jitter)
+    l50, l99 = percentiles(cycles["latency"])
+    return {
+        "cycles": n,
+        "missed_deadlines": missed,
+        "missed_share": missed / max(n, 1),
+        "jitter_p50_ms": j50 * 1e3,
+        "jitter_p99_ms": j99 * 1e3,
+        "latency_p50_ms": l50 * 1e3,
+        "latency_p99_ms": l99 * 1e3,
+        "solver_failures": int(cycles["failures"][-1]),
+    }
+
+
+def run_realtime(scenario: str, solvers: Sequence[str], rates: Sequence[float],
+                 timeout: float = 300.0) -> list[dict[str, Any]]:
+    """One real-time launch per (solver, rate); the rows of the table."""
+    from dualarm_control.app.launcher import launch_scenario
+
+    rows = []
+    for solver in solvers:
+        for rate in rates:
+            with tempfile.TemporaryDirectory() as tmp:
+                bag = Path(tmp) / "diagnostics"
+                print(f"=== {solver} at {rate:g} Hz, real time", flush=True)
+                code = launch_scenario(scenario, [], ["-p", f"solver:={solver}"], False, bag, timeout,
+                                       rate_hz=rate, record_topics=("/diagnostics",))
+                row = {"solver": solver, "rate_hz": rate, "exit": code,
+                       **summarize_cycles(controller_cycles(bag), 1.0 / rate)}
+            rows.append(row)
+    return rows
+
+
+def format_realtime(rows: Sequence[dict[str, Any]]) -> str:
+    """Markdown table of :func:`run_realtime` rows."""
+    lines = [("| solver | rate [Hz] | cycles | missed deadlines | jitter p50 / p99 [ms] | "
+             "state-to-command latency p50 / p99 [ms] | solver failures |"), "|" + "---|" * 7]
+    for r in rows:
+        if not r.get("cycles"):
+            lines.append(f"| {r['solver']} | {r['rate_hz']:g} | 0 (exit {r['exit']}) | | | | |")
+            continue
+        lines.append(f"| {r['solver']} | {r['rate_hz']:g} | {r['cycles']} | {r['missed_deadlines']} "
+                     f"({r['missed_share']:.2%}) | {r['jitter_p50_ms']:.3f} / {r['jitter_p99_ms']:.3f} | "
+                     f"{r['latency_p50_ms']:.3f} / {r['latency_p99_ms']:.3f} | {r['solver_failures']} |")
+    return "\n".join(lines)
+
+
+def write_realtime(out: Path, rows: Sequence[dict[str, Any]], scenario: str) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "realtime.json").write_text(json.dumps(list(rows), indent=2) + "\n")
+    (out / "realtime.md").write_text(f"# Real-time runs over ROS ({scenario})\n\n{format_realtime(rows)}\n")
