@@ -89,9 +89,9 @@ def test_lockstep_run_matches_in_process_experiment(lockstep_bags: dict[str, Pat
     log = run_scenario(scenario, controller_params(values), DualArmModel())
     topics = _read_bag(lockstep_bags[solver])
     commands = np.array([m.data for m in topics["/velocity_controller/commands"]])  # type: ignore[attr-defined]
-    n = len(log.commands)  # the trajectory node ends at t >= duration: the ROS run has one cycle more
-    assert len(commands) in (n, n + 1), (len(commands), n)
-    np.testing.assert_allclose(commands[:n], log.commands, atol=1e-9, rtol=0)
+    n = len(log.commands)
+    assert len(commands) == n
+    np.testing.assert_allclose(commands, log.commands, atol=1e-9, rtol=0)
     positions = np.array([s.position for s in topics["/joint_states"][:n]])  # type: ignore[attr-defined]
     np.testing.assert_allclose(positions, log.positions, atol=1e-9, rtol=0)
 
@@ -128,3 +128,19 @@ def test_bag_has_the_graph_with_standard_types(lockstep_bags: dict[str, Path]) -
     solvers = {kv.value for d in diags for s in d.status if s.name == "controller_node"  # type: ignore[attr-defined]
                for kv in s.values if kv.key == "solver"}
     assert solvers == {"sparse_qp"}
+
+
+@pytest.mark.parametrize("solver", ("standard_qp", "hierarchical_sparse_qp"))
+def test_table_one_means_from_the_bag_equal_in_process(lockstep_bags: dict[str, Path], solver: str,
+                                                       tmp_path: Path) -> None:
+    """``dualarm report`` on the lockstep bag gives the in-process experiment's Table I means."""
+    from dualarm_control.app.bag import report
+    from dualarm_control.app.experiment import summarize_log
+
+    scenario = load_scenario(str(SHORT))
+    model = DualArmModel()
+    log = run_scenario(scenario, controller_params({"solver": solver}), model)
+    expected = summarize_log(log, scenario, model)
+    got = report(lockstep_bags[solver], tmp_path)[solver]
+    for key in ("l0_mean", "l1_mean", "l2_mean"):
+        assert got[key] == pytest.approx(expected[key], rel=1e-9, abs=1e-12), key

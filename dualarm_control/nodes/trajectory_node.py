@@ -77,6 +77,10 @@ class TrajectoryNode:
     def publish(self, stamp: int, elapsed_ns: int) -> None:
         assert self.trajectory is not None
         t = elapsed_ns / 1e9
+        if t >= self.end_s:  # no target at or after the end: as many cycles as the in-process run
+            self.log.info(f"scenario '{self.scenario.name}' complete at t={t:.2f} s")
+            self._status(stamp, 0, "complete", t)
+            raise NodeFinished
         sample = self.trajectory.sample(t)
         self.pub.publish(convert.target_message(stamp, elapsed_ns, sample))
         if sample.segment != self.segment and not sample.done:
@@ -84,10 +88,6 @@ class TrajectoryNode:
             self.log.info(f"t={t:.2f} s: segment {sample.segment + 1}/{len(self.trajectory.segments)} "
                           f"'{sample.segment_name}'")
             self._status(stamp, 0, f"segment {sample.segment_name}", t)
-        if t >= self.end_s:
-            self.log.info(f"scenario '{self.scenario.name}' complete at t={t:.2f} s")
-            self._status(stamp, 0, "complete", t)
-            raise NodeFinished
 
     def _status(self, stamp: int, level: int, message: str, t: float) -> None:
         values = {"scenario": self.scenario.name, "time_s": f"{t:.3f}", "duration_s": f"{self.end_s:.3f}"}
