@@ -29,7 +29,8 @@ def controller_cycles(bag: Path) -> dict[str, np.ndarray]:
     with AnyReader([bag]) as reader:
         conns = [c for c in reader.connections if c.topic == "/diagnostics"]
         for conn, _, raw in reader.messages(connections=conns):
-            for status in reader.deserialize(raw, conn.msgtype).status:
+            msg: Any = reader.deserialize(raw, conn.msgtype)
+            for status in msg.status:
                 values = {kv.key: kv.value for kv in status.values}
                 if status.name != "controller_node" or "cycles" not in values:
                     continue
