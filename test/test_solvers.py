@@ -25,7 +25,7 @@ import pytest
 import qpsolvers
 from scipy.optimize import linprog
 
-from dualarm_control.errors import UnknownSolverError
+from dualarm_control.errors import ParameterError, UnknownSolverError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.limits import JointLimits, repulsive_velocity, velocity_bounds
 from dualarm_control.qp import QPSettings, QPSolution
@@ -304,12 +304,23 @@ def test_numerical_failures_never_raise(name: str, failure: Callable, monkeypatc
     assert res.detail
 
 
-def test_failing_qp_backend_gives_failed_status() -> None:
-    """sparse_qp on quadprog: eq (19)'s Hessian is singular, quadprog refuses -> status failed, zero, no raise."""
+@pytest.mark.parametrize("solver", ["sparse_qp", "hierarchical_sparse_qp"])
+def test_backend_needing_a_definite_hessian_is_refused_at_start(solver: str) -> None:
+    """sparse QPs on quadprog: eq (19)'s H is only semi-definite -> refused when built, naming valid back-ends."""
+    with pytest.raises(ParameterError, match=r"qp_backend.*quadprog.*semi-definite.*daqp"):
+        make_solver(solver, SolverParams(qp_backend="quadprog"))
+
+
+def test_standard_qp_on_quadprog_needs_its_regularization() -> None:
+    """standard_qp's H = J^T J + eps I is definite only with eps > 0: quadprog solves it, or is refused at eps = 0."""
     rng = np.random.default_rng(27)
-    res = make_solver("sparse_qp", SolverParams(qp_backend="quadprog")).solve(random_problem(rng, 1.0))
-    assert res.status == "failed" and res.detail == "QP failed"
-    np.testing.assert_array_equal(res.velocities, np.zeros(14))
+    p = random_problem(rng, 1.0)
+    res = make_solver("standard_qp", SolverParams(qp_backend="quadprog")).solve(p)
+    ref = make_solver("standard_qp", SolverParams(qp_backend="daqp")).solve(p)
+    assert res.status == "solved"
+    np.testing.assert_allclose(res.velocities, ref.velocities, atol=1e-9)  # two exact active-set methods
+    with pytest.raises(ParameterError, match="qp_backend"):
+        make_solver("standard_qp", SolverParams(qp_backend="quadprog", regularization=0.0))
 
 
 # ---- pseudo-inverse, eq (13) -------------------------------------------------------------------

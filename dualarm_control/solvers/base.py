@@ -7,13 +7,14 @@ serves the in-process experiment, the controller node and the benchmark.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 
-from dualarm_control.qp import QPSettings, QPSolution, make_backend
+from dualarm_control.qp import DEFAULT_BACKEND, QPSettings, QPSolution, make_backend
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -42,18 +43,26 @@ class ControlProblem:
     repulsive: FloatArray
 
     def problem_with_invalid_input(self) -> str:
-        """Return a description of what is wrong with the inputs, or '' when they are usable."""
+        """Return a description of what is wrong with the inputs, or '' when they are usable.
+
+        Runs every cycle: shapes are compared as tuples and finiteness is tested once on the
+        sum of all entries (NaN or inf anywhere makes it non-finite); only when that fails
+        are the arrays examined one by one to name the culprit.
+        """
         n = self.jacobian.shape[1] if self.jacobian.ndim == 2 else -1
         if self.jacobian.shape != (6, n) or self.reference.shape != (6,):
             return f"bad shapes: J {self.jacobian.shape}, reference {self.reference.shape}"
         for name in ("lower", "upper", "repulsive"):
             if getattr(self, name).shape != (n,):
                 return f"bad shape of {name}: {getattr(self, name).shape}, expected ({n},)"
-        for name in ("jacobian", "reference", "lower", "upper", "repulsive"):
-            if not np.all(np.isfinite(getattr(self, name))):
-                return f"non-finite values in {name}"
-        if np.any(self.lower > self.upper + 1e-12):
-            i = int(np.argmax(self.lower - self.upper))
+        total = self.jacobian.sum() + self.reference.sum() + self.lower.sum() + self.upper.sum() + self.repulsive.sum()
+        if not math.isfinite(total):
+            for name in ("jacobian", "reference", "lower", "upper", "repulsive"):
+                if not np.all(np.isfinite(getattr(self, name))):
+                    return f"non-finite values in {name}"
+        gap = self.lower - self.upper
+        if gap.max() > 1e-12:
+            i = int(np.argmax(gap))
             return f"velocity bounds cross at joint {i}: lower {self.lower[i]:.4g} > upper {self.upper[i]:.4g} (joint outside its position range)"
         return ""
 
@@ -96,13 +105,13 @@ class SolverParams:
         l1_weight: lambda of eq (17)/(26) [ (m/s)^2 per rad/s ], > 0; paper: 1e-6.
         regularization: epsilon of the standard QP's tie-break term eps/2 ||qd||^2 that selects
             the minimum-norm solution among the least-squares ones, like J^+ (eq 13-14), >= 0.
-        qp_backend: "proxsuite" or a qpsolvers solver name (see dualarm_control.qp).
+        qp_backend: "daqp" (default), "proxsuite" or a qpsolvers solver name (see dualarm_control.qp).
         qp: numerical settings of the QP back-end.
     """
 
     l1_weight: float = 1e-6
     regularization: float = 1e-6
-    qp_backend: str = "proxsuite"
+    qp_backend: str = DEFAULT_BACKEND
     qp: QPSettings = field(default_factory=QPSettings)
 
     def __post_init__(self) -> None:

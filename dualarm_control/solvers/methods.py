@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dualarm_control.qp import QPProblem
+from dualarm_control.qp import QPProblem, check_backend
 from dualarm_control.solvers.base import (
     ControlProblem,
     FloatArray,
@@ -47,11 +47,19 @@ def _least_squares_terms(problem: ControlProblem) -> tuple[FloatArray, FloatArra
 
 
 class _QPSolver(Solver):
-    """A solver that owns one QP back-end (and its warm-start memory)."""
+    """A solver that owns one QP back-end (and its warm-start memory).
+
+    ``positive_definite`` tells whether the solver's H is positive definite; a back-end
+    that needs a definite H is refused here, at start-up (see :func:`check_backend`).
+    """
+
+    positive_definite = True
+    qp_description = "QP"
 
     def __init__(self, params: SolverParams | None = None) -> None:
         super().__init__(params)
         self._qp = self._backend()
+        check_backend(self._qp, self.positive_definite, f"{self.name}'s {self.qp_description}")
 
     def reset(self) -> None:
         self._qp.reset()
@@ -63,7 +71,14 @@ class StandardQP(_QPSolver):
 
     J^T J has rank 6 < n, so eq (14) alone has a whole affine set of minimisers; the tiny
     term eps (``regularization``, default 1e-6) selects the minimum-norm one, as J^+ does.
+    With eps = 0, H is only semi-definite.
     """
+
+    qp_description = "QP, eq (14)"
+
+    def __init__(self, params: SolverParams | None = None) -> None:
+        self.positive_definite = (params or SolverParams()).regularization > 0
+        super().__init__(params)
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
         jtj, jtr = _least_squares_terms(problem)
@@ -72,30 +87,48 @@ class StandardQP(_QPSolver):
         return from_qp(self._qp.solve(QPProblem(H=h, g=-jtr, lb=problem.lower, ub=problem.upper)))
 
 
+def lasso_box(lower: FloatArray, upper: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Box of z = [qd+; qd-] that replaces the constraints of eq (19), shapes (n,) -> (2n,).
+
+    Eq (19) has z >= 0 and Qd_min <= qd+ - qd- <= Qd_max. At an optimum qd+_i qd-_i = 0
+    (lambda > 0 makes any overlap cost lambda without changing qd), so qd_i = qd+_i or -qd-_i
+    and the constraints are exactly the box
+    max(Qd_min, 0) <= qd+ <= max(Qd_max, 0),  max(-Qd_max, 0) <= qd- <= max(-Qd_min, 0):
+    for Qd_min <= 0 <= Qd_max it is 0 <= qd+ <= Qd_max, 0 <= qd- <= -Qd_min; for a range
+    above 0 (e.g. an acceleration bound around a positive command) qd- = 0 and qd+ spans it.
+    No general constraint rows remain: a 2n-variable box-constrained QP.
+
+    Args:
+        lower, upper: Qd_min, Qd_max [rad/s], (n,), lower <= upper.
+
+    Returns:
+        (lb, ub) [rad/s], (2n,).
+    """
+    return (np.concatenate((np.maximum(lower, 0.0), np.maximum(-upper, 0.0))),
+            np.concatenate((np.maximum(upper, 0.0), np.maximum(-lower, 0.0))))
+
+
 @register("sparse_qp")
 class SparseQP(_QPSolver):
     """Lasso QP, eq (17)-(19) with the bounds of eq (23) (QP1 of eq (26)).
 
     min 1/2 ||J qd - r||^2 + lambda ||qd||_1  s.t. Qd_min <= qd <= Qd_max, solved as the
-    standard QP of eq (19) in 2n variables z = [qd+; qd-] >= 0, qd = qd+ - qd-:
-    H = [[J^T J, -J^T J], [-J^T J, J^T J]], g = lambda 1_2n - [J^T r; -J^T r],
-    Qd_min <= [I, -I] z <= Qd_max. The box 0 <= qd+ <= max(Qd_max, 0), 0 <= qd- <= max(-Qd_min, 0)
-    is implied by the other constraints and only tightens the solver's search.
+    standard QP of eq (19) in 2n variables z = [qd+; qd-], qd = qd+ - qd-:
+    H = [J, -J]^T [J, -J] (2n, 2n), g = lambda 1_2n - [J, -J]^T r, and the bounds as the
+    equivalent box of :func:`lasso_box` (no constraint rows). H has rank 6: only positive
+    semi-definite, so back-ends that need a definite H are refused.
     """
 
-    _split: FloatArray | None = None  # [I, -I] of eq (19)
+    positive_definite = False
+    qp_description = "lasso QP, eq (19)"
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
-        jtj, jtr = _least_squares_terms(problem)
-        n = jtj.shape[0]
-        h = np.block([[jtj, -jtj], [-jtj, jtj]])
-        if self._split is None or self._split.shape[0] != n:  # constant per n: built once, not per cycle
-            self._split = np.hstack((np.eye(n), -np.eye(n)))
-        c = self._split
-        g = self.params.l1_weight - np.concatenate((jtr, -jtr))
-        lb = np.zeros(2 * n)
-        ub = np.concatenate((np.maximum(problem.upper, 0.0), np.maximum(-problem.lower, 0.0)))
-        qp = QPProblem(H=h, g=g, C=c, l=problem.lower, u=problem.upper, lb=lb, ub=ub)
+        j = problem.jacobian
+        n = j.shape[1]
+        b = np.hstack((j, -j))  # J [I, -I], (6, 2n)
+        g = self.params.l1_weight - b.T @ problem.reference
+        lb, ub = lasso_box(problem.lower, problem.upper)
+        qp = QPProblem(H=b.T @ b, g=g, lb=lb, ub=ub)
         return from_qp(self._qp.solve(qp), lambda z: z[:n] - z[n:])
 
 
@@ -117,7 +150,7 @@ class HierarchicalSparseQP(Solver):
 
     def __init__(self, params: SolverParams | None = None) -> None:
         super().__init__(params)
-        self._primary = SparseQP(self.params)
+        self._primary = SparseQP(self.params)  # refuses a back-end needing a definite H
         self._secondary = self._backend()
 
     def reset(self) -> None:
