@@ -182,22 +182,35 @@ class DaqpBackend(QPBackend):
     def __init__(self, settings: QPSettings) -> None:
         super().__init__(settings)
         self._previous: FloatArray | None = None
+        self._constants: dict[tuple[str, int], npt.NDArray[np.generic]] = {}
 
     def reset(self) -> None:
         self._previous = None
 
-    def solve(self, problem: QPProblem) -> QPSolution:
-        import daqp
+    def _box_only(self, n: int) -> FloatArray:
+        """The empty (0, n) constraint matrix of a box-only QP, built once per n."""
+        key = ("empty", n)
+        if key not in self._constants:
+            self._constants[key] = np.zeros((0, n))
+        return self._constants[key]  # type: ignore[return-value]
 
-        n = problem.H.shape[0]
+    def _sense(self, n: int) -> npt.NDArray[np.int32]:
+        """All-inequality ``sense`` of n box bounds, built once per n."""
+        key = ("sense", n)
+        if key not in self._constants:
+            self._constants[key] = np.full(n, self.INEQUALITY, dtype=np.int32)
+        return self._constants[key]  # type: ignore[return-value]
+
+    def _stack(self, problem: QPProblem, n: int) -> tuple[FloatArray, FloatArray, FloatArray, npt.NDArray[np.int32]]:
+        """daqp's (A, bupper, blower, sense): box first (simple bounds), then equalities, then C rows."""
         rows: list[FloatArray] = []
         upper: list[FloatArray] = []
         lower: list[FloatArray] = []
-        sense: list[FloatArray] = []
+        sense: list[npt.NDArray[np.int32]] = []
         if problem.lb is not None and problem.ub is not None:
             upper.append(problem.ub)
             lower.append(problem.lb)
-            sense.append(np.full(n, self.INEQUALITY, dtype=np.int32))
+            sense.append(self._sense(n))
         if problem.A is not None and problem.b is not None:
             rows.append(problem.A)
             upper.append(problem.b)
@@ -208,12 +221,22 @@ class DaqpBackend(QPBackend):
             upper.append(problem.u)
             lower.append(problem.l)
             sense.append(np.full(problem.C.shape[0], self.INEQUALITY, dtype=np.int32))
-        a = np.vstack(rows) if rows else np.zeros((0, n))
+        a = np.vstack(rows) if rows else self._box_only(n)
+        return a, np.concatenate(upper), np.concatenate(lower), np.concatenate(sense)
+
+    def solve(self, problem: QPProblem) -> QPSolution:
+        import daqp
+
+        n = problem.H.shape[0]
+        if problem.A is None and problem.C is None and problem.lb is not None and problem.ub is not None:
+            a, upper, lower, sense = self._box_only(n), problem.ub, problem.lb, self._sense(n)
+        else:
+            a, upper, lower, sense = self._stack(problem, n)
         start = time.perf_counter()
         warm = self._previous if self.settings.warm_start and self._previous is not None \
             and self._previous.shape == (n,) else None
         x, _, flag, info = daqp.solve(
-            problem.H, problem.g, a, np.concatenate(upper), np.concatenate(lower), np.concatenate(sense),
+            problem.H, problem.g, a, upper, lower, sense,
             primal_tol=self.settings.eps_abs, eta_prox=self.ETA_PROX, iter_limit=self.settings.max_iter,
             primal_start=warm,
         )

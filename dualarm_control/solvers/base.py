@@ -130,6 +130,8 @@ class Solver:
     """
 
     name = "base"
+    uses_repulsive = False
+    """Whether ``_solve`` reads ``ControlProblem.repulsive`` (callers may pass zeros otherwise)."""
 
     def __init__(self, params: SolverParams | None = None) -> None:
         self.params = params or SolverParams()
@@ -163,7 +165,11 @@ class Solver:
             qd = np.zeros(max(n, 0))
         elif not invalid:
             qd = np.clip(qd, problem.lower, problem.upper)  # remove solver-tolerance overshoot
-        residual = float(np.linalg.norm(problem.jacobian @ qd - problem.reference)) if not invalid else float("nan")
+        if invalid:
+            residual = float("nan")
+        else:
+            d = problem.jacobian @ qd - problem.reference
+            residual = math.sqrt(float(d @ d))
         return SolverResult(
             velocities=qd,
             status=status,

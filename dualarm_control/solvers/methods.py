@@ -148,6 +148,8 @@ class HierarchicalSparseQP(Solver):
     If QP2 fails, qd1 alone is commanded (the primary task is kept) and ``detail`` says so.
     """
 
+    uses_repulsive = True
+
     def __init__(self, params: SolverParams | None = None) -> None:
         super().__init__(params)
         self._primary = SparseQP(self.params)  # refuses a back-end needing a definite H
