@@ -180,7 +180,8 @@ class RelativeController:
         error = pose_error(state.position, state.rotation, p_des, r_des)
         lower, upper = velocity_bounds(q, self.limits, self.params.period)
         if self._acceleration is not None:
-            lower, upper = acceleration_bounds(lower, upper, self._previous, self._acceleration, self.params.period)
+            lower, upper = acceleration_bounds(lower, upper, q, self.limits, self._previous, self._acceleration,
+                                               self.params.period)
         repulsive = repulsive_velocity(q, self.limits, self.params.alpha) if self.solver.uses_repulsive else self._zeros
         result = self.solver.solve(ControlProblem(state.jacobian, twist + self.params.gain * error,
                                                   lower, upper, repulsive))
@@ -234,6 +235,8 @@ CONTROLLER_PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("velocity_scale", 1.0, "factor on the nominal joint velocity limits", check=open_unit_interval),
     ParamSpec("l1_weight", 1e-6, "lambda of eq (17)/(26)", check=positive),
     ParamSpec("regularization", 1e-6, "standard QP minimum-norm tie-break eps", check=non_negative),
+    ParamSpec("proximal_weight", 1e-6, "sparse QPs' proximal term mu around the previous solution (0 = exact lasso)",
+              check=non_negative),
     ParamSpec("acceleration_limit", [0.0],
               "joint acceleration bound [rad/s^2]: [0.0] = none, one value for all joints or one per joint "
               f"(documented choice: [{DEFAULT_ACCELERATION_LIMIT}])", check=_acceleration_check),
@@ -256,6 +259,7 @@ def controller_params(values: Mapping[str, Any], node: str = "controller_node") 
         solver_params=SolverParams(
             l1_weight=v["l1_weight"],
             regularization=v["regularization"],
+            proximal_weight=v["proximal_weight"],
             qp_backend=v["qp_backend"],
             qp=QPSettings(eps_abs=v["qp_eps_abs"], max_iter=v["qp_max_iter"]),
         ),

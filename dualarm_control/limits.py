@@ -100,21 +100,38 @@ def repulsive_velocity(q: FloatArray, limits: JointLimits, alpha: float) -> Floa
 
 
 def acceleration_bounds(
-    lower: FloatArray, upper: FloatArray, previous: FloatArray, max_acceleration: FloatArray, period: float
+    lower: FloatArray,
+    upper: FloatArray,
+    q: FloatArray,
+    limits: JointLimits,
+    previous: FloatArray,
+    max_acceleration: FloatArray,
+    period: float,
 ) -> tuple[FloatArray, FloatArray]:
-    """Velocity bounds of eq (23) narrowed to an acceleration bound around the previous command.
+    """Velocity bounds of eq (23) narrowed by a joint acceleration bound a_max.
 
     As in mc_rtc and OpenSoT, |qd_k - qd_{k-1}| <= a_max T becomes the velocity bounds
-    qd_{k-1} - a_max T <= qd_k <= qd_{k-1} + a_max T, intersected with eq (23):
+    qd_{k-1} - a_max T <= qd_k <= qd_{k-1} + a_max T. Eq (21)-(22) alone would let a joint
+    run at full speed until one period before its position limit and then stop in one
+    period, so the speed toward a limit is also capped at the speed from which it can
+    still stop at a = a_max / 2 (commands held for T, then reduced by a T each period:
+    v^2 / (2 a) + v T / 2 <= d). Planning the stop at half the bound leaves the other half
+    for the difference between commanded and measured motion (the measured position at
+    the next cycle is not exactly q + qd T; planned at a_max, a stop in the assembly run
+    needed 10.15 rad/s^2 under a 10 rad/s^2 bound):
 
-        lower' = max(Qd_min, qd_{k-1} - a_max T),  upper' = min(Qd_max, qd_{k-1} + a_max T).
+        v_stop(d) = -a T / 2 + sqrt((a T / 2)^2 + 2 a d),  d = distance to the limit [rad]
+        upper' = min(Qd_max, qd_{k-1} + a_max T, v_stop(q_max - q))
+        lower' = max(Qd_min, qd_{k-1} - a_max T, -v_stop(q - q_min))
 
-    The position bounds of eq (21)-(22) keep priority: when the two ranges do not meet
-    (the joint must brake harder than a_max to stay inside its position range), the
-    result is the point of eq (23)'s range nearest to the acceleration range.
+    Priorities when the ranges do not meet: eq (23) (position limits) first, then the
+    acceleration bound, then the stopping speed; the result is then the point of the
+    higher-priority range nearest to the lower-priority one.
 
     Args:
         lower, upper: Qd_min, Qd_max of eq (23) [rad/s], (n,).
+        q: joint positions [rad], (n,).
+        limits: joint limits.
         previous: previous command qd_{k-1} [rad/s], (n,).
         max_acceleration: a_max [rad/s^2], (n,), > 0.
         period: control period T [s].
@@ -123,6 +140,12 @@ def acceleration_bounds(
         (lower', upper') [rad/s], each (n,), lower' <= upper' wherever lower <= upper.
     """
     step = max_acceleration * period
-    new_lower = np.minimum(np.maximum(lower, previous - step), upper)
-    new_upper = np.maximum(np.minimum(upper, previous + step), new_lower)
+    brake = 0.5 * max_acceleration
+    half = 0.5 * brake * period
+    stop_up = np.sqrt(half * half + 2.0 * brake * np.maximum(limits.q_max - q, 0.0)) - half
+    stop_down = np.sqrt(half * half + 2.0 * brake * np.maximum(q - limits.q_min, 0.0)) - half
+    acc_lower = np.minimum(np.maximum(previous - step, -stop_down), previous + step)
+    acc_upper = np.maximum(np.minimum(previous + step, stop_up), previous - step)
+    new_lower = np.minimum(np.maximum(lower, acc_lower), upper)
+    new_upper = np.maximum(np.minimum(upper, acc_upper), new_lower)
     return new_lower, new_upper

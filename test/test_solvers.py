@@ -40,6 +40,7 @@ from dualarm_control.solvers import (
 LAMBDA = 1e-6  # default l1 weight (paper)
 EPS = 1e-6  # default standard-QP regularization
 ACCURATE = SolverParams(qp=QPSettings(eps_abs=1e-12))  # for checks of the formulation itself
+EXACT = SolverParams(proximal_weight=0.0)  # the lasso of eq (19) at every call, no tie-break toward the last solution
 PERIOD = 0.005
 
 Problem = ControlProblem
@@ -219,7 +220,7 @@ def test_result_record_is_consistent(name: str, model: DualArmModel, limits: Joi
 def test_task_met_up_to_each_methods_optimality_condition(name: str, model: DualArmModel, limits: JointLimits) -> None:
     """Wide bounds, real J: J^T (r - J qd) equals 0 (eq 13), eps qd (eq 14), or lies in lambda d||qd||_1 (eq 17, 26)."""
     rng = np.random.default_rng(22)
-    solver = make_solver(name)
+    solver = make_solver(name, EXACT)
     for _ in range(5):
         p = real_problem(model, limits, rng, ref=0.02)
         res = solver.solve(p)
@@ -422,7 +423,7 @@ def test_standard_qp_warm_start_from_another_problem_is_still_optimal() -> None:
 def test_sparse_qp_attains_the_brute_force_minimum_l1(n: int) -> None:
     """Lasso eq (17) vs vertex enumeration of min ||x||_1 s.t. J x = r, bounds: l1 within 1e-4 relative, sparse support."""
     rng = np.random.default_rng(50 + n)
-    solver = make_solver("sparse_qp")
+    solver = make_solver("sparse_qp", EXACT)
     for k in range(6):
         j = rng.standard_normal((6, n))
         width = 5.0 if k < 3 else 0.4
@@ -474,7 +475,7 @@ def test_sparse_qp_uses_less_l1_and_few_joints_on_the_real_jacobian(model: DualA
 def test_sparse_qp_objective_matches_eq19_solved_by_quadprog(model: DualArmModel, limits: JointLimits) -> None:
     """Eq (17) objective of sparse_qp vs eq (19) (2n variables) by quadprog with delta = 1e-9 added to H."""
     delta = 1e-9
-    solver = make_solver("sparse_qp")
+    solver = make_solver("sparse_qp", EXACT)
     problems = mixed_problems(model, limits, 12, seed=61)
     for p in problems:
         qd = solver.solve(p).velocities
@@ -567,7 +568,7 @@ def test_hierarchical_falls_back_to_primary_when_qp2_fails(
 def test_warm_start_repeats_the_answer_with_no_more_iterations(
     name: str, model: DualArmModel, limits: JointLimits
 ) -> None:
-    """proxsuite: solving the same problem twice gives the same qd (1e-8) in <= the first solve's iterations."""
+    """Default back-end: solving the same problem twice gives the same qd (1e-8) in <= the first solve's iterations."""
     p, _ = near_limit_problem(model, limits, 3, seed=80)
     solver = make_solver(name)
     first, second = solver.solve(p), solver.solve(p)

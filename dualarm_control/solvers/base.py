@@ -105,12 +105,17 @@ class SolverParams:
         l1_weight: lambda of eq (17)/(26) [ (m/s)^2 per rad/s ], > 0; paper: 1e-6.
         regularization: epsilon of the standard QP's tie-break term eps/2 ||qd||^2 that selects
             the minimum-norm solution among the least-squares ones, like J^+ (eq 13-14), >= 0.
+        proximal_weight: mu of the sparse QPs' proximal term mu/2 ||z - z_prev||^2 around the
+            previous lasso solution [(m/s)^2 per (rad/s)^2], >= 0; 0 = the exact lasso of eq (19)
+            every cycle. Default 1e-6 (docs/bench.md: chatter vs mu).
+            See :class:`dualarm_control.solvers.methods.SparseQP`.
         qp_backend: "daqp" (default), "proxsuite" or a qpsolvers solver name (see dualarm_control.qp).
         qp: numerical settings of the QP back-end.
     """
 
     l1_weight: float = 1e-6
     regularization: float = 1e-6
+    proximal_weight: float = 1e-6
     qp_backend: str = DEFAULT_BACKEND
     qp: QPSettings = field(default_factory=QPSettings)
 
@@ -119,6 +124,8 @@ class SolverParams:
             raise ValueError(f"l1_weight must be > 0, got {self.l1_weight}")
         if not (np.isfinite(self.regularization) and self.regularization >= 0):
             raise ValueError(f"regularization must be >= 0, got {self.regularization}")
+        if not (np.isfinite(self.proximal_weight) and self.proximal_weight >= 0):
+            raise ValueError(f"proximal_weight must be >= 0, got {self.proximal_weight}")
 
 
 class Solver:

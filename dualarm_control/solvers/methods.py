@@ -117,19 +117,48 @@ class SparseQP(_QPSolver):
     H = [J, -J]^T [J, -J] (2n, 2n), g = lambda 1_2n - [J, -J]^T r, and the bounds as the
     equivalent box of :func:`lasso_box` (no constraint rows). H has rank 6: only positive
     semi-definite, so back-ends that need a definite H are refused.
+
+    Tie-break: with ``proximal_weight`` mu > 0 and a previous solution z_prev (none after
+    construction or ``reset``), the QP gets the proximal term mu/2 ||z - z_prev||^2:
+    H + mu I, g - mu z_prev, so each control cycle is one proximal-point step on the lasso.
+    The exact lasso has near-ties (two joints whose columns of J are nearly parallel cost
+    almost the same) and its solution jumps from one to the other as J changes: the
+    assembly run switched two wrist joints back and forth at 34 rad/s^2. The proximal term
+    keeps the previous choice unless the other is better by more than mu/2 ||dz||^2, and
+    bounds the excess of the lasso objective by mu/2 ||z* - z_prev||^2 (docs/bench.md).
+    Without a previous solution the cycle solves the exact lasso.
     """
 
     positive_definite = False
     qp_description = "lasso QP, eq (19)"
 
+    def __init__(self, params: SolverParams | None = None) -> None:
+        super().__init__(params)
+        self._z_prev: FloatArray | None = None
+
+    def reset(self) -> None:
+        super().reset()
+        self._z_prev = None
+
+    @staticmethod
+    def _diagonal(size: int) -> tuple[FloatArray, FloatArray]:
+        """Index arrays of the diagonal of a (size, size) matrix."""
+        return np.diag_indices(size)  # type: ignore[return-value]
+
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
         j = problem.jacobian
         n = j.shape[1]
         b = np.hstack((j, -j))  # J [I, -I], (6, 2n)
+        h = b.T @ b
         g = self.params.l1_weight - b.T @ problem.reference
+        mu = self.params.proximal_weight
+        if mu > 0 and self._z_prev is not None and self._z_prev.shape == (2 * n,):
+            h[self._diagonal(2 * n)] += mu
+            g -= mu * self._z_prev
         lb, ub = lasso_box(problem.lower, problem.upper)
-        qp = QPProblem(H=b.T @ b, g=g, lb=lb, ub=ub)
-        return from_qp(self._qp.solve(qp), lambda z: z[:n] - z[n:])
+        solution = self._qp.solve(QPProblem(H=h, g=g, lb=lb, ub=ub))
+        self._z_prev = solution.x if solution.ok else None
+        return from_qp(solution, lambda z: z[:n] - z[n:])
 
 
 @register("hierarchical_sparse_qp")
