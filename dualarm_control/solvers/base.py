@@ -29,8 +29,9 @@ class ControlProblem:
     """Inputs of one control cycle.
 
     Attributes:
-        jacobian: relative Jacobian J of eq (5), (6, n).
-        reference: closed-loop reference twist xd* + K e of eq (13)/(26) [m/s; rad/s], (6,).
+        jacobian: relative Jacobian J of eq (5), (6, n); (6 k, n) for k relative tasks stacked
+            (the benchmark's 3- and 4-arm chains).
+        reference: closed-loop reference twist xd* + K e of eq (13)/(26) [m/s; rad/s], (6,) or (6 k,).
         lower, upper: joint velocity bounds Qd_min, Qd_max of eq (23) [rad/s], (n,).
         repulsive: repulsive joint velocity qd_r of eq (25) [rad/s], (n,); used by the
             hierarchical solver's secondary task only.
@@ -49,8 +50,8 @@ class ControlProblem:
         sum of all entries (NaN or inf anywhere makes it non-finite); only when that fails
         are the arrays examined one by one to name the culprit.
         """
-        n = self.jacobian.shape[1] if self.jacobian.ndim == 2 else -1
-        if self.jacobian.shape != (6, n) or self.reference.shape != (6,):
+        m, n = self.jacobian.shape if self.jacobian.ndim == 2 else (-1, -1)
+        if m < 1 or self.reference.shape != (m,):
             return f"bad shapes: J {self.jacobian.shape}, reference {self.reference.shape}"
         for name in ("lower", "upper", "repulsive"):
             if getattr(self, name).shape != (n,):
@@ -139,6 +140,8 @@ class Solver:
     name = "base"
     uses_repulsive = False
     """Whether ``_solve`` reads ``ControlProblem.repulsive`` (callers may pass zeros otherwise)."""
+    uses_qp = False
+    """Whether the solver solves QPs (and so depends on ``qp_backend``)."""
 
     def __init__(self, params: SolverParams | None = None) -> None:
         self.params = params or SolverParams()

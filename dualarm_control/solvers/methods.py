@@ -55,6 +55,7 @@ class _QPSolver(Solver):
 
     positive_definite = True
     qp_description = "QP"
+    uses_qp = True
 
     def __init__(self, params: SolverParams | None = None) -> None:
         super().__init__(params)
@@ -83,7 +84,8 @@ class StandardQP(_QPSolver):
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
         jtj, jtr = _least_squares_terms(problem)
         n = jtj.shape[0]
-        h = jtj + self.params.regularization * np.eye(n)
+        h = jtj  # a fresh array: add eps to its diagonal in place
+        h.flat[:: n + 1] += self.params.regularization
         return from_qp(self._qp.solve(QPProblem(H=h, g=-jtr, lb=problem.lower, ub=problem.upper)))
 
 
@@ -140,11 +142,6 @@ class SparseQP(_QPSolver):
         super().reset()
         self._z_prev = None
 
-    @staticmethod
-    def _diagonal(size: int) -> tuple[FloatArray, FloatArray]:
-        """Index arrays of the diagonal of a (size, size) matrix."""
-        return np.diag_indices(size)  # type: ignore[return-value]
-
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
         j = problem.jacobian
         n = j.shape[1]
@@ -153,7 +150,7 @@ class SparseQP(_QPSolver):
         g = self.params.l1_weight - b.T @ problem.reference
         mu = self.params.proximal_weight
         if mu > 0 and self._z_prev is not None and self._z_prev.shape == (2 * n,):
-            h[self._diagonal(2 * n)] += mu
+            h.flat[:: 2 * n + 1] += mu
             g -= mu * self._z_prev
         lb, ub = lasso_box(problem.lower, problem.upper)
         solution = self._qp.solve(QPProblem(H=h, g=g, lb=lb, ub=ub))
@@ -178,15 +175,22 @@ class HierarchicalSparseQP(Solver):
     """
 
     uses_repulsive = True
+    uses_qp = True
 
     def __init__(self, params: SolverParams | None = None) -> None:
         super().__init__(params)
         self._primary = SparseQP(self.params)  # refuses a back-end needing a definite H
         self._secondary = self._backend()
+        self._identity = np.eye(0)  # H of eq (27), rebuilt only when n changes
 
     def reset(self) -> None:
         self._primary.reset()
         self._secondary.reset()
+
+    def _identity_of(self, n: int) -> FloatArray:
+        if self._identity.shape != (n, n):
+            self._identity = np.eye(n)
+        return self._identity
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
         qd1, status, iters, detail = self._primary._solve(problem)
@@ -195,7 +199,7 @@ class HierarchicalSparseQP(Solver):
         qd1 = np.clip(qd1, problem.lower, problem.upper)
         n = qd1.shape[0]
         qp2 = QPProblem(
-            H=np.eye(n), g=-problem.repulsive, A=problem.jacobian, b=np.zeros(6),
+            H=self._identity_of(n), g=-problem.repulsive, A=problem.jacobian, b=np.zeros(problem.jacobian.shape[0]),
             lb=problem.lower - qd1, ub=problem.upper - qd1,
         )
         sol = self._secondary.solve(qp2)
