@@ -34,6 +34,7 @@ from dualarm_control.solvers import (
     ControlProblem,
     SolverParams,
     make_solver,
+    methods,
     solver_names,
 )
 
@@ -554,6 +555,7 @@ def test_hierarchical_falls_back_to_primary_when_qp2_fails(
     """A failing QP2 (forced) keeps the primary solution qd1 and says so in detail; nothing raises."""
     p, _ = near_limit_problem(model, limits, 3, seed=74)
     solver = make_solver("hierarchical_sparse_qp")
+    monkeypatch.setattr(methods, "null_space_projection", lambda jacobian, velocity: None)  # force the QP
     monkeypatch.setattr(solver._secondary, "solve", lambda qp: QPSolution(None, "infeasible", 7, 1e-6))
     res = solver.solve(p)
     qd1 = make_solver("sparse_qp").solve(p).velocities

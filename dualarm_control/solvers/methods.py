@@ -172,6 +172,8 @@ class HierarchicalSparseQP(Solver):
     repulsive vector qd_r of Sect. IV-B, so qd_r is the target here. When qd_r = 0 (every
     joint inside its activation thresholds) qd2 = 0 is the exact optimum and QP2 is skipped.
     If QP2 fails, qd1 alone is commanded (the primary task is kept) and ``detail`` says so.
+    QP2 is solved only when its unbounded minimiser (:func:`null_space_projection`) leaves
+    the bounds.
     """
 
     uses_repulsive = True
@@ -197,12 +199,36 @@ class HierarchicalSparseQP(Solver):
         if qd1 is None or not np.any(problem.repulsive):
             return qd1, status, iters, detail
         qd1 = np.clip(qd1, problem.lower, problem.upper)
+        lower2, upper2 = problem.lower - qd1, problem.upper - qd1
+        qd2 = null_space_projection(problem.jacobian, problem.repulsive)
+        if qd2 is not None and np.all(qd2 >= lower2) and np.all(qd2 <= upper2):
+            return qd1 + qd2, status, iters, detail  # eq (27)'s optimum: no bound is active
         n = qd1.shape[0]
         qp2 = QPProblem(
             H=self._identity_of(n), g=-problem.repulsive, A=problem.jacobian, b=np.zeros(problem.jacobian.shape[0]),
-            lb=problem.lower - qd1, ub=problem.upper - qd1,
+            lb=lower2, ub=upper2,
         )
         sol = self._secondary.solve(qp2)
         if sol.x is None:
             return qd1, status, iters + sol.iterations, f"secondary QP {sol.status}; primary task only"
         return qd1 + sol.x, status, iters + sol.iterations, detail
+
+
+def null_space_projection(jacobian: FloatArray, velocity: FloatArray) -> FloatArray | None:
+    """Projection of ``velocity`` onto the null space of J: v - J^T (J J^T)^-1 J v.
+
+    This is the minimiser of eq (27) without its bounds, min 1/2 ||qd - qd_r||^2 s.t. J qd = 0;
+    when it lies inside the bounds it is eq (27)'s optimum (the QP is strictly convex), so
+    the QP is solved only when a bound is active.
+
+    Args:
+        jacobian: J (m, n), full row rank.
+        velocity: qd_r [rad/s], (n,).
+
+    Returns:
+        (n,) [rad/s], or None when J J^T is singular.
+    """
+    try:
+        return velocity - jacobian.T @ np.linalg.solve(jacobian @ jacobian.T, jacobian @ velocity)
+    except np.linalg.LinAlgError:
+        return None
