@@ -72,7 +72,8 @@ class StandardQP(_QPSolver):
 
     J^T J has rank 6 < n, so eq (14) alone has a whole affine set of minimisers; the tiny
     term eps (``regularization``, default 1e-6) selects the minimum-norm one, as J^+ does.
-    With eps = 0, H is only semi-definite.
+    With eps = 0, H is only semi-definite. The QP is solved only when the unbounded
+    minimiser (:func:`damped_least_squares`) leaves the bounds.
     """
 
     qp_description = "QP, eq (14)"
@@ -82,11 +83,35 @@ class StandardQP(_QPSolver):
         super().__init__(params)
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
+        qd = damped_least_squares(problem.jacobian, problem.reference, self.params.regularization)
+        if qd is not None and np.all(qd >= problem.lower) and np.all(qd <= problem.upper):
+            return qd, "solved", 0, ""  # eq (14)'s optimum: no bound is active
         jtj, jtr = _least_squares_terms(problem)
         n = jtj.shape[0]
         h = jtj  # a fresh array: add eps to its diagonal in place
         h.flat[:: n + 1] += self.params.regularization
         return from_qp(self._qp.solve(QPProblem(H=h, g=-jtr, lb=problem.lower, ub=problem.upper)))
+
+
+def damped_least_squares(jacobian: FloatArray, reference: FloatArray, eps: float) -> FloatArray | None:
+    """Minimiser of eq (14) without bounds: (J^T J + eps I)^-1 J^T r = J^T (J J^T + eps I)^-1 r.
+
+    The second form solves an (m, m) system instead of (n, n); for eps = 0 it is J^+ r, the
+    minimum-norm least-squares solution. When it lies inside the bounds it is eq (14)'s
+    optimum (convex QP, KKT with no active bound).
+
+    Args:
+        jacobian: J (m, n); reference: r (m,) [m/s; rad/s]; eps: regularization >= 0.
+
+    Returns:
+        qd [rad/s], (n,), or None when J J^T + eps I is singular.
+    """
+    gram = jacobian @ jacobian.T
+    gram.flat[:: gram.shape[0] + 1] += eps
+    try:
+        return jacobian.T @ np.linalg.solve(gram, reference)
+    except np.linalg.LinAlgError:
+        return None
 
 
 def lasso_box(lower: FloatArray, upper: FloatArray) -> tuple[FloatArray, FloatArray]:
