@@ -92,7 +92,8 @@ def time_random_set(
     """Cycle and solve times of ``RelativeController.step`` per configuration on ``cases``.
 
     Configurations are interleaved case by case (every configuration sees the same machine
-    load), and each controller is reset before each case: the cases are independent, so
+    load), in an order rotated from case to case (no configuration always runs right after
+    the same other one), and each controller is reset before each case: the cases are independent, so
     no warm start or proximal tie-break carries over from an unrelated problem. ``extra``
     adds other timed callables (e.g. pink) to the same interleaving.
 
@@ -105,19 +106,22 @@ def time_random_set(
     solve: dict[str, list[float]] = {name: [] for name in controllers}
     active: dict[str, list[int]] = {name: [] for name in controllers}
     failures = dict.fromkeys(controllers, 0)
+    order = list(cycle)
     for _ in range(repeats):
-        for case in cases:
-            for name, ctrl in controllers.items():
-                ctrl.reset()
-                out = ctrl.step(case.q, case.target)
-                cycle[name].append(out.cycle_time)
-                solve[name].append(out.result.solve_time)
-                active[name].append(out.result.active_joints)
-                failures[name] += int(out.result.failed)
-            for name, call in (extra or {}).items():
-                start = time.perf_counter()
-                call(case)
-                cycle[name].append(time.perf_counter() - start)
+        for k, case in enumerate(cases):
+            for name in order[k % len(order):] + order[:k % len(order)]:  # rotate: no place is favoured
+                if name in controllers:
+                    ctrl = controllers[name]
+                    ctrl.reset()
+                    out = ctrl.step(case.q, case.target)
+                    cycle[name].append(out.cycle_time)
+                    solve[name].append(out.result.solve_time)
+                    active[name].append(out.result.active_joints)
+                    failures[name] += int(out.result.failed)
+                else:
+                    start = time.perf_counter()
+                    (extra or {})[name](case)
+                    cycle[name].append(time.perf_counter() - start)
     rows: dict[str, dict[str, Any]] = {}
     for name, samples in cycle.items():
         c50, c99 = percentiles(np.asarray(samples))
