@@ -43,14 +43,12 @@ def relative_jacobian(r_b1: FloatArray, p_r1: FloatArray, j1_b: FloatArray, j2_b
         (6, n1 + n2) matrix mapping joint velocities [rad/s] to the relative twist
         [v_r^1; w_r^1] of eq (4), expressed in F1.
     """
-    r_b1_t = r_b1.T  # R_b^1
     n1 = j1_b.shape[1]
-    out = np.empty((6, n1 + j2_b.shape[1]))
-    w1 = r_b1_t @ j1_b[3:]
-    out[:3, :n1] = skew(p_r1) @ w1 - r_b1_t @ j1_b[:3]  # -(v - p x w): Psi's -S(p) block
-    out[3:, :n1] = -w1
-    out[:3, n1:] = r_b1_t @ j2_b[:3]
-    out[3:, n1:] = r_b1_t @ j2_b[3:]
+    base = np.empty((6, n1 + j2_b.shape[1]))
+    np.negative(j1_b, out=base[:, :n1])
+    base[:, n1:] = j2_b  # [-J_1^b, J_2^b]
+    out = np.matmul(r_b1.T, base.reshape(2, 3, -1)).reshape(6, -1)  # Omega_b^1 on both blocks at once
+    out[:3, :n1] -= skew(p_r1) @ out[3:, :n1]  # Psi_r^1: v - p x w on the left block
     return out
 
 
