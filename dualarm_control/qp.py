@@ -14,9 +14,12 @@ back-end when it is built (:func:`check_backend`), instead of failing at every c
 
 from __future__ import annotations
 
+import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
+from typing import ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -178,6 +181,10 @@ class DaqpBackend(QPBackend):
     """Proximal-point stopping tolerance (change of the iterate between outer iterations)."""
     EQUALITY, INEQUALITY = 5, 0
     """daqp constraint kinds (``sense``)."""
+    STATUS: ClassVar[Mapping[int, str]] = MappingProxyType(
+        {1: "solved", 2: "solved", -1: "infeasible", -3: "infeasible", -4: "max_iter"})
+    """daqp exit flags: 1 optimal, 2 soft optimal, -1 infeasible, -2 cycling, -3 unbounded,
+    -4 iteration limit, -5 non-convex, -6 initial point infeasible (the others: "failed")."""
 
     def __init__(self, settings: QPSettings) -> None:
         super().__init__(settings)
@@ -241,13 +248,12 @@ class DaqpBackend(QPBackend):
             primal_start=warm,
         )
         elapsed = time.perf_counter() - start
-        # daqp exit flags: 1 optimal, 2 soft optimal, -1 infeasible, -2 cycling, -3 unbounded,
-        # -4 iteration limit, -5 non-convex, -6 initial point infeasible.
-        status = {1: "solved", 2: "solved", -1: "infeasible", -3: "infeasible", -4: "max_iter"}.get(int(flag), "failed")
-        usable = status in ("solved", "max_iter") and np.all(np.isfinite(x))
-        self._previous = np.array(x, dtype=float) if status == "solved" else None
-        return QPSolution(x=np.array(x, dtype=float) if usable else None, status=status,
-                          iterations=int(info["iterations"]), solve_time=elapsed)
+        status = self.STATUS.get(int(flag), "failed")
+        x = np.array(x, dtype=float)  # one copy, shared by the result and the warm start (neither is modified)
+        usable = status in ("solved", "max_iter") and math.isfinite(x.sum())
+        self._previous = x if status == "solved" else None
+        return QPSolution(x=x if usable else None, status=status, iterations=int(info["iterations"]),
+                          solve_time=elapsed)
 
 
 class QpsolversBackend(QPBackend):
