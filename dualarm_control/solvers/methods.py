@@ -148,8 +148,9 @@ class SparseQP(_QPSolver):
     construction or ``reset``), the QP gets the proximal term mu/2 ||z - z_prev||^2:
     H + mu I, g - mu z_prev, so each control cycle is one proximal-point step on the lasso.
     The exact lasso has near-ties (two joints whose columns of J are nearly parallel cost
-    almost the same) and its solution jumps from one to the other as J changes: the
-    assembly run switched two wrist joints back and forth at 34 rad/s^2. The proximal term
+    almost the same) and its solution jumps from one to the other as J changes: in the
+    assembly run two left-wrist joints switched on and off 34.6 times per second, with
+    steps of up to 74 rad/s^2 (mu = 1e-6: 1.46 per s, 1.3 rad/s^2). The proximal term
     keeps the previous choice unless the other is better by more than mu/2 ||dz||^2, and
     bounds the excess of the lasso objective by mu/2 ||z* - z_prev||^2 (docs/bench.md).
     Without a previous solution the cycle solves the exact lasso.
