@@ -20,7 +20,11 @@ demo: $(VENV)/.installed
 experiment: $(VENV)/.installed
 	$(VENV)/bin/dualarm experiment assembly --output $(OUT)/experiment
 
-bench: $(VENV)/.installed
+$(VENV)/.bench-installed: $(VENV)/.installed
+	$(PY) -m pip install --quiet -e '.[ros,test,bench]'
+	touch $@
+
+bench: $(VENV)/.bench-installed
 	$(VENV)/bin/dualarm bench --output $(OUT)/bench
 
 lint: $(VENV)/.installed

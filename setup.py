@@ -12,6 +12,7 @@ INSTALL_REQUIRES = [
     "scipy>=1.11,<2",
     "PyYAML>=6,<7",
     "pin>=3.1,<5",
+    "daqp>=0.11,<0.12",  # default QP back-end (exact dual active-set); needs primal_start/eta_prox
     "proxsuite>=0.6,<0.9",
     "pybullet>=3.2.6,<3.3",
     "ruckig>=0.12,<0.20",
@@ -31,6 +32,8 @@ ROS_REQUIRES = [
 ]
 TEST_REQUIRES = ["pytest>=8,<10", "hypothesis>=6.100,<7", "ruff>=0.5", "mypy>=1.10",
                  "colcon-common-extensions>=0.3,<1"]
+# `dualarm bench` compares with pink's solve_ik; not needed by the controller itself.
+BENCH_REQUIRES = ["pin-pink>=4.4,<5"]
 
 setup(
     name=PACKAGE,
@@ -46,7 +49,7 @@ setup(
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
     install_requires=INSTALL_REQUIRES,
-    extras_require={"ros": ROS_REQUIRES, "test": TEST_REQUIRES},
+    extras_require={"ros": ROS_REQUIRES, "test": TEST_REQUIRES, "bench": BENCH_REQUIRES},
     python_requires=">=3.10",
     zip_safe=True,
     maintainer="dualarm_control developers",

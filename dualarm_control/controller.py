@@ -5,8 +5,9 @@ Used unchanged by the in-process experiment, the controller node and the benchma
 
 from __future__ import annotations
 
+import math
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -18,7 +19,12 @@ from dualarm_control.kinematics import (
     pose_error,
     rotation_angle,
 )
-from dualarm_control.limits import JointLimits, repulsive_velocity, velocity_bounds
+from dualarm_control.limits import (
+    JointLimits,
+    acceleration_bounds,
+    repulsive_velocity,
+    velocity_bounds,
+)
 from dualarm_control.params import (
     ParamSpec,
     non_negative,
@@ -27,7 +33,7 @@ from dualarm_control.params import (
     resolve,
     unit_interval,
 )
-from dualarm_control.qp import QPSettings
+from dualarm_control.qp import DEFAULT_BACKEND, QPSettings
 from dualarm_control.solvers import (
     ControlProblem,
     SolverParams,
@@ -62,6 +68,12 @@ class ControllerParams:
         period: control period T of eq (21)-(23) [s], > 0; paper: 0.005.
         alpha: repulsive activation share of eq (24), in [0, 1]; paper: 0.1.
         velocity_scale: factor in (0, 1] on the nominal joint velocity limits.
+        acceleration_limit: joint acceleration bound a_max [rad/s^2], one value for every
+            joint or one per joint; empty (default) = no bound. When set, each cycle's
+            velocity bounds are narrowed to the previous command +- a_max T
+            (:func:`dualarm_control.limits.acceleration_bounds`). KUKA publishes no joint
+            acceleration limits for the LWR4; ``DEFAULT_ACCELERATION_LIMIT`` is this
+            project's documented choice (docs/bench.md).
         solver_params: parameters of the QP solvers.
     """
 
@@ -70,6 +82,7 @@ class ControllerParams:
     period: float = 0.005
     alpha: float = 0.1
     velocity_scale: float = 1.0
+    acceleration_limit: tuple[float, ...] = ()
     solver_params: SolverParams = field(default_factory=SolverParams)
 
     def __post_init__(self) -> None:
@@ -81,6 +94,24 @@ class ControllerParams:
             raise ValueError(f"alpha must be in [0, 1], got {self.alpha}")
         if not 0.0 < self.velocity_scale <= 1.0:
             raise ValueError(f"velocity_scale must be in (0, 1], got {self.velocity_scale}")
+        problem = acceleration_limit_problem(list(self.acceleration_limit))
+        if problem:
+            raise ValueError(f"acceleration_limit must be {problem}, got {list(self.acceleration_limit)}")
+
+
+DEFAULT_ACCELERATION_LIMIT = 10.0
+"""rad/s^2: the documented acceleration bound (``acceleration_limit: [10.0]``) for every joint.
+
+KUKA gives no joint acceleration limits for the LWR4; 10 rad/s^2 is well below what the
+arm reaches (the chatter measured without a bound was 34 rad/s^2) and keeps the assembly
+task's tracking and sparsity (docs/bench.md)."""
+
+
+def acceleration_limit_problem(value: Sequence[float]) -> str:
+    """'' when ``value`` is a valid acceleration_limit (empty, or finite values > 0), else what is expected."""
+    if all(isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in value):
+        return ""
+    return "an empty list (no bound) or values > 0 [rad/s^2], one for all joints or one per joint"
 
 
 @dataclass(frozen=True)
@@ -107,16 +138,28 @@ class ControlOutput:
 
 
 class RelativeController:
-    """Closed-loop relative pose controller: xd* + K e fed to the configured solver."""
+    """Closed-loop relative pose controller: xd* + K e fed to the configured solver.
+
+    It remembers its last command for the optional acceleration bound; ``reset`` forgets it
+    (the next cycle then starts from rest, zero velocity).
+    """
 
     def __init__(self, model: DualArmModel, params: ControllerParams | None = None) -> None:
         self.model = model
         self.params = params or ControllerParams()
         self.limits = JointLimits(model.q_min, model.q_max, model.qd_max).scaled_velocity(self.params.velocity_scale)
         self.solver = make_solver(self.params.solver, self.params.solver_params)
+        n = model.nq
+        acc = self.params.acceleration_limit
+        if len(acc) not in (0, 1, n):
+            raise ValueError(f"acceleration_limit must have 0, 1 or {n} values, got {len(acc)}")
+        self._acceleration: FloatArray | None = np.broadcast_to(np.asarray(acc, float), (n,)).copy() if acc else None
+        self._previous = np.zeros(n)
+        self._zeros = np.zeros(n)
 
     def reset(self) -> None:
         self.solver.reset()
+        self._previous = np.zeros(self.model.nq)
 
     def step(self, q: FloatArray, target: RelativeTarget) -> ControlOutput:
         """Compute the joint velocity command for measured positions q (n,) and a target.
@@ -126,35 +169,45 @@ class RelativeController:
         """
         start = time.perf_counter()
         q = self.model.check_q(q)
-        t_parts = (target.position, target.rotation, target.linear_velocity, target.angular_velocity)
-        bad = "joint positions" if not np.all(np.isfinite(q)) else (
-            "relative target" if not all(np.all(np.isfinite(np.asarray(x))) for x in t_parts) else "")
-        n = self.model.nq
-        if bad:
-            nan = np.full(6, np.nan)
-            problem = ControlProblem(np.full((6, n), np.nan), nan, np.zeros(n), np.zeros(n), np.zeros(n))
-            result = self.solver.solve(problem)
-            result = SolverResult(result.velocities, "invalid_input", result.solve_time, 0, 0, float("nan"),
-                                  f"non-finite {bad}")
-            p, r = np.full(3, np.nan), np.full((3, 3), np.nan)
-            return ControlOutput(result.velocities, result, p, r, float("nan"), float("nan"),
-                                 time.perf_counter() - start)
-        state = self.model.relative_state(q)
-        error = pose_error(state.position, state.rotation, np.asarray(target.position), np.asarray(target.rotation))
+        p_des = np.asarray(target.position, dtype=float)
+        r_des = np.asarray(target.rotation, dtype=float)
         twist = np.concatenate((target.linear_velocity, target.angular_velocity))
+        bad = "joint positions" if not math.isfinite(q.sum()) else (
+            "relative target" if not math.isfinite(p_des.sum() + r_des.sum() + twist.sum()) else "")
+        if bad:
+            return self._invalid(bad, start)
+        state = self.model.relative_state(q)
+        error = pose_error(state.position, state.rotation, p_des, r_des)
         lower, upper = velocity_bounds(q, self.limits, self.params.period)
-        repulsive = repulsive_velocity(q, self.limits, self.params.alpha)
+        if self._acceleration is not None:
+            lower, upper = acceleration_bounds(lower, upper, q, self.limits, self._previous, self._acceleration,
+                                               self.params.period)
+        repulsive = repulsive_velocity(q, self.limits, self.params.alpha) if self.solver.uses_repulsive else self._zeros
         result = self.solver.solve(ControlProblem(state.jacobian, twist + self.params.gain * error,
                                                   lower, upper, repulsive))
+        self._previous = result.velocities
         return ControlOutput(
             velocities=result.velocities,
             result=result,
             position=state.position,
             rotation=state.rotation,
-            position_error=float(np.linalg.norm(error[:3])),
-            orientation_error=rotation_angle(state.rotation, np.asarray(target.rotation)),
+            position_error=math.sqrt(error[0] ** 2 + error[1] ** 2 + error[2] ** 2),
+            orientation_error=rotation_angle(state.rotation, r_des),
             cycle_time=time.perf_counter() - start,
         )
+
+    def _invalid(self, what: str, start: float) -> ControlOutput:
+        """The safe command for a non-finite input, with the reason in ``detail``."""
+        n = self.model.nq
+        nan = np.full(6, np.nan)
+        problem = ControlProblem(np.full((6, n), np.nan), nan, self._zeros, self._zeros, self._zeros)
+        result = self.solver.solve(problem)
+        result = SolverResult(result.velocities, "invalid_input", result.solve_time, 0, 0, float("nan"),
+                              f"non-finite {what}")
+        self._previous = result.velocities
+        p, r = np.full(3, np.nan), np.full((3, 3), np.nan)
+        return ControlOutput(result.velocities, result, p, r, float("nan"), float("nan"),
+                             time.perf_counter() - start)
 
 
 def _solver_choices() -> list[str]:
@@ -169,6 +222,11 @@ def _backend_choices() -> list[str]:
     return available_backends()
 
 
+def _acceleration_check(value: Any) -> str:
+    """[0.0] means no bound; otherwise every value must be > 0."""
+    return "" if value == [0.0] else acceleration_limit_problem(value)
+
+
 CONTROLLER_PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("solver", "hierarchical_sparse_qp", "kinematic solver (registry name)", choices=_solver_choices),
     ParamSpec("gain", 10.0, "closed-loop gain K of eq (13) [1/s]", check=positive),
@@ -177,7 +235,12 @@ CONTROLLER_PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("velocity_scale", 1.0, "factor on the nominal joint velocity limits", check=open_unit_interval),
     ParamSpec("l1_weight", 1e-6, "lambda of eq (17)/(26)", check=positive),
     ParamSpec("regularization", 1e-6, "standard QP minimum-norm tie-break eps", check=non_negative),
-    ParamSpec("qp_backend", "proxsuite", "QP back-end", choices=_backend_choices),
+    ParamSpec("proximal_weight", 1e-6, "sparse QPs' proximal term mu around the previous solution (0 = exact lasso)",
+              check=non_negative),
+    ParamSpec("acceleration_limit", [0.0],
+              "joint acceleration bound [rad/s^2]: [0.0] = none, one value for all joints or one per joint "
+              f"(documented choice: [{DEFAULT_ACCELERATION_LIMIT}])", check=_acceleration_check),
+    ParamSpec("qp_backend", DEFAULT_BACKEND, "QP back-end", choices=_backend_choices),
     ParamSpec("qp_eps_abs", 1e-9, "QP absolute tolerance", check=positive),
     ParamSpec("qp_max_iter", 10000, "QP iteration cap", check=positive),
 )
@@ -192,9 +255,11 @@ def controller_params(values: Mapping[str, Any], node: str = "controller_node") 
         period=v["control_period"],
         alpha=v["alpha"],
         velocity_scale=v["velocity_scale"],
+        acceleration_limit=() if v["acceleration_limit"] == [0.0] else tuple(v["acceleration_limit"]),
         solver_params=SolverParams(
             l1_weight=v["l1_weight"],
             regularization=v["regularization"],
+            proximal_weight=v["proximal_weight"],
             qp_backend=v["qp_backend"],
             qp=QPSettings(eps_abs=v["qp_eps_abs"], max_iter=v["qp_max_iter"]),
         ),

@@ -8,6 +8,7 @@ Twists are ``[v; w]`` (m/s; rad/s), both expressed in F1.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,15 +43,20 @@ def relative_jacobian(r_b1: FloatArray, p_r1: FloatArray, j1_b: FloatArray, j2_b
         (6, n1 + n2) matrix mapping joint velocities [rad/s] to the relative twist
         [v_r^1; w_r^1] of eq (4), expressed in F1.
     """
-    omega = np.zeros((6, 6))
-    omega[:3, :3] = omega[3:, 3:] = r_b1.T  # Omega_b^1 with R_b^1 = (R_1^b)^T
-    psi = np.eye(6)
-    psi[:3, 3:] = -skew(p_r1)
-    return np.hstack((-psi @ omega @ j1_b, omega @ j2_b))
+    n1 = j1_b.shape[1]
+    base = np.empty((6, n1 + j2_b.shape[1]))
+    np.negative(j1_b, out=base[:, :n1])
+    base[:, n1:] = j2_b  # [-J_1^b, J_2^b]
+    out = np.matmul(r_b1.T, base.reshape(2, 3, -1)).reshape(6, -1)  # Omega_b^1 on both blocks at once
+    out[:3, :n1] -= skew(p_r1) @ out[3:, :n1]  # Psi_r^1: v - p x w on the left block
+    return out
 
 
 def luh_orientation_error(r_actual: FloatArray, r_desired: FloatArray) -> FloatArray:
     """Orientation error of Luh et al., eq (10): e_o = 1/2 (n x n* + s x s* + a x a*).
+
+    Computed in closed form: a x d is the vector of the skew matrix d a^T - a d^T, so the
+    sum over the three columns is the vector of M - M^T with M = R* R^T.
 
     Args:
         r_actual: R_r^1, actual relative orientation, columns (n, s, a), (3, 3).
@@ -59,7 +65,8 @@ def luh_orientation_error(r_actual: FloatArray, r_desired: FloatArray) -> FloatA
     Returns:
         (3,) error [rad-like, equal to sin(theta) u for a rotation theta about u], in F1.
     """
-    return 0.5 * np.sum(np.cross(r_actual.T, r_desired.T), axis=0)
+    m = r_desired @ r_actual.T
+    return 0.5 * np.array((m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]))
 
 
 def pose_error(p: FloatArray, r: FloatArray, p_des: FloatArray, r_des: FloatArray) -> FloatArray:
@@ -69,8 +76,8 @@ def pose_error(p: FloatArray, r: FloatArray, p_des: FloatArray, r_des: FloatArra
 
 def rotation_angle(r_a: FloatArray, r_b: FloatArray) -> float:
     """Geodesic angle [rad] between two rotations, in [0, pi]."""
-    c = (np.trace(r_a.T @ r_b) - 1.0) / 2.0
-    return float(np.arccos(np.clip(c, -1.0, 1.0)))
+    c = (float(np.vdot(r_a, r_b)) - 1.0) / 2.0  # trace(R_a^T R_b) = sum of the elementwise product
+    return math.acos(min(1.0, max(-1.0, c)))
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,15 @@ class JointLimits:
         if np.any(self.qd_max <= 0):
             raise ValueError(f"qd_max must be > 0, got {self.qd_max}")
 
+    @property
+    def half_range(self) -> FloatArray:
+        """(q_max - q_min) / 2 [rad], (n,); computed once (the limits are constant)."""
+        cached: FloatArray | None = self.__dict__.get("_half_range")
+        if cached is None:
+            cached = (self.q_max - self.q_min) / 2.0
+            object.__setattr__(self, "_half_range", cached)
+        return cached
+
     def scaled_velocity(self, factor: float) -> JointLimits:
         """Same limits with the velocity limits multiplied by ``factor`` in (0, 1]."""
         if not 0.0 < factor <= 1.0:
@@ -68,7 +77,9 @@ def repulsive_velocity(q: FloatArray, limits: JointLimits, alpha: float) -> Floa
     Inside ]q*_min, q*_max[ the value is 0; in [q_min, q*_min] it is
     ((q - q*_min)/(q_min - q*_min))^2 * qd_max (pushing up); in [q*_max, q_max] it is
     ((q - q*_max)/(q_max - q*_max))^2 * (-qd_max) (pushing down). Beyond the limits the
-    value saturates at +-qd_max.
+    value saturates at +-qd_max. Vectorised: with h = alpha (q_max - q_min)/2 the two
+    ratios clip((q*_min - q)/h, 0, 1) and clip((q - q*_max)/h, 0, 1) are never both
+    non-zero (q*_min <= q*_max), so qd_r = qd_max (ratio_low^2 - ratio_high^2).
 
     Args:
         q: joint positions [rad], (n,).
@@ -80,16 +91,61 @@ def repulsive_velocity(q: FloatArray, limits: JointLimits, alpha: float) -> Floa
     """
     if not 0.0 <= alpha <= 1.0:
         raise ValueError(f"alpha must be in [0, 1], got {alpha}")
-    half = alpha * (limits.q_max - limits.q_min) / 2.0
-    low_star = limits.q_min + half
-    high_star = limits.q_max - half
-    out = np.zeros_like(q, dtype=float)
     if alpha == 0.0:
-        return out
-    low = q <= low_star
-    high = q >= high_star
-    ratio_low = np.clip((q - low_star) / (limits.q_min - low_star), 0.0, 1.0)
-    ratio_high = np.clip((q - high_star) / (limits.q_max - high_star), 0.0, 1.0)
-    out[low] = (ratio_low**2 * limits.qd_max)[low]
-    out[high] = (ratio_high**2 * -limits.qd_max)[high]
-    return out
+        return np.zeros_like(q, dtype=float)
+    half = alpha * limits.half_range
+    ratio_low = np.clip((limits.q_min + half - q) / half, 0.0, 1.0)
+    ratio_high = np.clip((q - limits.q_max + half) / half, 0.0, 1.0)
+    return limits.qd_max * (ratio_low * ratio_low - ratio_high * ratio_high)
+
+
+def acceleration_bounds(
+    lower: FloatArray,
+    upper: FloatArray,
+    q: FloatArray,
+    limits: JointLimits,
+    previous: FloatArray,
+    max_acceleration: FloatArray,
+    period: float,
+) -> tuple[FloatArray, FloatArray]:
+    """Velocity bounds of eq (23) narrowed by a joint acceleration bound a_max.
+
+    As in mc_rtc and OpenSoT, |qd_k - qd_{k-1}| <= a_max T becomes the velocity bounds
+    qd_{k-1} - a_max T <= qd_k <= qd_{k-1} + a_max T. Eq (21)-(22) alone would let a joint
+    run at full speed until one period before its position limit and then stop in one
+    period, so the speed toward a limit is also capped at the speed from which it can
+    still stop at a = a_max / 2 (commands held for T, then reduced by a T each period:
+    v^2 / (2 a) + v T / 2 <= d). Planning the stop at half the bound leaves the other half
+    for the difference between commanded and measured motion (the measured position at
+    the next cycle is not exactly q + qd T; planned at a_max, a stop in the assembly run
+    needed 10.15 rad/s^2 under a 10 rad/s^2 bound):
+
+        v_stop(d) = -a T / 2 + sqrt((a T / 2)^2 + 2 a d),  d = distance to the limit [rad]
+        upper' = min(Qd_max, qd_{k-1} + a_max T, v_stop(q_max - q))
+        lower' = max(Qd_min, qd_{k-1} - a_max T, -v_stop(q - q_min))
+
+    Priorities when the ranges do not meet: eq (23) (position limits) first, then the
+    acceleration bound, then the stopping speed; the result is then the point of the
+    higher-priority range nearest to the lower-priority one.
+
+    Args:
+        lower, upper: Qd_min, Qd_max of eq (23) [rad/s], (n,).
+        q: joint positions [rad], (n,).
+        limits: joint limits.
+        previous: previous command qd_{k-1} [rad/s], (n,).
+        max_acceleration: a_max [rad/s^2], (n,), > 0.
+        period: control period T [s].
+
+    Returns:
+        (lower', upper') [rad/s], each (n,), lower' <= upper' wherever lower <= upper.
+    """
+    step = max_acceleration * period
+    brake = 0.5 * max_acceleration
+    half = 0.5 * brake * period
+    stop_up = np.sqrt(half * half + 2.0 * brake * np.maximum(limits.q_max - q, 0.0)) - half
+    stop_down = np.sqrt(half * half + 2.0 * brake * np.maximum(q - limits.q_min, 0.0)) - half
+    acc_lower = np.minimum(np.maximum(previous - step, -stop_down), previous + step)
+    acc_upper = np.maximum(np.minimum(previous + step, stop_up), previous - step)
+    new_lower = np.minimum(np.maximum(lower, acc_lower), upper)
+    new_upper = np.maximum(np.minimum(upper, acc_upper), new_lower)
+    return new_lower, new_upper

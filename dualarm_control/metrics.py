@@ -55,6 +55,43 @@ def velocity_norm_metrics(qd: FloatArray, period: float, threshold: float = ACTI
     )
 
 
+def max_joint_acceleration(qd: FloatArray, period: float) -> float:
+    """Largest commanded joint acceleration max_k,i |qd_k,i - qd_k-1,i| / T [rad/s^2].
+
+    Args:
+        qd: commanded joint velocities (N, n) [rad/s], one row per period.
+        period: control period T [s].
+
+    Returns:
+        The largest finite difference of one joint's command between two consecutive
+        cycles, divided by T; 0 for fewer than two samples.
+    """
+    qd = np.asarray(qd, dtype=float)
+    if qd.shape[0] < 2:
+        return 0.0
+    return float(np.max(np.abs(np.diff(qd, axis=0))) / period)
+
+
+def active_set_switches_per_s(qd: FloatArray, period: float, threshold: float = ACTIVITY_THRESHOLD) -> float:
+    """Chatter of the active set: joints entering or leaving it, per second.
+
+    A joint is active when |qd_i| > threshold (Table I's rule). Each cycle adds the size of
+    the symmetric difference of the active sets of cycles k-1 and k; the sum is divided
+    by the duration N T [s].
+
+    Args:
+        qd: commanded joint velocities (N, n) [rad/s].
+        period: control period T [s].
+        threshold: activity threshold [rad/s].
+    """
+    qd = np.asarray(qd, dtype=float)
+    if qd.shape[0] < 2:
+        return 0.0
+    active = np.abs(qd) > threshold
+    switches = np.count_nonzero(active[1:] != active[:-1])
+    return float(switches / (qd.shape[0] * period))
+
+
 def limit_violations(values: FloatArray, lower: FloatArray, upper: FloatArray, tolerance: float) -> int:
     """Number of samples (rows of ``values`` (N, n)) with any joint outside [lower - tol, upper + tol]."""
     values = np.asarray(values, dtype=float)

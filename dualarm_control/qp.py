@@ -1,4 +1,4 @@
-"""QP back-ends behind one registry: proxsuite (default, warm-started) and any qpsolvers solver.
+"""QP back-ends behind one registry: daqp (default), proxsuite (reference) and qpsolvers solvers.
 
 Every back-end solves
 
@@ -6,18 +6,25 @@ Every back-end solves
 
 and returns one :class:`QPSolution`. A back-end object keeps its own warm-start memory,
 so one object serves one QP of fixed dimensions across control cycles.
+
+A back-end says whether it needs a positive definite H (``needs_positive_definite``); a
+solver whose QP is only positive semi-definite (the lasso of eq 19) refuses such a
+back-end when it is built (:func:`check_backend`), instead of failing at every cycle.
 """
 
 from __future__ import annotations
 
+import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
+from typing import ClassVar
 
 import numpy as np
 import numpy.typing as npt
 
-from dualarm_control.errors import UnknownSolverError
+from dualarm_control.errors import ParameterError, UnknownSolverError
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -84,6 +91,8 @@ class QPBackend:
     """Interface of a QP back-end."""
 
     name = "base"
+    needs_positive_definite = False
+    """True when the back-end only solves QPs whose H is positive definite."""
 
     def __init__(self, settings: QPSettings) -> None:
         self.settings = settings
@@ -155,12 +164,109 @@ class ProxsuiteBackend(QPBackend):
         return QPSolution(x=x, status=status, iterations=int(info.iter), solve_time=elapsed)
 
 
+class DaqpBackend(QPBackend):
+    """daqp, a dual active-set method (Arnström et al. 2022): exact up to round-off.
+
+    A positive semi-definite H (the lasso of eq 19) is handled by daqp's proximal-point
+    outer loop (``eps_prox < 0``: regularise only when the factorisation is singular),
+    iterated until two outer iterates differ by less than ``ETA_PROX``; with daqp's
+    default (1e-6) the lasso objective was up to 18 % above the optimum, with 1e-14 it
+    matches proxsuite at eps 1e-13 to 1.4e-12 relative (docs/bench.md). Equality rows are
+    passed as daqp equality constraints, the box as daqp simple bounds. With ``warm_start``
+    the previous solution seeds the initial active set (``primal_start``).
+    """
+
+    name = "daqp"
+    ETA_PROX = 1e-14
+    """Proximal-point stopping tolerance (change of the iterate between outer iterations)."""
+    EQUALITY, INEQUALITY = 5, 0
+    """daqp constraint kinds (``sense``)."""
+    STATUS: ClassVar[Mapping[int, str]] = MappingProxyType(
+        {1: "solved", 2: "solved", -1: "infeasible", -3: "infeasible", -4: "max_iter"})
+    """daqp exit flags: 1 optimal, 2 soft optimal, -1 infeasible, -2 cycling, -3 unbounded,
+    -4 iteration limit, -5 non-convex, -6 initial point infeasible (the others: "failed")."""
+
+    def __init__(self, settings: QPSettings) -> None:
+        super().__init__(settings)
+        self._previous: FloatArray | None = None
+        self._constants: dict[tuple[str, int], npt.NDArray[np.generic]] = {}
+
+    def reset(self) -> None:
+        self._previous = None
+
+    def _box_only(self, n: int) -> FloatArray:
+        """The empty (0, n) constraint matrix of a box-only QP, built once per n."""
+        key = ("empty", n)
+        if key not in self._constants:
+            self._constants[key] = np.zeros((0, n))
+        return self._constants[key]  # type: ignore[return-value]
+
+    def _sense(self, n: int) -> npt.NDArray[np.int32]:
+        """All-inequality ``sense`` of n box bounds, built once per n."""
+        key = ("sense", n)
+        if key not in self._constants:
+            self._constants[key] = np.full(n, self.INEQUALITY, dtype=np.int32)
+        return self._constants[key]  # type: ignore[return-value]
+
+    def _stack(self, problem: QPProblem, n: int) -> tuple[FloatArray, FloatArray, FloatArray, npt.NDArray[np.int32]]:
+        """daqp's (A, bupper, blower, sense): box first (simple bounds), then equalities, then C rows."""
+        rows: list[FloatArray] = []
+        upper: list[FloatArray] = []
+        lower: list[FloatArray] = []
+        sense: list[npt.NDArray[np.int32]] = []
+        if problem.lb is not None and problem.ub is not None:
+            upper.append(problem.ub)
+            lower.append(problem.lb)
+            sense.append(self._sense(n))
+        if problem.A is not None and problem.b is not None:
+            rows.append(problem.A)
+            upper.append(problem.b)
+            lower.append(problem.b)
+            sense.append(np.full(problem.A.shape[0], self.EQUALITY, dtype=np.int32))
+        if problem.C is not None and problem.l is not None and problem.u is not None:
+            rows.append(problem.C)
+            upper.append(problem.u)
+            lower.append(problem.l)
+            sense.append(np.full(problem.C.shape[0], self.INEQUALITY, dtype=np.int32))
+        a = np.vstack(rows) if rows else self._box_only(n)
+        return a, np.concatenate(upper), np.concatenate(lower), np.concatenate(sense)
+
+    def solve(self, problem: QPProblem) -> QPSolution:
+        import daqp
+
+        n = problem.H.shape[0]
+        if problem.A is None and problem.C is None and problem.lb is not None and problem.ub is not None:
+            a, upper, lower, sense = self._box_only(n), problem.ub, problem.lb, self._sense(n)
+        else:
+            a, upper, lower, sense = self._stack(problem, n)
+        start = time.perf_counter()
+        warm = self._previous if self.settings.warm_start and self._previous is not None \
+            and self._previous.shape == (n,) else None
+        x, _, flag, info = daqp.solve(
+            problem.H, problem.g, a, upper, lower, sense,
+            primal_tol=self.settings.eps_abs, eta_prox=self.ETA_PROX, iter_limit=self.settings.max_iter,
+            primal_start=warm,
+        )
+        elapsed = time.perf_counter() - start
+        status = self.STATUS.get(int(flag), "failed")
+        x = np.array(x, dtype=float)  # one copy, shared by the result and the warm start (neither is modified)
+        usable = status in ("solved", "max_iter") and math.isfinite(x.sum())
+        self._previous = x if status == "solved" else None
+        return QPSolution(x=x if usable else None, status=status, iterations=int(info["iterations"]),
+                          solve_time=elapsed)
+
+
 class QpsolversBackend(QPBackend):
     """Any solver of the ``qpsolvers`` package (e.g. quadprog, osqp, clarabel); no warm start."""
+
+    POSITIVE_DEFINITE_ONLY = frozenset({"quadprog", "ecos", "qpswift", "hpipm", "kvxopt", "cvxopt"})
+    """qpsolvers back-ends that factorise H (Cholesky or equivalent) and so need it definite;
+    quadprog returns no solution on the lasso of eq (19) instead of an error."""
 
     def __init__(self, settings: QPSettings, solver: str) -> None:
         super().__init__(settings)
         self.name = solver
+        self.needs_positive_definite = solver in self.POSITIVE_DEFINITE_ONLY
 
     def solve(self, problem: QPProblem) -> QPSolution:
         import qpsolvers
@@ -183,19 +289,45 @@ class QpsolversBackend(QPBackend):
                           iterations=0, solve_time=elapsed)
 
 
+DEFAULT_BACKEND = "daqp"
+_NATIVE: dict[str, type[QPBackend]] = {"daqp": DaqpBackend, "proxsuite": ProxsuiteBackend}
+_NATIVE_IN_QPSOLVERS = {"daqp", "proxqp"}  # qpsolvers names of the back-ends wrapped natively above
+
+
 def available_backends() -> list[str]:
-    """Names accepted by :func:`make_backend`: proxsuite plus the installed qpsolvers solvers."""
+    """Names accepted by :func:`make_backend`: daqp, proxsuite, then the other installed qpsolvers solvers."""
     import qpsolvers
 
-    return ["proxsuite", *sorted(s for s in qpsolvers.available_solvers if s != "proxqp")]
+    return [*_NATIVE, *sorted(s for s in qpsolvers.available_solvers if s not in _NATIVE_IN_QPSOLVERS)]
 
 
 def make_backend(name: str, settings: QPSettings | None = None) -> QPBackend:
     """Create a QP back-end by name; raises UnknownSolverError listing the valid names."""
     settings = settings or QPSettings()
-    factories: dict[str, Callable[[], QPBackend]] = {"proxsuite": lambda: ProxsuiteBackend(settings)}
-    for other in available_backends()[1:]:
+    factories: dict[str, Callable[[], QPBackend]] = {
+        key: (lambda cls=cls: cls(settings)) for key, cls in _NATIVE.items()  # type: ignore[misc]
+    }
+    for other in available_backends()[len(_NATIVE):]:
         factories[other] = lambda other=other: QpsolversBackend(settings, other)  # type: ignore[misc]
     if name not in factories:
         raise UnknownSolverError(name, list(factories))
     return factories[name]()
+
+
+def check_backend(backend: QPBackend, positive_definite: bool, what: str) -> None:
+    """Refuse a back-end that cannot solve a QP whose H is only semi-definite.
+
+    Args:
+        backend: the back-end a solver is about to use.
+        positive_definite: whether the solver's H is positive definite.
+        what: the QP, for the message (e.g. "sparse_qp's lasso QP, eq (19)").
+
+    Raises:
+        ParameterError on ``qp_backend`` naming the back-ends that can.
+    """
+    if backend.needs_positive_definite and not positive_definite:
+        able = [n for n in available_backends() if n not in QpsolversBackend.POSITIVE_DEFINITE_ONLY]
+        raise ParameterError(
+            "qp_backend", backend.name,
+            f"a back-end for a positive semi-definite H ({what}): one of {', '.join(able)}",
+        )

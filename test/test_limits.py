@@ -10,7 +10,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from dualarm_control.kinematics import DualArmModel
-from dualarm_control.limits import JointLimits, repulsive_velocity, velocity_bounds
+from dualarm_control.limits import (
+    JointLimits,
+    acceleration_bounds,
+    repulsive_velocity,
+    velocity_bounds,
+)
 
 FINITE = {"allow_nan": False, "allow_infinity": False}
 
@@ -182,3 +187,48 @@ def test_joint_limits_validation() -> None:
     for factor in (0.0, 1.5):
         with pytest.raises(ValueError, match="scale"):
             lim.scaled_velocity(factor)
+
+
+# ---- acceleration bound (issue 8) ------------------------------------------------------------
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(cases(), st.floats(0.5, 50.0, **FINITE), st.floats(-1.0, 1.0, **FINITE))
+def test_acceleration_bounds_stay_inside_eq23_and_around_the_previous_command(
+    case: Case, a_max: float, previous_share: float
+) -> None:
+    """lower' <= upper', inside eq (23); inside prev +- a T whenever that range meets eq (23) and the stop speed."""
+    lower, upper = velocity_bounds(case.q, case.limits, case.period)
+    previous = previous_share * case.limits.qd_max
+    acc = np.full(case.q.shape, a_max)
+    lo, up = acceleration_bounds(lower, upper, case.q, case.limits, previous, acc, case.period)
+    assert np.all(lo <= up)
+    assert np.all(lo >= lower - 1e-12) and np.all(up <= upper + 1e-12)
+    step = a_max * case.period
+    meets = (previous - step <= upper) & (previous + step >= lower)
+    assert np.all(lo[meets] >= np.minimum(previous - step, up)[meets] - 1e-12)
+    assert np.all(up[meets] <= np.maximum(previous + step, lo)[meets] + 1e-12)
+
+
+def test_acceleration_bound_caps_the_speed_toward_a_near_limit() -> None:
+    """Toward a limit d away, the speed is capped at the stop speed for a_max / 2: v^2/a + v T/2 <= d."""
+    limits = JointLimits(np.array([-1.0]), np.array([1.0]), np.array([2.0]))
+    q, period, a_max = np.array([0.99]), 0.005, np.array([10.0])
+    lower, upper = velocity_bounds(q, limits, period)
+    assert upper[0] == pytest.approx(2.0)  # eq (23) alone: still full speed 1 cm before the limit
+    lo, up = acceleration_bounds(lower, upper, q, limits, np.array([0.3]), a_max, period)
+    v, a, d = up[0], 5.0, 0.01
+    assert v == pytest.approx(-a * period / 2 + np.sqrt((a * period / 2) ** 2 + 2 * a * d))  # 0.304 < 0.3 + a T
+    assert lo[0] == pytest.approx(0.3 - 10.0 * period)
+    # a previous speed above the stop speed: braking at a_max wins over the stop speed
+    lo, up = acceleration_bounds(lower, upper, q, limits, np.array([0.5]), a_max, period)
+    assert lo[0] == up[0] == pytest.approx(0.5 - 10.0 * period)
+
+
+def test_position_limits_win_over_the_acceleration_bound() -> None:
+    """At a limit with a large previous speed toward it, eq (23) (stop) wins: lower' = upper' = eq (23)'s upper."""
+    limits = JointLimits(np.array([-1.0]), np.array([1.0]), np.array([2.0]))
+    q = np.array([1.0])
+    lower, upper = velocity_bounds(q, limits, 0.005)
+    lo, up = acceleration_bounds(lower, upper, q, limits, np.array([1.5]), np.array([1.0]), 0.005)
+    assert lo[0] == up[0] == pytest.approx(0.0)

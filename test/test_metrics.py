@@ -8,8 +8,10 @@ import numpy as np
 import pytest
 
 from dualarm_control.metrics import (
+    active_set_switches_per_s,
     l0_norms,
     limit_violations,
+    max_joint_acceleration,
     percentiles,
     velocity_norm_metrics,
 )
@@ -77,3 +79,18 @@ def test_percentiles() -> None:
     assert percentiles(np.arange(101.0)) == (50.0, 99.0)
     assert percentiles(np.arange(101.0), (0.0, 100.0)) == (0.0, 100.0)
     assert all(math.isnan(v) for v in percentiles(np.array([])))
+
+
+def test_max_joint_acceleration_by_hand() -> None:
+    """Largest |dqd| / T over joints and cycles; 0 for one sample."""
+    qd = np.array([[0.0, 0.1], [0.02, 0.1], [0.02, -0.2]])
+    assert max_joint_acceleration(qd, 0.005) == pytest.approx(0.3 / 0.005)
+    assert max_joint_acceleration(qd[:1], 0.005) == 0.0
+
+
+def test_active_set_switches_per_s_by_hand() -> None:
+    """Joints entering or leaving |qd| > 1e-3, counted per cycle, over N T seconds."""
+    qd = np.array([[0.0, 0.5, 0.0], [0.01, 0.5, 0.0], [0.0, 0.0, 0.002], [0.0, 0.0, 0.002]])
+    # cycle 1: joint 0 enters (1); cycle 2: joint 0 leaves, 1 leaves, 2 enters (3); cycle 3: none
+    assert active_set_switches_per_s(qd, 0.5) == pytest.approx(4 / (4 * 0.5))
+    assert active_set_switches_per_s(np.full((5, 2), 1e-3), 0.5) == 0.0  # exactly 1e-3 is not active

@@ -149,7 +149,9 @@ def test_unknown_solver_parameter_lists_valid_solvers() -> None:
 @pytest.mark.parametrize(
     ("key", "value", "fragment"),
     [("alpha", 1.5, "[0, 1]"), ("control_period", 0.0, "> 0"), ("velocity_scale", 0.0, "(0, 1]"),
-     ("qp_backend", "nope", "proxsuite"), ("qp_max_iter", 1.5, "integer"), ("solver", 3, "string")],
+     ("qp_backend", "nope", "proxsuite"), ("qp_max_iter", 1.5, "integer"), ("solver", 3, "string"),
+     ("acceleration_limit", [-1.0], "values > 0"), ("acceleration_limit", 10.0, "double array"),
+     ("proximal_weight", -1e-6, ">= 0")],
 )
 def test_controller_params_validation(key: str, value: object, fragment: str) -> None:
     """Range, choice and type checks name the parameter and the expectation."""
@@ -165,6 +167,21 @@ def test_controller_params_map_to_the_dataclasses() -> None:
     assert (p.solver, p.period, p.alpha, p.velocity_scale, p.gain) == ("sparse_qp", 0.01, 0.0, 0.5, 10.0)
     sp = p.solver_params
     assert (sp.l1_weight, sp.regularization, sp.qp.eps_abs, sp.qp.max_iter) == (1e-5, 0.0, 1e-8, 50)
+    assert (sp.qp_backend, sp.proximal_weight, p.acceleration_limit) == ("daqp", 1e-6, ())  # defaults
+
+
+def test_acceleration_limit_one_value_or_one_per_joint() -> None:
+    """[0.0] = no bound; [a] for every joint; 14 values per joint; another length is refused by the controller."""
+    from dualarm_control.controller import RelativeController
+    from dualarm_control.kinematics import DualArmModel
+
+    assert controller_params({"acceleration_limit": [0.0]}).acceleration_limit == ()
+    assert controller_params({"acceleration_limit": [10.0]}).acceleration_limit == (10.0,)
+    per_joint = [float(v) for v in range(1, 15)]
+    model = DualArmModel()
+    RelativeController(model, controller_params({"acceleration_limit": per_joint}))
+    with pytest.raises(ValueError, match="0, 1 or 14 values"):
+        RelativeController(model, controller_params({"acceleration_limit": [1.0, 2.0]}))
 
 
 # ---- scenarios ------------------------------------------------------------------------------------

@@ -25,7 +25,7 @@ import pytest
 import qpsolvers
 from scipy.optimize import linprog
 
-from dualarm_control.errors import UnknownSolverError
+from dualarm_control.errors import ParameterError, UnknownSolverError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.limits import JointLimits, repulsive_velocity, velocity_bounds
 from dualarm_control.qp import QPSettings, QPSolution
@@ -34,12 +34,14 @@ from dualarm_control.solvers import (
     ControlProblem,
     SolverParams,
     make_solver,
+    methods,
     solver_names,
 )
 
 LAMBDA = 1e-6  # default l1 weight (paper)
 EPS = 1e-6  # default standard-QP regularization
 ACCURATE = SolverParams(qp=QPSettings(eps_abs=1e-12))  # for checks of the formulation itself
+EXACT = SolverParams(proximal_weight=0.0)  # the lasso of eq (19) at every call, no tie-break toward the last solution
 PERIOD = 0.005
 
 Problem = ControlProblem
@@ -219,7 +221,7 @@ def test_result_record_is_consistent(name: str, model: DualArmModel, limits: Joi
 def test_task_met_up_to_each_methods_optimality_condition(name: str, model: DualArmModel, limits: JointLimits) -> None:
     """Wide bounds, real J: J^T (r - J qd) equals 0 (eq 13), eps qd (eq 14), or lies in lambda d||qd||_1 (eq 17, 26)."""
     rng = np.random.default_rng(22)
-    solver = make_solver(name)
+    solver = make_solver(name, EXACT)
     for _ in range(5):
         p = real_problem(model, limits, rng, ref=0.02)
         res = solver.solve(p)
@@ -304,12 +306,23 @@ def test_numerical_failures_never_raise(name: str, failure: Callable, monkeypatc
     assert res.detail
 
 
-def test_failing_qp_backend_gives_failed_status() -> None:
-    """sparse_qp on quadprog: eq (19)'s Hessian is singular, quadprog refuses -> status failed, zero, no raise."""
+@pytest.mark.parametrize("solver", ["sparse_qp", "hierarchical_sparse_qp"])
+def test_backend_needing_a_definite_hessian_is_refused_at_start(solver: str) -> None:
+    """sparse QPs on quadprog: eq (19)'s H is only semi-definite -> refused when built, naming valid back-ends."""
+    with pytest.raises(ParameterError, match=r"qp_backend.*quadprog.*semi-definite.*daqp"):
+        make_solver(solver, SolverParams(qp_backend="quadprog"))
+
+
+def test_standard_qp_on_quadprog_needs_its_regularization() -> None:
+    """standard_qp's H = J^T J + eps I is definite only with eps > 0: quadprog solves it, or is refused at eps = 0."""
     rng = np.random.default_rng(27)
-    res = make_solver("sparse_qp", SolverParams(qp_backend="quadprog")).solve(random_problem(rng, 1.0))
-    assert res.status == "failed" and res.detail == "QP failed"
-    np.testing.assert_array_equal(res.velocities, np.zeros(14))
+    p = random_problem(rng, 1.0)
+    res = make_solver("standard_qp", SolverParams(qp_backend="quadprog")).solve(p)
+    ref = make_solver("standard_qp", SolverParams(qp_backend="daqp")).solve(p)
+    assert res.status == "solved"
+    np.testing.assert_allclose(res.velocities, ref.velocities, atol=1e-9)  # two exact active-set methods
+    with pytest.raises(ParameterError, match="qp_backend"):
+        make_solver("standard_qp", SolverParams(qp_backend="quadprog", regularization=0.0))
 
 
 # ---- pseudo-inverse, eq (13) -------------------------------------------------------------------
@@ -411,7 +424,7 @@ def test_standard_qp_warm_start_from_another_problem_is_still_optimal() -> None:
 def test_sparse_qp_attains_the_brute_force_minimum_l1(n: int) -> None:
     """Lasso eq (17) vs vertex enumeration of min ||x||_1 s.t. J x = r, bounds: l1 within 1e-4 relative, sparse support."""
     rng = np.random.default_rng(50 + n)
-    solver = make_solver("sparse_qp")
+    solver = make_solver("sparse_qp", EXACT)
     for k in range(6):
         j = rng.standard_normal((6, n))
         width = 5.0 if k < 3 else 0.4
@@ -463,7 +476,7 @@ def test_sparse_qp_uses_less_l1_and_few_joints_on_the_real_jacobian(model: DualA
 def test_sparse_qp_objective_matches_eq19_solved_by_quadprog(model: DualArmModel, limits: JointLimits) -> None:
     """Eq (17) objective of sparse_qp vs eq (19) (2n variables) by quadprog with delta = 1e-9 added to H."""
     delta = 1e-9
-    solver = make_solver("sparse_qp")
+    solver = make_solver("sparse_qp", EXACT)
     problems = mixed_problems(model, limits, 12, seed=61)
     for p in problems:
         qd = solver.solve(p).velocities
@@ -542,6 +555,7 @@ def test_hierarchical_falls_back_to_primary_when_qp2_fails(
     """A failing QP2 (forced) keeps the primary solution qd1 and says so in detail; nothing raises."""
     p, _ = near_limit_problem(model, limits, 3, seed=74)
     solver = make_solver("hierarchical_sparse_qp")
+    monkeypatch.setattr(methods, "null_space_projection", lambda jacobian, velocity: None)  # force the QP
     monkeypatch.setattr(solver._secondary, "solve", lambda qp: QPSolution(None, "infeasible", 7, 1e-6))
     res = solver.solve(p)
     qd1 = make_solver("sparse_qp").solve(p).velocities
@@ -556,7 +570,7 @@ def test_hierarchical_falls_back_to_primary_when_qp2_fails(
 def test_warm_start_repeats_the_answer_with_no_more_iterations(
     name: str, model: DualArmModel, limits: JointLimits
 ) -> None:
-    """proxsuite: solving the same problem twice gives the same qd (1e-8) in <= the first solve's iterations."""
+    """Default back-end: solving the same problem twice gives the same qd (1e-8) in <= the first solve's iterations."""
     p, _ = near_limit_problem(model, limits, 3, seed=80)
     solver = make_solver(name)
     first, second = solver.solve(p), solver.solve(p)

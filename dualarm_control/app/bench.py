@@ -1,70 +1,247 @@
-"""Benchmark of the solvers on a scenario: solve and cycle time percentiles, as ratios.
+"""``dualarm bench``: solver and QP back-end timings, pink comparison, exactness, scaling.
 
-Machines are shared and noisy, so the table reports percentiles (p50/p99) and the ratio
-of each solver's p50 to the reference solver's p50 measured in the same run, never a
-single absolute figure on its own.
+Machines are shared and noisy, so every table reports percentiles (p50/p99) and ratios
+measured in the same run, never a single absolute figure on its own. Parts:
+
+- random set (:mod:`dualarm_control.app.bench_random`): RelativeController.step per solver
+  and QP back-end on seeded random configurations and targets, interleaved with pink's
+  ``solve_ik`` on the same cases (:mod:`dualarm_control.app.bench_pink`), ratios of each
+  p50 to pink's fastest and default set-ups, active joints per cycle;
+- the scenario (assembly) run in-process per solver and back-end, and pink replaying the
+  recorded states and targets of one run;
+- exactness of the lasso solve against a reference (proxsuite at eps 1e-12);
+- scaling with the number of joints (3- and 4-arm chains of the LWR4).
 """
 
 from __future__ import annotations
 
 import json
+import platform
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from dualarm_control.app.bench_pink import pink_cycle, pink_version
+from dualarm_control.app.bench_random import (
+    Case,
+    exactness,
+    random_cases,
+    time_random_set,
+    time_scaling,
+    with_backend,
+)
 from dualarm_control.app.experiment import run_scenario
-from dualarm_control.controller import controller_params
+from dualarm_control.controller import ControllerParams
+from dualarm_control.errors import ParameterError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.metrics import percentiles
 from dualarm_control.scenario import Scenario
+from dualarm_control.solvers import make_solver
+
+Progress = Callable[[str], None]
+
+PINK_SETUPS = {
+    "pink | quadprog, Configuration.update": ("quadprog", True),
+    "pink | daqp, Configuration.update": ("daqp", True),
+    "pink | proxqp, new Configuration (default)": ("proxqp", False),
+}
+PINK_DEFAULT = "pink | proxqp, new Configuration (default)"
 
 
-def bench_solvers(
-    scenario: Scenario,
-    solvers: Sequence[str],
-    reference: str,
-    progress: Callable[[str], Callable[[float, str], None]] | None = None,
-) -> dict[str, dict[str, Any]]:
-    """Run ``scenario`` per solver; return per-solver timing percentiles and ratios to ``reference``."""
-    model = DualArmModel()
-    rows: dict[str, dict[str, Any]] = {}
-    for name in solvers:
-        log = run_scenario(scenario, controller_params({"solver": name}), model,
-                           progress=None if progress is None else progress(name))
-        solve50, solve99 = percentiles(log.solve_time)
-        cycle50, cycle99 = percentiles(log.cycle_time)
-        rows[name] = {
-            "cycles": len(log.time),
-            "solve_time_p50_ms": solve50 * 1e3,
-            "solve_time_p99_ms": solve99 * 1e3,
-            "cycle_time_p50_ms": cycle50 * 1e3,
-            "cycle_time_p99_ms": cycle99 * 1e3,
-            "cycle_time_max_ms": float(np.max(log.cycle_time)) * 1e3,
-            "share_of_period_p99": cycle99 / log.period,
-        }
-    ref = rows.get(reference) or next(iter(rows.values()))
+def solver_configs(
+    params: ControllerParams, solvers: Sequence[str], backends: Sequence[str]
+) -> tuple[dict[str, ControllerParams], dict[str, str]]:
+    """``{"solver | backend": params}`` for every pair a solver accepts, and ``{pair: reason}`` for refusals.
+
+    A solver without a QP (pseudo_inverse) is listed once, with back-end "-".
+    """
+    configs: dict[str, ControllerParams] = {}
+    refused: dict[str, str] = {}
+    for s in solvers:
+        if not make_solver(s).uses_qp:
+            configs[f"{s} | -"] = with_backend(params, s, params.solver_params.qp_backend)
+            continue
+        for b in backends:
+            candidate = with_backend(params, s, b)
+            try:
+                make_solver(s, candidate.solver_params)
+            except ParameterError as exc:
+                refused[f"{s} | {b}"] = str(exc)
+                continue
+            configs[f"{s} | {b}"] = candidate
+    return configs, refused
+
+
+def _pink_calls(model: DualArmModel) -> dict[str, Callable[[Case], None]]:
+    if pink_version() is None:
+        return {}
+    return {name: pink_cycle(model, solver, update) for name, (solver, update) in PINK_SETUPS.items()}
+
+
+def add_ratio(rows: dict[str, dict[str, Any]], reference: str, column: str) -> None:
+    """Set ``row[column]`` = row's cycle p50 / the ``reference`` row's cycle p50, for every row."""
+    base = rows[reference]["cycle_p50_ms"]
     for row in rows.values():
-        row["solve_p50_ratio"] = row["solve_time_p50_ms"] / ref["solve_time_p50_ms"]
-    return rows
+        row[column] = row["cycle_p50_ms"] / base
 
 
-def format_bench(rows: dict[str, dict[str, Any]], reference: str) -> str:
-    """Markdown table of :func:`bench_solvers` output."""
-    head = (f"| solver | cycles | solve p50 [ms] | solve p99 [ms] | cycle p50 [ms] | cycle p99 [ms] | "
-            f"cycle p99 / period | solve p50 / {reference} |")
-    lines = [head, "|" + "---|" * 8]
-    for name, r in rows.items():
-        lines.append(
-            f"| {name} | {r['cycles']} | {r['solve_time_p50_ms']:.3f} | {r['solve_time_p99_ms']:.3f} | "
-            f"{r['cycle_time_p50_ms']:.3f} | {r['cycle_time_p99_ms']:.3f} | {r['share_of_period_p99']:.2f} | "
-            f"{r['solve_p50_ratio']:.2f} |"
-        )
-    return "\n".join(lines)
+def bench_random(
+    model: DualArmModel, params: ControllerParams, configs: dict[str, ControllerParams], count: int, seed: int,
+    fallback_reference: str,
+) -> dict[str, Any]:
+    """Random-set part: timings of every config and of pink, ratios to pink's fastest and default set-ups."""
+    cases = random_cases(model, count, seed)
+    pink = _pink_calls(model)
+    for call in pink.values():  # first calls import and set up pink's QP solvers: not timed
+        call(cases[0])
+    rows = time_random_set(model, cases, configs, extra=pink)
+    out: dict[str, Any] = {"cases": count, "seed": seed, "rows": rows, "ratio_columns": []}
+    if pink:
+        fastest = min(PINK_SETUPS, key=lambda name: rows[name]["cycle_p50_ms"])
+        out["pink_fastest"] = fastest
+        add_ratio(rows, fastest, "p50_ratio_to_pink_fastest")
+        add_ratio(rows, PINK_DEFAULT, "p50_ratio_to_pink_default")
+        out["ratio_columns"] = ["p50_ratio_to_pink_fastest", "p50_ratio_to_pink_default"]
+    elif fallback_reference in rows:
+        add_ratio(rows, fallback_reference, "p50_ratio_to_reference")
+        out["ratio_columns"] = ["p50_ratio_to_reference"]
+        out["reference"] = fallback_reference
+    return out
 
 
-def write_bench(out: Path, rows: dict[str, dict[str, Any]], reference: str, scenario: str) -> None:
+def bench_scenario(
+    scenario: Scenario, model: DualArmModel, configs: dict[str, ControllerParams], progress: Progress | None = None,
+) -> dict[str, Any]:
+    """Scenario part: one in-process run per config; pink replays the states and targets of the first QP run."""
+    rows: dict[str, dict[str, Any]] = {}
+    replay: list[Case] = []
+    for name, params in configs.items():
+        if progress:
+            progress(f"scenario {scenario.name}: {name}")
+        log = run_scenario(scenario, params, model)
+        s50, s99 = percentiles(log.solve_time)
+        c50, c99 = percentiles(log.cycle_time)
+        rows[name] = {
+            "cycles": len(log.time), "solve_p50_ms": s50 * 1e3, "solve_p99_ms": s99 * 1e3,
+            "cycle_p50_ms": c50 * 1e3, "cycle_p99_ms": c99 * 1e3, "cycle_max_ms": float(np.max(log.cycle_time)) * 1e3,
+            "share_of_period_p99": c99 / log.period,
+        }
+        if not replay and not name.endswith("| -"):
+            trajectory = scenario.trajectory(*model.relative_pose(log.positions[0]))
+            replay = [Case(q=q, target=trajectory.sample(t)) for q, t in zip(log.positions, log.time, strict=True)]  # type: ignore[arg-type]
+    out: dict[str, Any] = {"scenario": scenario.name, "rows": rows}
+    pink = _pink_calls(model)
+    if pink and replay:
+        if progress:
+            progress(f"scenario {scenario.name}: pink replay")
+        for name, call in pink.items():
+            call(replay[0])
+            samples = []
+            for case in replay:
+                start = time.perf_counter()
+                call(case)
+                samples.append(time.perf_counter() - start)
+            c50, c99 = percentiles(np.asarray(samples))
+            rows[name] = {"cycles": len(samples), "cycle_p50_ms": c50 * 1e3, "cycle_p99_ms": c99 * 1e3}
+        fastest = min(PINK_SETUPS, key=lambda name: rows[name]["cycle_p50_ms"])
+        out["pink_fastest"] = fastest
+        add_ratio(rows, fastest, "p50_ratio_to_pink_fastest")
+    return out
+
+
+def run_bench(
+    scenario: Scenario | None,
+    solvers: Sequence[str],
+    backends: Sequence[str],
+    count: int = 400,
+    seed: int = 0,
+    fallback_reference: str = "standard_qp | daqp",
+    scaling_arms: Sequence[int] = (2, 3, 4),
+    progress: Progress | None = None,
+) -> dict[str, Any]:
+    """The whole benchmark as one JSON-able record (see the module docstring)."""
+    model = DualArmModel()
+    params = ControllerParams()
+    configs, refused = solver_configs(params, solvers, backends)
+    say = progress or (lambda _msg: None)
+    say(f"random set: {count} cases x {len(configs)} configurations")
+    record: dict[str, Any] = {
+        "machine": {"python": platform.python_version(), "processor": platform.processor() or platform.machine(),
+                    "pink": pink_version()},
+        "refused": refused,
+        "random": bench_random(model, params, configs, count, seed, fallback_reference),
+    }
+    say("exactness of the lasso solve")
+    record["exactness"] = exactness(model, random_cases(model, count, seed), params)
+    say("scaling with the number of joints")
+    qp_solvers = [s for s in solvers if make_solver(s).uses_qp]
+    record["scaling"] = time_scaling(model, params, qp_solvers, backends, scaling_arms, count=max(count // 4, 20),
+                                     seed=seed + 1)
+    if scenario is not None:
+        scenario_configs = {k: v for k, v in configs.items() if k.split(" | ")[1] in ("daqp", "proxsuite", "-")}
+        record["scenario"] = bench_scenario(scenario, model, scenario_configs, progress)
+    return record
+
+
+def _table(rows: dict[str, dict[str, Any]], columns: Sequence[tuple[str, str, str]], first: str) -> list[str]:
+    """Markdown table; row names "a | b" fill the first columns named by ``first`` ("a | b")."""
+    head = [*first.split(" | "), *(c[1] for c in columns)]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for name, row in rows.items():
+        cells = name.split(" | ")
+        for key, _, fmt in columns:
+            value = row.get(key)
+            cells.append("—" if value is None else fmt.format(value))
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
+def format_bench(record: dict[str, Any]) -> str:
+    """Markdown report of :func:`run_bench`."""
+    rnd = record["random"]
+    ratio_cols = [(c, "cycle " + c.replace("p50_ratio_to_", "p50 / ").replace("_", " "), "{:.2f}")
+                  for c in rnd["ratio_columns"]]
+    timing = [("cycle_p50_ms", "cycle p50 [ms]", "{:.3f}"), ("cycle_p99_ms", "cycle p99 [ms]", "{:.3f}"),
+              ("solve_p50_ms", "solve p50 [ms]", "{:.3f}"), ("solve_p99_ms", "solve p99 [ms]", "{:.3f}")]
+    lines = [f"# Solver benchmark (python {record['machine']['python']}, pink {record['machine']['pink']})", "",
+             f"## Random set: {rnd['cases']} configurations and targets (seed {rnd['seed']}), one run, interleaved", ""]
+    lines += _table(rnd["rows"], [*timing, *ratio_cols,
+                                  ("active_joints_p50", "active joints p50", "{:.0f}"),
+                                  ("active_joints_max", "max", "{:d}"),
+                                  ("share_at_most_6_active", "share <= 6", "{:.3f}"),
+                                  ("failures", "failures", "{:d}")], "solver | QP back-end")
+    if rnd.get("pink_fastest"):
+        lines += ["", f"pink's fastest set-up in this run: {rnd['pink_fastest']}."]
+    if record["refused"]:
+        lines += ["", "Refused at start-up (no silent zero command):", ""]
+        lines += [f"- {k}: {v}" for k, v in record["refused"].items()]
+    ex = record["exactness"]
+    lines += ["", f"## Exactness of the lasso (eq 17-19) on the random set, vs {ex['reference']}", "",
+              f"- references verified optimal (KKT): {ex['verified_references']} of {ex['cases']}",
+              (f"- relative objective difference to them: min {ex['objective_rel_diff_min']:.2e}, "
+               f"max {ex['objective_rel_diff_max']:.2e}"),
+              f"- same active set (non-zero joints and joints at a bound, 1e-7): {ex['same_active_set']}",
+              (f"- relative difference to the raw reference solve: min {ex['raw_reference_rel_diff_min']:.2e}, "
+               f"max {ex['raw_reference_rel_diff_max']:.2e}")]
+    if "scenario" in record:
+        sc = record["scenario"]
+        lines += ["", f"## Scenario {sc['scenario']} (in-process, lockstep); pink replays the recorded states", ""]
+        lines += _table(sc["rows"], [("cycles", "cycles", "{:d}"), *timing,
+                                     ("p50_ratio_to_pink_fastest", "cycle p50 / pink fastest", "{:.2f}")],
+                        "solver | QP back-end")
+    lines += ["", "## Scaling with the number of joints (chains of LWR4 arms, relative tasks between neighbours)", ""]
+    lines += _table(record["scaling"], [("solve_p50_ms", "solve p50 [ms]", "{:.3f}"),
+                                        ("solve_p99_ms", "solve p99 [ms]", "{:.3f}"),
+                                        ("active_joints_p50", "active joints p50", "{:.0f}")],
+                    "arms | solver | QP back-end")
+    return "\n".join(lines) + "\n"
+
+
+def write_bench(out: Path, record: dict[str, Any]) -> None:
+    """Write ``out/bench.json`` and ``out/bench.md``."""
     out.mkdir(parents=True, exist_ok=True)
-    (out / "bench.json").write_text(json.dumps(rows, indent=2) + "\n")
-    (out / "bench.md").write_text(f"# Solver benchmark ({scenario})\n\n{format_bench(rows, reference)}\n")
+    (out / "bench.json").write_text(json.dumps(record, indent=2) + "\n")
+    (out / "bench.md").write_text(format_bench(record))

@@ -15,7 +15,13 @@ from typing import Any
 import numpy as np
 
 from dualarm_control.kinematics import FloatArray
-from dualarm_control.metrics import limit_violations, percentiles, velocity_norm_metrics
+from dualarm_control.metrics import (
+    active_set_switches_per_s,
+    limit_violations,
+    max_joint_acceleration,
+    percentiles,
+    velocity_norm_metrics,
+)
 from dualarm_control.solvers.base import ACTIVITY_THRESHOLD, FAILURE_STATUSES
 
 POSITION_TOLERANCE = 1e-6
@@ -27,6 +33,7 @@ METRIC_KEYS = (
     "l0_mean", "l1_mean", "l2_mean", "l0_integral", "l1_integral", "l2_integral", "duration_s",
     "final_position_error_m", "final_orientation_error_rad", "joint_position_limit_violations",
     "joint_velocity_limit_violations", "solver_failures", "cycle_time_p50_s", "cycle_time_p99_s",
+    "max_joint_acceleration", "active_set_switches_per_s",
 )
 
 
@@ -65,6 +72,8 @@ def summarize(
         solver_failures=int(sum(s in FAILURE_STATUSES for s in statuses)),
         cycle_time_p50_s=p50,
         cycle_time_p99_s=p99,
+        max_joint_acceleration=max_joint_acceleration(commands, period),
+        active_set_switches_per_s=active_set_switches_per_s(commands, period),
     )
     return out
 
@@ -93,6 +102,8 @@ def format_table(results: Mapping[str, Mapping[str, Any]]) -> str:
         ("solver failures", "solver_failures", "{:d}"),
         ("cycle time p50 [ms]", "cycle_time_p50_s", "ms"),
         ("cycle time p99 [ms]", "cycle_time_p99_s", "ms"),
+        ("max joint acceleration [rad/s^2]", "max_joint_acceleration", "{:.2f}"),
+        ("active-set switches per s", "active_set_switches_per_s", "{:.2f}"),
     ]
     width = max(len(r[0]) for r in rows)
     cols = [max(len(n), 12) for n in names]

@@ -7,13 +7,14 @@ serves the in-process experiment, the controller node and the benchmark.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 
-from dualarm_control.qp import QPSettings, QPSolution, make_backend
+from dualarm_control.qp import DEFAULT_BACKEND, QPSettings, QPSolution, make_backend
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -28,8 +29,9 @@ class ControlProblem:
     """Inputs of one control cycle.
 
     Attributes:
-        jacobian: relative Jacobian J of eq (5), (6, n).
-        reference: closed-loop reference twist xd* + K e of eq (13)/(26) [m/s; rad/s], (6,).
+        jacobian: relative Jacobian J of eq (5), (6, n); (6 k, n) for k relative tasks stacked
+            (the benchmark's 3- and 4-arm chains).
+        reference: closed-loop reference twist xd* + K e of eq (13)/(26) [m/s; rad/s], (6,) or (6 k,).
         lower, upper: joint velocity bounds Qd_min, Qd_max of eq (23) [rad/s], (n,).
         repulsive: repulsive joint velocity qd_r of eq (25) [rad/s], (n,); used by the
             hierarchical solver's secondary task only.
@@ -42,18 +44,26 @@ class ControlProblem:
     repulsive: FloatArray
 
     def problem_with_invalid_input(self) -> str:
-        """Return a description of what is wrong with the inputs, or '' when they are usable."""
-        n = self.jacobian.shape[1] if self.jacobian.ndim == 2 else -1
-        if self.jacobian.shape != (6, n) or self.reference.shape != (6,):
+        """Return a description of what is wrong with the inputs, or '' when they are usable.
+
+        Runs every cycle: shapes are compared as tuples and finiteness is tested once on the
+        sum of all entries (NaN or inf anywhere makes it non-finite); only when that fails
+        are the arrays examined one by one to name the culprit.
+        """
+        m, n = self.jacobian.shape if self.jacobian.ndim == 2 else (-1, -1)
+        if m < 1 or self.reference.shape != (m,):
             return f"bad shapes: J {self.jacobian.shape}, reference {self.reference.shape}"
         for name in ("lower", "upper", "repulsive"):
             if getattr(self, name).shape != (n,):
                 return f"bad shape of {name}: {getattr(self, name).shape}, expected ({n},)"
-        for name in ("jacobian", "reference", "lower", "upper", "repulsive"):
-            if not np.all(np.isfinite(getattr(self, name))):
-                return f"non-finite values in {name}"
-        if np.any(self.lower > self.upper + 1e-12):
-            i = int(np.argmax(self.lower - self.upper))
+        total = self.jacobian.sum() + self.reference.sum() + self.lower.sum() + self.upper.sum() + self.repulsive.sum()
+        if not math.isfinite(total):
+            for name in ("jacobian", "reference", "lower", "upper", "repulsive"):
+                if not np.all(np.isfinite(getattr(self, name))):
+                    return f"non-finite values in {name}"
+        gap = self.lower - self.upper
+        if gap.max() > 1e-12:
+            i = int(np.argmax(gap))
             return f"velocity bounds cross at joint {i}: lower {self.lower[i]:.4g} > upper {self.upper[i]:.4g} (joint outside its position range)"
         return ""
 
@@ -96,13 +106,18 @@ class SolverParams:
         l1_weight: lambda of eq (17)/(26) [ (m/s)^2 per rad/s ], > 0; paper: 1e-6.
         regularization: epsilon of the standard QP's tie-break term eps/2 ||qd||^2 that selects
             the minimum-norm solution among the least-squares ones, like J^+ (eq 13-14), >= 0.
-        qp_backend: "proxsuite" or a qpsolvers solver name (see dualarm_control.qp).
+        proximal_weight: mu of the sparse QPs' proximal term mu/2 ||z - z_prev||^2 around the
+            previous lasso solution [(m/s)^2 per (rad/s)^2], >= 0; 0 = the exact lasso of eq (19)
+            every cycle. Default 1e-6 (docs/bench.md: chatter vs mu).
+            See :class:`dualarm_control.solvers.methods.SparseQP`.
+        qp_backend: "daqp" (default), "proxsuite" or a qpsolvers solver name (see dualarm_control.qp).
         qp: numerical settings of the QP back-end.
     """
 
     l1_weight: float = 1e-6
     regularization: float = 1e-6
-    qp_backend: str = "proxsuite"
+    proximal_weight: float = 1e-6
+    qp_backend: str = DEFAULT_BACKEND
     qp: QPSettings = field(default_factory=QPSettings)
 
     def __post_init__(self) -> None:
@@ -110,6 +125,8 @@ class SolverParams:
             raise ValueError(f"l1_weight must be > 0, got {self.l1_weight}")
         if not (np.isfinite(self.regularization) and self.regularization >= 0):
             raise ValueError(f"regularization must be >= 0, got {self.regularization}")
+        if not (np.isfinite(self.proximal_weight) and self.proximal_weight >= 0):
+            raise ValueError(f"proximal_weight must be >= 0, got {self.proximal_weight}")
 
 
 class Solver:
@@ -121,6 +138,10 @@ class Solver:
     """
 
     name = "base"
+    uses_repulsive = False
+    """Whether ``_solve`` reads ``ControlProblem.repulsive`` (callers may pass zeros otherwise)."""
+    uses_qp = False
+    """Whether the solver solves QPs (and so depends on ``qp_backend``)."""
 
     def __init__(self, params: SolverParams | None = None) -> None:
         self.params = params or SolverParams()
@@ -147,14 +168,18 @@ class Solver:
                 qd, status, iters, detail = self._solve(problem)
             except (ValueError, np.linalg.LinAlgError, RuntimeError) as exc:
                 qd, status, iters, detail = None, "failed", 0, f"{type(exc).__name__}: {exc}"
-        if qd is None or not np.all(np.isfinite(qd)):
+        if qd is None or not math.isfinite(qd.sum()):  # NaN or inf anywhere makes the sum non-finite
             if status not in FAILURE_STATUSES:
                 status, detail = "failed", detail or "solver returned non-finite velocities"
             self.reset()
             qd = np.zeros(max(n, 0))
         elif not invalid:
-            qd = np.clip(qd, problem.lower, problem.upper)  # remove solver-tolerance overshoot
-        residual = float(np.linalg.norm(problem.jacobian @ qd - problem.reference)) if not invalid else float("nan")
+            qd = np.minimum(np.maximum(qd, problem.lower), problem.upper)  # tolerance overshoot; a third of np.clip's cost
+        if invalid:
+            residual = float("nan")
+        else:
+            d = problem.jacobian @ qd - problem.reference
+            residual = math.sqrt(float(d @ d))
         return SolverResult(
             velocities=qd,
             status=status,

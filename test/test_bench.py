@@ -1,0 +1,49 @@
+"""`dualarm bench` end to end on a tiny random set (no timing asserts: speed goes into the bench)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from dualarm_control.app.bench import run_bench, solver_configs
+from dualarm_control.app.cli import main
+from dualarm_control.controller import ControllerParams
+
+
+def test_bench_writes_every_part(tmp_path: Path) -> None:
+    """bench.json has the random set (every accepted solver x back-end), refusals, exactness and scaling."""
+    argv = ["bench", "--scenario", "none", "--cases", "6", "--solver", "standard_qp,sparse_qp",
+            "--backend", "daqp,quadprog", "--output", str(tmp_path)]
+    assert main(argv) == 0
+    record = json.loads((tmp_path / "bench.json").read_text())
+    rows = record["random"]["rows"]
+    assert {"standard_qp | daqp", "standard_qp | quadprog", "sparse_qp | daqp"} <= set(rows)
+    assert "sparse_qp | quadprog" in record["refused"] and "semi-definite" in record["refused"]["sparse_qp | quadprog"]
+    for name in ("standard_qp | daqp", "sparse_qp | daqp"):
+        row = rows[name]
+        assert row["failures"] == 0 and row["samples"] == 6
+        assert 0 < row["cycle_p50_ms"] <= row["cycle_p99_ms"]
+        assert row[record["random"]["ratio_columns"][0]] > 0
+    assert rows["sparse_qp | daqp"]["active_joints_max"] <= 6
+    assert record["exactness"]["cases"] == 6
+    assert {r["arms"] for r in record["scaling"].values()} == {2, 3, 4}
+    text = (tmp_path / "bench.md").read_text()
+    assert "| sparse_qp | daqp |" in text and "Exactness" in text and "Scaling" in text
+
+
+def test_pseudo_inverse_is_listed_once() -> None:
+    """A solver without a QP does not depend on the back-end: one row, back-end '-'."""
+    configs, refused = solver_configs(ControllerParams(), ["pseudo_inverse"], ["daqp", "proxsuite"])
+    assert list(configs) == ["pseudo_inverse | -"] and not refused
+
+
+def test_unknown_backend_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench", "--scenario", "none", "--backend", "nope", "--output", str(tmp_path)]) == 2
+    assert "nope" in capsys.readouterr().err
+
+
+def test_run_bench_without_scenario_has_no_scenario_part() -> None:
+    record = run_bench(None, ["standard_qp"], ["daqp"], count=4, scaling_arms=(2,))
+    assert "scenario" not in record and record["random"]["cases"] == 4
