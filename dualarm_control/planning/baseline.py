@@ -19,7 +19,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualarm_control.kinematics import DualArmModel, FloatArray, pose_error
-from dualarm_control.planning.index import chain_terms, index_and_gradient, performance_index
+from dualarm_control.planning.index import (
+    chain_terms,
+    index_and_gradient,
+    performance_index,
+)
 from dualarm_control.planning.path import SampledPath
 
 

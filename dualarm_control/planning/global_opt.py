@@ -17,6 +17,7 @@ Units: q [rad], c [m^2/rad^2], lambda [m^2/rad^6] (so that lambda ||dq||^4 is an
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -81,7 +82,7 @@ class BlockResult:
 def smoothness(configs: Sequence[FloatArray], before: FloatArray | None, after: FloatArray | None) -> float:
     """Smoothness sum of eq (18)/(20) without lambda: sum of ||q_i - q_{i-1}||^4 along the chain."""
     chain = ([before] if before is not None else []) + list(configs) + ([after] if after is not None else [])
-    return float(sum(np.sum((b - a) ** 2) ** 2 for a, b in zip(chain[:-1], chain[1:], strict=True)))
+    return float(sum(np.sum((b - a) ** 2) ** 2 for a, b in itertools.pairwise(chain)))
 
 
 class BlockProblem:
@@ -120,7 +121,7 @@ class BlockProblem:
         chain += [(k, qs[k]) for k in range(self.n)]
         if self.block.after is not None:
             chain.append((None, self.block.after))
-        for (ka, qa), (kb, qb) in zip(chain[:-1], chain[1:], strict=True):
+        for (ka, qa), (kb, qb) in itertools.pairwise(chain):
             d = qb - qa
             sq = float(d @ d)
             value += lam * sq * sq
