@@ -15,6 +15,7 @@ configuration and pose segments, so the nodes can load it by name) with these ex
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -68,7 +69,7 @@ class PlanConfig:
     def __post_init__(self) -> None:
         h = sum(self.corner.samples)
         keys = self.key_points
-        if len(keys) < 2 or keys[0] != 1 or keys[-1] != h or any(b <= a for a, b in zip(keys, keys[1:])):
+        if len(keys) < 2 or keys[0] != 1 or keys[-1] != h or any(b <= a for a, b in itertools.pairwise(keys)):
             raise ScenarioError(f"plan.key_points: got {list(keys)}, expected increasing 1-based indices from 1 to {h}")
         if self.execution_subdivisions < 1:
             raise ScenarioError(f"execution.subdivisions: got {self.execution_subdivisions}, expected >= 1")
