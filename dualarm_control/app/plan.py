@@ -107,7 +107,7 @@ _WORKER: dict[str, Any] = {}
 
 
 def _init_worker(config: PlanConfig) -> None:
-    """Pool initializer (also used in-process): model and sampled path for this process."""
+    """Pool initializer: model and sampled path for this worker process."""
     _WORKER["model"] = DualArmModel()
     _WORKER["path"] = config.corner.sample()
     _WORKER["config"] = config
@@ -165,16 +165,10 @@ def default_workers() -> int:
 
 def _run_tasks(
     calls: list[tuple[Callable[..., BlockResult], tuple[Any, ...]]],
-    pool: ProcessPoolExecutor | None,
+    pool: ProcessPoolExecutor,
     on_done: Callable[[], None],
 ) -> list[BlockResult]:
-    """Run the calls (in the pool, or here if None); results in call order."""
-    if pool is None:
-        out = []
-        for fn, args in calls:
-            out.append(fn(*args))
-            on_done()
-        return out
+    """Run the calls in the pool; results in call order."""
     futures: dict[Future[BlockResult], int] = {pool.submit(fn, *args): k for k, (fn, args) in enumerate(calls)}
     results: list[BlockResult | None] = [None] * len(calls)
     for fut in as_completed(futures):
@@ -208,9 +202,6 @@ def optimise(
 
         return on_done
 
-    if workers == 1:
-        _init_worker(config)
-        return _both_stages(config, None, tick, n_starts, n_inner, workers)
     with _single_threaded_children():
         ctx = multiprocessing.get_context("spawn")
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(config,))
@@ -222,13 +213,13 @@ def optimise(
 
 def _both_stages(
     config: PlanConfig,
-    pool: ProcessPoolExecutor | None,
+    pool: ProcessPoolExecutor,
     tick: Callable[[str], Callable[[], None]],
     n_starts: int,
     n_inner: int,
     workers: int,
 ) -> tuple[FloatArray, dict[str, Any]]:
-    """Stage 1 then stage 2 (module docstring) on ``pool`` (or in-process)."""
+    """Stage 1 then stage 2 (module docstring) on ``pool``."""
     keys = config.key_indices
     n_intervals = len(keys) - 1
     key_results = _run_tasks([(key_task, (s,)) for s in range(n_starts)], pool, tick("key points"))
