@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dualarm_control.app.plan import optimise, plan
+from dualarm_control.app.plan import distinct_best, optimise, plan
 from dualarm_control.app.plan_report import PLAN_FORMAT, load_plan, plan_record
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel
@@ -231,6 +231,18 @@ def test_plan_is_deterministic_and_independent_of_the_worker_count() -> None:
     assert not np.array_equal(one, other)
 
 
+def test_distinct_best_skips_repeated_optima() -> None:
+    from dualarm_control.planning.global_opt import BlockResult
+
+    def result(value: float, q: float) -> BlockResult:
+        qs = np.full((2, 14), q)
+        return BlockResult(qs, value, qs, value + 1.0, 10, "optimised")
+
+    results = [result(2.0, 0.0), result(1.0, 0.5), result(1.0, 0.5 + 1e-5), result(1.5, 0.2), result(3.0, 0.9)]
+    assert distinct_best(results, 3) == [1, 3, 0]  # 2 repeats 1's optimum; ties go to the lower index
+    assert distinct_best(results, 10) == [1, 3, 0, 4]
+
+
 # ---- baseline (eq 12-13) ----------------------------------------------------------------
 def test_baseline_tracks_the_path_and_its_null_space_term_lowers_the_index(model: DualArmModel,
                                                                            corner: CornerPath) -> None:
@@ -274,6 +286,7 @@ def test_corner_scenario_has_the_paper_settings_and_a_start_on_the_path(model: D
     cfg = load_plan_config("corner_path")
     assert cfg.key_points == (1, 7, 13, 19, 25, 31)
     assert (cfg.lambda_key, cfg.lambda_inner, cfg.starts, cfg.baseline.k0) == (1.5, 3.0, 100, 1.0)
+    assert cfg.candidates == 4 and cfg.inner_starts == 10
     assert cfg.corner == CornerPath()
     scenario = load_scenario("corner_path")
     path = cfg.corner.sample()

@@ -10,6 +10,12 @@ Two stages, each a set of independent NLPs (:mod:`dualarm_control.planning.globa
    optimum as start 0 (12 starts per interval, values equal to 1e-6), so the default is 10
    inner starts, not the paper's 100; raise ``plan.inner_starts`` to check.
 
+Stage 2 runs for the ``candidates`` best *distinct* stage-1 optima (default 1 = the paper's
+method). With more, the complete plan with the lowest whole-path cost
+``sum_i c(q_i) + lambda_inner sum_i ||q_i - q_{i-1}||^4`` over all h samples is kept: eq (19)
+on six key points is only a proxy of the paper's target sum_i c_i (Sect. III), and the best
+key-point optimum did not always give the best complete plan (docs/planner.md).
+
 Every (stage, problem, start) task draws its random numbers from its own
 ``numpy.random.SeedSequence(seed, spawn_key=(stage, problem, start))`` and results are
 reduced in start order (lowest value, ties to the lowest start index), so the plan depends
@@ -66,7 +72,9 @@ class PlanResult:
         joint_limit_violations: number of (sample, joint) outside the limits.
         key_values: eq (19) value of every key-point start, (starts,).
         key_start_values: eq (19) value at every key-point start's initial guess, (starts,).
-        best_key_start: index of the winning key-point start.
+        best_key_start: index of the key-point start the plan is built on.
+        candidate_starts: key-point starts that went through stage 2 (best distinct first).
+        candidate_costs: whole-path cost of each candidate's complete plan.
         inner_values: eq (20) value per interval and start, (intervals, starts).
         best_inner_starts: winning start per interval.
         runtime_s: wall time of the optimisation (both stages) [s].
@@ -85,6 +93,8 @@ class PlanResult:
     key_values: FloatArray
     key_start_values: FloatArray
     best_key_start: int
+    candidate_starts: list[int]
+    candidate_costs: list[float]
     inner_values: FloatArray
     best_inner_starts: list[int]
     runtime_s: float
@@ -191,14 +201,14 @@ def optimise(
     n_inner = min(config.starts, config.inner_starts)
     keys = config.key_indices
     n_intervals = len(keys) - 1
-    total = n_starts + n_inner * n_intervals
+    total = n_starts + min(config.candidates, n_starts) * n_inner * n_intervals
     done = {"n": 0}
 
     def tick(label: str) -> Callable[[], None]:
         def on_done() -> None:
             done["n"] += 1
             if progress is not None:
-                progress(done["n"] / total, label)
+                progress(min(done["n"] / total, 1.0), label)
 
         return on_done
 
@@ -206,9 +216,34 @@ def optimise(
         ctx = multiprocessing.get_context("spawn")
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(config,))
         try:
-            return _both_stages(config, pool, tick, n_starts, n_inner, workers)
+            result = _both_stages(config, pool, tick, n_starts, n_inner, workers)
         finally:
             pool.shutdown()
+    if progress is not None and done["n"] < total:  # fewer distinct candidates than asked for
+        progress(1.0, "inner points")
+    return result
+
+
+def distinct_best(results: list[BlockResult], count: int, tolerance: float = 1e-3) -> list[int]:
+    """Indices of the ``count`` best results in (value, index) order, skipping any result whose
+    configurations are within ``tolerance`` rad (max abs) of one already chosen (the same
+    local optimum reached from several starts)."""
+    chosen: list[int] = []
+    for k in sorted(range(len(results)), key=lambda k: (results[k].value, k)):
+        q = results[k].configurations
+        if all(np.max(np.abs(q - results[c].configurations)) > tolerance for c in chosen):
+            chosen.append(k)
+        if len(chosen) == count:
+            break
+    return chosen
+
+
+def whole_path_cost(model: DualArmModel, path: SampledPath, configurations: FloatArray, weight: float) -> float:
+    """Cost of a complete plan: sum_i c(q_i) + weight * sum_i ||q_i - q_{i-1}||^4 over all h samples
+    (eq 19 applied to the whole path; the paper's target sum_i c_i plus its smoothness term)."""
+    c = float(np.sum(path_indices(model, path, configurations)))
+    steps = np.diff(configurations, axis=0)
+    return c + weight * float(np.sum(np.sum(steps**2, axis=1) ** 2))
 
 
 def _both_stages(
@@ -219,37 +254,50 @@ def _both_stages(
     n_inner: int,
     workers: int,
 ) -> tuple[FloatArray, dict[str, Any]]:
-    """Stage 1 then stage 2 (module docstring) on ``pool``."""
+    """Stage 1, then stage 2 for each of the best distinct stage-1 candidates, on ``pool``."""
     keys = config.key_indices
     n_intervals = len(keys) - 1
     key_results = _run_tasks([(key_task, (s,)) for s in range(n_starts)], pool, tick("key points"))
-    best_key = _best(key_results)
-    q_key = key_results[best_key].configurations
-    calls: list[tuple[Callable[..., BlockResult], tuple[Any, ...]]] = [
-        (inner_task, (j, s, q_key[j], q_key[j + 1])) for j in range(n_intervals) for s in range(n_inner)
-    ]
+    candidates = distinct_best(key_results, config.candidates)
+    calls: list[tuple[Callable[..., BlockResult], tuple[Any, ...]]] = []
+    for c in candidates:
+        q_key = key_results[c].configurations
+        calls += [(inner_task, (j, s, q_key[j], q_key[j + 1])) for j in range(n_intervals) for s in range(n_inner)]
     inner_flat = _run_tasks(calls, pool, tick("inner points"))
-    h = len(config.corner.sample())
-    configurations = np.zeros((h, len(q_key[0])))
-    for k, i in enumerate(keys):
-        configurations[i] = q_key[k]
-    inner_values = np.zeros((n_intervals, n_inner))
-    best_inner = []
-    for j in range(n_intervals):
-        results = inner_flat[j * n_inner:(j + 1) * n_inner]
-        inner_values[j] = [r.value for r in results]
-        b = _best(results)
-        best_inner.append(b)
-        configurations[keys[j] + 1:keys[j + 1]] = results[b].configurations
+    model = DualArmModel()
+    path = config.corner.sample()
+    plans, costs, inner_values, best_inner = [], [], [], []
+    per_candidate = n_intervals * n_inner
+    for rank, c in enumerate(candidates):
+        q_key = key_results[c].configurations
+        configurations = np.zeros((len(path), model.nq))
+        for k, i in enumerate(keys):
+            configurations[i] = q_key[k]
+        values = np.zeros((n_intervals, n_inner))
+        winners = []
+        for j in range(n_intervals):
+            first = rank * per_candidate + j * n_inner
+            results = inner_flat[first:first + n_inner]
+            values[j] = [r.value for r in results]
+            b = _best(results)
+            winners.append(b)
+            configurations[keys[j] + 1:keys[j + 1]] = results[b].configurations
+        plans.append(configurations)
+        costs.append(whole_path_cost(model, path, configurations, config.lambda_inner))
+        inner_values.append(values)
+        best_inner.append(winners)
+    chosen = min(range(len(candidates)), key=lambda r: (costs[r], r))
     details = {
         "key_values": np.array([r.value for r in key_results]),
         "key_start_values": np.array([r.start_value for r in key_results]),
-        "best_key_start": best_key,
-        "inner_values": inner_values,
-        "best_inner_starts": best_inner,
+        "best_key_start": candidates[chosen],
+        "candidate_starts": candidates,
+        "candidate_costs": costs,
+        "inner_values": inner_values[chosen],
+        "best_inner_starts": best_inner[chosen],
         "workers": workers,
     }
-    return configurations, details
+    return plans[chosen], details
 
 
 def path_indices(model: DualArmModel, path: SampledPath, configurations: FloatArray) -> FloatArray:
@@ -285,6 +333,8 @@ def plan(config: PlanConfig, workers: int | None = None, progress: Progress | No
         key_values=details["key_values"],
         key_start_values=details["key_start_values"],
         best_key_start=details["best_key_start"],
+        candidate_starts=details["candidate_starts"],
+        candidate_costs=details["candidate_costs"],
         inner_values=details["inner_values"],
         best_inner_starts=details["best_inner_starts"],
         runtime_s=runtime,

@@ -28,6 +28,9 @@ def add_plan_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser],
     pl.add_argument("--output", default="out/plan", metavar="DIR", help="output directory (default: %(default)s)")
     pl.add_argument("--starts", type=int, metavar="N", help="random starts of the key-point NLP (default: the "
                     "scenario's plan.starts, 100)")
+    pl.add_argument("--candidates", type=int, metavar="K", help="best distinct key-point optima completed by the "
+                    "inner stage; the lowest whole-path cost wins (default: the scenario's plan.candidates, 4; "
+                    "1 = the paper's method)")
     pl.add_argument("--seed", type=int, metavar="S", help="base seed (default: the scenario's plan.seed, 0)")
     pl.add_argument("--workers", type=int, metavar="W", help="processes (default: every core)")
     pl.add_argument("--no-execute", action="store_true", help="skip the execution in the simulator")
@@ -52,14 +55,19 @@ def run_plan_command(args: argparse.Namespace, progress: ProgressFactory) -> int
         if args.starts < 1:
             raise DualArmError(f"--starts: got {args.starts}, expected >= 1")
         config = dataclasses.replace(config, starts=args.starts)
+    if args.candidates is not None:
+        if args.candidates < 1:
+            raise DualArmError(f"--candidates: got {args.candidates}, expected >= 1")
+        config = dataclasses.replace(config, candidates=args.candidates)
     if args.seed is not None:
         config = dataclasses.replace(config, seed=args.seed)
     workers = default_workers() if args.workers is None else args.workers
     if workers < 1:
         raise DualArmError(f"--workers: got {workers}, expected >= 1")
     out = Path(args.output)
-    print(f"plan {config.name!r}: {config.starts} key-point starts, {min(config.starts, config.inner_starts)} "
-          f"inner starts per interval, seed {config.seed}, {workers} workers; output {out}", file=sys.stderr)
+    print(f"plan {config.name!r}: {config.starts} key-point starts, {config.candidates} candidates, "
+          f"{min(config.starts, config.inner_starts)} inner starts per interval, seed {config.seed}, "
+          f"{workers} workers; output {out}", file=sys.stderr)
     result = plan(config, workers, progress("plan"))
     model = DualArmModel()
     execution = None

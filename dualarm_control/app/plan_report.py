@@ -77,7 +77,7 @@ def plan_record(result: PlanResult, model: DualArmModel, execution: ExecutionRes
             "key_points": list(cfg.key_points),
         },
         "parameters": {
-            "lambda_key": cfg.lambda_key, "lambda_inner": cfg.lambda_inner,
+            "lambda_key": cfg.lambda_key, "lambda_inner": cfg.lambda_inner, "candidates": cfg.candidates,
             "inner_spread_rad": cfg.inner_spread,
             "baseline": asdict(cfg.baseline),
             "execution": {"gain": cfg.execution_gain, "velocity_scale": cfg.execution_velocity_scale,
@@ -88,7 +88,9 @@ def plan_record(result: PlanResult, model: DualArmModel, execution: ExecutionRes
         "configurations": result.configurations.tolist(),
         "points": points,
         "key_stage": {"best_start": result.best_key_start, "values": result.key_values.tolist(),
-                      "start_values": result.key_start_values.tolist()},
+                      "start_values": result.key_start_values.tolist(),
+                      "candidates": cfg.candidates, "candidate_starts": result.candidate_starts,
+                      "candidate_whole_path_costs": result.candidate_costs},
         "inner_stage": {"best_starts": result.best_inner_starts, "values": result.inner_values.tolist()},
         "initial_configuration_study": {
             "planned_first_configuration_average_index": result.baseline_average_index,

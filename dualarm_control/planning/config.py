@@ -6,7 +6,7 @@ configuration and pose segments, so the nodes can load it by name) with these ex
 * ``corner.side`` [m], ``corner.fillet_radius`` [m], ``corner.height`` [m] (plane z in F1),
   ``corner.samples`` [h1, h2, h3], ``corner.rpy_deg`` (R_d) — Sect. IV-B of paper 003;
 * ``plan.key_points`` (1-based, Gamma of eq 15), ``plan.lambda_key`` (eq 19),
-  ``plan.lambda_inner`` (eq 20), ``plan.starts``, ``plan.inner_starts``, ``plan.seed``, ``plan.inner_spread_rad``
+  ``plan.lambda_inner`` (eq 20), ``plan.starts``, ``plan.inner_starts``, ``plan.candidates``, ``plan.seed``, ``plan.inner_spread_rad``
   (std. dev. of the random perturbation of the inner starts);
 * ``baseline.k0`` (eq 13), ``baseline.gain`` [1/s], ``baseline.speed`` [m/s];
 * ``execution.gain`` [1/s] (joint tracking), ``execution.velocity_scale``,
@@ -39,6 +39,8 @@ class PlanConfig:
         lambda_key, lambda_inner: smoothness weights of eq (19) and (20).
         starts: random starts of the key-point NLP (eq 19).
         inner_starts: starts per inner NLP (eq 20), capped at ``starts``.
+        candidates: best distinct key-point optima completed by stage 2; the complete plan of
+            lowest whole-path cost is kept (1 = the paper's method).
         seed: base seed of all random starts.
         inner_spread: std. dev. [rad] of the perturbation of inner starts 1.. (start 0 is
             the plain interpolation).
@@ -57,6 +59,7 @@ class PlanConfig:
     lambda_inner: float = 3.0
     starts: int = 100
     inner_starts: int = 10
+    candidates: int = 4
     seed: int = 0
     inner_spread: float = 0.2
     baseline: BaselineParams = field(default_factory=BaselineParams)
@@ -73,8 +76,9 @@ class PlanConfig:
             raise ScenarioError(f"plan.key_points: got {list(keys)}, expected increasing 1-based indices from 1 to {h}")
         if self.execution_subdivisions < 1:
             raise ScenarioError(f"execution.subdivisions: got {self.execution_subdivisions}, expected >= 1")
-        if self.starts < 1 or self.inner_starts < 1:
-            raise ScenarioError(f"plan.starts / plan.inner_starts: got {self.starts} / {self.inner_starts}, expected >= 1")
+        if min(self.starts, self.inner_starts, self.candidates) < 1:
+            raise ScenarioError(f"plan.starts / inner_starts / candidates: got {self.starts} / {self.inner_starts} / "
+                                f"{self.candidates}, expected >= 1")
         for key in ("lambda_key", "lambda_inner", "inner_spread"):
             if not (math.isfinite(getattr(self, key)) and getattr(self, key) >= 0):
                 raise ScenarioError(f"plan.{key}: got {getattr(self, key)}, expected a number >= 0")
@@ -137,6 +141,7 @@ def load_plan_config(name_or_path: str) -> PlanConfig:
         lambda_inner=_number(flat, "plan.lambda_inner", d.lambda_inner),
         starts=int(_number(flat, "plan.starts", d.starts)),
         inner_starts=int(_number(flat, "plan.inner_starts", d.inner_starts)),
+        candidates=int(_number(flat, "plan.candidates", d.candidates)),
         seed=int(_number(flat, "plan.seed", d.seed)),
         inner_spread=_number(flat, "plan.inner_spread_rad", d.inner_spread),
         baseline=BaselineParams(
