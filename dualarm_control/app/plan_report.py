@@ -139,7 +139,8 @@ def plot_indices(result: PlanResult, out: Path) -> None:
     ax.axvspan(h1 + 0.5, h1 + h2 + 0.5, color="y", alpha=0.15, label="fillet")
     ax.set_xlabel("path point i (grey: key points)")
     ax.set_ylabel(r"$c = u^T J_r J_r^T u$ [m$^2$/rad$^2$]")
-    ax.set_title(f"{result.config.name}: index along the path (paper Fig. 4), {result.config.starts} starts")
+    ax.set_title(f"{result.config.name}: index along the path (paper Fig. 4), {result.config.starts} starts, "
+                 f"{result.config.candidates} candidates")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
