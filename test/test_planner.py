@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dualarm_control.app.plan import distinct_best, optimise, plan
+from dualarm_control.app.plan import PlanResult, distinct_best, optimise, plan
 from dualarm_control.app.plan_report import PLAN_FORMAT, load_plan, plan_record
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel
@@ -306,14 +306,14 @@ def test_scenario_without_a_corner_is_rejected() -> None:
 
 # ---- end to end: plan.json and the executed path ----------------------------------------
 @pytest.fixture(scope="module")
-def small_plan() -> object:
+def small_plan() -> PlanResult:
     return plan(small_config(), workers=1)
 
 
-def test_plan_record_is_self_describing(small_plan: object, model: DualArmModel, tmp_path: Path) -> None:
+def test_plan_record_is_self_describing(small_plan: PlanResult, model: DualArmModel, tmp_path: Path) -> None:
     from dualarm_control.app.plan_report import write_plan
 
-    doc = plan_record(small_plan, model, None)  # type: ignore[arg-type]
+    doc = plan_record(small_plan, model, None)
     path = write_plan(tmp_path, doc)
     back = load_plan(path)
     assert back["format"] == PLAN_FORMAT and back["joint_names"] == model.joint_names
@@ -330,10 +330,10 @@ def test_plan_record_is_self_describing(small_plan: object, model: DualArmModel,
         load_plan(bad)
 
 
-def test_executed_plan_stays_on_the_path(small_plan: object, model: DualArmModel) -> None:
+def test_executed_plan_stays_on_the_path(small_plan: PlanResult, model: DualArmModel) -> None:
     from dualarm_control.app.plan_execute import execute_plan
 
-    result = execute_plan(small_config(), small_plan.configurations, model)  # type: ignore[attr-defined]
+    result = execute_plan(small_config(), small_plan.configurations, model)
     assert result.duration > 1.0
     assert result.max_error_m < 1e-3  # m: 1 mm along a 30 cm corner
     assert result.max_error_rad < 5e-3

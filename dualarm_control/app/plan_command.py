@@ -40,7 +40,6 @@ def add_plan_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser],
 def run_plan_command(args: argparse.Namespace, progress: ProgressFactory) -> int:
     """Body of ``dualarm plan`` (see :func:`add_plan_parser`)."""
     from dualarm_control.app.plan import default_workers, plan
-    from dualarm_control.app.plan_execute import execute_plan
     from dualarm_control.app.plan_report import (
         plan_record,
         plot_indices,
@@ -72,6 +71,8 @@ def run_plan_command(args: argparse.Namespace, progress: ProgressFactory) -> int
     model = DualArmModel()
     execution = None
     if not args.no_execute:
+        from dualarm_control.app.plan_execute import execute_plan
+
         execution = execute_plan(config, result.configurations, model, progress("execute"))
     doc = plan_record(result, model, execution)
     path = write_plan(out, doc)

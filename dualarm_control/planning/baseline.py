@@ -18,7 +18,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dualarm_control.kinematics import DualArmModel, FloatArray, pose_error
+from dualarm_control.kinematics import (
+    DualArmModel,
+    FloatArray,
+    pose_error,
+    rotation_angle,
+)
 from dualarm_control.planning.index import (
     chain_terms,
     index_and_gradient,
@@ -60,10 +65,9 @@ class BaselineResult:
     rotation_errors: FloatArray
 
 
-def _closure(model_terms_p: FloatArray, model_terms_r: FloatArray, p_d: FloatArray, r_d: FloatArray) -> tuple[float, float]:
-    e = pose_error(model_terms_p, model_terms_r, p_d, r_d)
-    angle = math.acos(max(-1.0, min(1.0, (float(np.trace(r_d.T @ model_terms_r)) - 1.0) / 2.0)))
-    return float(np.linalg.norm(e[:3])), angle
+def _closure(position: FloatArray, rotation: FloatArray, p_d: FloatArray, r_d: FloatArray) -> tuple[float, float]:
+    """(||p_d - p|| [m], geodesic angle between R and R_d [rad])."""
+    return float(np.linalg.norm(p_d - position)), rotation_angle(rotation, r_d)
 
 
 def run_baseline(

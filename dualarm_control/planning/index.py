@@ -88,8 +88,8 @@ def chain_terms(model: DualArmModel, q: FloatArray) -> ChainTerms:
     """One pinocchio pass at q (14,) [rad] -> :class:`ChainTerms`."""
     pin.computeJointJacobians(model.model, model.data, q)
     pin.updateFramePlacements(model.model, model.data)
-    o1 = model.data.oMf[model._f1]
-    o2 = model.data.oMf[model._f2]
+    f1, f2 = model.tool_frame_ids
+    o1, o2 = model.data.oMf[f1], model.data.oMf[f2]
     jac = model.data.J  # world frame: rows [V; Z]
     z = np.array(jac[3:, :])
     w = np.array(jac[:3, :]) + np.cross(z, o2.translation, axis=0)
