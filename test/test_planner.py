@@ -227,6 +227,7 @@ def test_plan_is_deterministic_and_independent_of_the_worker_count() -> None:
     two, details_two = optimise(small_config(), workers=2)
     np.testing.assert_array_equal(one, two)
     np.testing.assert_array_equal(details_one["key_values"], details_two["key_values"])
+    assert np.all(details_one["key_values"] <= details_one["key_start_values"])  # no start got worse
     other, _ = optimise(small_config(seed=1), workers=1)
     assert not np.array_equal(one, other)
 

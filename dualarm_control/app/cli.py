@@ -170,7 +170,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     """Global manipulability plan of a relative path (paper 003); logic in app/plan_command.py."""
     from dualarm_control.app.plan_command import run_plan_command
 
-    return run_plan_command(args, _progress_printer)
+    return run_plan_command(args)
 
 
 def cmd_bag_record(args: argparse.Namespace) -> int:

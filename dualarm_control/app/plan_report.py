@@ -12,13 +12,15 @@ from __future__ import annotations
 import json
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from dualarm_control.app.plan import PlanResult
-from dualarm_control.app.plan_execute import ExecutionResult
 from dualarm_control.kinematics import DualArmModel
+
+if TYPE_CHECKING:  # the simulator (pybullet) is only imported when a plan is executed
+    from dualarm_control.app.plan_execute import ExecutionResult
 
 PLAN_FORMAT = "dualarm_control/plan/1"
 
