@@ -21,7 +21,7 @@ import numpy as np
 
 from dualarm_control.kinematics import DualArmModel, FloatArray, rotation_angle
 from dualarm_control.planning.config import PlanConfig
-from dualarm_control.planning.joint_trajectory import JointPathTrajectory, densify
+from dualarm_control.planning.joint_trajectory import plan_trajectory
 from dualarm_sim.cell import CellConfig, DualArmCell
 
 CONTROL_PERIOD = 0.005  # s, as the controller node
@@ -65,8 +65,7 @@ def execute_plan(
     model = model or DualArmModel()
     path = config.corner.sample()
     sub = config.execution_subdivisions
-    knots, knot_positions = densify(model, path, configurations, sub)
-    traj = JointPathTrajectory(knots, knot_positions, model.qd_max, velocity_scale=config.execution_velocity_scale)
+    traj = plan_trajectory(model, path, configurations, sub, config.execution_velocity_scale)
     steps = math.ceil((traj.duration + config.execution_settle) / CONTROL_PERIOD)
     sample_steps = {round(t / CONTROL_PERIOD): i // sub for i, t in enumerate(traj.sample_times) if i % sub == 0}
     r_d = path.rotation

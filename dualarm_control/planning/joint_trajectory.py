@@ -173,3 +173,28 @@ class JointPathTrajectory:
             path_parameter=float(s),
             done=t >= self.duration,
         )
+
+
+def plan_trajectory(
+    model: DualArmModel,
+    path: SampledPath,
+    configurations: FloatArray,
+    subdivisions: int = 8,
+    velocity_scale: float = 0.5,
+    limits: MotionLimits | None = None,
+) -> JointPathTrajectory:
+    """The executable joint trajectory of a plan: :func:`densify` then :class:`JointPathTrajectory`.
+
+    Args:
+        model: the cell model (joint limits, kinematics for the densification).
+        path: the sampled relative path the configurations were planned on.
+        configurations: planned q_i, (h, 14) [rad], one per path sample.
+        subdivisions: knots per path interval (1 = the planned configurations only).
+        velocity_scale: share of the joint velocity limits the reference may use.
+        limits: relative-motion limits of the path parameter.
+
+    Returns:
+        The trajectory; its knots ``subdivisions * i`` are the planned configurations.
+    """
+    knots, positions = densify(model, path, configurations, subdivisions)
+    return JointPathTrajectory(knots, positions, model.qd_max, limits, velocity_scale)
