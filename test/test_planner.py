@@ -36,7 +36,7 @@ from dualarm_control.planning.index import (
     performance_index,
 )
 from dualarm_control.planning.joint_trajectory import JointPathTrajectory, densify
-from dualarm_control.planning.path import CornerPath
+from dualarm_control.planning.path import CornerPath, SampledPath
 from dualarm_control.scenario import load_scenario
 
 FD_STEP = 1e-6  # central differences: truncation ~1e-12 * |third derivative|, round-off ~1e-10
@@ -262,8 +262,8 @@ def test_joint_trajectory_passes_through_the_knots_within_limits(model: DualArmM
     path = corner.sample()
     keys = list(range(0, 31, 3))
     configs = random_feasible_chain(model, path, keys, np.random.default_rng(13))
-    knots, positions = densify(model, path.__class__(path.positions[keys], path.tangents[keys], path.rotation),
-                               configs, 3)
+    coarse = SampledPath(path.positions[keys], path.tangents[keys], path.rotation)
+    knots, positions = densify(model, coarse, configs, 3)
     np.testing.assert_array_equal(knots[::3], configs)
     for q, p in zip(knots, positions, strict=True):
         e_p, e_r = closure_errors(model, q, p, path.rotation)
