@@ -113,6 +113,11 @@ class DualArmModel:
         self._f1 = self.model.getFrameId(LEFT_TOOL)
         self._f2 = self.model.getFrameId(RIGHT_TOOL)
 
+    @property
+    def tool_frame_ids(self) -> tuple[int, int]:
+        """Pinocchio frame ids of the left (F1) and right (F2) tool frames."""
+        return self._f1, self._f2
+
     def check_q(self, q: FloatArray, what: str = "joint positions") -> FloatArray:
         """Return q as a float array of shape (nq,), or raise DimensionError naming the problem."""
         q = np.asarray(q, dtype=float)

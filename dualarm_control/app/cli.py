@@ -194,6 +194,13 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_plan(args: argparse.Namespace) -> int:
+    """Global manipulability plan of a relative path (paper 003); logic in app/plan_command.py."""
+    from dualarm_control.app.plan_command import run_plan_command
+
+    return run_plan_command(args)
+
+
 def cmd_bag_record(args: argparse.Namespace) -> int:
     """Record topics to a rosbag2 directory (MCAP, version 9) until Ctrl-C/SIGTERM or --duration."""
     from dualarm_control.ros.recorder import default_bag_path, record
@@ -445,6 +452,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_topic_parser(sub)
     _add_param_parser(sub)
     _add_report_parser(sub)
+    from dualarm_control.app.plan_command import add_plan_parser
+
+    add_plan_parser(sub, cmd_plan)
     return parser
 
 
