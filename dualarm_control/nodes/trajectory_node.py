@@ -20,7 +20,7 @@ from trajectory_msgs.msg import MultiDOFJointTrajectory
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import ParamSpec, positive
 from dualarm_control.ros import convert
-from dualarm_control.ros.node import NodeFinished, declare, run, usage
+from dualarm_control.ros.node import declare, run, usage
 from dualarm_control.scenario import load_scenario
 from dualarm_control.trajectory import RelativeTrajectory
 
@@ -50,12 +50,15 @@ class TrajectoryNode:
         self.start_ns = 0
         self.segment = -1
         self.end_s = 0.0
+        self.finished = False
         if not self.lockstep:
             n.create_timer(p["control_period"], self.on_tick)
         self.log.info(f"scenario '{self.scenario.name}': {len(self.scenario.segments)} segments, "
                       f"{'lockstep' if self.lockstep else 'real-time'}; waiting for /joint_states")
 
     def on_joint_state(self, msg: Any) -> None:
+        if self.finished:
+            return
         stamp = convert.stamp_ns(msg.header.stamp)
         if self.trajectory is None:
             decoded = convert.joint_vectors(msg, self.order)
@@ -80,7 +83,8 @@ class TrajectoryNode:
         if t >= self.end_s:  # no target at or after the end: as many cycles as the in-process run
             self.log.info(f"scenario '{self.scenario.name}' complete at t={t:.2f} s")
             self._status(stamp, 0, "complete", t)
-            raise NodeFinished
+            self.finished = True  # run() stops spinning after this callback
+            return
         sample = self.trajectory.sample(t)
         self.pub.publish(convert.target_message(stamp, elapsed_ns, sample))
         if sample.segment != self.segment and not sample.done:

@@ -30,10 +30,6 @@ EXIT_PARAMS = 2
 SPIN_TIMEOUT_S = 0.1
 
 
-class NodeFinished(Exception):
-    """Raised by a node's callback to end spinning normally (e.g. scenario complete)."""
-
-
 def descriptor(spec: ParamSpec) -> Any:
     """rcl_interfaces/ParameterDescriptor of ``spec``: description, constraints, read-only."""
     from rcl_interfaces.msg import ParameterDescriptor
@@ -115,8 +111,29 @@ def init_rclpy(argv: Sequence[str]) -> Any:
     return context
 
 
+EXECUTOR_VARIABLE = "DUALARM_EXECUTOR"
+
+
+def make_executor(context: Any) -> Any:
+    """The nodes' executor: rclpy's C++ EventsExecutor (``rclpy.experimental``, Jazzy) when present,
+    else the SingleThreadedExecutor; ``DUALARM_EXECUTOR=single`` forces the latter. At 1 kHz the
+    events executor cut the per-callback overhead of the Python wait-set loop (docs/bench.md)."""
+    import os
+
+    from rclpy.executors import SingleThreadedExecutor
+
+    if os.environ.get(EXECUTOR_VARIABLE, "events") != "single":
+        try:
+            from rclpy.experimental.events_executor import EventsExecutor
+        except ImportError:
+            pass
+        else:
+            return EventsExecutor(context=context)
+    return SingleThreadedExecutor(context=context)
+
+
 def spin_until_stopped(executor: Any, stop: _StopOnSignal, until: Callable[[], bool] = lambda: False) -> None:
-    """Run callbacks until a signal, ``until()`` or a :class:`NodeFinished` from a callback."""
+    """Run callbacks until a signal or ``until()``."""
     while stop.signal is None and not until():
         executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
 
@@ -143,12 +160,11 @@ def wants_help(argv: Sequence[str]) -> bool:
 def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text: str = "") -> int:
     """A node's main: build the shell with ``make(context)``, spin it, shut down cleanly.
 
-    ``make`` returns a shell object with a ``node`` attribute and an optional ``close()``
-    (called once on the way out, while the node can still log). ``-h``/``--help`` prints
-    ``help_text`` and exits 0.
+    ``make`` returns a shell object with a ``node`` attribute, an optional ``finished`` flag
+    that ends spinning normally when a callback sets it (e.g. scenario complete), and an
+    optional ``close()`` (called once on the way out, while the node can still log).
+    ``-h``/``--help`` prints ``help_text`` and exits 0.
     """
-    from rclpy.executors import SingleThreadedExecutor
-
     argv = list(sys.argv if args is None else args)
     if wants_help(argv):
         print(help_text)
@@ -160,11 +176,9 @@ def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text
             read_params_files(params_files(argv), "_check_")  # missing or malformed file: exit 2
             context = init_rclpy(argv)
             shell = make(context)
-            executor = SingleThreadedExecutor(context=context)
+            executor = make_executor(context)
             executor.add_node(shell.node)
-            spin_until_stopped(executor, stop)
-        except NodeFinished:
-            pass
+            spin_until_stopped(executor, stop, lambda: bool(getattr(shell, "finished", False)))
         except ParameterError as exc:
             print(f"error: {exc}", file=sys.stderr, flush=True)
             return EXIT_PARAMS
@@ -192,7 +206,6 @@ def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text
 @contextmanager
 def tool_node(name: str) -> Iterator[tuple[Any, Any, _StopOnSignal]]:
     """A node, its executor and a stop flag for a tool verb; torn down in the right order."""
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
 
     context = init_rclpy([])
@@ -200,7 +213,7 @@ def tool_node(name: str) -> Iterator[tuple[Any, Any, _StopOnSignal]]:
     try:
         with _StopOnSignal() as stop:
             node = Node(name, context=context, start_parameter_services=False)
-            executor = SingleThreadedExecutor(context=context)
+            executor = make_executor(context)
             executor.add_node(node)
             yield node, executor, stop
     finally:
