@@ -13,6 +13,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from dualarm_control.joint_tracking import joint_tracking_velocity
 from dualarm_control.kinematics import (
     DualArmModel,
     FloatArray,
@@ -35,6 +36,7 @@ from dualarm_control.params import (
 )
 from dualarm_control.qp import DEFAULT_BACKEND, QPSettings
 from dualarm_control.solvers import (
+    ACTIVITY_THRESHOLD,
     ControlProblem,
     SolverParams,
     SolverResult,
@@ -195,6 +197,30 @@ class RelativeController:
             orientation_error=rotation_angle(state.rotation, r_des),
             cycle_time=time.perf_counter() - start,
         )
+
+    def track_joints(self, q: FloatArray, q_ref: FloatArray, qd_ref: FloatArray, target: RelativeTarget,
+                     gain: float) -> ControlOutput:
+        """Joint-space tracking of a planned trajectory (:func:`joint_tracking_velocity`) inside the
+        eq (23) bounds; the relative pose error is measured against ``target`` (the reference's
+        relative pose) for the report. Non-finite inputs give the zero command ("invalid_input")."""
+        start = time.perf_counter()
+        q = self.model.check_q(q)
+        q_ref, qd_ref = self.model.check_q(q_ref, "joint reference"), self.model.check_q(qd_ref, "joint reference")
+        if not math.isfinite(q.sum()):
+            return self._invalid("joint positions", start)
+        if not math.isfinite(q_ref.sum() + qd_ref.sum()):
+            return self._invalid("joint reference", start)
+        lower, upper = velocity_bounds(q, self.limits, self.params.period)
+        velocities = joint_tracking_velocity(q, q_ref, qd_ref, gain, lower, upper)
+        self._previous = velocities
+        p, r = self.model.relative_pose(q)
+        p_des, r_des = np.asarray(target.position, dtype=float), np.asarray(target.rotation, dtype=float)
+        active = int(np.count_nonzero(np.abs(velocities) > ACTIVITY_THRESHOLD))
+        elapsed = time.perf_counter() - start
+        result = SolverResult(velocities, "solved", elapsed, 0, active, float("nan"), "joint tracking")
+        return ControlOutput(velocities=velocities, result=result, position=p, rotation=r,
+                             position_error=float(np.linalg.norm(p_des - p)),
+                             orientation_error=rotation_angle(r, r_des), cycle_time=elapsed)
 
     def _invalid(self, what: str, start: float) -> ControlOutput:
         """The safe command for a non-finite input, with the reason in ``detail``."""

@@ -42,6 +42,7 @@ PARAMETERS = (
     ParamSpec("physics_rate_hz", 1000.0, "physics rate [Hz] (>= 1000)", check=positive, read_only=True),
     ParamSpec("command_timeout", 0.05, "command age that brings the arms to rest [s]", check=positive),
     ParamSpec("lockstep", False, "advance one period per received command", read_only=True),
+    ParamSpec("plan", "", "plan.json of `dualarm plan`: start at its first configuration", read_only=True),
     ParamSpec("thread_priority", 50, "SCHED_FIFO priority of the physics loop (0: normal scheduling)",
               check=lambda v: "" if 0 <= v <= 99 else "an integer in [0, 99]", read_only=True),
     ParamSpec("lockstep_subscribers", 2, "joint_states readers to wait for before the first lockstep state",
@@ -55,6 +56,14 @@ PARAMETERS = (
 DEFAULT_PRIORITY = 50
 
 
+def plan_start(path: str) -> np.ndarray:
+    """First planned configuration of a plan.json [rad], (14,)."""
+    from dualarm_control.kinematics import DualArmModel
+    from dualarm_control.planning.plan_file import read_plan
+
+    return read_plan(path, DualArmModel().joint_names).configurations[0]
+
+
 class SimNode:
     """Node shell around :class:`DualArmCell`."""
 
@@ -65,7 +74,7 @@ class SimNode:
         self.cell = DualArmCell(
             CellConfig(control_period=p["control_period"], physics_rate_hz=p["physics_rate_hz"],
                        command_timeout=p["command_timeout"]),
-            initial_positions=scenario.initial_positions,
+            initial_positions=plan_start(p["plan"]) if p["plan"] else scenario.initial_positions,
         )
         self.period_ns = round(p["control_period"] * 1e9)
         self.lockstep = bool(p["lockstep"])

@@ -144,3 +144,27 @@ def test_table_one_means_from_the_bag_equal_in_process(lockstep_bags: dict[str, 
     got = report(lockstep_bags[solver], tmp_path)[solver]
     for key in ("l0_mean", "l1_mean", "l2_mean"):
         assert got[key] == pytest.approx(expected[key], rel=1e-9, abs=1e-12), key
+
+
+def test_plan_executed_by_the_nodes(tmp_path: Path) -> None:
+    """``dualarm launch corner_path --plan``: the trajectory node streams the plan's joint trajectory,
+    the controller tracks it; the executed relative pose stays within 1 mm / 5 mrad of the reference."""
+    from dualarm_control.app.bag import report
+
+    plan = run_cli("plan", "corner_path", "--starts", "4", "--output", str(tmp_path / "plan"), timeout=300)
+    assert plan.returncode == 0, plan.stderr
+    bag = tmp_path / "bag"
+    assert launch_scenario("corner_path", [], [], True, bag, timeout=240.0, plan=tmp_path / "plan" / "plan.json") == 0
+    metrics = report(bag, tmp_path / "report")["joint_tracking"]
+    assert metrics["solver_failures"] == 0 and metrics["joint_velocity_limit_violations"] == 0
+    assert metrics["max_tracking_error_m"] < 1e-3 and metrics["max_tracking_error_rad"] < 5e-3
+    assert metrics["duration_s"] > 5.0
+    topics = _read_bag(bag)
+    assert len(topics["/joint_reference"]) == len(topics["/velocity_controller/commands"])
+
+
+def test_launch_refuses_a_plan_of_another_scenario(tmp_path: Path) -> None:
+    bad = tmp_path / "plan.json"
+    bad.write_text('{"format": "something else"}')
+    out = run_cli("launch", "corner_path", "--plan", str(bad), "--lockstep")
+    assert out.returncode == 2 and "not a dualarm_control/plan/1 document" in out.stderr

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from dualarm_control.app.plan import PlanResult, distinct_best, optimise, plan
-from dualarm_control.app.plan_report import PLAN_FORMAT, load_plan, plan_record
+from dualarm_control.app.plan_report import plan_record
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.planning.baseline import BaselineParams, run_baseline
@@ -37,6 +37,7 @@ from dualarm_control.planning.index import (
 )
 from dualarm_control.planning.joint_trajectory import JointPathTrajectory, densify
 from dualarm_control.planning.path import CornerPath, SampledPath
+from dualarm_control.planning.plan_file import PLAN_FORMAT, load_plan
 from dualarm_control.scenario import load_scenario
 
 FD_STEP = 1e-6  # central differences: truncation ~1e-12 * |third derivative|, round-off ~1e-10

@@ -158,6 +158,8 @@ class ControllerDiagnostics:
     solver: list[str] = field(default_factory=list)
     status: list[str] = field(default_factory=list)
     cycle_time: list[float] = field(default_factory=list)
+    position_error: list[float] = field(default_factory=list)
+    orientation_error: list[float] = field(default_factory=list)
     period: list[float] = field(default_factory=list)
     stamp_ns: list[int | None] = field(default_factory=list)
 
@@ -243,6 +245,8 @@ class _RunCollector:
             self.diag.solver.append(values.get("solver", "unknown"))
             self.diag.status.append(values.get("status", ""))
             self.diag.cycle_time.append(_float(values.get("cycle_time_s")))
+            self.diag.position_error.append(_float(values.get("position_error_m")))
+            self.diag.orientation_error.append(_float(values.get("orientation_error_rad")))
             self.diag.period.append(_float(values.get("control_period_s")))
             self.diag.stamp_ns.append(_int_or_none(values.get("stamp_ns")))
 
@@ -374,6 +378,7 @@ def summarize_run(run: RunData, model: Any) -> list[SolverRun]:
             period=period,
             statuses=[s for s, keep in zip(diag.status, in_diag, strict=True) if keep],
             cycle_times=_finite(np.array(diag.cycle_time)[in_diag]),
+            tracking_errors=(np.array(diag.position_error)[in_diag], np.array(diag.orientation_error)[in_diag]),
             final_errors=pose_error(_last_in(run.poses, per_msg["poses"] == solver),
                                     _last_in(run.targets, per_msg["targets"] == solver)),
             q_limits=(model.q_min, model.q_max),

@@ -87,7 +87,16 @@ def cmd_launch(args: argparse.Namespace) -> int:
     if args.solver:
         extra += ["-p", f"solver:={args.solver}"]
     record = Path(args.record) if args.record else None
-    return launch_scenario(args.scenario, args.params, extra, args.lockstep, record, args.timeout, args.rate)
+    plan = Path(args.plan) if args.plan else None
+    if plan is not None:
+        from dualarm_control.kinematics import DualArmModel
+        from dualarm_control.planning.plan_file import read_plan
+
+        planned = read_plan(plan, DualArmModel().joint_names).scenario  # exit 2 on a bad plan file
+        if planned != args.scenario:
+            raise DualArmError(f"--plan {plan} was planned on scenario {planned!r}, not {args.scenario!r}")
+    return launch_scenario(args.scenario, args.params, extra, args.lockstep, record, args.timeout, args.rate,
+                           plan=plan)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -446,6 +455,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="deterministic: the simulator steps only when the command for the step arrives")
     lau.add_argument("--record", metavar="BAG", help="record the graph's topics to this rosbag2 directory")
     lau.add_argument("--rate", type=float, metavar="HZ", help="control rate of every node (default: 200 Hz)")
+    lau.add_argument("--plan", metavar="PLAN_JSON",
+                     help="execute a plan of 'dualarm plan': the sim starts at its first configuration, the "
+                     "trajectory node streams its joint trajectory, the controller tracks it (reference:=joint)")
     lau.add_argument("--timeout", type=float, default=None, metavar="S", help="stop after S seconds")
     lau.set_defaults(func=cmd_launch)
     _add_bag_parser(sub)

@@ -109,4 +109,5 @@ def summarize_log(log: RunLog, scenario: Scenario, model: DualArmModel) -> dict[
         final_errors=final_errors(log, scenario, model),
         q_limits=(model.q_min, model.q_max),
         qd_max=model.qd_max,
+        tracking_errors=(log.position_error, log.orientation_error),
     )

@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from dualarm_control.ros.env import localhost_environment
+from dualarm_control.ros.env import LAUNCHER_PID_VARIABLE, localhost_environment
 
 NODES = {
     "sim_node": "dualarm_sim.sim_node",
@@ -27,6 +27,7 @@ NODES = {
 STOP_GRACE_S = 10.0
 GRAPH_TOPICS = ("/joint_states", "/velocity_controller/commands", "/relative_target", "/relative_pose",
                 "/diagnostics", "/wrench", "/clock")
+PLAN_TOPICS = (*GRAPH_TOPICS, "/joint_reference")
 """What ``--record`` records: the cell's graph."""
 
 
@@ -57,6 +58,7 @@ class Launch:
 
     def start(self, name: str, cmd: list[str]) -> Process:
         env = dict(localhost_environment(os.environ), PYTHONUNBUFFERED="1")
+        env[LAUNCHER_PID_VARIABLE] = str(os.getpid())  # the node stops if the launcher dies (ros.node)
         popen = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
                                  start_new_session=True)
         proc = Process(name, popen)
@@ -116,6 +118,7 @@ def launch_scenario(
     timeout: float | None = None,
     rate_hz: float | None = None,
     record_topics: Sequence[str] = GRAPH_TOPICS,
+    plan: Path | None = None,
 ) -> int:
     """Run the three nodes (and a recorder of ``record_topics``) on ``scenario``; ``rate_hz`` sets every
     node's control period. Returns 0 if the scenario completed cleanly, 130 on Ctrl-C."""
@@ -124,11 +127,16 @@ def launch_scenario(
         common += ["-p", f"control_period:={1.0 / rate_hz!r}"]
     with_scenario = ["-p", f"scenario:={scenario}"]
     sim_time = ["-p", "use_sim_time:=true"] if lockstep else []  # lockstep stamps are simulation time
+    if plan is not None:  # execute a plan: joint reference from the trajectory node, tracked by the controller
+        with_scenario += ["-p", f"plan:={Path(plan).resolve()}"]
+        controller_args = [*controller_args, "-p", "reference:=joint"]
     for f in params:
         common += ["--params-file", str(Path(f).resolve())]
     launch = Launch()
     interrupted = False
     try:
+        if plan is not None and record_topics == GRAPH_TOPICS:
+            record_topics = PLAN_TOPICS
         if record is not None:  # subscribes the graph's topics once they all have a publisher
             launch.start("bag", [sys.executable, "-u", "-m", "dualarm_control.app.cli", "bag", "record", "-o",
                                  str(record), *record_topics, *(["--use-sim-time"] if lockstep else [])])

@@ -1,7 +1,9 @@
 """In-process execution of a plan in the pybullet cell: joint-space tracking of the ruckig trajectory.
 
 The cell starts at the plan's first configuration; every 5 ms control period the command is
-``qd = qd_ref(t) + K (q_ref(t) - q)`` (joint-space tracking, K = ``execution.gain``) with the
+``qd = qd_ref(t) + K (q_ref(t) - q)`` inside the eq (23) bounds (joint-space tracking,
+:func:`~dualarm_control.joint_tracking.joint_tracking_velocity`, K = ``execution.gain``; the
+controller node runs the same law with ``reference:=joint``) with the
 reference from :class:`~dualarm_control.planning.joint_trajectory.JointPathTrajectory`
 through the planned configurations and ``execution.subdivisions - 1`` closure-projected
 knots between each pair (:func:`~dualarm_control.planning.joint_trajectory.densify`).
@@ -19,7 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dualarm_control.joint_tracking import joint_tracking_velocity
 from dualarm_control.kinematics import DualArmModel, FloatArray, rotation_angle
+from dualarm_control.limits import JointLimits, velocity_bounds
 from dualarm_control.planning.config import PlanConfig
 from dualarm_control.planning.joint_trajectory import plan_trajectory
 from dualarm_sim.cell import CellConfig, DualArmCell
@@ -69,6 +73,7 @@ def execute_plan(
     steps = math.ceil((traj.duration + config.execution_settle) / CONTROL_PERIOD)
     sample_steps = {round(t / CONTROL_PERIOD): i // sub for i, t in enumerate(traj.sample_times) if i % sub == 0}
     r_d = path.rotation
+    limits = JointLimits(model.q_min, model.q_max, model.qd_max)
     pos_err, rot_err, ref_pos, ref_rot, track = [], [], [], [], []
     sample_pos, sample_rot = [], []
     every = max(steps // 100, 1)
@@ -91,7 +96,9 @@ def execute_plan(
                 sample_rot.append(rotation_angle(r, r_d))
             if k == steps:
                 break
-            cell.apply_command(ref.velocities + config.execution_gain * (ref.positions - q))
+            lower, upper = velocity_bounds(q, limits, CONTROL_PERIOD)
+            cell.apply_command(joint_tracking_velocity(q, ref.positions, ref.velocities, config.execution_gain,
+                                                       lower, upper))
             state = cell.step()
             if progress is not None and (k % every == 0 or k == steps - 1):
                 progress((k + 1) / steps, "execute")

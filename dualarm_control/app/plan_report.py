@@ -18,11 +18,11 @@ import numpy as np
 
 from dualarm_control.app.plan import PlanResult
 from dualarm_control.kinematics import DualArmModel
+from dualarm_control.planning.plan_file import PLAN_FORMAT
 
 if TYPE_CHECKING:  # the simulator (pybullet) is only imported when a plan is executed
     from dualarm_control.app.plan_execute import ExecutionResult
 
-PLAN_FORMAT = "dualarm_control/plan/1"
 
 
 def plan_record(result: PlanResult, model: DualArmModel, execution: ExecutionResult | None) -> dict[str, Any]:
@@ -113,14 +113,6 @@ def write_plan(directory: Path, doc: dict[str, Any]) -> Path:
     out = directory / "plan.json"
     out.write_text(json.dumps(doc, indent=1) + "\n")
     return out
-
-
-def load_plan(path: Path) -> dict[str, Any]:
-    """Read a plan.json and check its format tag (ValueError otherwise)."""
-    doc = json.loads(Path(path).read_text())
-    if doc.get("format") != PLAN_FORMAT:
-        raise ValueError(f"{path}: not a {PLAN_FORMAT} document (format={doc.get('format')!r})")
-    return doc
 
 
 def plot_indices(result: PlanResult, out: Path) -> None:

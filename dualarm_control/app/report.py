@@ -48,6 +48,7 @@ def summarize(
     final_errors: tuple[float, float],
     q_limits: tuple[FloatArray, FloatArray],
     qd_max: FloatArray,
+    tracking_errors: tuple[FloatArray, FloatArray] | None = None,
 ) -> dict[str, float | int]:
     """The metrics.json record of one run.
 
@@ -59,6 +60,8 @@ def summarize(
         cycle_times: controller cycle wall times [s], (N,).
         final_errors: (position [m], orientation [rad]) error at the end.
         q_limits: (q_min, q_max) [rad]; qd_max: velocity limits [rad/s].
+        tracking_errors: per-cycle relative (position [m], orientation [rad]) error against the
+            cycle's target, (N,) each; gives max/rms tracking errors when given.
     """
     norms = velocity_norm_metrics(commands, period)
     vel_violations = limit_violations(np.vstack((commands, velocities)), -qd_max, qd_max, VELOCITY_TOLERANCE)
@@ -75,6 +78,11 @@ def summarize(
         max_joint_acceleration=max_joint_acceleration(commands, period),
         active_set_switches_per_s=active_set_switches_per_s(commands, period),
     )
+    if tracking_errors is not None:
+        pos, rot = (np.asarray(e, dtype=float)[np.isfinite(e)] for e in tracking_errors)
+        if pos.size and rot.size:
+            out.update(max_tracking_error_m=float(pos.max()), rms_tracking_error_m=float(np.sqrt(np.mean(pos**2))),
+                       max_tracking_error_rad=float(rot.max()))
     return out
 
 
@@ -97,6 +105,9 @@ def format_table(results: Mapping[str, Mapping[str, Any]]) -> str:
         ("duration [s]", "duration_s", "{:.2f}"),
         ("final position error [m]", "final_position_error_m", "{:.2e}"),
         ("final orientation error [rad]", "final_orientation_error_rad", "{:.2e}"),
+        ("max tracking error [m]", "max_tracking_error_m", "{:.2e}"),
+        ("rms tracking error [m]", "rms_tracking_error_m", "{:.2e}"),
+        ("max tracking error [rad]", "max_tracking_error_rad", "{:.2e}"),
         ("position limit violations", "joint_position_limit_violations", "{:d}"),
         ("velocity limit violations", "joint_velocity_limit_violations", "{:d}"),
         ("solver failures", "solver_failures", "{:d}"),

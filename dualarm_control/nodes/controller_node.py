@@ -33,7 +33,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
-from trajectory_msgs.msg import MultiDOFJointTrajectory
+from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
 from dualarm_control.controller import (
     CONTROLLER_PARAMETERS,
@@ -60,6 +60,10 @@ NODE_PARAMETERS = (
               check=positive),
     ParamSpec("thread_priority", 50, "SCHED_FIFO priority of the control loop (0: normal scheduling)",
               check=lambda v: "" if 0 <= v <= 99 else "an integer in [0, 99]", read_only=True),
+    ParamSpec("reference", "relative", "what is tracked: the relative target (the solvers) or a planned "
+              "joint trajectory on /joint_reference (qd_ref + joint_gain (q_ref - q), eq 23 bounds)",
+              choices=lambda: ["relative", "joint"], read_only=True),
+    ParamSpec("joint_gain", 30.0, "K of the joint-space tracking of reference:=joint [1/s]", check=positive),
 )
 DEFAULT_PRIORITY = 50
 WINDOW = 2000  # samples kept for jitter/latency percentiles
@@ -87,6 +91,11 @@ class ControllerNode:
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
         n.create_subscription(JointState, "/joint_states", self.on_joint_state, 10)
         n.create_subscription(MultiDOFJointTrajectory, "/relative_target", self.on_target, 10)
+        self.joint_mode = self.values["reference"] == "joint"
+        if self.joint_mode:
+            n.create_subscription(JointTrajectory, "/joint_reference", self.on_joint_reference, 10)
+        self.joint_ref: tuple[int, np.ndarray, np.ndarray] | None = None
+        self.joint_refs: dict[int, tuple[int, np.ndarray, np.ndarray]] = {}  # lockstep: by stamp
         n.add_on_set_parameters_callback(self.on_set_parameters)
         self.log = n.get_logger()
         self.state: tuple[int, np.ndarray, int] | None = None  # (stamp_ns, q, received monotonic ns)
@@ -102,7 +111,8 @@ class ControllerNode:
         self.stats: tuple[tuple[float, float], tuple[float, float]] = (NAN2, NAN2)
         if not self.lockstep:
             n.create_timer(self.params.period, self.on_watchdog)
-        self.log.info(f"solver '{self.params.solver}' (K={self.params.gain}, T={self.params.period} s, "
+        tracked = "joint reference" if self.joint_mode else f"solver '{self.params.solver}'"
+        self.log.info(f"{tracked} (K={self.params.gain}, T={self.params.period} s, "
                       f"{'lockstep' if self.lockstep else 'real-time, event-driven'})")
         if priority_note and priority_note != "disabled":
             self.log.warning(priority_note)
@@ -163,8 +173,10 @@ class ControllerNode:
             self.try_lockstep()
         elif self.target is None:
             self.publish_safe(stamp, "waiting for relative_target")
+        elif self.joint_mode and self.joint_ref is None:
+            self.publish_safe(stamp, "waiting for joint_reference")
         else:
-            self.cycle(self.target)
+            self.cycle(self.target, self.joint_ref)
 
     def on_target(self, msg: Any) -> None:
         value = convert.target_value(msg)
@@ -174,6 +186,16 @@ class ControllerNode:
         self.target = value
         if self.lockstep:
             self.targets[value.stamp_ns] = value
+            self.try_lockstep()
+
+    def on_joint_reference(self, msg: Any) -> None:
+        value = convert.joint_reference(msg, self.order)
+        if isinstance(value, str):
+            self.report(convert.stamp_ns(msg.header.stamp), f"joint_reference rejected: {value}", "input_rejected")
+            return
+        self.joint_ref = value
+        if self.lockstep:
+            self.joint_refs[value[0]] = value
             self.try_lockstep()
 
     # --- cycles -----------------------------------------------------------------
@@ -192,11 +214,14 @@ class ControllerNode:
         if self.state is None or self.state[0] == self.last_commanded_stamp:
             return
         target = self.targets.get(self.state[0])
-        if target is None:
+        ref = self.joint_refs.get(self.state[0]) if self.joint_mode else None
+        if target is None or (self.joint_mode and ref is None):
             return
         for old in [s for s in self.targets if s <= self.state[0]]:
             del self.targets[old]
-        self.cycle(target)
+        for old in [s for s in self.joint_refs if s <= self.state[0]]:
+            del self.joint_refs[old]
+        self.cycle(target, ref)
 
     def on_watchdog(self) -> None:
         """Real-time mode: zero command while there is no joint state or it is stale."""
@@ -207,11 +232,14 @@ class ControllerNode:
         if age > self.stale_ns:
             self.publish_safe(self.state[0], f"joint_states stale by {age / 1e6:.1f} ms")
 
-    def cycle(self, target: convert.TargetValue) -> None:
+    def cycle(self, target: convert.TargetValue, ref: tuple[int, np.ndarray, np.ndarray] | None = None) -> None:
         assert self.state is not None
         self.apply_pending()
         stamp, q, received = self.state
-        out = self.controller.step(q, target)
+        if ref is not None:
+            out = self.controller.track_joints(q, ref[1], ref[2], target, self.values["joint_gain"])
+        else:
+            out = self.controller.step(q, target)
         self.pub_cmd.publish(convert.float_array(out.velocities))
         # Real time: from the state's stamp (its publication, wall clock) to the command's
         # publication, transport included. Lockstep stamps are simulation time: from receipt.
@@ -255,7 +283,7 @@ class ControllerNode:
                           percentiles(np.array(self.latency)))
         jit, lat = self.stats
         values = {
-            "solver": self.params.solver,
+            "solver": "joint_tracking" if self.joint_mode else self.params.solver,
             "status": r.status,
             "solve_time_s": f"{r.solve_time:.6e}",
             "cycle_time_s": f"{out.cycle_time:.6e}",

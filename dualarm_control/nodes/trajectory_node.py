@@ -15,10 +15,11 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from trajectory_msgs.msg import MultiDOFJointTrajectory
+from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import ParamSpec, positive
+from dualarm_control.planning.execution import PlanExecution
 from dualarm_control.ros import convert
 from dualarm_control.ros.node import declare, run, usage
 from dualarm_control.scenario import load_scenario
@@ -28,6 +29,8 @@ PARAMETERS = (
     ParamSpec("scenario", "assembly", "scenario name (config/scenarios/<name>.yaml) or YAML path", read_only=True),
     ParamSpec("control_period", 0.005, "target period in real-time mode [s]", check=positive, read_only=True),
     ParamSpec("lockstep", False, "publish one target per joint state, with its stamp", read_only=True),
+    ParamSpec("plan", "", "plan.json of `dualarm plan`: stream its joint trajectory on /joint_reference "
+              "(and its relative pose on /relative_target) instead of the scenario's segments", read_only=True),
 )
 
 
@@ -40,10 +43,12 @@ class TrajectoryNode:
         self.scenario = load_scenario(p["scenario"])
         self.lockstep = bool(p["lockstep"])
         self.model = DualArmModel()
+        self.plan = PlanExecution(self.model, p["plan"]) if p["plan"] else None
         self.order = {name: i for i, name in enumerate(self.model.joint_names)}
         n = self.node
         self.pub = n.create_publisher(MultiDOFJointTrajectory, "/relative_target", 10)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.pub_joint = n.create_publisher(JointTrajectory, "/joint_reference", 10)
         n.create_subscription(JointState, "/joint_states", self.on_joint_state, 10)
         self.log = n.get_logger()
         self.trajectory: RelativeTrajectory | None = None
@@ -53,7 +58,8 @@ class TrajectoryNode:
         self.finished = False
         if not self.lockstep:
             n.create_timer(p["control_period"], self.on_tick)
-        self.log.info(f"scenario '{self.scenario.name}': {len(self.scenario.segments)} segments, "
+        what = f"plan {p['plan']}" if self.plan else f"{len(self.scenario.segments)} segments"
+        self.log.info(f"scenario '{self.scenario.name}': {what}, "
                       f"{'lockstep' if self.lockstep else 'real-time'}; waiting for /joint_states")
 
     def on_joint_state(self, msg: Any) -> None:
@@ -67,8 +73,10 @@ class TrajectoryNode:
                 return
             self.trajectory = self.scenario.trajectory(*self.model.relative_pose(decoded[0]))
             self.start_ns = stamp if self.lockstep else self.node.get_clock().now().nanoseconds
-            self.end_s = self.trajectory.duration + self.scenario.settle_time
-            self.log.info(f"trajectory: {self.trajectory.duration:.2f} s + settle {self.scenario.settle_time:.2f} s")
+            duration, settle = ((self.plan.duration, self.plan.settle_time) if self.plan
+                                else (self.trajectory.duration, self.scenario.settle_time))
+            self.end_s = duration + settle
+            self.log.info(f"trajectory: {duration:.2f} s + settle {settle:.2f} s")
         if self.lockstep:
             self.publish(stamp, stamp - self.start_ns)
 
@@ -84,6 +92,12 @@ class TrajectoryNode:
             self.log.info(f"scenario '{self.scenario.name}' complete at t={t:.2f} s")
             self._status(stamp, 0, "complete", t)
             self.finished = True  # run() stops spinning after this callback
+            return
+        if self.plan is not None:
+            ref = self.plan.sample(t)
+            self.pub_joint.publish(convert.joint_reference_message(stamp, elapsed_ns, self.model.joint_names,
+                                                                   ref.joint_positions, ref.joint_velocities))
+            self.pub.publish(convert.target_message(stamp, elapsed_ns, ref))
             return
         sample = self.trajectory.sample(t)
         self.pub.publish(convert.target_message(stamp, elapsed_ns, sample))

@@ -27,7 +27,12 @@ from geometry_msgs.msg import (
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header
-from trajectory_msgs.msg import MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint
+from trajectory_msgs.msg import (
+    JointTrajectory,
+    JointTrajectoryPoint,
+    MultiDOFJointTrajectory,
+    MultiDOFJointTrajectoryPoint,
+)
 
 LEFT_FRAME = "left_tool"
 RIGHT_FRAME = "right_tool"
@@ -116,7 +121,7 @@ def target_message(ns: int, elapsed_ns: int, sample: Any) -> Any:
     accel = Twist(linear=_vec3(sample.linear_acceleration), angular=_vec3(sample.angular_acceleration))
     point = MultiDOFJointTrajectoryPoint(
         transforms=[transform], velocities=[twist], accelerations=[accel],
-        time_from_start=Duration(sec=int(elapsed_ns // NS), nanosec=int(elapsed_ns % NS)),
+        time_from_start=duration(elapsed_ns),
     )
     return MultiDOFJointTrajectory(header=header(ns, LEFT_FRAME), joint_names=[RIGHT_FRAME], points=[point])
 
@@ -155,3 +160,32 @@ def wrench_stamped(ns: int, wrench: np.ndarray, frame_id: str = RIGHT_FRAME) -> 
 def clock(ns: int) -> Any:
     """rosgraph_msgs/Clock at ``ns`` (simulation time)."""
     return Clock(clock=stamp(ns))
+
+
+def duration(ns: int) -> Any:
+    """builtin_interfaces/Duration from integer nanoseconds."""
+    return Duration(sec=int(ns // NS), nanosec=int(ns % NS))
+
+
+def joint_reference_message(ns: int, elapsed_ns: int, names: Sequence[str], q: np.ndarray, qd: np.ndarray) -> Any:
+    """trajectory_msgs/JointTrajectory with one point: the joint reference (positions, velocities) at a stamp."""
+    point = JointTrajectoryPoint(positions=[float(v) for v in q], velocities=[float(v) for v in qd],
+                                 time_from_start=duration(elapsed_ns))
+    return JointTrajectory(header=header(ns), joint_names=list(names), points=[point])
+
+
+def joint_reference(msg: Any, order: Mapping[str, int]) -> tuple[int, np.ndarray, np.ndarray] | str:
+    """(stamp ns, q_ref, qd_ref) in the model's joint order, or why the message is unusable."""
+    names = list(msg.joint_names)
+    if len(msg.points) != 1:
+        return "joint_reference must carry exactly one point"
+    point = msg.points[0]
+    missing = [n for n in order if n not in names]
+    if missing or len(point.positions) != len(names) or len(point.velocities) != len(names):
+        return f"joint_reference with {len(names)} names / {len(point.positions)} positions; missing {missing[:3]}"
+    idx = [names.index(n) for n in order]
+    q = np.asarray(point.positions, dtype=float)[idx]
+    qd = np.asarray(point.velocities, dtype=float)[idx]
+    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
+        return "joint_reference contains NaN or inf"
+    return stamp_ns(msg.header.stamp), q, qd

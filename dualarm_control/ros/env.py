@@ -33,3 +33,24 @@ def apply_localhost_default(environ: MutableMapping[str, str] | None = None) -> 
     """Apply :func:`localhost_environment` in place (default: this process's ``os.environ``)."""
     target = os.environ if environ is None else environ
     target.update(localhost_environment(target))
+
+
+LAUNCHER_PID_VARIABLE = "DUALARM_LAUNCHER_PID"
+"""Set by ``dualarm launch`` for its children: the pid whose death must stop them."""
+
+
+def stop_with_launcher(environ: Mapping[str, str] | None = None) -> None:
+    """Under ``dualarm launch``: get SIGTERM when the launcher dies, even by SIGKILL (Linux
+    ``PR_SET_PDEATHSIG``), so that no node outlives it and keeps publishing on the domain."""
+    import ctypes
+    import signal
+
+    pid = (os.environ if environ is None else environ).get(LAUNCHER_PID_VARIABLE, "")
+    if not pid.isdigit():
+        return
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG = 1
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != int(pid):  # the launcher died before the request
+        os.kill(os.getpid(), signal.SIGTERM)

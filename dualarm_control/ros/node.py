@@ -22,7 +22,7 @@ from typing import Any, Self
 
 from dualarm_control.errors import DualArmError, ParameterError
 from dualarm_control.params import ParamSpec, read_params_files
-from dualarm_control.ros.env import apply_localhost_default
+from dualarm_control.ros.env import apply_localhost_default, stop_with_launcher
 
 EXIT_OK = 0
 EXIT_ERROR = 1
@@ -172,6 +172,7 @@ def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text
     shell = None
     context = None
     with _StopOnSignal() as stop:
+        stop_with_launcher()
         try:
             read_params_files(params_files(argv), "_check_")  # missing or malformed file: exit 2
             context = init_rclpy(argv)
