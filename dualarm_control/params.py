@@ -100,7 +100,8 @@ class ParamSpec:
     ``choices`` returns the valid values (evaluated lazily, e.g. the solver registry);
     ``check`` returns an error description for a bad value, or '' (its docstring states the
     rule, shown as the ROS parameter descriptor's ``additional_constraints``);
-    ``read_only`` parameters cannot change on a running node (ROS descriptor ``read_only``).
+    ``read_only`` parameters cannot change on a running node (ROS descriptor ``read_only``);
+    ``bounds`` (closed interval) becomes the descriptor's floating-point or integer range.
     """
 
     name: str
@@ -109,6 +110,7 @@ class ParamSpec:
     choices: Callable[[], list[str]] | None = None
     check: Callable[[Any], str] | None = None
     read_only: bool = False
+    bounds: tuple[float, float] | None = None
 
     @property
     def constraints(self) -> str:

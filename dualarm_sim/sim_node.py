@@ -44,7 +44,7 @@ PARAMETERS = (
     ParamSpec("lockstep", False, "advance one period per received command", read_only=True),
     ParamSpec("plan", "", "plan.json of `dualarm plan`: start at its first configuration", read_only=True),
     ParamSpec("thread_priority", 50, "SCHED_FIFO priority of the physics loop (0: normal scheduling)",
-              check=lambda v: "" if 0 <= v <= 99 else "an integer in [0, 99]", read_only=True),
+              check=lambda v: "" if 0 <= v <= 99 else "an integer in [0, 99]", read_only=True, bounds=(0, 99)),
     ParamSpec("lockstep_subscribers", 2, "joint_states readers to wait for before the first lockstep state",
               check=non_negative),
     ParamSpec("lockstep_resend", 0.5, "re-publish the pending state after this long without a command [s]",

@@ -59,7 +59,7 @@ NODE_PARAMETERS = (
     ParamSpec("stale_timeout", 0.015, "joint states older than this give a zero command [s] (3 periods)",
               check=positive),
     ParamSpec("thread_priority", 50, "SCHED_FIFO priority of the control loop (0: normal scheduling)",
-              check=lambda v: "" if 0 <= v <= 99 else "an integer in [0, 99]", read_only=True),
+              check=lambda v: "" if 0 <= v <= 99 else "an integer in [0, 99]", read_only=True, bounds=(0, 99)),
     ParamSpec("reference", "relative", "what is tracked: the relative target (the solvers) or a planned "
               "joint trajectory on /joint_reference (qd_ref + joint_gain (q_ref - q), eq 23 bounds)",
               choices=lambda: ["relative", "joint"], read_only=True),

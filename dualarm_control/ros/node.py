@@ -31,11 +31,17 @@ SPIN_TIMEOUT_S = 0.1
 
 
 def descriptor(spec: ParamSpec) -> Any:
-    """rcl_interfaces/ParameterDescriptor of ``spec``: description, constraints, read-only."""
-    from rcl_interfaces.msg import ParameterDescriptor
+    """rcl_interfaces/ParameterDescriptor of ``spec``: description, constraints, read-only, range."""
+    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
-    return ParameterDescriptor(description=spec.description, additional_constraints=spec.constraints,
-                               read_only=spec.read_only)
+    d = ParameterDescriptor(description=spec.description, additional_constraints=spec.constraints,
+                            read_only=spec.read_only)
+    if spec.bounds is not None and spec.type_name == "double":
+        d.floating_point_range = [FloatingPointRange(from_value=float(spec.bounds[0]), to_value=float(spec.bounds[1]),
+                                                     step=0.0)]
+    elif spec.bounds is not None and spec.type_name == "integer":
+        d.integer_range = [IntegerRange(from_value=int(spec.bounds[0]), to_value=int(spec.bounds[1]), step=1)]
+    return d
 
 
 def declare(node: Any, specs: Iterable[ParamSpec]) -> dict[str, Any]:
@@ -44,7 +50,7 @@ def declare(node: Any, specs: Iterable[ParamSpec]) -> dict[str, Any]:
     A value of the wrong ROS type (``-p gain:=10`` for a double) is reported with the same
     message as the core's check; unknown overrides for this node are warned about.
     """
-    from rclpy.exceptions import InvalidParameterTypeException
+    from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 
     values: dict[str, Any] = {}
     name = node.get_name()
@@ -53,7 +59,7 @@ def declare(node: Any, specs: Iterable[ParamSpec]) -> dict[str, Any]:
     for spec in specs:
         try:
             value = node.declare_parameter(spec.name, spec.default, descriptor(spec)).value
-        except InvalidParameterTypeException as exc:
+        except (InvalidParameterTypeException, InvalidParameterValueException) as exc:
             given = overrides[spec.name].value if spec.name in overrides else str(exc)
             spec.validate(given, name)  # raises ParameterError naming key, value and type
             raise DualArmError(str(exc)) from None
