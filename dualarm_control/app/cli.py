@@ -8,29 +8,14 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
+from dualarm_control.app.progress import progress_bar
 from dualarm_control.errors import DualArmError
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
-
-
-def _progress_printer(label: str) -> Callable[[float, str], None]:
-    """Progress on stderr: a live line on a terminal, a line per 10 % otherwise."""
-    tty = sys.stderr.isatty()
-    state = {"last": -1}
-
-    def show(fraction: float, segment: str) -> None:
-        pct = int(fraction * 100)
-        if tty:
-            print(f"\r[{label}] {pct:3d}% {segment:<12}", end="" if pct < 100 else "\n", file=sys.stderr, flush=True)
-        elif pct // 10 != state["last"] // 10 or pct == 100 and state["last"] != 100:
-            print(f"[{label}] {pct:3d}% ({segment})", file=sys.stderr, flush=True)
-        state["last"] = pct
-
-    return show
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
@@ -58,7 +43,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     try:
         for name, params in configs.items():
             start = time.perf_counter()
-            log = run_scenario(scenario, params, model, progress=_progress_printer(name))
+            log = run_scenario(scenario, params, model, progress=progress_bar(name))
             results[name] = summarize_log(log, scenario, model)
             runs[name] = (log.time, log.commands)
             print(f"[{name}] done: {len(log.time)} cycles in {time.perf_counter() - start:.1f} s wall", file=sys.stderr)
@@ -113,7 +98,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    """The main job: for each solver, three processes over DDS in lockstep with a bag, then
+    """The main job: for each solver, three processes over ROS in lockstep with a bag, then
     ``dualarm report`` on the bag, then the in-process experiment, and a comparison of both."""
     import json
 
@@ -129,7 +114,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
             shutil.rmtree(bag)
         bag.parent.mkdir(parents=True, exist_ok=True)
-        print(f"=== {name}: sim_node + controller_node + trajectory_node over DDS (lockstep), bag {bag}", flush=True)
+        print(f"=== {name}: sim_node + controller_node + trajectory_node over ROS (lockstep), bag {bag}", flush=True)
         code = launch_scenario(args.scenario, [], ["-p", f"solver:={name}"], True, bag, args.timeout)
         if code != 0:
             print(f"demo: the {name} run failed (exit {code})", file=sys.stderr)
@@ -144,7 +129,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         return code
     experiment = json.loads((out / "experiment" / "metrics.json").read_text())
     comparison = {}
-    print(f"\n{'solver':<24}{'metric':<9}{'bag (DDS)':>12}{'in-process':>12}{'rel. diff':>11}")
+    print(f"\n{'solver':<24}{'metric':<9}{'bag (ROS)':>12}{'in-process':>12}{'rel. diff':>11}")
     for name in solvers:
         comparison[name] = {}
         for key in ("l0_mean", "l1_mean", "l2_mean"):
@@ -406,8 +391,8 @@ def build_parser() -> argparse.ArgumentParser:
     exp.add_argument("--output", default="out/experiment", metavar="DIR", help="output directory (default: %(default)s)")
     exp.set_defaults(func=cmd_experiment)
 
-    demo = sub.add_parser("demo", help="the main job: three nodes over DDS per solver, bags, reports",
-                          description="For each solver: launch the three nodes over DDS in lockstep on the "
+    demo = sub.add_parser("demo", help="the main job: three nodes over ROS per solver, bags, reports",
+                          description="For each solver: launch the three nodes over ROS in lockstep on the "
                           "scenario while recording a bag, run 'dualarm report' on the bag, then run the "
                           "in-process experiment and print how the bag metrics compare.")
     demo.add_argument("--scenario", default="assembly", help="scenario (default: %(default)s)")
@@ -445,7 +430,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     lau = sub.add_parser("launch", help="start the three nodes as processes on a scenario",
                          description="Start sim_node, controller_node and trajectory_node as separate processes "
-                         "over DDS (loopback by default), prefix their output, and stop everything when the "
+                         "over ROS (localhost discovery by default), prefix their output, and stop everything when the "
                          "scenario is complete or on Ctrl-C. Exit status is non-zero if a node failed.")
     lau.add_argument("scenario", help="scenario name or YAML path")
     lau.add_argument("--params", action="append", default=[], metavar="FILE",

@@ -50,7 +50,10 @@ def declare(node: Any, specs: Iterable[ParamSpec]) -> dict[str, Any]:
     A value of the wrong ROS type (``-p gain:=10`` for a double) is reported with the same
     message as the core's check; unknown overrides for this node are warned about.
     """
-    from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+    from rclpy.exceptions import (
+        InvalidParameterTypeException,
+        InvalidParameterValueException,
+    )
 
     values: dict[str, Any] = {}
     name = node.get_name()
