@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from dualarm_control.app.cli import main
-from dualarm_control.app.report import METRIC_KEYS
+from dualarm_control.app.report import METRIC_KEYS, TRACKING_KEYS
 
 SOLVERS = ("standard_qp", "sparse_qp", "hierarchical_sparse_qp")
 
@@ -29,7 +29,7 @@ def test_metrics_file_has_every_key(metrics: dict[str, dict[str, float]]) -> Non
     """metrics.json lists each solver with exactly the documented keys."""
     assert list(metrics) == list(SOLVERS)
     for record in metrics.values():
-        assert tuple(record) == METRIC_KEYS
+        assert tuple(record) == METRIC_KEYS + TRACKING_KEYS
 
 
 @pytest.mark.parametrize("solver", SOLVERS)

@@ -35,6 +35,8 @@ METRIC_KEYS = (
     "joint_velocity_limit_violations", "solver_failures", "cycle_time_p50_s", "cycle_time_p99_s",
     "max_joint_acceleration", "active_set_switches_per_s",
 )
+TRACKING_KEYS = ("max_tracking_error_m", "rms_tracking_error_m", "max_tracking_error_rad")
+"""Added when per-cycle tracking errors are known (in-process runs, bags with controller diagnostics)."""
 
 
 def summarize(
