@@ -8,5 +8,6 @@ import random
 from dualarm_control.ros.env import apply_localhost_default
 
 apply_localhost_default()  # before rclpy.init; inherited by subprocesses
-os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 101)))
+# Always a private domain (not the user's interactive one), unless DUALARM_TEST_DOMAIN_ID says which.
+os.environ["ROS_DOMAIN_ID"] = os.environ.get("DUALARM_TEST_DOMAIN_ID") or str(random.SystemRandom().randint(1, 101))
 os.environ.setdefault("MPLBACKEND", "Agg")
