@@ -22,6 +22,7 @@ from dualarm_control.params import ParamSpec, positive
 from dualarm_control.planning.execution import PlanExecution
 from dualarm_control.ros import convert
 from dualarm_control.ros.node import declare, run, usage
+from dualarm_control.ros.qos import QOS_PARAMETER, stream_qos
 from dualarm_control.scenario import load_scenario
 from dualarm_control.trajectory import RelativeTrajectory
 
@@ -31,6 +32,7 @@ PARAMETERS = (
     ParamSpec("lockstep", False, "publish one target per joint state, with its stamp", read_only=True),
     ParamSpec("plan", "", "plan.json of `dualarm plan`: stream its joint trajectory on /joint_reference "
               "(and its relative pose on /relative_target) instead of the scenario's segments", read_only=True),
+    QOS_PARAMETER,
 )
 
 
@@ -46,10 +48,11 @@ class TrajectoryNode:
         self.plan = PlanExecution(self.model, p["plan"]) if p["plan"] else None
         self.order = {name: i for i, name in enumerate(self.model.joint_names)}
         n = self.node
-        self.pub = n.create_publisher(MultiDOFJointTrajectory, "/relative_target", 10)
+        qos = stream_qos(p["qos_reliability"])
+        self.pub = n.create_publisher(MultiDOFJointTrajectory, "/relative_target", qos)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.pub_joint = n.create_publisher(JointTrajectory, "/joint_reference", 10)
-        n.create_subscription(JointState, "/joint_states", self.on_joint_state, 10)
+        self.pub_joint = n.create_publisher(JointTrajectory, "/joint_reference", qos)
+        n.create_subscription(JointState, "/joint_states", self.on_joint_state, qos)
         self.log = n.get_logger()
         self.trajectory: RelativeTrajectory | None = None
         self.start_ns = 0
