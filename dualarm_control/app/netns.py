@@ -117,3 +117,16 @@ def private_link(peer: bool = True, subnet: str = "", tag: str = "", default_rou
     finally:
         for ns in made:
             subprocess.run(["ip", "netns", "del", ns], check=False, capture_output=True)
+
+
+def netem_unavailable() -> str:
+    """Why ``tc ... netem`` cannot be used here ('' if it can): tried on lo of a throw-away namespace."""
+    reason = tc_unavailable()
+    if reason:
+        return reason
+    with private_link(peer=False) as link:
+        try:
+            link.netem(link.a, "lo", ["loss", "0%"])
+        except NetnsError as exc:
+            return f"netem not usable on this kernel ({exc})"
+    return ""
