@@ -210,6 +210,20 @@ def cmd_faults(args: argparse.Namespace) -> int:
     return 1 if any(r.status == "FAIL" for r in rows) else 0
 
 
+def cmd_soak(args: argparse.Namespace) -> int:
+    """The scenario on repeat over ROS: RSS growth, missed-deadline bursts, accounting (soak.md/json)."""
+    from dualarm_control.app.soak import format_soak, run_soak, write_soak
+    from dualarm_control.scenario import scenario_file
+
+    scenario_file(args.scenario)
+    doc = run_soak(args.minutes, args.scenario, lambda text: print(f"[soak] {text}", flush=True))
+    out = Path(args.output)
+    write_soak(out, doc)
+    print(format_soak(doc))
+    print(f"\nwrote {out}/soak.md and soak.json")
+    return 0 if doc["passed"] else 1
+
+
 def cmd_plan(args: argparse.Namespace) -> int:
     """Global manipulability plan of a relative path (paper 003); logic in app/plan_command.py."""
     from dualarm_control.app.plan_command import run_plan_command
@@ -476,6 +490,15 @@ def build_parser() -> argparse.ArgumentParser:
     fau.add_argument("--scenario", default="assembly", help="scenario of the runs (default: %(default)s)")
     fau.add_argument("--only", metavar="ROW,...", help="run only these rows (default: all)")
     fau.set_defaults(func=cmd_faults)
+    soak = sub.add_parser("soak", help="benchmark: the scenario on repeat at 200 Hz over ROS for minutes",
+                          description="Run the three nodes with the scenario on repeat (trajectory_node repeat:=true) "
+                          "in real time; sample each node's RSS and the /diagnostics counters every second; report "
+                          "RSS growth (<= 5 %%), missed-deadline bursts and whether every command is accounted for. "
+                          "Writes DIR/soak.md and soak.json; exit 1 if a criterion fails.")
+    soak.add_argument("--minutes", type=float, default=10.0, help="duration (default: %(default)s)")
+    soak.add_argument("--scenario", default="assembly", help="scenario (default: %(default)s)")
+    soak.add_argument("--output", default="out/soak", metavar="DIR", help="output directory (default: %(default)s)")
+    soak.set_defaults(func=cmd_soak)
     _add_bag_parser(sub)
     _add_topic_parser(sub)
     _add_param_parser(sub)

@@ -127,6 +127,7 @@ class ControllerNode:
         self.target_received: int | None = None  # monotonic ns of the last valid target / joint reference
         self.fault: tuple[str, int] | None = None  # watchdog reason and monotonic ns it started
         self.trips = 0
+        self.unmatched = 0  # commands published while no subscriber was matched (nobody received them)
         self.last_warning = 0.0
         self.last_arrival_ns: int | None = None
         self.interval = float("nan")  # last joint-state inter-arrival time [s]
@@ -147,7 +148,8 @@ class ControllerNode:
         jp = percentiles(np.array(self.jitter)) if self.jitter else NAN2
         lp = percentiles(np.array(self.latency)) if self.latency else NAN2
         self.log.info(f"{self.cycles} cycles, {self.missed} missed deadlines, {self.failures} solver failures, "
-                      f"{self.safe_commands} safe commands, {self.switches} parameter switches, "
+                      f"{self.safe_commands} safe commands, {self.unmatched} unmatched commands, "
+                      f"{self.trips} watchdog trips, {self.switches} parameter switches, "
                       f"period jitter p50/p99 {jp[0] * 1e3:.3f}/{jp[1] * 1e3:.3f} ms, "
                       f"state-to-command latency p50/p99 {lp[0] * 1e3:.3f}/{lp[1] * 1e3:.3f} ms "
                       f"(last {WINDOW} cycles)")
@@ -310,7 +312,7 @@ class ControllerNode:
             out = self.controller.track_joints(q, ref[1], ref[2], target, self.values["joint_gain"])
         else:
             out = self.controller.step(q, target)
-        self.pub_cmd.publish(convert.float_array(out.velocities))
+        self.send_command(out.velocities)
         # Real time: from the state's stamp (its publication, wall clock) to the command's
         # publication, transport included. Lockstep stamps are simulation time: from receipt.
         latency = (time.monotonic_ns() - received if self.lockstep else time.time_ns() - stamp) / 1e9
@@ -328,9 +330,14 @@ class ControllerNode:
 
     def publish_safe(self, stamp: int, reason: str, level: int = 1) -> None:
         """Zero-velocity command with the reason on /diagnostics (``level``) and in the (throttled) log."""
-        self.pub_cmd.publish(convert.float_array(np.zeros(self.model.nq)))
+        self.send_command(np.zeros(self.model.nq))
         self.safe_commands += 1
         self.report(stamp, reason, "safe_command", level)
+
+    def send_command(self, velocities: np.ndarray) -> None:
+        self.pub_cmd.publish(convert.float_array(velocities))
+        if self.pub_cmd.get_subscription_count() == 0:
+            self.unmatched += 1
 
     def warn(self, text: str) -> None:
         """Log at most once a second."""
@@ -351,9 +358,10 @@ class ControllerNode:
         return "ok" if self.fault is None else self.fault[0]
 
     def counters(self) -> dict[str, int]:
-        """Cumulative counts: ``cycles + safe_commands`` is every command this node has published."""
-        return {"cycles": self.cycles, "safe_commands": self.safe_commands, "watchdog_trips": self.trips,
-                "missed_deadlines": self.missed, "solver_failures": self.failures}
+        """Cumulative counts: ``cycles + safe_commands`` is every command this node has published,
+        ``unmatched_commands`` of them while no subscriber was matched."""
+        return {"cycles": self.cycles, "safe_commands": self.safe_commands, "unmatched_commands": self.unmatched,
+                "watchdog_trips": self.trips, "missed_deadlines": self.missed, "solver_failures": self.failures}
 
     def publish_diagnostics(self, stamp: int, out: ControlOutput, latency: float) -> None:
         r = out.result

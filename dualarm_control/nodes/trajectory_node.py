@@ -5,7 +5,8 @@ kinematics). Real-time mode: one target per control period on a timer, timed fro
 joint state on the node's clock (simulation time with ``use_sim_time``). Lockstep mode: one
 target per joint state, stamped with the joint state's stamp, so the controller can pair them. When the trajectory plus the
 scenario's settle time has elapsed the node logs completion, publishes a final
-``/diagnostics`` status "complete" and exits 0.
+``/diagnostics`` status "complete" and exits 0; with ``repeat:=true`` (soak runs) it starts the
+scenario again from the pose of the next joint state instead, forever.
 """
 
 from __future__ import annotations
@@ -33,6 +34,8 @@ PARAMETERS = (
     ParamSpec("plan", "", "plan.json of `dualarm plan`: stream its joint trajectory on /joint_reference "
               "(and its relative pose on /relative_target) instead of the scenario's segments", read_only=True),
     QOS_PARAMETER,
+    ParamSpec("repeat", False, "start the scenario again from the current pose when it completes (soak runs)",
+              read_only=True),
 )
 
 
@@ -44,6 +47,8 @@ class TrajectoryNode:
         p = declare(self.node, PARAMETERS)
         self.scenario = load_scenario(p["scenario"])
         self.lockstep = bool(p["lockstep"])
+        self.repeat = bool(p["repeat"])
+        self.repetitions = 0
         self.model = DualArmModel()
         self.plan = PlanExecution(self.model, p["plan"]) if p["plan"] else None
         self.order = {name: i for i, name in enumerate(self.model.joint_names)}
@@ -94,7 +99,11 @@ class TrajectoryNode:
         if t >= self.end_s:  # no target at or after the end: as many cycles as the in-process run
             self.log.info(f"scenario '{self.scenario.name}' complete at t={t:.2f} s")
             self._status(stamp, 0, "complete", t)
-            self.finished = True  # run() stops spinning after this callback
+            self.repetitions += 1
+            if self.repeat:  # the next joint state plans the next run from where the arms are
+                self.trajectory, self.segment = None, -1
+            else:
+                self.finished = True  # run() stops spinning after this callback
             return
         if self.plan is not None:
             ref = self.plan.sample(t)
@@ -111,7 +120,8 @@ class TrajectoryNode:
             self._status(stamp, 0, f"segment {sample.segment_name}", t)
 
     def _status(self, stamp: int, level: int, message: str, t: float) -> None:
-        values = {"scenario": self.scenario.name, "time_s": f"{t:.3f}", "duration_s": f"{self.end_s:.3f}"}
+        values = {"scenario": self.scenario.name, "time_s": f"{t:.3f}", "duration_s": f"{self.end_s:.3f}",
+                  "repetitions": self.repetitions}
         self.pub_diag.publish(convert.diagnostics(stamp, "trajectory_node", level, message, values))
 
 
