@@ -38,7 +38,7 @@ def test_quick_fault_rows_pass(tmp_path: Path) -> None:
 
 def test_a_row_that_cannot_run_is_skipped_with_the_reason(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(faults, "netem_unavailable", lambda: "no netem here (test)")
-    rows = faults.loss_rows(tmp_path, "assembly", ["best_effort_loss"], lambda _: None)
+    rows = faults.loss_rows(tmp_path, "assembly", ["best_effort_loss"], lambda _: None, relay_loss=0.0)
     assert [(r.status, r.observed) for r in rows] == [("skipped", "skipped: no netem here (test)")]
 
 

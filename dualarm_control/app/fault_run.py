@@ -47,10 +47,15 @@ class CellRun:
 
     def __init__(self, out: Path, scenario: str, node_args: Sequence[str] = (), sim_ns: str = "",
                  ctrl_ns: str = "", env: Mapping[str, str] | None = None,
-                 sim_env: Mapping[str, str] | None = None) -> None:
+                 sim_env: Mapping[str, str] | None = None, node_extra: Mapping[str, Sequence[str]] | None = None,
+                 helpers: Mapping[str, list[str]] | None = None) -> None:
+        """``node_extra``: more ROS arguments per node (remappings); ``helpers``: more processes (name ->
+        command, in ``ctrl_ns``) started before the nodes, e.g. a lossy relay."""
         self.out = Path(out)
         self.scenario = scenario
         self.node_args = list(node_args)
+        self.node_extra = dict(node_extra or {})
+        self.helpers = dict(helpers or {})
         self.sim_ns, self.ctrl_ns = sim_ns, ctrl_ns
         self.env = dict(env or {})
         self.sim_env = dict(sim_env) if sim_env is not None else self.env
@@ -63,7 +68,7 @@ class CellRun:
         return [*exec_prefix(ns), *cmd] if ns else cmd
 
     def start_node(self, name: str) -> Process:
-        args = [*self.node_args]
+        args = [*self.node_args, *self.node_extra.get(name, [])]
         if name != "controller_node":
             args += ["-p", f"scenario:={self.scenario}"]
         if name == "sim_node":
@@ -78,6 +83,8 @@ class CellRun:
         self.out.mkdir(parents=True, exist_ok=True)
         recorders = [self.start_recorder("bag", self.bag)]
         recorders += [self.start_recorder(name, path) for name, path in extra_recorders.items()]
+        for name, cmd in self.helpers.items():
+            self.launch.start(name, self._cmd(self.ctrl_ns, cmd), self.env)
         for name in ("controller_node", "trajectory_node", "sim_node"):
             self.start_node(name)
         end = time.monotonic() + START_TIMEOUT_S

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import signal
+import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
@@ -63,7 +64,8 @@ EXPECTED = {
     "recorder_sigint": "SIGINT to a bag recorder mid-run: exit 0, bag readable (rosbags AnyReader), every message "
                        "decodes, every /joint_states stamped before the signal (- 1 ms) is in it",
     "recorder_sigterm": "SIGTERM to a bag recorder mid-run: as for SIGINT",
-    "best_effort_loss": "best-effort streams, netem loss 10 % on lo of a private namespace (UDP only): the scenario "
+    "best_effort_loss": "best-effort streams losing 10 % of their messages (netem loss on lo of a private namespace, "
+                        "UDP only; without netem a relay process dropping 10 % of every stream): the scenario "
                         f"completes, final error < {FINAL_POSITION_M * 1e3:g} mm / {FINAL_ORIENTATION_RAD * 1e3:g} mrad",
     "across_hosts": "sim_node and controller/trajectory in two namespaces joined by a veth pair (10.231.x.x), Fast DDS "
                     "bound to it (config/fastdds_link.xml + ROS_STATIC_PEERS): scenario completes, final error < "
@@ -219,25 +221,54 @@ def _run_to_completion(run: CellRun) -> None:
     run.wait_line("trajectory_node", "complete at", timeout=max(1.0, end - run.elapsed()))
 
 
-def loss_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[str], None]) -> list[Row]:
+RELAY_ROUTES = ("/raw/joint_states:/joint_states:sensor_msgs/msg/JointState",
+                "/velocity_controller/commands:/raw/velocity_controller/commands:std_msgs/msg/Float64MultiArray",
+                "/raw/relative_target:/relative_target:trajectory_msgs/msg/MultiDOFJointTrajectory")
+RELAY_REMAPS = {"sim_node": ["-r", "/joint_states:=/raw/joint_states",
+                             "-r", "/velocity_controller/commands:=/raw/velocity_controller/commands"],
+                "trajectory_node": ["-r", "/relative_target:=/raw/relative_target"]}
+
+
+def loss_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[str], None],
+              relay_loss: float = 0.1) -> list[Row]:
+    """Best-effort streams with 10 % loss: netem on lo of a private namespace, or (no netem in this
+    kernel) a lossy relay process on loopback that every stream goes through. Runs to completion."""
     if "best_effort_loss" not in only:
         return []
+    best_effort = ["-p", "qos_reliability:=best_effort"]
     why = netem_unavailable()
-    if why:
+    if why and relay_loss <= 0.0:
         return [_skipped("best_effort_loss", why)]
-    with private_link(peer=False) as link:
-        link.netem(link.a, "lo", LOSS)
-        run = CellRun(out / "best_effort_loss", scenario, ["-p", "qos_reliability:=best_effort"], sim_ns=link.a,
-                      ctrl_ns=link.a, env=_ros_env(False))
-        try:
-            say(f"best_effort_loss: netem {' '.join(LOSS)} on lo, best-effort streams, running to completion")
-            run.start()
-            _run_to_completion(run)
-        except RunError as exc:
-            run.stop()
-            return _failed(["best_effort_loss"], str(exc))
+    try:
+        if not why:
+            with private_link(peer=False) as link:
+                link.netem(link.a, "lo", LOSS)
+                say(f"best_effort_loss: netem {' '.join(LOSS)} on lo of {link.a}, best-effort streams")
+                run = CellRun(out / "best_effort_loss", scenario, best_effort, sim_ns=link.a, ctrl_ns=link.a,
+                              env=_ros_env(False))
+                _run_whole(run)
+            how = f"netem {' '.join(LOSS)} on lo"
+        else:
+            relay = [sys.executable, "-u", "-m", "dualarm_control.app.lossy_relay", "--loss", str(relay_loss),
+                     *RELAY_ROUTES]
+            say(f"best_effort_loss: no netem ({why}); a relay process drops {relay_loss:.0%} of every stream")
+            run = CellRun(out / "best_effort_loss", scenario, best_effort, node_extra=RELAY_REMAPS,
+                          helpers={"relay": relay})
+            _run_whole(run)
+            how = "relay: " + "; ".join(line.removeprefix("relay ") for line in run.process("relay").lines
+                                        if "dropped" in line) + f" (netem unavailable: {why})"
+    except RunError as exc:
+        return _failed(["best_effort_loss"], str(exc))
+    return [_completion_row("best_effort_loss", run.record(), f"; loss by {how}")]
+
+
+def _run_whole(run: CellRun) -> None:
+    """Start ``run``, wait for the scenario to complete, stop (also on failure)."""
+    try:
+        run.start()
+        _run_to_completion(run)
+    finally:
         run.stop()
-    return [_completion_row("best_effort_loss", run.record())]
 
 
 def link_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[str], None]) -> list[Row]:
