@@ -35,6 +35,7 @@ from dualarm_control.ros.node import (
     priority_from_args,
     request_realtime_priority,
     run,
+    thread_priority_spec,
     usage,
 )
 from dualarm_control.ros.qos import QOS_PARAMETER, stream_qos
@@ -48,8 +49,7 @@ PARAMETERS = (
     ParamSpec("command_timeout", 0.05, "command age that brings the arms to rest [s]", check=positive),
     ParamSpec("lockstep", False, "advance one period per received command", read_only=True),
     ParamSpec("plan", "", "plan.json of `dualarm plan`: start at its first configuration", read_only=True),
-    ParamSpec("thread_priority", 50, "SCHED_FIFO priority of the physics loop (0: normal scheduling)",
-              check=lambda v: "" if 0 <= v <= 99 else "an integer in [0, 99]", read_only=True, bounds=(0, 99)),
+    thread_priority_spec(50, "the physics loop"),
     ParamSpec("lockstep_subscribers", 2, "joint_states readers to wait for before the first lockstep state",
               check=non_negative),
     ParamSpec("lockstep_resend", 0.5, "re-publish the pending state after this long without a command [s]",

@@ -11,10 +11,15 @@ and their closing log lines give the final counters.
   whichever is longer. Must be <= 5 %.
 * **Missed-deadline bursts**: one-second windows in which the controller's missed-deadline
   counter rose by :data:`BURST` or more (2.5 % of the window's 200 cycles). Must be none.
-* **Accounting**: every command the controller published (``cycles + safe_commands``) was
-  received by the simulator, except those sent while no subscriber was matched
-  (``unmatched_commands``, start-up): ``commands received == cycles + safe_commands -
-  unmatched_commands``, exactly.
+* **Accounting**: every command the controller published (``cycles + safe_commands``) after
+  the start-up was received by the simulator. Start-up loses a few: those published while no
+  subscriber was matched (``unmatched_commands``) and those sent while discovery was matched on
+  the writer's side only. So the *shortfall* ``cycles + safe_commands - unmatched_commands -
+  commands_received`` is measured at each ``sim_node`` status (its stamp T against the
+  controller's count for the states stamped up to T - 10 ms, so at most
+  :data:`IN_FLIGHT` commands are in doubt) and exactly at the end (the controller and
+  trajectory node are stopped first, the simulator a second later). The final shortfall must
+  equal the one at the end of the warm-up within :data:`IN_FLIGHT`: no command lost after it.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ import re
 import signal
 import subprocess
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +44,8 @@ SAMPLE_S = 1.0
 BURST = 5
 MAX_RSS_GROWTH = 0.05
 WARMUP_SHARE = 0.1
+IN_FLIGHT = 2
+MATCH_NS = 10_000_000
 STOP_WAIT_S = 15.0
 
 
@@ -53,19 +61,28 @@ def rss_bytes(pid: int) -> int:
 
 @dataclass
 class Counters:
-    """The latest /diagnostics values of the controller, the simulator and the trajectory node."""
+    """The latest /diagnostics values of the controller, the simulator and the trajectory node, and the
+    command shortfall at each simulator status (module docstring)."""
 
     controller: dict[str, str] = field(default_factory=dict)
     sim: dict[str, str] = field(default_factory=dict)
     repetitions: int = 0
+    shortfall: int | None = None
+    published: deque[tuple[int, int]] = field(default_factory=lambda: deque(maxlen=1000))  # (stamp, net count)
 
     def on_message(self, msg: Any) -> None:
+        stamp = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
         for status in msg.status:
             values = {kv.key: kv.value for kv in status.values}
             if status.name == "controller_node" and "cycles" in values:
                 self.controller = values
+                net = _int(values, "cycles") + _int(values, "safe_commands") - _int(values, "unmatched_commands")
+                self.published.append((stamp, net))
             elif status.name == "sim_node":
                 self.sim = values
+                sent = [n for t, n in self.published if t <= stamp - MATCH_NS]
+                if sent:
+                    self.shortfall = sent[-1] - _int(values, "commands_received")
             elif status.name == "trajectory_node" and status.message == "complete":
                 self.repetitions = int(values.get("repetitions", self.repetitions + 1))
 
@@ -134,6 +151,7 @@ def run_soak(minutes: float, scenario: str = "assembly", say: Callable[[str], No
                                 "safe_commands": _int(counters.controller, "safe_commands"),
                                 "watchdog_trips": _int(counters.controller, "watchdog_trips"),
                                 "commands_received": _int(counters.sim, "commands_received"),
+                                "shortfall": counters.shortfall,
                                 "rss": {n: rss_bytes(p.popen.pid) for n, p in procs.items()}})
                 if now >= next_report:
                     next_report += 30.0
@@ -170,7 +188,10 @@ def summarize(samples: list[dict[str, Any]], controller: dict[str, int], sim: di
     bursts = sum(1 for d in per_window if d >= BURST)
     published = controller.get("cycles", 0) + controller.get("safe", 0)
     expected = published - controller.get("unmatched", 0)
-    accounted = bool(controller) and bool(sim) and sim.get("received", -1) == expected
+    final_shortfall = expected - sim["received"] if controller and sim else None
+    at_warmup = samples[warm]["shortfall"] if warm is not None else None
+    accounted = (final_shortfall is not None and at_warmup is not None
+                 and abs(final_shortfall - at_warmup) <= IN_FLIGHT)
     growth_ok = all(v["growth"] <= MAX_RSS_GROWTH for v in rss.values())  # nan (no warm-up) fails
     return {
         "scenario": scenario, "minutes": duration / 60.0, "samples": samples,
@@ -179,7 +200,7 @@ def summarize(samples: list[dict[str, Any]], controller: dict[str, int], sim: di
         "missed_deadlines": controller.get("missed", 0), "max_missed_per_s": max(per_window, default=0),
         "seconds_with_missed": sum(1 for d in per_window if d > 0), "bursts": bursts, "bursts_ok": bursts == 0,
         "controller": controller, "sim": sim, "commands_published": published, "commands_expected": expected,
-        "accounted": accounted,
+        "startup_shortfall": at_warmup, "final_shortfall": final_shortfall, "accounted": accounted,
         "passed": growth_ok and bursts == 0 and accounted,
     }
 
@@ -196,9 +217,10 @@ def format_soak(doc: dict[str, Any]) -> str:
               f"{doc['seconds_with_missed']} one-second windows with any, at most {doc['max_missed_per_s']} in one; "
               f"bursts (>= {BURST} in a second): {doc['bursts']}"),
               (f"- accounting: {c.get('cycles', 0)} cycles + {c.get('safe', 0)} safe commands = "
-              f"{doc['commands_published']} published, {c.get('unmatched', 0)} before the simulator matched; "
-              f"the simulator received {s.get('received', 'n/a')} "
-              f"({'every one' if doc['accounted'] else 'MISMATCH'}); "
+              f"{doc['commands_published']} published, {c.get('unmatched', 0)} while no subscriber was matched; "
+              f"the simulator received {s.get('received', 'n/a')}; shortfall {doc['startup_shortfall']} at the end "
+              f"of the warm-up (start-up discovery), {doc['final_shortfall']} at the end "
+              f"({'no command lost after the start-up' if doc['accounted'] else 'COMMANDS LOST'}); "
               f"watchdog trips {c.get('trips', 0)}, solver failures {c.get('failures', 0)}, "
               f"command timeouts {s.get('timeouts', 'n/a')}")]
     return "\n".join(lines)

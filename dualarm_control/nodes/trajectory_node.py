@@ -11,6 +11,7 @@ scenario again from the pose of the next joint state instead, forever.
 
 from __future__ import annotations
 
+import sys
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -22,11 +23,19 @@ from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import ParamSpec, positive
 from dualarm_control.planning.execution import PlanExecution
 from dualarm_control.ros import convert
-from dualarm_control.ros.node import declare, run, usage
+from dualarm_control.ros.node import (
+    declare,
+    priority_from_args,
+    request_realtime_priority,
+    run,
+    thread_priority_spec,
+    usage,
+)
 from dualarm_control.ros.qos import QOS_PARAMETER, stream_qos
 from dualarm_control.scenario import load_scenario
 from dualarm_control.trajectory import RelativeTrajectory
 
+DEFAULT_PRIORITY = 40
 PARAMETERS = (
     ParamSpec("scenario", "assembly", "scenario name (config/scenarios/<name>.yaml) or YAML path", read_only=True),
     ParamSpec("control_period", 0.005, "target period in real-time mode [s]", check=positive, read_only=True),
@@ -34,6 +43,7 @@ PARAMETERS = (
     ParamSpec("plan", "", "plan.json of `dualarm plan`: stream its joint trajectory on /joint_reference "
               "(and its relative pose on /relative_target) instead of the scenario's segments", read_only=True),
     QOS_PARAMETER,
+    thread_priority_spec(DEFAULT_PRIORITY, "the target stream (below the simulator's and controller's 50)"),
     ParamSpec("repeat", False, "start the scenario again from the current pose when it completes (soak runs)",
               read_only=True),
 )
@@ -42,7 +52,7 @@ PARAMETERS = (
 class TrajectoryNode:
     """Node shell around :class:`RelativeTrajectory`."""
 
-    def __init__(self, context: Any) -> None:
+    def __init__(self, context: Any, priority_note: str = "disabled") -> None:
         self.node = Node("trajectory_node", context=context)
         p = declare(self.node, PARAMETERS)
         self.scenario = load_scenario(p["scenario"])
@@ -69,6 +79,8 @@ class TrajectoryNode:
         what = f"plan {p['plan']}" if self.plan else f"{len(self.scenario.segments)} segments"
         self.log.info(f"scenario '{self.scenario.name}': {what}, "
                       f"{'lockstep' if self.lockstep else 'real-time'}; waiting for /joint_states")
+        if priority_note and priority_note != "disabled":
+            self.log.warning(priority_note)
 
     def on_joint_state(self, msg: Any) -> None:
         if self.finished:
@@ -126,7 +138,12 @@ class TrajectoryNode:
 
 
 def main(args: list[str] | None = None) -> int:
-    return run(TrajectoryNode, args, usage("trajectory_node", __doc__ or "", PARAMETERS))
+    argv = list(sys.argv if args is None else args)
+    # Before any middleware thread exists, so they inherit the scheduling: a starved target stream
+    # stops the controller (target_timeout), as `dualarm soak` showed on a loaded machine.
+    why_not = request_realtime_priority(priority_from_args(argv, DEFAULT_PRIORITY))
+    return run(lambda context: TrajectoryNode(context, why_not), argv,
+               usage("trajectory_node", __doc__ or "", PARAMETERS))
 
 
 if __name__ == "__main__":
