@@ -194,7 +194,16 @@ class DualArmModel:
         """World poses of the left and right tool frames at q."""
         q = self.check_q(q)
         pin.framesForwardKinematics(self.model, self.data, q)
+        self._owner = None  # a Configuration must recompute before reading self.data
         return self.data.oMf[self._f1].copy(), self.data.oMf[self._f2].copy()
+
+    def frame_poses(self, q: FloatArray, names: tuple[str, ...]) -> tuple[pin.SE3, ...]:
+        """World poses of the named frames at q."""
+        q = self.check_q(q)
+        ids = [self.frame_id(n) for n in names]
+        pin.framesForwardKinematics(self.model, self.data, q)
+        self._owner = None
+        return tuple(self.data.oMf[i].copy() for i in ids)
 
     def relative_pose(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(p_r^1, R_r^1) of eq (1)-(2) at q."""
