@@ -12,7 +12,8 @@ Keys under ``scenario.`` (flattened, see :mod:`dualarm_control.scenario`):
   * ``table`` (eq 11): ``frames`` and ``radii`` [m] (spheres), ``bound`` (b_6 < 0, m);
 
   optional ``<task>.weight`` (slack weight). ``force.*`` configures the force variant
-  (eq 9), see :class:`~dualarm_control.force.ForceParams`.
+  (eq 9), see :class:`~dualarm_control.force.ForceParams`; ``contact_links`` (two link
+  names) are the links that touch in the force variant (pan and brush).
 """
 
 from __future__ import annotations
@@ -55,6 +56,7 @@ class TaskScenario:
         convergence_time: time after which tracking metrics are taken [s].
         gains: the k values [1/s] the experiment compares by default.
         tasks: task specs in order. force: the force variant's parameters.
+        contact_links: the two links that make contact in the force variant.
     """
 
     duration: float
@@ -63,6 +65,7 @@ class TaskScenario:
     gains: tuple[float, ...]
     tasks: tuple[TaskSpec, ...]
     force: ForceParams
+    contact_links: tuple[str, str] = ("left_flange", "right_tool")
 
     def build(self, gain: float, height_offset: float = 0.0) -> list[Task]:
         """Task objects with gain k for every task; ``height_offset`` [m] is added to the circle
@@ -155,9 +158,12 @@ def parse_task_scenario(flat: Mapping[str, Any], prefix: str) -> TaskScenario:
         force = ForceParams(**force_values)
     except (TypeError, ValueError) as exc:
         raise ScenarioError(f"scenario force parameters: {exc}") from None
+    links = get("contact_links", ["left_flange", "right_tool"])
+    if not isinstance(links, list) or len(links) != 2 or not all(isinstance(n, str) for n in links):
+        raise ScenarioError(f"scenario parameter '{prefix}contact_links': got {links!r}, expected two link names")
     out = TaskScenario(duration=number("duration"), table_height=number("table_height"),
                        convergence_time=number("convergence_time", 5.0), gains=tuple(float(g) for g in gains),
-                       tasks=tuple(specs), force=force)
+                       tasks=tuple(specs), force=force, contact_links=(links[0], links[1]))
     if out.duration <= out.convergence_time:
         raise ScenarioError(f"scenario parameter '{prefix}duration' must exceed convergence_time "
                             f"({out.convergence_time} s), got {out.duration}")

@@ -26,7 +26,12 @@ from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.metrics import percentiles
 from dualarm_control.scenario import Scenario
 from dualarm_control.task_scenario import TaskScenario
-from dualarm_control.tasks import INEQUALITY, CircleTask, ManipulabilityTask, TablePlaneTask
+from dualarm_control.tasks import (
+    INEQUALITY,
+    CircleTask,
+    ManipulabilityTask,
+    TablePlaneTask,
+)
 from dualarm_sim.cell import CellConfig, DualArmCell
 
 
@@ -94,7 +99,7 @@ def run_task_scenario(
     pan, tool = circle.pan_frame, circle.tool_frame
     period = params.period
     steps = math.ceil((duration if duration is not None else spec.duration) / period)
-    pairs = (("left_flange", "right_tool"),) if force else ()
+    pairs: tuple[tuple[str, str], ...] = (spec.contact_links,) if force else ()
     config = CellConfig(urdf=scenario.urdf_path, control_period=period, table_height=spec.table_height,
                         contact_pairs=pairs)
     sensor, pi = ForceSensorModel(fp, period), ForcePI(fp)

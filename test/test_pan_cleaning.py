@@ -1,0 +1,124 @@
+"""Pan-cleaning task of paper 001: scenario, force feedback parts, short closed-loop runs, the CLI."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dualarm_control.app.cli import main
+from dualarm_control.app.task_experiment import run_task_scenario, summarize_task_run
+from dualarm_control.controller import controller_params
+from dualarm_control.errors import ScenarioError
+from dualarm_control.force import (
+    ForceParams,
+    ForcePI,
+    ForceSensorModel,
+    contact_normal_force,
+)
+from dualarm_control.params import read_params_file
+from dualarm_control.paths import config_path
+from dualarm_control.scenario import load_scenario, scenario_from_parameters
+
+
+@pytest.fixture(scope="module")
+def scenario():
+    return load_scenario("pan_cleaning")
+
+
+@pytest.fixture(scope="module")
+def params():
+    return controller_params({"solver": "constraint_based"})
+
+
+def test_scenario_has_the_papers_tasks_and_cell(scenario) -> None:
+    spec = scenario.tasks
+    assert spec is not None and scenario.urdf == "dualarm_cell_pan.urdf" and scenario.segments == ()
+    assert [t.type for t in spec.tasks] == ["circle", "cone", "singularity", "singularity", "table"]
+    assert spec.gains == (1.0, 0.5, 0.2) and spec.table_height == pytest.approx(0.4)
+    assert [t.gain for t in spec.build(0.5)] == [0.5] * 5
+
+
+def test_bad_task_parameters_name_the_key() -> None:
+    path = config_path("scenarios", "pan_cleaning.yaml")
+    flat = read_params_file(path, "trajectory_node")
+    with pytest.raises(ScenarioError, match="scenario.cone.type"):
+        scenario_from_parameters({**flat, "scenario.cone.type": "spiral"}, path)
+    with pytest.raises(ScenarioError, match="singularity_left.*b_5"):
+        scenario_from_parameters({**flat, "scenario.singularity_left.bound": 0.1}, path)
+    with pytest.raises(ScenarioError, match="force parameters: unknown"):
+        scenario_from_parameters({**flat, "scenario.force.stiffness": 1.0}, path)
+
+
+def test_force_pi_integrates_and_saturates() -> None:
+    pi = ForcePI(ForceParams(kp=0.001, ki=0.01, max_offset=0.02))
+    assert pi.step(0.0, 0.1) == pytest.approx(0.001 * 5 + 0.01 * 5 * 0.1)
+    for _ in range(1000):
+        out = pi.step(0.0, 0.1)
+    assert out == pytest.approx(0.02) and pi.integral == pytest.approx(0.02)
+    assert pi.step(5.0, 0.1) == pytest.approx(0.02)  # at the set point: integral held
+
+
+def test_sensor_model_is_seeded_and_low_pass() -> None:
+    fp = ForceParams(noise_std=0.3, cutoff_hz=15.0, seed=3)
+    a, b = ForceSensorModel(fp, 0.005), ForceSensorModel(fp, 0.005)
+    xs = np.array([a.filter(np.zeros(6)) for _ in range(4000)])
+    ys = np.array([b.filter(np.zeros(6)) for _ in range(4000)])
+    np.testing.assert_array_equal(xs, ys)
+    alpha = 1 - math.exp(-2 * math.pi * 15.0 * 0.005)
+    expected = 0.3 * math.sqrt(alpha / (2 - alpha))  # stationary std of the first-order filter
+    assert np.std(xs[100:, :3]) == pytest.approx(expected, rel=0.1)
+
+
+def test_contact_normal_force_removes_the_tool_weight() -> None:
+    """Tool pointing down (R_2 = diag(1, -1, -1)), pan normal up, 5 N contact, 0.1 kg brush."""
+    r2 = np.diag([1.0, -1.0, -1.0])
+    contact, weight = np.array([0, 0, 5.0]), np.array([0, 0, -0.981])
+    reading = np.concatenate((r2.T @ -(contact + weight), np.zeros(3)))  # flange on tool, tool frame
+    assert contact_normal_force(reading, r2, np.array([0, 0, 1.0]), 0.1) == pytest.approx(5.0)
+
+
+def test_circle_converges_below_1_mm_and_no_inequality_is_violated(scenario, params) -> None:
+    """k = 1, 8 s: RMS circle error after 5 s < 1 mm; f_i <= b_i every cycle; the table is never touched."""
+    log = run_task_scenario(scenario, params, 1.0, duration=8.0)
+    metrics = summarize_task_run(log, scenario)
+    assert metrics["circle_rms_error_m"] < 1e-3
+    assert metrics["max_inequality_violation"] <= 1e-4
+    assert metrics["table_contacts"] == 0 and metrics["min_table_distance_m"] > 0.05
+    assert metrics["solver_failures"] == 0
+
+
+def test_larger_gain_converges_faster(scenario, params) -> None:
+    """The paper's ordering (Fig. 4-5): ||f_1-3|| at 2.5 s is smaller for larger k."""
+    errors = []
+    for gain in (1.0, 0.5, 0.2):
+        log = run_task_scenario(scenario, params, gain, duration=2.5)
+        errors.append(float(np.linalg.norm(log.values["circle"][-1])))
+    assert errors[0] < errors[1] < errors[2]
+    for gain, error in zip((1.0, 0.5, 0.2), errors, strict=True):  # close to exp(-k t) of the 5 cm start error
+        assert error == pytest.approx(0.05 * math.exp(-gain * 2.5), rel=0.15)
+
+
+def test_force_feedback_keeps_contact_at_the_set_point(scenario, params) -> None:
+    """eq (9) with a 1 cm pan modelling error: contact after first touch, force RMS error < 1 N."""
+    log = run_task_scenario(scenario, params, scenario.tasks.force.gain, force=True, duration=8.0)
+    metrics = summarize_task_run(log, scenario)
+    assert metrics["first_contact_s"] < 4.0
+    assert metrics["contact_lost_cycles"] == 0
+    assert metrics["force_rms_error_n"] < 1.0
+    assert metrics["max_inequality_violation"] <= 1e-4
+
+
+def test_cli_writes_metrics_and_figures(tmp_path: Path) -> None:
+    out = tmp_path / "pan"
+    assert main(["experiment", "pan_cleaning", "--gains", "1", "--duration", "6", "--output", str(out)]) == 0
+    metrics = json.loads((out / "metrics.json").read_text())
+    for key in ("circle_rms_error_m", "max_inequality_violation", "min_table_distance_m", "min_singularity_margin",
+                "cycle_time_p50_s", "cycle_time_p99_s"):
+        assert key in metrics["k=1"]
+    for name in ("tool_path.png", "task_values.png", "joint_velocities.png"):
+        assert (out / name).stat().st_size > 1000
+    assert main(["experiment", "assembly", "--force", "--output", str(out)]) == 2  # task options only
