@@ -122,3 +122,31 @@ def test_cli_writes_metrics_and_figures(tmp_path: Path) -> None:
     for name in ("tool_path.png", "task_values.png", "joint_velocities.png"):
         assert (out / name).stat().st_size > 1000
     assert main(["experiment", "assembly", "--force", "--output", str(out)]) == 2  # task options only
+
+
+def variant(**changes: float):
+    """pan_cleaning with some scenario keys changed (flattened names without 'scenario.')."""
+    path = config_path("scenarios", "pan_cleaning.yaml")
+    flat = read_params_file(path, "trajectory_node")
+    return scenario_from_parameters({**flat, **{f"scenario.{k}": v for k, v in changes.items()}}, path)
+
+
+def test_an_active_inequality_is_kept_while_the_circle_is_tracked(params) -> None:
+    """A 5 deg cone: the brush tilts more than that on the plain run, so f_4 reaches its bound and
+    stays on it (bound margin, eq 5) while the circle is still tracked below 1 mm."""
+    scenario = variant(**{"cone.max_angle_deg": 5.0})
+    log = run_task_scenario(scenario, params, 1.0, duration=8.0)
+    margin = log.values["cone"][:, 0] - log.bounds["cone"][0]
+    assert np.mean(margin > -1e-4) > 0.05  # active for a part of the run
+    assert margin.max() <= 1e-4
+    assert summarize_task_run(log, scenario)["circle_rms_error_m"] < 1e-3
+
+
+def test_a_violated_inequality_decays_at_least_exponentially(params) -> None:
+    """Table clearance 0.15 m demanded, 0.148 m at the start: f_6 - b_6 > 0 decays no slower than exp(-k t)."""
+    scenario = variant(**{"table.bound": -0.15})
+    log = run_task_scenario(scenario, params, 1.0, duration=4.0)
+    excess = (log.values["table"] - log.bounds["table"]).max(axis=1)
+    assert excess[0] > 1e-3
+    assert np.all(excess <= excess[0] * np.exp(-1.0 * log.time) + 1e-4)
+    assert excess[int(1.0 / log.period):].max() <= 0.0
