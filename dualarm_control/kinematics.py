@@ -99,16 +99,24 @@ def jacobian_derivatives(jacobian: FloatArray) -> FloatArray:
     """
     jv, jw = jacobian[:3], jacobian[3:]
     m = jacobian.shape[1]
-    zk = jw.T[:, :, None]  # (m, 3, 1): z_k
-    cross_v = np.cross(zk, jv[None, :, :], axis=1)  # [k, :, i] = z_k x Jv_i
-    cross_w = np.cross(zk, jw[None, :, :], axis=1)  # [k, :, i] = z_k x z_i
+    cross_v = _pairwise_cross(jw, jv)  # [k, :, i] = z_k x Jv_i
+    cross_w = _pairwise_cross(jw, jw)  # [k, :, i] = z_k x z_i
     lower_v = np.transpose(cross_v, (2, 1, 0))  # [k, :, i] = cross_v[i, :, k] = z_i x Jv_k
     out = np.zeros((m, 6, m))
-    upper = np.triu(np.ones((m, m), dtype=bool))  # [k, i]: k <= i
-    mask = upper[:, None, :]
+    mask = np.triu(np.ones((m, m), dtype=bool))[:, None, :]  # [k, :, i]: k <= i
     out[:, :3, :] = np.where(mask, cross_v, lower_v)
     out[:, 3:, :] = np.where(mask, cross_w, 0.0)
     return out
+
+
+def _pairwise_cross(a: FloatArray, b: FloatArray) -> FloatArray:
+    """c[k, :, i] = a[:, k] x b[:, i] for a (3, m) and b (3, p): shape (m, 3, p).
+
+    Written out by components: np.cross with axis arguments costs several times more on
+    these small arrays (it runs every control cycle)."""
+    a0, a1, a2 = a[0][:, None], a[1][:, None], a[2][:, None]
+    b0, b1, b2 = b[0][None, :], b[1][None, :], b[2][None, :]
+    return np.stack((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), axis=1)
 
 
 @dataclass(frozen=True)

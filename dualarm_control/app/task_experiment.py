@@ -201,11 +201,13 @@ def force_metrics(log: TaskRunLog, settle: float, threshold: float) -> dict[str,
     ``force_rms_error_n`` is the RMS of (pybullet contact force - set point) from
     max(first touch, ``settle``) to the end; ``measured_force_rms_error_n`` the same for the
     filtered sensor value the controller used; ``contact_lost_cycles`` counts cycles after the
-    first touch with a contact force below ``threshold``.
+    first touch with a contact force below ``threshold``; ``contact_force_mean/min/max_n`` are
+    taken over the same window as ``force_rms_error_n``, ``contact_force_peak_n`` over the run.
     """
     touching = log.contact_force > threshold
     if not touching.any():
         return {"first_contact_s": float("nan"), "contact_lost_cycles": -1, "force_rms_error_n": float("nan"),
+                "contact_force_peak_n": float(log.contact_force.max()),
                 "measured_force_rms_error_n": float("nan"), "contact_force_mean_n": float("nan"),
                 "force_rms_error_from_first_touch_n": float("nan")}
     first = int(np.argmax(touching))
@@ -220,5 +222,6 @@ def force_metrics(log: TaskRunLog, settle: float, threshold: float) -> dict[str,
         "contact_force_mean_n": float(log.contact_force[window].mean()),
         "contact_force_min_n": float(log.contact_force[window].min()),
         "contact_force_max_n": float(log.contact_force[window].max()),
+        "contact_force_peak_n": float(log.contact_force.max()),
         "normal_offset_final_m": float(log.normal_offset[-1]),
     }

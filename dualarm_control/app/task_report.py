@@ -119,6 +119,8 @@ TABLE_ROWS = (
     ("first contact [s]", "first_contact_s", 1.0, "{:.2f}"),
     ("contact lost cycles after first touch", "contact_lost_cycles", 1.0, "{:.0f}"),
     ("force RMS error [N]", "force_rms_error_n", 1.0, "{:.3f}"),
+    ("force RMS error from first touch [N]", "force_rms_error_from_first_touch_n", 1.0, "{:.3f}"),
+    ("peak contact force [N]", "contact_force_peak_n", 1.0, "{:.2f}"),
     ("measured force RMS error [N]", "measured_force_rms_error_n", 1.0, "{:.3f}"),
 )
 
