@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from dualarm_control.errors import ParameterError
 from dualarm_control.joint_tracking import joint_tracking_velocity
 from dualarm_control.kinematics import (
     Configuration,
@@ -209,12 +210,12 @@ class RelativeController:
         """One cycle on any set of tasks at time t [s] (paper 001, eq (12)-(14)).
 
         Inequality tasks need a solver that handles inequality rows (``constraint_based``);
-        ValueError otherwise. Non-finite q gives the safe command (status "invalid_input").
+        ParameterError (a ValueError) otherwise. Non-finite q gives the safe command (status "invalid_input").
         """
         start = time.perf_counter()
         q = self.model.check_q(q)
         if any(task.kind == INEQUALITY for task in tasks) and not getattr(self.solver, "supports_inequalities", False):
-            raise ValueError(f"solver {self.solver.name!r} does not handle inequality tasks; use constraint_based")
+            raise ParameterError("solver", self.solver.name, "a solver that handles inequality tasks: constraint_based")
         if not math.isfinite(q.sum()):
             out = self._invalid("joint positions", start)
             return TaskOutput(out.velocities, out.result, (), out.cycle_time)

@@ -84,6 +84,9 @@ class Scenario:
 
     def trajectory(self, start_position: FloatArray, start_rotation: FloatArray) -> RelativeTrajectory:
         """The ruckig relative trajectory from the measured start pose through all segments."""
+        if not self.segments:
+            raise ScenarioError(f"scenario {self.name!r} is a task scenario (paper 001) without relative motion "
+                                "segments: run it with 'dualarm experiment' (constraint_based solver)")
         segments: list[Segment] = []
         p, r = np.asarray(start_position, float), np.asarray(start_rotation, float)
         for spec in self.segments:

@@ -122,6 +122,12 @@ def test_cli_writes_metrics_and_figures(tmp_path: Path) -> None:
     for name in ("tool_path.png", "task_values.png", "joint_velocities.png"):
         assert (out / name).stat().st_size > 1000
     assert main(["experiment", "assembly", "--force", "--output", str(out)]) == 2  # task options only
+    assert main(["experiment", "pan_cleaning", "--solver", "standard_qp", "--output", str(out)]) == 2
+
+
+def test_a_task_scenario_has_no_relative_trajectory(scenario) -> None:
+    with pytest.raises(ScenarioError, match="task scenario"):
+        scenario.trajectory(np.zeros(3), np.eye(3))
 
 
 def variant(**changes: float):
