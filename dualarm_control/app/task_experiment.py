@@ -118,10 +118,10 @@ def run_task_scenario(
         state = cell.state()
         for k in range(steps):
             t = k * period
-            if force:
-                pan_rot = cell.link_pose(pan)[1]  # measured in the cell: N = z_1 of the (real) pan
-                tool_rot = cell.link_pose(tool)[1]
-                f_c = contact_normal_force(sensor.filter(cell.wrench()), tool_rot, pan_rot[:, 2], fp.tool_mass)
+            if force:  # N = z_1 and R_2 from the controller's own kinematics at the measured q
+                pan_pose, tool_pose = model.frame_poses(state.positions, (pan, tool))
+                f_c = contact_normal_force(sensor.filter(cell.wrench()), tool_pose.rotation,
+                                           pan_pose.rotation[:, 2], fp.tool_mass)
                 offset = pi.step(f_c, period)
                 measured[k] = f_c
                 tasks[circle_index] = dataclasses.replace(circle, normal_offset=offset)
