@@ -112,6 +112,14 @@ def test_force_feedback_keeps_contact_at_the_set_point(scenario, params) -> None
     assert metrics["max_inequality_violation"] <= 1e-4
 
 
+def test_without_feedback_the_modelling_error_leaves_the_brush_above_the_pan(params) -> None:
+    """The control case of the force test: ki = 0, the brush circles 1 cm above the real pan."""
+    scenario = variant(**{"force.ki": 0.0})
+    log = run_task_scenario(scenario, params, scenario.tasks.force.gain, force=True, duration=4.0)
+    assert log.contact_force.max() == 0.0
+    assert log.tip_in_pan[-1, 2] == pytest.approx(scenario.tasks.force.model_error, abs=1e-3)
+
+
 def test_cli_writes_metrics_and_figures(tmp_path: Path) -> None:
     out = tmp_path / "pan"
     assert main(["experiment", "pan_cleaning", "--gains", "1", "--duration", "6", "--output", str(out)]) == 0
