@@ -164,3 +164,23 @@ def test_a_violated_inequality_decays_at_least_exponentially(params) -> None:
     assert excess[0] > 1e-3
     assert np.all(excess <= excess[0] * np.exp(-1.0 * log.time) + 1e-4)
     assert excess[int(1.0 / log.period):].max() <= 0.0
+
+
+def test_task_controller_holds_the_force_loop_on_a_bad_reading(scenario, params) -> None:
+    """The per-cycle object a node would use: a NaN wrench keeps the previous offset, no wrench is refused."""
+    from dualarm_control.kinematics import DualArmModel
+    from dualarm_control.task_control import TaskScenarioController
+
+    model = DualArmModel(scenario.urdf_path)
+    control = TaskScenarioController(model, params, scenario.tasks, 2.0, force=True)
+    q = scenario.initial_positions
+    tool = model.frame_poses(q, ("right_tool",))[0]
+    at_rest = np.concatenate((tool.rotation.T @ np.array([0.0, 0.0, 0.1 * 9.81]), np.zeros(3)))  # holds the weight
+    first = control.step(q, 0.0, at_rest)
+    assert abs(first.measured_force) < 1.0  # weight removed; noise 0.3 N
+    assert first.normal_offset > 0  # below the set point: move toward the pan
+    held = control.step(q, 0.005, np.full(6, np.nan))
+    assert math.isnan(held.measured_force) and held.normal_offset == first.normal_offset
+    assert held.output.result.status == "solved"
+    with pytest.raises(ValueError, match="F/T reading"):
+        control.step(q, 0.01)

@@ -13,25 +13,19 @@ offset. The table is in the cell in both variants.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from dualarm_control.controller import ControllerParams, RelativeController
-from dualarm_control.force import ForcePI, ForceSensorModel, contact_normal_force
+from dualarm_control.controller import ControllerParams
 from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.metrics import percentiles
 from dualarm_control.scenario import Scenario
+from dualarm_control.task_control import TaskScenarioController
 from dualarm_control.task_scenario import TaskScenario
-from dualarm_control.tasks import (
-    INEQUALITY,
-    CircleTask,
-    ManipulabilityTask,
-    TablePlaneTask,
-)
+from dualarm_control.tasks import INEQUALITY, ManipulabilityTask, TablePlaneTask
 from dualarm_sim.cell import CellConfig, DualArmCell
 
 
@@ -89,63 +83,53 @@ def run_task_scenario(
 ) -> TaskRunLog:
     """Run the task scenario with all task gains k = ``gain`` (force variant if ``force``)."""
     spec = _task_scenario(scenario)
-    fp = spec.force
     model = DualArmModel(scenario.urdf_path)
-    controller = RelativeController(model, params)
-    tasks = spec.build(gain, height_offset=fp.model_error if force else 0.0)
-    circle_index = next(i for i, t in enumerate(tasks) if isinstance(t, CircleTask))
-    circle = tasks[circle_index]
-    assert isinstance(circle, CircleTask)
-    pan, tool = circle.pan_frame, circle.tool_frame
+    control = TaskScenarioController(model, params, spec, gain, force)
+    circle = control.circle
+    if circle is None:
+        raise ValueError(f"scenario {scenario.name!r} has no circle task")
     period = params.period
     steps = math.ceil((duration if duration is not None else spec.duration) / period)
     pairs: tuple[tuple[str, str], ...] = (spec.contact_links,) if force else ()
     config = CellConfig(urdf=scenario.urdf_path, control_period=period, table_height=spec.table_height,
                         contact_pairs=pairs)
-    sensor, pi = ForceSensorModel(fp, period), ForcePI(fp)
     n = model.nq
     rec = {k: np.zeros((steps, n)) for k in ("positions", "commands")}
-    scal = {k: np.zeros(steps) for k in ("time", "cycle_time", "contact_force", "normal_offset", "table_contacts")}
-    measured = np.full(steps, np.nan)
+    scal = {k: np.zeros(steps) for k in ("time", "cycle_time", "contact_force", "normal_offset", "table_contacts",
+                                         "measured_force")}
     tip = np.zeros((steps, 3))
-    values: dict[str, list[FloatArray]] = {t.name: [] for t in tasks}
+    values: dict[str, list[FloatArray]] = {t.name: [] for t in control.tasks}
     bounds: dict[str, FloatArray] = {}
-    kinds: dict[str, str] = {t.name: t.kind for t in tasks}
+    kinds: dict[str, str] = {t.name: t.kind for t in control.tasks}
     status: list[str] = []
     every = max(steps // 100, 1)
-    offset = 0.0
     with DualArmCell(config, initial_positions=scenario.initial_positions) as cell:
         state = cell.state()
         for k in range(steps):
             t = k * period
-            if force:  # N = z_1 and R_2 from the controller's own kinematics at the measured q
-                pan_pose, tool_pose = model.frame_poses(state.positions, (pan, tool))
-                f_c = contact_normal_force(sensor.filter(cell.wrench()), tool_pose.rotation,
-                                           pan_pose.rotation[:, 2], fp.tool_mass)
-                offset = pi.step(f_c, period)
-                measured[k] = f_c
-                tasks[circle_index] = dataclasses.replace(circle, normal_offset=offset)
-            out = controller.solve_tasks(state.positions, tasks, t)
+            cycle = control.step(state.positions, t, cell.wrench() if force else None)
+            out = cycle.output
             cell.apply_command(out.velocities)
             rec["positions"][k], rec["commands"][k] = state.positions, out.velocities
             for rows in out.rows:
                 values[rows.name].append(rows.value)
                 bounds.setdefault(rows.name, rows.bound)
             status.append(out.result.status)
-            scal["time"][k], scal["cycle_time"][k], scal["normal_offset"][k] = t, out.cycle_time, offset
+            for key, value in (("time", t), ("cycle_time", out.cycle_time), ("normal_offset", cycle.normal_offset),
+                               ("measured_force", cycle.measured_force)):
+                scal[key][k] = value
             state = cell.step()
             scal["contact_force"][k] = cell.contact_force(*pairs[0]) if force else 0.0
             scal["table_contacts"][k] = cell.table_contacts()
             if progress is not None and (k % every == 0 or k == steps - 1):
                 progress((k + 1) / steps, "circle")
     for k, q in enumerate(rec["positions"]):
-        o1, o2 = model.frame_poses(q, (pan, tool))
+        o1, o2 = model.frame_poses(q, (circle.pan_frame, circle.tool_frame))
         tip[k] = o1.rotation.T @ (o2.translation - o1.translation)
     label = f"k={gain:g}" + (" force" if force else "")
     return TaskRunLog(label=label, gain=gain, force=force, period=period, status=status,
                       values={name: np.array(v) for name, v in values.items()}, bounds=bounds, kinds=kinds,
-                      tip_in_pan=tip, measured_force=measured,
-                      set_point=fp.set_point if force else float("nan"), **rec, **scal)
+                      tip_in_pan=tip, set_point=spec.force.set_point if force else float("nan"), **rec, **scal)
 
 
 def convergence_time(time: FloatArray, error: FloatArray, threshold: float) -> float:
