@@ -148,7 +148,7 @@ def _vector(flat: Mapping[str, Any], key: str, size: int) -> FloatArray:
     return np.array(value, dtype=float)
 
 
-def _number(flat: Mapping[str, Any], key: str, default: float) -> float:
+def _number(flat: Mapping[str, Any], key: str, default: float | None = None) -> float:
     value = _get(flat, key, default)
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise ScenarioError(f"scenario parameter '{PREFIX}{key}': got {value!r}, expected a number")
@@ -161,7 +161,7 @@ def scenario_from_parameters(flat: Mapping[str, Any], source: Path) -> Scenario:
     if PREFIX + "tasks" in flat:
         from dualarm_control.task_scenario import parse_task_scenario
 
-        tasks = parse_task_scenario(flat, PREFIX)
+        tasks = parse_task_scenario(flat)
     names = _get(flat, "segments", [] if tasks is not None else None)
     if not isinstance(names, list) or not all(isinstance(n, str) for n in names) or not (names or tasks):
         raise ScenarioError(f"scenario parameter '{PREFIX}segments': got {names!r}, expected a list of segment names")

@@ -25,6 +25,11 @@ from typing import Any
 
 from dualarm_control.errors import ScenarioError
 from dualarm_control.force import ForceParams
+from dualarm_control.scenario import (  # the scenario file's readers and messages
+    PREFIX,
+    _get,
+    _number,
+)
 from dualarm_control.tasks import (
     DEFAULT_EQUALITY_WEIGHT,
     DEFAULT_INEQUALITY_WEIGHT,
@@ -40,7 +45,8 @@ TASK_TYPES = ("circle", "cone", "singularity", "table")
 
 @dataclass(frozen=True)
 class TaskSpec:
-    """One task as written in the file (its keys, validated when the task is built)."""
+    """One task as written in the file: its flattened parameters (``scenario.<name>.<key>``),
+    validated when the task is built."""
 
     name: str
     type: str
@@ -75,18 +81,13 @@ class TaskScenario:
 
 
 def _value(spec: TaskSpec, key: str, kind: type, default: Any = None) -> Any:
-    value = spec.values.get(key, default)
-    where = f"scenario parameter 'scenario.{spec.name}.{key}'"
-    if value is None:
-        raise ScenarioError(f"{where} is missing")
+    """``scenario.<task>.<key>`` as a number, a string or a list; ScenarioError naming the key."""
+    full = f"{spec.name}.{key}"
     if kind is float:
-        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-            raise ScenarioError(f"{where}: got {value!r}, expected a number")
-        return float(value)
-    if kind is str and not isinstance(value, str):
-        raise ScenarioError(f"{where}: got {value!r}, expected a string")
-    if kind is list and not isinstance(value, list):
-        raise ScenarioError(f"{where}: got {value!r}, expected a list")
+        return _number(spec.values, full, default)
+    value = _get(spec.values, full, default)
+    if not isinstance(value, kind):
+        raise ScenarioError(f"scenario parameter '{PREFIX}{full}': got {value!r}, expected a {kind.__name__}")
     return value
 
 
@@ -117,39 +118,27 @@ def _build(spec: TaskSpec, gain: float, table_height: float, height_offset: floa
         raise ScenarioError(f"scenario task {spec.name!r}: {exc}") from None
 
 
-def parse_task_scenario(flat: Mapping[str, Any], prefix: str) -> TaskScenario:
+def parse_task_scenario(flat: Mapping[str, Any]) -> TaskScenario:
     """Read the task keys (module docstring) from flattened parameters; ScenarioError on a bad value."""
 
-    def get(key: str, default: Any = None) -> Any:
-        value = flat.get(prefix + key, default)
-        if value is None:
-            raise ScenarioError(f"scenario parameter '{prefix}{key}' is missing")
-        return value
-
-    def number(key: str, default: float | None = None) -> float:
-        value = get(key, default)
-        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-            raise ScenarioError(f"scenario parameter '{prefix}{key}': got {value!r}, expected a number")
-        return float(value)
-
-    names = get("tasks")
+    names = _get(flat, "tasks")
     if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
-        raise ScenarioError(f"scenario parameter '{prefix}tasks': got {names!r}, expected a list of task names")
+        raise ScenarioError(f"scenario parameter '{PREFIX}tasks': got {names!r}, expected a list of task names")
     specs = []
     for name in names:
-        sub = prefix + name + "."
-        values = {k[len(sub):]: v for k, v in flat.items() if k.startswith(sub)}
-        kind = values.get("type")
+        sub = PREFIX + name + "."
+        values = {k: v for k, v in flat.items() if k.startswith(sub)}
+        kind = values.get(sub + "type")
         if kind not in TASK_TYPES:
             raise ScenarioError(f"scenario parameter '{sub}type': got {kind!r}, expected one of: "
                                 f"{', '.join(TASK_TYPES)}")
         specs.append(TaskSpec(name, str(kind), values))
-    gains = get("gains", [1.0])
+    gains = _get(flat, "gains", [1.0])
     if not isinstance(gains, list) or not gains or not all(
             isinstance(g, int | float) and not isinstance(g, bool) and g > 0 for g in gains):
-        raise ScenarioError(f"scenario parameter '{prefix}gains': got {gains!r}, expected numbers > 0")
+        raise ScenarioError(f"scenario parameter '{PREFIX}gains': got {gains!r}, expected numbers > 0")
     force_keys = {f.name for f in fields(ForceParams)}
-    force_values = {k[len(prefix) + 6:]: v for k, v in flat.items() if k.startswith(prefix + "force.")}
+    force_values = {k[len(PREFIX) + 6:]: v for k, v in flat.items() if k.startswith(PREFIX + "force.")}
     unknown = sorted(set(force_values) - force_keys)
     if unknown:
         raise ScenarioError(f"scenario force parameters: unknown {', '.join(unknown)}; valid: "
@@ -158,14 +147,14 @@ def parse_task_scenario(flat: Mapping[str, Any], prefix: str) -> TaskScenario:
         force = ForceParams(**force_values)
     except (TypeError, ValueError) as exc:
         raise ScenarioError(f"scenario force parameters: {exc}") from None
-    links = get("contact_links", ["left_flange", "right_tool"])
+    links = _get(flat, "contact_links", ["left_flange", "right_tool"])
     if not isinstance(links, list) or len(links) != 2 or not all(isinstance(n, str) for n in links):
-        raise ScenarioError(f"scenario parameter '{prefix}contact_links': got {links!r}, expected two link names")
-    out = TaskScenario(duration=number("duration"), table_height=number("table_height"),
-                       convergence_time=number("convergence_time", 5.0), gains=tuple(float(g) for g in gains),
+        raise ScenarioError(f"scenario parameter '{PREFIX}contact_links': got {links!r}, expected two link names")
+    out = TaskScenario(duration=_number(flat, "duration"), table_height=_number(flat, "table_height"),
+                       convergence_time=_number(flat, "convergence_time", 5.0), gains=tuple(float(g) for g in gains),
                        tasks=tuple(specs), force=force, contact_links=(links[0], links[1]))
     if out.duration <= out.convergence_time:
-        raise ScenarioError(f"scenario parameter '{prefix}duration' must exceed convergence_time "
+        raise ScenarioError(f"scenario parameter '{PREFIX}duration' must exceed convergence_time "
                             f"({out.convergence_time} s), got {out.duration}")
     for gain in out.gains:
         out.build(gain)  # validate every task now, with the message naming it
