@@ -37,9 +37,9 @@ def params():
 def test_scenario_has_the_papers_tasks_and_cell(scenario) -> None:
     spec = scenario.tasks
     assert spec is not None and scenario.urdf == "dualarm_cell_pan.urdf" and scenario.segments == ()
-    assert [t.type for t in spec.tasks] == ["circle", "cone", "singularity", "singularity", "table"]
+    assert [t.type for t in spec.tasks] == ["circle", "cone", "singularity", "singularity", "table", "table"]
     assert spec.gains == (1.0, 0.5, 0.2) and spec.table_height == pytest.approx(0.4)
-    assert [t.gain for t in spec.build(0.5)] == [0.5] * 5
+    assert [t.gain for t in spec.build(0.5)] == [0.5] * 6
 
 
 def test_bad_task_parameters_name_the_key() -> None:
@@ -157,10 +157,11 @@ def test_an_active_inequality_is_kept_while_the_circle_is_tracked(params) -> Non
 
 
 def test_a_violated_inequality_decays_at_least_exponentially(params) -> None:
-    """Table clearance 0.15 m demanded, 0.148 m at the start: f_6 - b_6 > 0 decays no slower than exp(-k t)."""
-    scenario = variant(**{"table.bound": -0.15})
+    """Table clearance 0.15 m demanded of the left arm, 0.148 m at the start: f_6 - b_6 > 0 decays no
+    slower than exp(-k t)."""
+    scenario = variant(**{"table_left.bound": -0.15})
     log = run_task_scenario(scenario, params, 1.0, duration=4.0)
-    excess = (log.values["table"] - log.bounds["table"]).max(axis=1)
+    excess = (log.values["table_left"] - log.bounds["table_left"]).max(axis=1)
     assert excess[0] > 1e-3
     assert np.all(excess <= excess[0] * np.exp(-1.0 * log.time) + 1e-4)
     assert excess[int(1.0 / log.period):].max() <= 0.0
