@@ -15,8 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualarm_control.controller import ControllerParams, RelativeController, TaskOutput
+from dualarm_control.errors import ScenarioError
 from dualarm_control.force import ForcePI, ForceSensorModel, contact_normal_force
-from dualarm_control.kinematics import DualArmModel, FloatArray
+from dualarm_control.kinematics import Configuration, DualArmModel, FloatArray
 from dualarm_control.task_scenario import TaskScenario
 from dualarm_control.tasks import CircleTask, Task
 
@@ -37,6 +38,17 @@ class TaskCycle:
     normal_offset: float
 
 
+def _check_frames(model: DualArmModel, tasks: list[Task]) -> None:
+    """Evaluate every task once at q = 0 so that a frame missing from the URDF is reported
+    now, naming the task (ScenarioError), not at the first control cycle."""
+    conf = Configuration(model, np.zeros(model.nq))
+    for task in tasks:
+        try:
+            task.evaluate(conf, 0.0)
+        except KeyError as exc:
+            raise ScenarioError(f"scenario task {task.name!r}: {exc.args[0]}") from None
+
+
 class TaskScenarioController:
     """The tasks of a task scenario at gain k and, with ``force``, the force loop of eq (9):
     F/T reading -> noise and low-pass (:class:`ForceSensorModel`, the simulated sensor chain)
@@ -54,6 +66,7 @@ class TaskScenarioController:
         self.period = params.period
         self.controller = RelativeController(model, params)
         self.tasks: list[Task] = spec.build(gain, height_offset=spec.force.model_error if force else 0.0)
+        _check_frames(model, self.tasks)
         index = [i for i, t in enumerate(self.tasks) if isinstance(t, CircleTask)]
         if force and len(index) != 1:
             raise ValueError(f"the force variant needs exactly one circle task, the scenario has {len(index)}")

@@ -238,7 +238,9 @@ def manipulability(jacobian: FloatArray) -> tuple[float, FloatArray]:
     The paper writes det(J^T J) for its 6-joint Puma arms (square J, the same number); for
     a 7-joint arm J^T J (7, 7) has rank 6 and a zero determinant, so the 6x6 J J^T is used
     (Yoshikawa's manipulability squared). With A = J J^T and dJ/dq_k of
-    :func:`jacobian_derivatives`: d det A / dq_k = 2 det(A) tr(A^-1 dJ_k J^T).
+    :func:`jacobian_derivatives`: d det A / dq_k = 2 tr(adj(A) dJ_k J^T), adj(A) = det(A) A^-1
+    the adjugate, computed from the eigen-decomposition A = U diag(w) U^T as
+    U diag(prod_{j != i} w_j) U^T, so that a singular arm (det A = 0) gives a finite gradient.
 
     Args:
         jacobian: J (6, m) of one arm at its tool frame, world axes.
@@ -247,12 +249,14 @@ def manipulability(jacobian: FloatArray) -> tuple[float, FloatArray]:
         (det(J J^T), gradient (m,)).
     """
     a = jacobian @ jacobian.T
-    det = float(np.linalg.det(a))
+    w, u = np.linalg.eigh(a)
+    n = w.shape[0]
+    others = np.array([np.prod(np.delete(w, i)) for i in range(n)])  # prod_{j != i} w_j
+    adj_j = (u * others) @ (u.T @ jacobian)  # adj(A) J, (6, m)
     derivs = jacobian_derivatives(jacobian)  # (m, 6, m)
-    a_inv_j = np.linalg.solve(a, jacobian)  # A^-1 J, (6, m)
-    # tr(A^-1 dJ_k J^T) = sum_ij (A^-1 J)_ij (dJ_k)_ij  (A symmetric)
-    grad = 2.0 * det * np.einsum("ij,kij->k", a_inv_j, derivs)
-    return det, grad
+    # tr(adj(A) dJ_k J^T) = sum_ij (adj(A) J)_ij (dJ_k)_ij  (adj(A) symmetric)
+    grad = 2.0 * np.einsum("ij,kij->k", adj_j, derivs)
+    return float(np.prod(w)), grad
 
 
 @dataclass(frozen=True)

@@ -51,6 +51,9 @@ def test_bad_task_parameters_name_the_key() -> None:
         scenario_from_parameters({**flat, "scenario.singularity_left.bound": 0.1}, path)
     with pytest.raises(ScenarioError, match="force parameters: unknown"):
         scenario_from_parameters({**flat, "scenario.force.stiffness": 1.0}, path)
+    typo = scenario_from_parameters({**flat, "scenario.cone.pan_frame": "left_tol"}, path)
+    with pytest.raises(ScenarioError, match="cone.*unknown frame 'left_tol'"):
+        run_task_scenario(typo, controller_params({"solver": "constraint_based"}), 1.0, duration=0.1)
 
 
 def test_force_pi_integrates_and_saturates() -> None:

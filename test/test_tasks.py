@@ -168,3 +168,10 @@ def test_task_parameters_are_validated() -> None:
         ConeTask("a", "b", max_angle=4.0, gain=1.0)
     with pytest.raises(ValueError, match="radius"):
         CircleTask("a", "b", radius=-1.0, rate=1.0, gain=1.0)
+
+
+def test_manipulability_is_finite_at_a_singular_configuration(model: DualArmModel) -> None:
+    """q = 0: the arm is stretched out (det J J^T = 0); value and gradient stay finite (adjugate form)."""
+    task = ManipulabilityTask("right_tool", "right", bound=-1e-3, gain=1.0)
+    rows = task.evaluate(Configuration(model, np.zeros(model.nq)), 0.0)
+    assert abs(rows.value[0]) < 1e-12 and np.all(np.isfinite(rows.jacobian))
