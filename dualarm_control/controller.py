@@ -9,15 +9,16 @@ import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
+from dualarm_control.errors import ParameterError
 from dualarm_control.joint_tracking import joint_tracking_velocity
 from dualarm_control.kinematics import (
+    Configuration,
     DualArmModel,
     FloatArray,
-    pose_error,
     rotation_angle,
 )
 from dualarm_control.limits import (
@@ -42,22 +43,15 @@ from dualarm_control.solvers import (
     SolverResult,
     make_solver,
 )
-
-
-class RelativeTarget(Protocol):
-    """A desired relative pose and twist (x*, xd*), expressed in the left tool frame F1."""
-
-    @property
-    def position(self) -> FloatArray: ...  # (3,) m
-
-    @property
-    def rotation(self) -> FloatArray: ...  # (3, 3)
-
-    @property
-    def linear_velocity(self) -> FloatArray: ...  # (3,) m/s
-
-    @property
-    def angular_velocity(self) -> FloatArray: ...  # (3,) rad/s
+from dualarm_control.tasks import (
+    INEQUALITY,
+    RelativePoseTask,
+    RelativeTarget,
+    Task,
+    TaskRows,
+    assemble_problem,
+    evaluate_tasks,
+)
 
 
 @dataclass(frozen=True)
@@ -139,8 +133,27 @@ class ControlOutput:
     cycle_time: float
 
 
+@dataclass(frozen=True)
+class TaskOutput:
+    """Result of one cycle of :meth:`RelativeController.solve_tasks`.
+
+    Attributes:
+        velocities: command [rad/s], (n,), finite and inside the eq (23) bounds.
+        result: the solver's record.
+        rows: every task evaluated at the cycle's (q, t), in the order given (empty when the
+            input was invalid).
+        cycle_time: wall time of the whole cycle (kinematics + solve) [s].
+    """
+
+    velocities: FloatArray
+    result: SolverResult
+    rows: tuple[TaskRows, ...]
+    cycle_time: float
+
+
 class RelativeController:
-    """Closed-loop relative pose controller: xd* + K e fed to the configured solver.
+    """Closed-loop task controller: paper 000's relative pose task (xd* + K e) or any set of
+    tasks (paper 001), fed to the configured solver.
 
     It remembers its last command for the optional acceleration bound; ``reset`` forgets it
     (the next cycle then starts from rest, zero velocity).
@@ -178,16 +191,11 @@ class RelativeController:
             "relative target" if not math.isfinite(p_des.sum() + r_des.sum() + twist.sum()) else "")
         if bad:
             return self._invalid(bad, start)
-        state = self.model.relative_state(q)
-        error = pose_error(state.position, state.rotation, p_des, r_des)
-        lower, upper = velocity_bounds(q, self.limits, self.params.period)
-        if self._acceleration is not None:
-            lower, upper = acceleration_bounds(lower, upper, q, self.limits, self._previous, self._acceleration,
-                                               self.params.period)
-        repulsive = repulsive_velocity(q, self.limits, self.params.alpha) if self.solver.uses_repulsive else self._zeros
-        result = self.solver.solve(ControlProblem(state.jacobian, twist + self.params.gain * error,
-                                                  lower, upper, repulsive))
-        self._previous = result.velocities
+        conf = Configuration(self.model, q)
+        rows = evaluate_tasks((RelativePoseTask(target, self.params.gain),), conf, 0.0)
+        result = self._solve_rows(q, rows)
+        state = conf.relative()
+        error = rows[0].value  # -e: the position rows are p - p*
         return ControlOutput(
             velocities=result.velocities,
             result=result,
@@ -197,6 +205,34 @@ class RelativeController:
             orientation_error=rotation_angle(state.rotation, r_des),
             cycle_time=time.perf_counter() - start,
         )
+
+    def solve_tasks(self, q: FloatArray, tasks: Sequence[Task], t: float) -> TaskOutput:
+        """One cycle on any set of tasks at time t [s] (paper 001, eq (12)-(14)).
+
+        Inequality tasks need a solver that handles inequality rows (``constraint_based``);
+        ParameterError (a ValueError) otherwise. Non-finite q gives the safe command (status "invalid_input").
+        """
+        start = time.perf_counter()
+        q = self.model.check_q(q)
+        if any(task.kind == INEQUALITY for task in tasks) and not getattr(self.solver, "supports_inequalities", False):
+            raise ParameterError("solver", self.solver.name, "a solver that handles inequality tasks: constraint_based")
+        if not math.isfinite(q.sum()):
+            out = self._invalid("joint positions", start)
+            return TaskOutput(out.velocities, out.result, (), out.cycle_time)
+        rows = evaluate_tasks(tasks, Configuration(self.model, q), t)
+        result = self._solve_rows(q, rows)
+        return TaskOutput(result.velocities, result, rows, time.perf_counter() - start)
+
+    def _solve_rows(self, q: FloatArray, rows: Sequence[TaskRows]) -> SolverResult:
+        """Bounds of eq (23) (and the acceleration bound), the problem of the rows, the solve."""
+        lower, upper = velocity_bounds(q, self.limits, self.params.period)
+        if self._acceleration is not None:
+            lower, upper = acceleration_bounds(lower, upper, q, self.limits, self._previous, self._acceleration,
+                                               self.params.period)
+        repulsive = repulsive_velocity(q, self.limits, self.params.alpha) if self.solver.uses_repulsive else self._zeros
+        result = self.solver.solve(assemble_problem(rows, lower, upper, repulsive))
+        self._previous = result.velocities
+        return result
 
     def track_joints(self, q: FloatArray, q_ref: FloatArray, qd_ref: FloatArray, target: RelativeTarget,
                      gain: float) -> ControlOutput:

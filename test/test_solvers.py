@@ -176,8 +176,10 @@ def near_limit_problem(model: DualArmModel, limits: JointLimits, joint: int, see
 
 
 def test_registry_lists_the_four_methods_of_the_paper() -> None:
-    """solver_names() holds eq (13), (14), (17)-(19) and (26)-(28), sorted; make_solver sets .name."""
-    assert solver_names() == ["hierarchical_sparse_qp", "pseudo_inverse", "sparse_qp", "standard_qp"]
+    """solver_names() holds eq (13), (14), (17)-(19) and (26)-(28) of paper 000 and paper 001's
+    constraint_based (eq 12-14), sorted; make_solver sets .name."""
+    assert solver_names() == ["constraint_based", "hierarchical_sparse_qp", "pseudo_inverse", "sparse_qp",
+                              "standard_qp"]
     for name in solver_names():
         assert make_solver(name).name == name
 
@@ -232,6 +234,8 @@ def test_task_met_up_to_each_methods_optimality_condition(name: str, model: Dual
             assert res.task_residual < 1e-9
         elif name == "standard_qp":
             np.testing.assert_allclose(grad, EPS * qd, atol=2e-9)  # dual residual tolerance 1e-9
+        elif name == "constraint_based":  # Q = eps I in u^T Q u (paper 001, eq 12): gradient 2 eps qd
+            np.testing.assert_allclose(grad, 2 * EPS * qd, atol=2e-9)
         else:  # lasso KKT: |grad_i| <= lambda, and grad_i = lambda sign(qd_i) on the support
             assert np.max(np.abs(grad)) <= LAMBDA + 2e-9
             on = np.abs(qd) > 1e-6

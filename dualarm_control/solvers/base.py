@@ -35,6 +35,11 @@ class ControlProblem:
         lower, upper: joint velocity bounds Qd_min, Qd_max of eq (23) [rad/s], (n,).
         repulsive: repulsive joint velocity qd_r of eq (25) [rad/s], (n,); used by the
             hierarchical solver's secondary task only.
+        inequality_jacobian: A_ie of paper 001 eq (13), (m_ie, n), or None (no inequality
+            rows; the solvers of paper 000 ignore them).
+        inequality_bound: h of ``A_ie qd <= h``, k(b - f) - df/dt of eq (13), (m_ie,).
+        equality_weights: slack weight of each row of ``jacobian`` (>= 0), (m,), or None (1).
+        inequality_weights: slack weight of each inequality row (> 0), (m_ie,), or None.
     """
 
     jacobian: FloatArray
@@ -42,6 +47,10 @@ class ControlProblem:
     lower: FloatArray
     upper: FloatArray
     repulsive: FloatArray
+    inequality_jacobian: FloatArray | None = None
+    inequality_bound: FloatArray | None = None
+    equality_weights: FloatArray | None = None
+    inequality_weights: FloatArray | None = None
 
     def problem_with_invalid_input(self) -> str:
         """Return a description of what is wrong with the inputs, or '' when they are usable.
@@ -61,10 +70,35 @@ class ControlProblem:
             for name in ("jacobian", "reference", "lower", "upper", "repulsive"):
                 if not np.all(np.isfinite(getattr(self, name))):
                     return f"non-finite values in {name}"
+        optional = self._problem_with_optional_rows(m, n)
+        if optional:
+            return optional
         gap = self.lower - self.upper
         if gap.max() > 1e-12:
             i = int(np.argmax(gap))
             return f"velocity bounds cross at joint {i}: lower {self.lower[i]:.4g} > upper {self.upper[i]:.4g} (joint outside its position range)"
+        return ""
+
+    def _problem_with_optional_rows(self, m: int, n: int) -> str:
+        """Shapes and finiteness of the optional inequality rows and weights ('' when usable)."""
+        a, h = self.inequality_jacobian, self.inequality_bound
+        if (a is None) != (h is None):
+            return "inequality_jacobian and inequality_bound must be given together"
+        m_ie = 0
+        if a is not None and h is not None:
+            m_ie = a.shape[0] if a.ndim == 2 else -1
+            if a.shape != (m_ie, n) or h.shape != (m_ie,):
+                return f"bad shapes: inequality_jacobian {a.shape}, inequality_bound {h.shape}"
+            if not math.isfinite(a.sum() + h.sum()):
+                return "non-finite values in the inequality rows"
+        for name, size in (("equality_weights", m), ("inequality_weights", m_ie)):
+            w = getattr(self, name)
+            if w is None:
+                continue
+            if w.shape != (size,):
+                return f"bad shape of {name}: {w.shape}, expected ({size},)"
+            if not math.isfinite(w.sum()) or w.min(initial=0.0) < 0:
+                return f"{name} must be finite and >= 0"
         return ""
 
 
