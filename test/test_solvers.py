@@ -295,7 +295,7 @@ def return_nothing(problem: Problem) -> tuple:
 
 
 def return_max_iter(problem: Problem) -> tuple:
-    return np.full(problem.jacobian.shape[1], 1e3), "max_iter", 10000, "QP max_iter; best iterate used"
+    return np.full(problem.jacobian.shape[1], 1e3), "max_iter", 10000, "QP max_iter"
 
 
 @pytest.mark.parametrize("name", solver_names())

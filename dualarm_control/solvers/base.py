@@ -276,5 +276,5 @@ def from_qp(solution: QPSolution, transform=None) -> tuple[FloatArray | None, st
     if solution.x is None:
         return None, solution.status, solution.iterations, f"QP {solution.status}"
     x = solution.x if transform is None else transform(solution.x)
-    detail = "" if solution.status == "solved" else f"QP {solution.status}; best iterate used"
+    detail = "" if solution.status == "solved" else f"QP {solution.status}"
     return x, solution.status, solution.iterations, detail
