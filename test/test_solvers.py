@@ -323,7 +323,7 @@ def test_numerical_failures_give_the_bounded_least_squares_fallback(name: str, f
 @pytest.mark.parametrize("name", solver_names())
 def test_failed_fallback_gives_the_command_nearest_to_rest(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """If the bounded least squares fails too: the original failure status and clip(0, lower, upper)."""
-    import dualarm_control.solvers.base as base
+    from dualarm_control.solvers import base
 
     solver = make_solver(name)
     monkeypatch.setattr(solver, "_solve", return_nothing)

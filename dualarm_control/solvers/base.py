@@ -20,7 +20,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import lsq_linear  # imported here: a first import inside the loop would take ~0.3 s
+
+# scipy.optimize imported here, not in the fallback: a first import inside the loop takes ~0.3 s
+from scipy.optimize import lsq_linear
 
 from dualarm_control.qp import DEFAULT_BACKEND, QPSettings, QPSolution, make_backend
 
@@ -185,20 +187,10 @@ class Solver:
         n = problem.jacobian.shape[1] if problem.jacobian.ndim == 2 else problem.lower.shape[0]
         invalid = problem.problem_with_invalid_input()
         if invalid:
-            qd, status, iters, detail = np.zeros(max(n, 0)), "invalid_input", 0, invalid
+            qd: FloatArray = np.zeros(max(n, 0))
+            status, iters, detail, residual = "invalid_input", 0, invalid, float("nan")
         else:
-            try:
-                qd, status, iters, detail = self._solve(problem)
-            except (ValueError, np.linalg.LinAlgError, RuntimeError) as exc:
-                qd, status, iters, detail = None, "failed", 0, f"{type(exc).__name__}: {exc}"
-            if qd is None or status in FALLBACK_TRIGGERS or not math.isfinite(qd.sum()):
-                qd, status, detail = fallback(problem, qd, status, detail)
-                self.reset()
-            else:  # tolerance overshoot; a third of np.clip's cost
-                qd = np.minimum(np.maximum(qd, problem.lower), problem.upper)
-        if invalid:
-            residual = float("nan")
-        else:
+            qd, status, iters, detail = self._solve_or_fall_back(problem)
             d = problem.jacobian @ qd - problem.reference
             residual = math.sqrt(float(d @ d))
         return SolverResult(
@@ -210,6 +202,18 @@ class Solver:
             task_residual=residual,
             detail=detail,
         )
+
+    def _solve_or_fall_back(self, problem: ControlProblem) -> tuple[FloatArray, str, int, str]:
+        """``_solve`` on a valid problem, its result clipped to the bounds, or the failure policy's command."""
+        try:
+            qd, status, iters, detail = self._solve(problem)
+        except (ValueError, np.linalg.LinAlgError, RuntimeError) as exc:
+            qd, status, iters, detail = None, "failed", 0, f"{type(exc).__name__}: {exc}"
+        if qd is None or status in FALLBACK_TRIGGERS or not math.isfinite(qd.sum()):
+            self.reset()
+            velocities, status, detail = fallback(problem, qd, status, detail)
+            return velocities, status, iters, detail
+        return np.minimum(np.maximum(qd, problem.lower), problem.upper), status, iters, detail  # tolerance overshoot
 
 
 def fallback(problem: ControlProblem, qd: FloatArray | None, status: str, detail: str) -> tuple[FloatArray, str, str]:
