@@ -241,7 +241,7 @@ def test_task_met_up_to_each_methods_optimality_condition(name: str, model: Dual
 
 @pytest.mark.parametrize("name", solver_names())
 def test_crossing_bounds_give_invalid_input_and_zero(name: str) -> None:
-    """lower > upper (a joint outside its range): status invalid_input, zero velocities, no raise."""
+    """lower > upper (inconsistent input: velocity_bounds never gives it): status invalid_input, zero velocities."""
     rng = np.random.default_rng(23)
     p = random_problem(rng, 1.0)
     lower = p.lower.copy()
