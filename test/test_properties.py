@@ -21,6 +21,7 @@ from dualarm_control.controller import ControllerParams, RelativeController
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.limits import JointLimits, velocity_bounds
 from dualarm_control.solvers import ControlProblem, make_solver, solver_names
+from dualarm_control.solvers.base import FALLBACK_DAMPING, rest_command
 
 PERIOD = 0.005
 TOL = 1e-9  # rad/s: floating-point slack on the bounds
@@ -46,11 +47,19 @@ def model() -> DualArmModel:
 
 @st.composite
 def configurations(draw: st.DrawFn, q_min: np.ndarray, q_max: np.ndarray) -> np.ndarray:
-    """Joint positions: each joint inside its range, exactly at a limit, or up to 20 % of the range beyond."""
+    """Joint positions: each joint inside its range, exactly at a limit, or up to 20 % of the range beyond;
+    or a singular configuration (an arm stretched: every joint of it at 0, the LWR4's straight-up pose)."""
     margin = draw(st.sampled_from([0.0, 0.2]))  # 0: every joint inside or at a limit
     where = st.one_of(st.floats(-margin, 1.0 + margin, **FINITE), st.sampled_from([0.0, 1.0, -1e-9, 1.0 + 1e-9]))
     shares = np.array(draw(st.lists(where, min_size=q_min.size, max_size=q_min.size)))
-    return q_min + shares * (q_max - q_min)
+    q = q_min + shares * (q_max - q_min)
+    stretched = draw(st.sampled_from(["none", "none", "left", "right", "both"]))
+    half = q_min.size // 2
+    if stretched in ("left", "both"):
+        q[:half] = 0.0
+    if stretched in ("right", "both"):
+        q[half:] = 0.0
+    return q
 
 
 def vectors(scale: float) -> st.SearchStrategy[np.ndarray]:
@@ -138,5 +147,28 @@ def test_solver_command_is_finite_and_inside_the_bounds(name: str, model: DualAr
         result = solver.solve(problem)
         assert_inside_eq21_23(result.velocities, q, limits)
         assert result.status in ("solved", "scaled", "fallback"), result
+
+    check()
+
+
+@pytest.mark.parametrize("name", solver_names())
+def test_fallback_command_is_finite_and_inside_the_bounds(name: str, model: DualArmModel,
+                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every solve forced to fail (QP infeasible): the bounded least-squares fallback satisfies eq (21)-(23)
+    and, being the box's damped least-squares optimum, it is no worse than the rest command (a point of the box)."""
+    solver = make_solver(name)
+    monkeypatch.setattr(solver, "_solve", lambda problem: (None, "infeasible", 7, "QP infeasible"))
+    limits = JointLimits(model.q_min, model.q_max, model.qd_max)
+
+    @PROPERTY
+    @given(problems(model.q_min, model.q_max, model.qd_max))
+    def check(case: tuple[ControlProblem, np.ndarray]) -> None:
+        problem, q = case
+        result = solver.solve(problem)
+        assert result.status == "fallback" and "infeasible" in result.detail, result
+        assert_inside_eq21_23(result.velocities, q, limits)
+        rest = rest_command(problem.lower, problem.upper)  # damped optimum: res^2 <= res_rest^2 + d ||rest||^2
+        bound = np.linalg.norm(problem.jacobian @ rest - problem.reference) ** 2 + FALLBACK_DAMPING * rest @ rest
+        assert result.task_residual <= np.sqrt(bound) + 1e-9
 
     check()
