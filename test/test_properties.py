@@ -108,7 +108,7 @@ def test_controller_command_is_finite_and_inside_eq21_23(name: str, acceleration
         for _ in range(cycles):  # later cycles use the warm start and the acceleration bound's memory
             out = controller.step(q, target)
             assert_inside_eq21_23(out.velocities, q, controller.limits)
-            assert out.result.status in ("solved", "scaled", "fallback", "invalid_input"), out.result
+            assert not out.result.failed or out.result.status == "invalid_input", out.result  # NaN targets only
 
     check()
 
@@ -146,7 +146,7 @@ def test_solver_command_is_finite_and_inside_the_bounds(name: str, model: DualAr
         problem, q = case
         result = solver.solve(problem)
         assert_inside_eq21_23(result.velocities, q, limits)
-        assert result.status in ("solved", "scaled", "fallback"), result
+        assert not result.failed, result  # a solver's own degraded statuses are allowed; failures fall back
 
     check()
 
