@@ -38,11 +38,11 @@ from dualarm_control.params import (
 from dualarm_control.qp import DEFAULT_BACKEND, QPSettings
 from dualarm_control.solvers import (
     ACTIVITY_THRESHOLD,
-    ControlProblem,
     SolverParams,
     SolverResult,
     make_solver,
 )
+from dualarm_control.solvers.base import rest_command
 from dualarm_control.tasks import (
     INEQUALITY,
     RelativePoseTask,
@@ -190,7 +190,7 @@ class RelativeController:
         bad = "joint positions" if not math.isfinite(q.sum()) else (
             "relative target" if not math.isfinite(p_des.sum() + r_des.sum() + twist.sum()) else "")
         if bad:
-            return self._invalid(bad, start)
+            return self._invalid(bad, start, q)
         conf = Configuration(self.model, q)
         rows = evaluate_tasks((RelativePoseTask(target, self.params.gain),), conf, 0.0)
         result = self._solve_rows(q, rows)
@@ -217,7 +217,7 @@ class RelativeController:
         if any(task.kind == INEQUALITY for task in tasks) and not getattr(self.solver, "supports_inequalities", False):
             raise ParameterError("solver", self.solver.name, "a solver that handles inequality tasks: constraint_based")
         if not math.isfinite(q.sum()):
-            out = self._invalid("joint positions", start)
+            out = self._invalid("joint positions", start, q)
             return TaskOutput(out.velocities, out.result, (), out.cycle_time)
         rows = evaluate_tasks(tasks, Configuration(self.model, q), t)
         result = self._solve_rows(q, rows)
@@ -243,9 +243,9 @@ class RelativeController:
         q = self.model.check_q(q)
         q_ref, qd_ref = self.model.check_q(q_ref, "joint reference"), self.model.check_q(qd_ref, "joint reference")
         if not math.isfinite(q.sum()):
-            return self._invalid("joint positions", start)
+            return self._invalid("joint positions", start, q)
         if not math.isfinite(q_ref.sum() + qd_ref.sum()):
-            return self._invalid("joint reference", start)
+            return self._invalid("joint reference", start, q)
         lower, upper = velocity_bounds(q, self.limits, self.params.period)
         velocities = joint_tracking_velocity(q, q_ref, qd_ref, gain, lower, upper)
         self._previous = velocities
@@ -258,18 +258,22 @@ class RelativeController:
                              position_error=float(np.linalg.norm(p_des - p)),
                              orientation_error=rotation_angle(r, r_des), cycle_time=elapsed)
 
-    def _invalid(self, what: str, start: float) -> ControlOutput:
-        """The safe command for a non-finite input, with the reason in ``detail``."""
+    def _invalid(self, what: str, start: float, q: FloatArray) -> ControlOutput:
+        """The safe command for a non-finite input, with the reason in ``detail`` (status "invalid_input").
+
+        Zero velocity, or, when q is finite, the command of the eq (23) bounds nearest to rest
+        (:func:`rest_command`: zero inside the position range, the way back beyond a limit).
+        """
         n = self.model.nq
-        nan = np.full(6, np.nan)
-        problem = ControlProblem(np.full((6, n), np.nan), nan, self._zeros, self._zeros, self._zeros)
-        result = self.solver.solve(problem)
-        result = SolverResult(result.velocities, "invalid_input", result.solve_time, 0, 0, float("nan"),
+        velocities = (rest_command(*velocity_bounds(q, self.limits, self.params.period)) if math.isfinite(q.sum())
+                      else np.zeros(n))
+        self.solver.reset()
+        result = SolverResult(velocities, "invalid_input", time.perf_counter() - start, 0,
+                              int(np.count_nonzero(np.abs(velocities) > ACTIVITY_THRESHOLD)), float("nan"),
                               f"non-finite {what}")
-        self._previous = result.velocities
+        self._previous = velocities
         p, r = np.full(3, np.nan), np.full((3, 3), np.nan)
-        return ControlOutput(result.velocities, result, p, r, float("nan"), float("nan"),
-                             time.perf_counter() - start)
+        return ControlOutput(velocities, result, p, r, float("nan"), float("nan"), time.perf_counter() - start)
 
 
 def _solver_choices() -> list[str]:

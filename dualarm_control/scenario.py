@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -155,6 +155,27 @@ def _number(flat: Mapping[str, Any], key: str, default: float | None = None) -> 
     return float(value)
 
 
+def _motion_limits(flat: Mapping[str, Any]) -> MotionLimits:
+    """MotionLimits from the ``scenario.limits.*`` keys; ScenarioError naming the full key and value.
+
+    Each limit must be a finite number > 0 (bool, strings, NaN/inf, 0 and negatives are
+    refused); an unknown key is refused with the valid names.
+    """
+    prefix = PREFIX + "limits."
+    valid = [f.name for f in fields(MotionLimits)]
+    values: dict[str, float] = {}
+    for key, value in flat.items():
+        if not key.startswith(prefix):
+            continue
+        name = key[len(prefix):]
+        if name not in valid:
+            raise ScenarioError(f"scenario parameter '{key}': unknown limit; valid names: {', '.join(valid)}")
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
+            raise ScenarioError(f"scenario parameter '{key}': got {value!r}, expected a finite number > 0")
+        values[name] = float(value)
+    return MotionLimits(**values)
+
+
 def scenario_from_parameters(flat: Mapping[str, Any], source: Path) -> Scenario:
     """Build a Scenario from flattened parameters (as read from the file or declared in a node)."""
     tasks = None
@@ -179,13 +200,7 @@ def scenario_from_parameters(flat: Mapping[str, Any], source: Path) -> Scenario:
                                      advance=_number(flat, f"{seg}.advance", 0.0), hold=hold))
         else:
             raise ScenarioError(f"scenario parameter '{PREFIX}{seg}.type': got {kind!r}, expected one of: pose, screw")
-    limit_values = {k[len(PREFIX) + 7:]: v for k, v in flat.items() if k.startswith(PREFIX + "limits.")}
-    try:
-        limits = MotionLimits(**limit_values)
-    except TypeError as exc:
-        raise ScenarioError(f"scenario limits: {exc}") from None
-    except ValueError as exc:
-        raise ScenarioError(f"scenario limits: {exc}") from None
+    limits = _motion_limits(flat)
     settle = _number(flat, "settle_time", 1.0)
     if settle < 0:
         raise ScenarioError(f"scenario parameter '{PREFIX}settle_time': got {settle}, expected >= 0")

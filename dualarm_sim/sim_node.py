@@ -3,7 +3,9 @@
 Publishes ``/joint_states``, ``/wrench`` and ``/clock`` (simulation time, steps x period)
 every control period; applies
 ``/velocity_controller/commands`` (Float64MultiArray, 14 values, controller joint order).
-A command older than ``command_timeout`` brings the arms to rest.
+A command older than ``command_timeout`` brings the arms to rest. A malformed command (bad
+CDR, wrong length, NaN/inf) is rejected (throttled log, WARN on ``/diagnostics``, counted)
+and the last valid one kept, so the timeout still applies.
 
 Real-time mode: a drift-free timer steps the physics one control period per tick, stamps
 are the wall clock. Lockstep mode (``lockstep:=true``): the state of step k (stamped with
@@ -18,6 +20,7 @@ import time
 from typing import Any
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
@@ -26,6 +29,7 @@ from std_msgs.msg import Float64MultiArray
 
 from dualarm_control.params import ParamSpec, non_negative, positive
 from dualarm_control.ros import convert
+from dualarm_control.ros.inputs import Throttle, subscribe_checked
 from dualarm_control.ros.node import (
     declare,
     priority_from_args,
@@ -86,8 +90,10 @@ class SimNode:
         self.pub_js = n.create_publisher(JointState, "/joint_states", 10)
         self.pub_wrench = n.create_publisher(WrenchStamped, "/wrench", 10)
         self.pub_clock = n.create_publisher(Clock, "/clock", 10)
-        n.create_subscription(Float64MultiArray, "/velocity_controller/commands", self.on_command, 10)
+        self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        subscribe_checked(n, Float64MultiArray, "/velocity_controller/commands", self.on_command, 10, self.reject)
         self.log = n.get_logger()
+        self.throttle = Throttle(1.0)
         self.steps = 0
         self.started = False
         self.last_publish = 0.0
@@ -103,7 +109,8 @@ class SimNode:
             self.log.warning(priority_note)
 
     def close(self) -> None:
-        self.log.info(f"stopping after {self.steps} steps ({self.steps * self.period_ns / 1e9:.3f} s sim time)")
+        self.log.info(f"stopping after {self.steps} steps ({self.steps * self.period_ns / 1e9:.3f} s sim time), "
+                      f"{self.rejected} commands rejected")
         self.cell.close()
 
     def _stamp_ns(self) -> int:
@@ -117,15 +124,25 @@ class SimNode:
         self.pub_wrench.publish(convert.wrench_stamped(ns, self.cell.wrench()))
         self.last_publish = time.monotonic()
 
+    def reject(self, reason: str) -> None:
+        """A rejected command: counted, WARN on /diagnostics, throttled log; the last valid command is kept."""
+        self.rejected += 1
+        line = self.throttle.text(reason)
+        if line is not None:
+            self.log.warning(line)
+        self.pub_diag.publish(convert.diagnostics(self._stamp_ns(), "sim_node", 1, reason,
+                                                  {"status": "input_rejected", "rejected_inputs": self.rejected}))
+
     def on_command(self, msg: Any) -> None:
-        data = np.asarray(msg.data, dtype=float)
-        if data.shape != (len(self.cell.joint_names),):
-            self.rejected += 1
-            self.log.error(f"command with {data.shape[0]} values rejected: expected {len(self.cell.joint_names)}")
+        data = convert.command_vector(msg, len(self.cell.joint_names))
+        if isinstance(data, str):
+            self.reject(data)
             return
         report = self.cell.apply_command(data)
-        if not report.accepted or report.clipped:
-            self.log.warning(f"command: {report.reason}")
+        if report.clipped:
+            line = self.throttle.text(f"command: {report.reason}")
+            if line is not None:
+                self.log.warning(line)
         if self.lockstep and self.started:
             self.cell.step()
             self.steps += 1

@@ -10,9 +10,13 @@ the watchdog: no joint state yet, or none for more than ``stale_timeout``, gives
 zero-velocity command with the reason on /diagnostics and in the log. Lockstep mode: one
 command per joint-state stamp, computed when the target with the same stamp has arrived.
 
-Safe behaviour (documented): an unusable message (wrong joint count or names, NaN) is
-rejected and the last valid state kept (it goes stale -> zero command); no target yet -> zero
-command; solver failures give the solver's safe command.
+Safe behaviour (documented, docs/safety.md): an unusable message (malformed CDR, wrong,
+missing or duplicate joint names, wrong counts, NaN/inf, a stamp older than the last accepted
+one, a target beyond the cell's reach) is rejected with a throttled log line and a
+/diagnostics entry, and the last valid input kept (a state then goes stale -> zero command);
+a time source that restarted is accepted after 3 consecutive monotonic samples ("time source
+restarted"); no target yet -> zero command; a solver failure gives the bounded least-squares
+fallback (status "fallback", counted as ``solver_fallbacks``).
 
 Live parameters: ``solver``, ``gain``, ``l1_weight``, the QP tolerances (every controller
 parameter that is not read-only) can be set on the running node (``dualarm param set`` or
@@ -46,6 +50,7 @@ from dualarm_control.kinematics import DualArmModel
 from dualarm_control.metrics import percentiles
 from dualarm_control.params import ParamSpec, positive
 from dualarm_control.ros import convert
+from dualarm_control.ros.inputs import StampGate, Throttle, subscribe_checked
 from dualarm_control.ros.node import (
     declare,
     priority_from_args,
@@ -89,11 +94,13 @@ class ControllerNode:
         self.pub_cmd = n.create_publisher(Float64MultiArray, "/velocity_controller/commands", 10)
         self.pub_pose = n.create_publisher(PoseStamped, "/relative_pose", 10)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        n.create_subscription(JointState, "/joint_states", self.on_joint_state, 10)
-        n.create_subscription(MultiDOFJointTrajectory, "/relative_target", self.on_target, 10)
+        subscribe_checked(n, JointState, "/joint_states", self.on_joint_state, 10, self.on_malformed)
+        subscribe_checked(n, MultiDOFJointTrajectory, "/relative_target", self.on_target, 10, self.on_malformed)
         self.joint_mode = self.values["reference"] == "joint"
         if self.joint_mode:
-            n.create_subscription(JointTrajectory, "/joint_reference", self.on_joint_reference, 10)
+            subscribe_checked(n, JointTrajectory, "/joint_reference", self.on_joint_reference, 10, self.on_malformed)
+        self.gates = {name: StampGate(name) for name in ("joint_states", "relative_target", "joint_reference")}
+        self.reach = self.model.relative_reach()
         self.joint_ref: tuple[int, np.ndarray, np.ndarray] | None = None
         self.joint_refs: dict[int, tuple[int, np.ndarray, np.ndarray]] = {}  # lockstep: by stamp
         n.add_on_set_parameters_callback(self.on_set_parameters)
@@ -103,7 +110,8 @@ class ControllerNode:
         self.targets: dict[int, convert.TargetValue] = {}  # lockstep: by stamp
         self.last_commanded_stamp: int | None = None
         self.cycles = self.missed = self.failures = self.switches = self.safe_commands = 0
-        self.last_warning = 0.0
+        self.fallbacks = self.rejected = 0
+        self.throttle = Throttle(1.0)
         self.last_arrival_ns: int | None = None
         self.interval = float("nan")  # last joint-state inter-arrival time [s]
         self.jitter: list[float] = []
@@ -123,6 +131,7 @@ class ControllerNode:
         jp = percentiles(np.array(self.jitter)) if self.jitter else NAN2
         lp = percentiles(np.array(self.latency)) if self.latency else NAN2
         self.log.info(f"{self.cycles} cycles, {self.missed} missed deadlines, {self.failures} solver failures, "
+                      f"{self.fallbacks} solver fallbacks, {self.rejected} rejected inputs, "
                       f"{self.safe_commands} safe commands, {self.switches} parameter switches, "
                       f"period jitter p50/p99 {jp[0] * 1e3:.3f}/{jp[1] * 1e3:.3f} ms, "
                       f"state-to-command latency p50/p99 {lp[0] * 1e3:.3f}/{lp[1] * 1e3:.3f} ms "
@@ -160,11 +169,37 @@ class ControllerNode:
                       + ", ".join(f"{k}={v!r}" for k, v in changed.items()))
 
     # --- inputs -----------------------------------------------------------------
+    def on_malformed(self, reason: str) -> None:
+        """A sample that failed to deserialize (see :func:`subscribe_checked`): reported, dropped."""
+        self.reject(self.node.get_clock().now().nanoseconds, reason)
+
+    def reject(self, stamp: int, reason: str) -> None:
+        """A rejected input: counted, on /diagnostics and in the throttled log; the last valid input is kept."""
+        self.rejected += 1
+        self.report(stamp, reason, "input_rejected")
+
+    def stamp_accepted(self, stream: str, stamp: int) -> bool:
+        """Monotonic stamps per stream (:class:`StampGate`); a restarted time source is logged and reported."""
+        verdict = self.gates[stream].check(stamp)
+        if not verdict.accepted:
+            self.reject(stamp, verdict.message)
+        elif verdict.message:
+            self.log.warning(verdict.message)
+            self.report(stamp, verdict.message, "time_source_restarted")
+            for pending in (self.targets, self.joint_refs):  # lockstep samples of the old time base
+                for old in [s for s in pending if s > stamp]:
+                    del pending[old]
+            if stream == "joint_states":
+                self.last_commanded_stamp = None
+        return verdict.accepted
+
     def on_joint_state(self, msg: Any) -> None:
         decoded = convert.joint_vectors(msg, self.order)
         stamp = convert.stamp_ns(msg.header.stamp)
         if isinstance(decoded, str):  # keep the last good state; it goes stale -> safe command
-            self.report(stamp, decoded, "input_rejected")
+            self.reject(stamp, decoded)
+            return
+        if not self.stamp_accepted("joint_states", stamp):
             return
         now = time.monotonic_ns()
         self.track_arrival(now)
@@ -179,9 +214,11 @@ class ControllerNode:
             self.cycle(self.target, self.joint_ref)
 
     def on_target(self, msg: Any) -> None:
-        value = convert.target_value(msg)
+        value = convert.target_value(msg, self.reach)
         if isinstance(value, str):
-            self.report(convert.stamp_ns(msg.header.stamp), f"relative_target rejected: {value}", "input_rejected")
+            self.reject(convert.stamp_ns(msg.header.stamp), f"relative_target rejected: {value}")
+            return
+        if not self.stamp_accepted("relative_target", value.stamp_ns):
             return
         self.target = value
         if self.lockstep:
@@ -191,7 +228,9 @@ class ControllerNode:
     def on_joint_reference(self, msg: Any) -> None:
         value = convert.joint_reference(msg, self.order)
         if isinstance(value, str):
-            self.report(convert.stamp_ns(msg.header.stamp), f"joint_reference rejected: {value}", "input_rejected")
+            self.reject(convert.stamp_ns(msg.header.stamp), f"joint_reference rejected: {value}")
+            return
+        if not self.stamp_accepted("joint_reference", value[0]):
             return
         self.joint_ref = value
         if self.lockstep:
@@ -252,6 +291,9 @@ class ControllerNode:
         if out.result.failed:
             self.failures += 1
             self.warn(f"solver {out.result.status}: {out.result.detail}; safe command sent")
+        elif out.result.fell_back:
+            self.fallbacks += 1
+            self.warn(f"solver fallback: {out.result.detail}")
         if np.all(np.isfinite(out.position)):
             self.pub_pose.publish(convert.pose_stamped(stamp, out.position, out.rotation))
         self.publish_diagnostics(stamp, out, latency)
@@ -263,17 +305,17 @@ class ControllerNode:
         self.report(stamp, reason, "safe_command")
 
     def warn(self, text: str) -> None:
-        """Log at most once a second."""
-        now = time.monotonic()
-        if now - self.last_warning > 1.0:
-            self.last_warning = now
-            self.log.warning(text)
+        """Log at most once a second (with the count of suppressed lines)."""
+        line = self.throttle.text(text)
+        if line is not None:
+            self.log.warning(line)
 
     def report(self, stamp: int, reason: str, status: str) -> None:
         """Reason on /diagnostics (every time, WARN) and in the log (throttled)."""
         self.warn(f"{status}: {reason}")
         self.pub_diag.publish(convert.diagnostics(stamp, "controller_node", 1, reason,
-                                                  {"solver": self.params.solver, "status": status}))
+                                                  {"solver": self.params.solver, "status": status,
+                                                   "rejected_inputs": self.rejected}))
 
     def publish_diagnostics(self, stamp: int, out: ControlOutput, latency: float) -> None:
         r = out.result
@@ -296,6 +338,8 @@ class ControllerNode:
             "cycles": self.cycles,
             "missed_deadlines": self.missed,
             "solver_failures": self.failures,
+            "solver_fallbacks": self.fallbacks,
+            "rejected_inputs": self.rejected,
             "safe_commands": self.safe_commands,
             "parameter_switches": self.switches,
             "period_jitter_p50_s": f"{jit[0]:.6e}",
