@@ -9,15 +9,16 @@ import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
+from dualarm_control.errors import ParameterError
 from dualarm_control.joint_tracking import joint_tracking_velocity
 from dualarm_control.kinematics import (
+    Configuration,
     DualArmModel,
     FloatArray,
-    pose_error,
     rotation_angle,
 )
 from dualarm_control.limits import (
@@ -37,27 +38,20 @@ from dualarm_control.params import (
 from dualarm_control.qp import DEFAULT_BACKEND, QPSettings
 from dualarm_control.solvers import (
     ACTIVITY_THRESHOLD,
-    ControlProblem,
     SolverParams,
     SolverResult,
     make_solver,
 )
-
-
-class RelativeTarget(Protocol):
-    """A desired relative pose and twist (x*, xd*), expressed in the left tool frame F1."""
-
-    @property
-    def position(self) -> FloatArray: ...  # (3,) m
-
-    @property
-    def rotation(self) -> FloatArray: ...  # (3, 3)
-
-    @property
-    def linear_velocity(self) -> FloatArray: ...  # (3,) m/s
-
-    @property
-    def angular_velocity(self) -> FloatArray: ...  # (3,) rad/s
+from dualarm_control.solvers.base import rest_command
+from dualarm_control.tasks import (
+    INEQUALITY,
+    RelativePoseTask,
+    RelativeTarget,
+    Task,
+    TaskRows,
+    assemble_problem,
+    evaluate_tasks,
+)
 
 
 @dataclass(frozen=True)
@@ -139,8 +133,27 @@ class ControlOutput:
     cycle_time: float
 
 
+@dataclass(frozen=True)
+class TaskOutput:
+    """Result of one cycle of :meth:`RelativeController.solve_tasks`.
+
+    Attributes:
+        velocities: command [rad/s], (n,), finite and inside the eq (23) bounds.
+        result: the solver's record.
+        rows: every task evaluated at the cycle's (q, t), in the order given (empty when the
+            input was invalid).
+        cycle_time: wall time of the whole cycle (kinematics + solve) [s].
+    """
+
+    velocities: FloatArray
+    result: SolverResult
+    rows: tuple[TaskRows, ...]
+    cycle_time: float
+
+
 class RelativeController:
-    """Closed-loop relative pose controller: xd* + K e fed to the configured solver.
+    """Closed-loop task controller: paper 000's relative pose task (xd* + K e) or any set of
+    tasks (paper 001), fed to the configured solver.
 
     It remembers its last command for the optional acceleration bound; ``reset`` forgets it
     (the next cycle then starts from rest, zero velocity).
@@ -177,17 +190,12 @@ class RelativeController:
         bad = "joint positions" if not math.isfinite(q.sum()) else (
             "relative target" if not math.isfinite(p_des.sum() + r_des.sum() + twist.sum()) else "")
         if bad:
-            return self._invalid(bad, start)
-        state = self.model.relative_state(q)
-        error = pose_error(state.position, state.rotation, p_des, r_des)
-        lower, upper = velocity_bounds(q, self.limits, self.params.period)
-        if self._acceleration is not None:
-            lower, upper = acceleration_bounds(lower, upper, q, self.limits, self._previous, self._acceleration,
-                                               self.params.period)
-        repulsive = repulsive_velocity(q, self.limits, self.params.alpha) if self.solver.uses_repulsive else self._zeros
-        result = self.solver.solve(ControlProblem(state.jacobian, twist + self.params.gain * error,
-                                                  lower, upper, repulsive))
-        self._previous = result.velocities
+            return self._invalid(bad, start, q)
+        conf = Configuration(self.model, q)
+        rows = evaluate_tasks((RelativePoseTask(target, self.params.gain),), conf, 0.0)
+        result = self._solve_rows(q, rows)
+        state = conf.relative()
+        error = rows[0].value  # -e: the position rows are p - p*
         return ControlOutput(
             velocities=result.velocities,
             result=result,
@@ -198,6 +206,34 @@ class RelativeController:
             cycle_time=time.perf_counter() - start,
         )
 
+    def solve_tasks(self, q: FloatArray, tasks: Sequence[Task], t: float) -> TaskOutput:
+        """One cycle on any set of tasks at time t [s] (paper 001, eq (12)-(14)).
+
+        Inequality tasks need a solver that handles inequality rows (``constraint_based``);
+        ParameterError (a ValueError) otherwise. Non-finite q gives the safe command (status "invalid_input").
+        """
+        start = time.perf_counter()
+        q = self.model.check_q(q)
+        if any(task.kind == INEQUALITY for task in tasks) and not getattr(self.solver, "supports_inequalities", False):
+            raise ParameterError("solver", self.solver.name, "a solver that handles inequality tasks: constraint_based")
+        if not math.isfinite(q.sum()):
+            out = self._invalid("joint positions", start, q)
+            return TaskOutput(out.velocities, out.result, (), out.cycle_time)
+        rows = evaluate_tasks(tasks, Configuration(self.model, q), t)
+        result = self._solve_rows(q, rows)
+        return TaskOutput(result.velocities, result, rows, time.perf_counter() - start)
+
+    def _solve_rows(self, q: FloatArray, rows: Sequence[TaskRows]) -> SolverResult:
+        """Bounds of eq (23) (and the acceleration bound), the problem of the rows, the solve."""
+        lower, upper = velocity_bounds(q, self.limits, self.params.period)
+        if self._acceleration is not None:
+            lower, upper = acceleration_bounds(lower, upper, q, self.limits, self._previous, self._acceleration,
+                                               self.params.period)
+        repulsive = repulsive_velocity(q, self.limits, self.params.alpha) if self.solver.uses_repulsive else self._zeros
+        result = self.solver.solve(assemble_problem(rows, lower, upper, repulsive))
+        self._previous = result.velocities
+        return result
+
     def track_joints(self, q: FloatArray, q_ref: FloatArray, qd_ref: FloatArray, target: RelativeTarget,
                      gain: float) -> ControlOutput:
         """Joint-space tracking of a planned trajectory (:func:`joint_tracking_velocity`) inside the
@@ -207,9 +243,9 @@ class RelativeController:
         q = self.model.check_q(q)
         q_ref, qd_ref = self.model.check_q(q_ref, "joint reference"), self.model.check_q(qd_ref, "joint reference")
         if not math.isfinite(q.sum()):
-            return self._invalid("joint positions", start)
+            return self._invalid("joint positions", start, q)
         if not math.isfinite(q_ref.sum() + qd_ref.sum()):
-            return self._invalid("joint reference", start)
+            return self._invalid("joint reference", start, q)
         lower, upper = velocity_bounds(q, self.limits, self.params.period)
         velocities = joint_tracking_velocity(q, q_ref, qd_ref, gain, lower, upper)
         self._previous = velocities
@@ -222,18 +258,22 @@ class RelativeController:
                              position_error=float(np.linalg.norm(p_des - p)),
                              orientation_error=rotation_angle(r, r_des), cycle_time=elapsed)
 
-    def _invalid(self, what: str, start: float) -> ControlOutput:
-        """The safe command for a non-finite input, with the reason in ``detail``."""
+    def _invalid(self, what: str, start: float, q: FloatArray) -> ControlOutput:
+        """The safe command for a non-finite input, with the reason in ``detail`` (status "invalid_input").
+
+        Zero velocity, or, when q is finite, the command of the eq (23) bounds nearest to rest
+        (:func:`rest_command`: zero inside the position range, the way back beyond a limit).
+        """
         n = self.model.nq
-        nan = np.full(6, np.nan)
-        problem = ControlProblem(np.full((6, n), np.nan), nan, self._zeros, self._zeros, self._zeros)
-        result = self.solver.solve(problem)
-        result = SolverResult(result.velocities, "invalid_input", result.solve_time, 0, 0, float("nan"),
+        velocities = (rest_command(*velocity_bounds(q, self.limits, self.params.period)) if math.isfinite(q.sum())
+                      else np.zeros(n))
+        self.solver.reset()
+        result = SolverResult(velocities, "invalid_input", time.perf_counter() - start, 0,
+                              int(np.count_nonzero(np.abs(velocities) > ACTIVITY_THRESHOLD)), float("nan"),
                               f"non-finite {what}")
-        self._previous = result.velocities
+        self._previous = velocities
         p, r = np.full(3, np.nan), np.full((3, 3), np.nan)
-        return ControlOutput(result.velocities, result, p, r, float("nan"), float("nan"),
-                             time.perf_counter() - start)
+        return ControlOutput(velocities, result, p, r, float("nan"), float("nan"), time.perf_counter() - start)
 
 
 def _solver_choices() -> list[str]:

@@ -75,9 +75,71 @@ def pose_error(p: FloatArray, r: FloatArray, p_des: FloatArray, r_des: FloatArra
 
 
 def rotation_angle(r_a: FloatArray, r_b: FloatArray) -> float:
-    """Geodesic angle [rad] between two rotations, in [0, pi]."""
-    c = (float(np.vdot(r_a, r_b)) - 1.0) / 2.0  # trace(R_a^T R_b) = sum of the elementwise product
-    return math.acos(min(1.0, max(-1.0, c)))
+    """Geodesic angle [rad] between two rotations, in [0, pi].
+
+    theta = atan2(||vee(R - R^T)|| / 2, (trace R - 1) / 2) with R = R_a^T R_b: accurate to
+    machine precision over the whole range (acos of the trace loses half the digits near 0
+    and pi, ~2e-8 rad).
+    """
+    r = r_a.T @ r_b
+    c = (r[0, 0] + r[1, 1] + r[2, 2] - 1.0) / 2.0
+    s = 0.5 * math.sqrt((r[2, 1] - r[1, 2]) ** 2 + (r[0, 2] - r[2, 0]) ** 2 + (r[1, 0] - r[0, 1]) ** 2)
+    return math.atan2(s, c)
+
+
+def jacobian_derivatives(jacobian: FloatArray) -> FloatArray:
+    """Derivatives dJ/dq_k of the geometric Jacobian of a serial chain of revolute joints.
+
+    For J = [J_v; J_w] at a point p in world axes (pinocchio LOCAL_WORLD_ALIGNED), column i
+    is [z_i x (p - o_i); z_i] with z_i = J_w[:, i] the joint axis. Then (Jacobi identity)
+
+        dJ_i/dq_k = [z_k x J_v,i ; z_k x z_i]   for k <= i,
+        dJ_i/dq_k = [z_i x J_v,k ; 0]           for k > i,
+
+    computed from J alone. Used for the gradient of the manipulability (paper 001, eq 10).
+
+    Args:
+        jacobian: J (6, m) of one chain, columns in chain order (base to tip).
+
+    Returns:
+        (m, 6, m) array D with D[k] = dJ/dq_k [m/rad per rad; 1/rad].
+    """
+    jv, jw = jacobian[:3], jacobian[3:]
+    m = jacobian.shape[1]
+    cross_v = _pairwise_cross(jw, jv)  # [k, :, i] = z_k x Jv_i
+    cross_w = _pairwise_cross(jw, jw)  # [k, :, i] = z_k x z_i
+    lower_v = np.transpose(cross_v, (2, 1, 0))  # [k, :, i] = cross_v[i, :, k] = z_i x Jv_k
+    out = np.zeros((m, 6, m))
+    mask = np.triu(np.ones((m, m), dtype=bool))[:, None, :]  # [k, :, i]: k <= i
+    out[:, :3, :] = np.where(mask, cross_v, lower_v)
+    out[:, 3:, :] = np.where(mask, cross_w, 0.0)
+    return out
+
+
+def _pairwise_cross(a: FloatArray, b: FloatArray) -> FloatArray:
+    """c[k, :, i] = a[:, k] x b[:, i] for a (3, m) and b (3, p): shape (m, 3, p).
+
+    Written out by components: np.cross with axis arguments costs several times more on
+    these small arrays (it runs every control cycle)."""
+    a0, a1, a2 = a[0][:, None], a[1][:, None], a[2][:, None]
+    b0, b1, b2 = b[0][None, :], b[1][None, :], b[2][None, :]
+    return np.stack((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), axis=1)
+
+
+@dataclass(frozen=True)
+class FrameState:
+    """World pose and geometric Jacobian of one frame at one configuration.
+
+    Attributes:
+        position: origin in the world [m], (3,).
+        rotation: axes in the world, (3, 3) (columns x, y, z).
+        jacobian: (6, n) map from joint velocities to [v; w] of the frame origin in world
+            axes (pinocchio LOCAL_WORLD_ALIGNED) [m/s; rad/s per rad/s].
+    """
+
+    position: FloatArray
+    rotation: FloatArray
+    jacobian: FloatArray
 
 
 @dataclass(frozen=True)
@@ -112,11 +174,52 @@ class DualArmModel:
         self.qd_max: FloatArray = self.model.velocityLimit.copy()
         self._f1 = self.model.getFrameId(LEFT_TOOL)
         self._f2 = self.model.getFrameId(RIGHT_TOOL)
+        self._frame_ids: dict[str, int] = {}
+        self._owner: object | None = None  # the Configuration whose q is in self.data
+
+    def frame_id(self, name: str) -> int:
+        """Pinocchio frame id of ``name``; KeyError naming the frames of the arms' links."""
+        fid = self._frame_ids.get(name)
+        if fid is None:
+            if not self.model.existFrame(name):
+                links = sorted(f.name for f in self.model.frames if f.name.startswith(("left_", "right_")))
+                raise KeyError(f"unknown frame {name!r}; frames: {', '.join(links)}")
+            fid = self._frame_ids[name] = self.model.getFrameId(name)
+        return fid
+
+    def arm_columns(self, side: str) -> slice:
+        """Columns (joints) of one arm, ``"left"`` or ``"right"``, in the joint vector."""
+        if side not in ("left", "right"):
+            raise ValueError(f"arm side must be 'left' or 'right', got {side!r}")
+        return slice(0, self.n_left) if side == "left" else slice(self.n_left, self.nq)
 
     @property
     def tool_frame_ids(self) -> tuple[int, int]:
         """Pinocchio frame ids of the left (F1) and right (F2) tool frames."""
         return self._f1, self._f2
+
+    def relative_reach(self) -> float:
+        """Upper bound of ||p_r^1|| over all configurations [m]: how far apart the tools can ever be.
+
+        Triangle inequality along each arm's chain: the distance from an arm's first joint
+        (fixed in the world) to its tool frame is at most the sum of the link offsets
+        (joint placements after the first, then the tool frame's placement), whatever q is; so
+        ||p_r|| <= ||o_left - o_right|| + reach_left + reach_right, with o the first joints'
+        origins (||p_r^1|| is the tools' distance: the frame F1 does not change it). For the
+        cell's URDF: 0.628 + 1.101 + 1.141 = 2.870 m (the largest of 20 000 random
+        configurations: 2.54 m). A target farther than this cannot be reached.
+        """
+        total = 0.0
+        origins = []
+        for frame_id in self.tool_frame_ids:
+            frame = self.model.frames[frame_id]
+            total += float(np.linalg.norm(frame.placement.translation))
+            joint = frame.parentJoint
+            while self.model.parents[joint] != 0:
+                total += float(np.linalg.norm(self.model.jointPlacements[joint].translation))
+                joint = self.model.parents[joint]
+            origins.append(self.model.jointPlacements[joint].translation)
+        return total + float(np.linalg.norm(origins[0] - origins[1]))
 
     def check_q(self, q: FloatArray, what: str = "joint positions") -> FloatArray:
         """Return q as a float array of shape (nq,), or raise DimensionError naming the problem."""
@@ -129,7 +232,16 @@ class DualArmModel:
         """World poses of the left and right tool frames at q."""
         q = self.check_q(q)
         pin.framesForwardKinematics(self.model, self.data, q)
+        self._owner = None  # a Configuration must recompute before reading self.data
         return self.data.oMf[self._f1].copy(), self.data.oMf[self._f2].copy()
+
+    def frame_poses(self, q: FloatArray, names: tuple[str, ...]) -> tuple[pin.SE3, ...]:
+        """World poses of the named frames at q."""
+        q = self.check_q(q)
+        ids = [self.frame_id(n) for n in names]
+        pin.framesForwardKinematics(self.model, self.data, q)
+        self._owner = None
+        return tuple(self.data.oMf[i].copy() for i in ids)
 
     def relative_pose(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(p_r^1, R_r^1) of eq (1)-(2) at q."""
@@ -139,15 +251,61 @@ class DualArmModel:
 
     def relative_state(self, q: FloatArray) -> RelativeState:
         """Relative pose and relative Jacobian (eq 5-6) at q, in one kinematics pass."""
-        q = self.check_q(q)
-        pin.computeJointJacobians(self.model, self.data, q)
-        pin.updateFramePlacements(self.model, self.data)
-        frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-        j1 = pin.getFrameJacobian(self.model, self.data, self._f1, frame)
-        j2 = pin.getFrameJacobian(self.model, self.data, self._f2, frame)
-        o1, o2 = self.data.oMf[self._f1], self.data.oMf[self._f2]
-        rel = o1.actInv(o2)
-        p_r1 = rel.translation.copy()
-        nl = self.n_left
-        jac = relative_jacobian(o1.rotation, p_r1, j1[:, :nl], j2[:, nl:])
-        return RelativeState(position=p_r1, rotation=rel.rotation.copy(), jacobian=jac)
+        return Configuration(self, q).relative()
+
+
+class Configuration:
+    """Kinematics of the cell at one joint configuration (like pink's ``Configuration``).
+
+    One pinocchio pass (joint Jacobians and frame placements) at construction; frame states
+    and the relative state are then read on demand and cached. Every task of a control
+    cycle reads the same Configuration. If another Configuration of the same model has
+    overwritten the pinocchio data since, the pass is redone before reading.
+    """
+
+    def __init__(self, model: DualArmModel, q: FloatArray) -> None:
+        self.model = model
+        self.q = model.check_q(q)
+        self._frames: dict[str, FrameState] = {}
+        self._relative: RelativeState | None = None
+        self._compute()
+
+    def _compute(self) -> None:
+        m = self.model
+        pin.computeJointJacobians(m.model, m.data, self.q)
+        pin.updateFramePlacements(m.model, m.data)
+        m._owner = self
+
+    def _data(self) -> pin.Data:
+        if self.model._owner is not self:
+            self._compute()
+        return self.model.data
+
+    def frame(self, name: str) -> FrameState:
+        """World pose and Jacobian (6, n) of frame ``name`` (LOCAL_WORLD_ALIGNED)."""
+        state = self._frames.get(name)
+        if state is None:
+            m = self.model
+            fid = m.frame_id(name)
+            data = self._data()
+            jac = pin.getFrameJacobian(m.model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+            placement = data.oMf[fid]
+            state = FrameState(placement.translation.copy(), placement.rotation.copy(), jac)
+            self._frames[name] = state
+        return state
+
+    def relative(self) -> RelativeState:
+        """Relative pose of F2 in F1 and relative Jacobian of eq (5)-(6) (paper 000)."""
+        if self._relative is None:
+            m = self.model
+            data = self._data()
+            frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+            j1 = pin.getFrameJacobian(m.model, data, m._f1, frame)
+            j2 = pin.getFrameJacobian(m.model, data, m._f2, frame)
+            o1, o2 = data.oMf[m._f1], data.oMf[m._f2]
+            rel = o1.actInv(o2)
+            p_r1 = rel.translation.copy()
+            nl = m.n_left
+            jac = relative_jacobian(o1.rotation, p_r1, j1[:, :nl], j2[:, nl:])
+            self._relative = RelativeState(position=p_r1, rotation=rel.rotation.copy(), jacobian=jac)
+        return self._relative

@@ -54,13 +54,18 @@ def read_params_file(path: str | Path, node_name: str, namespace: str = "/") -> 
     """Parameters that ``path`` gives to node ``node_name`` in ``namespace``, flattened.
 
     Sections are applied in ROS order: ``/**`` wildcards first, then the node's own.
-    Raises ParameterFileError (missing file, bad YAML with its line, wrong layout).
+    Raises ParameterFileError (missing or unreadable file, not UTF-8, bad YAML with its line,
+    wrong layout).
     """
     p = Path(path)
     if not p.is_file():
         raise ParameterFileError(p, "file not found")
     try:
-        doc = yaml.safe_load(p.read_text())
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ParameterFileError(p, f"unreadable ({exc})") from None
+    try:
+        doc = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
@@ -164,13 +169,13 @@ def resolve(specs: Iterable[ParamSpec], given: Mapping[str, Any], node: str = ""
 
 
 def positive(value: Any) -> str:
-    """a value > 0"""
-    return "" if value > 0 else "a value > 0"
+    """a value > 0 (finite)"""
+    return "" if 0 < value < float("inf") else "a value > 0 (finite)"
 
 
 def non_negative(value: Any) -> str:
-    """a value >= 0"""
-    return "" if value >= 0 else "a value >= 0"
+    """a value >= 0 (finite)"""
+    return "" if 0 <= value < float("inf") else "a value >= 0 (finite)"
 
 
 def unit_interval(value: Any) -> str:

@@ -9,15 +9,18 @@ Keys under ``scenario.`` (flattened names):
   settle_time [s], limits.<MotionLimits field>, segments (ordered list of names), and per
   segment ``<seg>.type``: ``pose`` (``position`` [m] and ``rpy_deg`` of the peg frame F2 in
   the hole frame F1) or ``screw`` (``axis`` in F1, ``angle_deg``, ``advance`` [m]); ``<seg>.hold`` [s].
+  Optional ``urdf``: the cell URDF's file name in ``urdf/`` (default ``dualarm_cell.urdf``).
+  A task scenario (paper 001) has ``tasks`` instead of ``segments``: see
+  :mod:`dualarm_control.task_scenario`.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pinocchio as pin
@@ -25,10 +28,14 @@ import pinocchio as pin
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import FloatArray
 from dualarm_control.params import ParameterError, read_params_file
-from dualarm_control.paths import config_path
+from dualarm_control.paths import config_path, share_dir
 from dualarm_control.trajectory import MotionLimits, RelativeTrajectory, Segment
 
+if TYPE_CHECKING:
+    from dualarm_control.task_scenario import TaskScenario
+
 PREFIX = "scenario."
+DEFAULT_URDF = "dualarm_cell.urdf"
 
 
 @dataclass(frozen=True)
@@ -56,6 +63,8 @@ class Scenario:
         limits: ruckig limits of the relative motion.
         settle_time: control time after the trajectory ends [s] (error convergence).
         source: file it came from.
+        urdf: the cell URDF's file name in ``urdf/``.
+        tasks: the task part of a task scenario (paper 001), else None.
     """
 
     name: str
@@ -65,9 +74,19 @@ class Scenario:
     limits: MotionLimits
     settle_time: float
     source: Path
+    urdf: str = DEFAULT_URDF
+    tasks: TaskScenario | None = None
+
+    @property
+    def urdf_path(self) -> Path:
+        """Path of the scenario's cell URDF."""
+        return share_dir() / "urdf" / self.urdf
 
     def trajectory(self, start_position: FloatArray, start_rotation: FloatArray) -> RelativeTrajectory:
         """The ruckig relative trajectory from the measured start pose through all segments."""
+        if not self.segments:
+            raise ScenarioError(f"scenario {self.name!r} is a task scenario (paper 001) without relative motion "
+                                "segments: run it with 'dualarm experiment' (constraint_based solver)")
         segments: list[Segment] = []
         p, r = np.asarray(start_position, float), np.asarray(start_rotation, float)
         for spec in self.segments:
@@ -129,17 +148,43 @@ def _vector(flat: Mapping[str, Any], key: str, size: int) -> FloatArray:
     return np.array(value, dtype=float)
 
 
-def _number(flat: Mapping[str, Any], key: str, default: float) -> float:
+def _number(flat: Mapping[str, Any], key: str, default: float | None = None) -> float:
     value = _get(flat, key, default)
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise ScenarioError(f"scenario parameter '{PREFIX}{key}': got {value!r}, expected a number")
     return float(value)
 
 
+def _motion_limits(flat: Mapping[str, Any]) -> MotionLimits:
+    """MotionLimits from the ``scenario.limits.*`` keys; ScenarioError naming the full key and value.
+
+    Each limit must be a finite number > 0 (bool, strings, NaN/inf, 0 and negatives are
+    refused); an unknown key is refused with the valid names.
+    """
+    prefix = PREFIX + "limits."
+    valid = [f.name for f in fields(MotionLimits)]
+    values: dict[str, float] = {}
+    for key, value in flat.items():
+        if not key.startswith(prefix):
+            continue
+        name = key[len(prefix):]
+        if name not in valid:
+            raise ScenarioError(f"scenario parameter '{key}': unknown limit; valid names: {', '.join(valid)}")
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value <= 0:
+            raise ScenarioError(f"scenario parameter '{key}': got {value!r}, expected a finite number > 0")
+        values[name] = float(value)
+    return MotionLimits(**values)
+
+
 def scenario_from_parameters(flat: Mapping[str, Any], source: Path) -> Scenario:
     """Build a Scenario from flattened parameters (as read from the file or declared in a node)."""
-    names = _get(flat, "segments")
-    if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+    tasks = None
+    if PREFIX + "tasks" in flat:
+        from dualarm_control.task_scenario import parse_task_scenario
+
+        tasks = parse_task_scenario(flat)
+    names = _get(flat, "segments", [] if tasks is not None else None)
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names) or not (names or tasks):
         raise ScenarioError(f"scenario parameter '{PREFIX}segments': got {names!r}, expected a list of segment names")
     specs = []
     for seg in names:
@@ -155,16 +200,14 @@ def scenario_from_parameters(flat: Mapping[str, Any], source: Path) -> Scenario:
                                      advance=_number(flat, f"{seg}.advance", 0.0), hold=hold))
         else:
             raise ScenarioError(f"scenario parameter '{PREFIX}{seg}.type': got {kind!r}, expected one of: pose, screw")
-    limit_values = {k[len(PREFIX) + 7:]: v for k, v in flat.items() if k.startswith(PREFIX + "limits.")}
-    try:
-        limits = MotionLimits(**limit_values)
-    except TypeError as exc:
-        raise ScenarioError(f"scenario limits: {exc}") from None
-    except ValueError as exc:
-        raise ScenarioError(f"scenario limits: {exc}") from None
+    limits = _motion_limits(flat)
     settle = _number(flat, "settle_time", 1.0)
     if settle < 0:
         raise ScenarioError(f"scenario parameter '{PREFIX}settle_time': got {settle}, expected >= 0")
+    urdf = _get(flat, "urdf", DEFAULT_URDF)
+    if not isinstance(urdf, str) or not (share_dir() / "urdf" / urdf).is_file():
+        raise ScenarioError(f"scenario parameter '{PREFIX}urdf': got {urdf!r}, expected a file name in "
+                            f"{share_dir() / 'urdf'}")
     return Scenario(
         name=str(_get(flat, "name")),
         description=str(_get(flat, "description", "")),
@@ -173,4 +216,6 @@ def scenario_from_parameters(flat: Mapping[str, Any], source: Path) -> Scenario:
         limits=limits,
         settle_time=settle,
         source=source,
+        urdf=urdf,
+        tasks=tasks,
     )

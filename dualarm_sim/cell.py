@@ -20,6 +20,12 @@ Physics choices (all measured on ``urdf/dualarm_cell.urdf``):
   of the cell (torso, both arms, hole block and peg) never collide with each other; the
   peg enters the hole kinematically. Collisions between the two tools and flanges are also
   filtered explicitly (``setCollisionFilterPair``) in case self-collision is turned on later.
+* Contacts between links of the cell can be switched on pair by pair
+  (``CellConfig.contact_pairs``, e.g. the brush on the pan of the pan-cleaning cell): the
+  URDF is then loaded with self-collision and every other link pair is filtered out.
+  Contact stiffness/damping/friction come from the URDF's ``<contact>`` tags.
+* ``CellConfig.table_height`` adds a table: a static 1.2 x 1.6 x 0.05 m box in front of the
+  torso (centre at x = 0.7 m, clear of the torso) whose top is at that world height; it collides with every link.
 * Joint position limits ARE enforced by pybullet (it creates joint-limit constraints from
   the URDF ``<limit>``, also in velocity mode): a joint commanded past its limit stops
   there (overshoot of a few 1e-5 rad). Keeping away from the limits is still the
@@ -72,6 +78,9 @@ class CellConfig:
         gravity: gravity along world z [m/s^2].
         motor_force_scale: velocity-motor force limit as a multiple of the URDF effort
             limits [-]; see the module docstring for why it is 10.
+        table_height: world z of a table top [m], or None (no table).
+        contact_pairs: pairs of link names that make contact with each other (all other
+            link pairs of the cell never do).
     """
 
     urdf: Path = field(default_factory=urdf_path)
@@ -80,8 +89,12 @@ class CellConfig:
     command_timeout: float = 0.05
     gravity: float = -9.81
     motor_force_scale: float = 10.0
+    table_height: float | None = None
+    contact_pairs: tuple[tuple[str, str], ...] = ()
 
     def __post_init__(self) -> None:
+        if self.table_height is not None and not math.isfinite(self.table_height):
+            raise ValueError(f"table_height={self.table_height!r} must be finite or None")
         _check_positive("control_period", self.control_period)
         _check_positive("command_timeout", self.command_timeout)
         _check_positive("motor_force_scale", self.motor_force_scale)
@@ -189,9 +202,8 @@ class DualArmCell:
         cid = self._client
         p.setGravity(0.0, 0.0, self.config.gravity, physicsClientId=cid)
         p.setPhysicsEngineParameter(fixedTimeStep=self.config.physics_dt, numSubSteps=0, physicsClientId=cid)
-        self._body = p.loadURDF(
-            str(self.config.urdf), useFixedBase=True, flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=cid
-        )
+        flags = p.URDF_USE_INERTIA_FROM_FILE | (p.URDF_USE_SELF_COLLISION if self.config.contact_pairs else 0)
+        self._body = p.loadURDF(str(self.config.urdf), useFixedBase=True, flags=flags, physicsClientId=cid)
         n_joints = p.getNumJoints(self._body, physicsClientId=cid)
         infos = [p.getJointInfo(self._body, j, physicsClientId=cid) for j in range(n_joints)]
         self._joint_index = {info[1].decode(): j for j, info in enumerate(infos)}
@@ -207,6 +219,11 @@ class DualArmCell:
         for link in range(-1, len(infos)):
             p.changeDynamics(self._body, link, linearDamping=0.0, angularDamping=0.0, physicsClientId=cid)
         self._filter_tool_collisions()
+        self._table: int | None = None
+        if self.config.contact_pairs:
+            self._keep_only_contact_pairs(len(infos))
+        if self.config.table_height is not None:
+            self._table = self._add_table(self.config.table_height)
         self._sensor = self._joint_index[SENSOR_JOINT]
         p.enableJointForceTorqueSensor(self._body, self._sensor, True, physicsClientId=cid)
 
@@ -217,6 +234,39 @@ class DualArmCell:
         for a in left:
             for b in right:
                 p.setCollisionFilterPair(self._body, self._body, a, b, 0, physicsClientId=self._client)
+
+    def _keep_only_contact_pairs(self, n_links: int) -> None:
+        """Filter out every link pair of the cell but ``contact_pairs`` (self-collision is on)."""
+        keep = set()
+        for a, b in self.config.contact_pairs:
+            for name in (a, b):
+                if name not in self._link_index:
+                    raise ValueError(f"contact_pairs: unknown link {name!r}")
+            keep |= {(self._link_index[a], self._link_index[b]), (self._link_index[b], self._link_index[a])}
+        for i in range(-1, n_links):
+            for j in range(i + 1, n_links):
+                p.setCollisionFilterPair(self._body, self._body, i, j, int((i, j) in keep),
+                                         physicsClientId=self._client)
+
+    def _add_table(self, height: float) -> int:
+        """A static box whose top is at world z = ``height`` [m] (module docstring)."""
+        cid = self._client
+        half = (0.6, 0.8, 0.025)
+        shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=cid)
+        visual = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=(0.6, 0.45, 0.3, 1), physicsClientId=cid)
+        return int(p.createMultiBody(0.0, shape, visual, basePosition=(0.7, 0.0, height - half[2]), physicsClientId=cid))
+
+    def contact_force(self, link_a: str, link_b: str) -> float:
+        """Sum of the normal contact forces between two links of the cell [N] (last substep)."""
+        a, b = self._link_index[link_a], self._link_index[link_b]
+        points = p.getContactPoints(self._body, self._body, a, b, physicsClientId=self._client)
+        return float(sum(c[9] for c in points))
+
+    def table_contacts(self) -> int:
+        """Number of contact points between the cell and the table (0 without a table)."""
+        if self._table is None:
+            return 0
+        return len(p.getContactPoints(self._body, self._table, physicsClientId=self._client))
 
     def _require_open(self) -> int:
         """Return the pybullet client id; raise RuntimeError once the cell is closed."""

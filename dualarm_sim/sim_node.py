@@ -4,9 +4,11 @@ Publishes ``/joint_states``, ``/wrench`` and ``/clock`` (simulation time, steps 
 every control period; applies
 ``/velocity_controller/commands`` (Float64MultiArray, 14 values, controller joint order).
 A command older than ``command_timeout`` (simulation time, counted in steps, as a robot's
-own cycle counts it) brings the arms to rest, in both modes. Once a second a ``sim_node``
-status on ``/diagnostics`` counts the steps, the commands received and rejected, and the
-command timeouts (WARN while the arms are held at rest by the timeout).
+own cycle counts it) brings the arms to rest, in both modes. A malformed command (bad CDR,
+wrong length, NaN/inf) is rejected (throttled log, WARN on ``/diagnostics``, counted) and the
+last valid one kept, so the timeout still applies. Once a second a ``sim_node`` status on
+``/diagnostics`` counts the steps, the commands received and rejected, and the command
+timeouts (WARN while the arms are held at rest by the timeout).
 
 Real-time mode: a drift-free timer steps the physics one control period per tick, stamps
 are the wall clock. Lockstep mode (``lockstep:=true``): the state of step k (stamped with
@@ -30,6 +32,7 @@ from std_msgs.msg import Float64MultiArray
 
 from dualarm_control.params import ParamSpec, non_negative, positive
 from dualarm_control.ros import convert
+from dualarm_control.ros.inputs import Throttle, subscribe_checked
 from dualarm_control.ros.node import (
     declare,
     priority_from_args,
@@ -95,8 +98,9 @@ class SimNode:
         self.pub_wrench = n.create_publisher(WrenchStamped, "/wrench", 10)
         self.pub_clock = n.create_publisher(Clock, "/clock", 10)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        n.create_subscription(Float64MultiArray, "/velocity_controller/commands", self.on_command, qos)
+        subscribe_checked(n, Float64MultiArray, "/velocity_controller/commands", self.on_command, qos, self.reject)
         self.log = n.get_logger()
+        self.throttle = Throttle(1.0)
         self.steps = 0
         self.started = False
         self.last_publish = 0.0
@@ -129,16 +133,26 @@ class SimNode:
         self.pub_wrench.publish(convert.wrench_stamped(ns, self.cell.wrench()))
         self.last_publish = time.monotonic()
 
+    def reject(self, reason: str) -> None:
+        """A rejected command: counted, WARN on /diagnostics, throttled log; the last valid command is kept."""
+        self.rejected += 1
+        line = self.throttle.text(reason)
+        if line is not None:
+            self.log.warning(line)
+        self.pub_diag.publish(convert.diagnostics(self._stamp_ns(), "sim_node", 1, reason,
+                                                  {"status": "input_rejected", "rejected_inputs": self.rejected}))
+
     def on_command(self, msg: Any) -> None:
         self.received += 1
-        data = np.asarray(msg.data, dtype=float)
-        if data.shape != (len(self.cell.joint_names),):
-            self.rejected += 1
-            self.log.error(f"command with {data.shape[0]} values rejected: expected {len(self.cell.joint_names)}")
+        data = convert.command_vector(msg, len(self.cell.joint_names))
+        if isinstance(data, str):
+            self.reject(data)
             return
         report = self.cell.apply_command(data)
-        if not report.accepted or report.clipped:
-            self.log.warning(f"command: {report.reason}")
+        if report.clipped:
+            line = self.throttle.text(f"command: {report.reason}")
+            if line is not None:
+                self.log.warning(line)
         if self.lockstep and self.started:
             self.step()
             self.publish_state()

@@ -237,3 +237,29 @@ def test_cell_module_is_ros_free() -> None:
         "import sys, dualarm_sim.cell; bad = {'rclpy', 'cyclonedds', 'rosbags'} & set(sys.modules); assert not bad, bad"
     )
     subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, cwd=Path(__file__).parents[1])
+
+
+PAN_URDF = Path(__file__).resolve().parents[1] / "urdf" / "dualarm_cell_pan.urdf"
+PAN_START = np.radians([-17.3, 91.343, 59.706, -80.623, 9.786, -85.028, 41.618,
+                        136.0, 94.216, -133.402, 93.405, 36.843, 59.326, 0.0])  # pan_cleaning.yaml
+
+
+def test_table_collides_with_the_arms_only_when_they_reach_it() -> None:
+    """A table at z = 0.4 m (pan_cleaning) is clear of the start pose; raised to 0.9 m it cuts the arms."""
+    with DualArmCell(CellConfig(urdf=PAN_URDF, table_height=0.4), initial_positions=PAN_START) as c:
+        run(c, np.zeros(14), 2)
+        assert c.table_contacts() == 0
+    with DualArmCell(CellConfig(urdf=PAN_URDF, table_height=0.9), initial_positions=PAN_START) as c:
+        run(c, np.zeros(14), 2)
+        assert c.table_contacts() > 0
+    with pytest.raises(ValueError, match="table_height"):
+        CellConfig(table_height=float("nan"))
+
+
+def test_contact_pairs_enable_only_the_named_links() -> None:
+    """Brush and pan touch only when their pair is enabled; an unknown link name is refused."""
+    with DualArmCell(CellConfig(urdf=PAN_URDF, contact_pairs=(("left_flange", "right_tool"),)),
+                     initial_positions=PAN_START) as c:
+        assert c.contact_force("left_flange", "right_tool") == 0.0  # 5 cm apart at the start
+    with pytest.raises(ValueError, match="unknown link 'nope'"):
+        DualArmCell(CellConfig(urdf=PAN_URDF, contact_pairs=(("left_flange", "nope"),)))

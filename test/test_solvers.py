@@ -176,8 +176,10 @@ def near_limit_problem(model: DualArmModel, limits: JointLimits, joint: int, see
 
 
 def test_registry_lists_the_four_methods_of_the_paper() -> None:
-    """solver_names() holds eq (13), (14), (17)-(19) and (26)-(28), sorted; make_solver sets .name."""
-    assert solver_names() == ["hierarchical_sparse_qp", "pseudo_inverse", "sparse_qp", "standard_qp"]
+    """solver_names() holds eq (13), (14), (17)-(19) and (26)-(28) of paper 000 and paper 001's
+    constraint_based (eq 12-14), sorted; make_solver sets .name."""
+    assert solver_names() == ["constraint_based", "hierarchical_sparse_qp", "pseudo_inverse", "sparse_qp",
+                              "standard_qp"]
     for name in solver_names():
         assert make_solver(name).name == name
 
@@ -232,6 +234,8 @@ def test_task_met_up_to_each_methods_optimality_condition(name: str, model: Dual
             assert res.task_residual < 1e-9
         elif name == "standard_qp":
             np.testing.assert_allclose(grad, EPS * qd, atol=2e-9)  # dual residual tolerance 1e-9
+        elif name == "constraint_based":  # Q = eps I in u^T Q u (paper 001, eq 12): gradient 2 eps qd
+            np.testing.assert_allclose(grad, 2 * EPS * qd, atol=2e-9)
         else:  # lasso KKT: |grad_i| <= lambda, and grad_i = lambda sign(qd_i) on the support
             assert np.max(np.abs(grad)) <= LAMBDA + 2e-9
             on = np.abs(qd) > 1e-6
@@ -241,7 +245,7 @@ def test_task_met_up_to_each_methods_optimality_condition(name: str, model: Dual
 
 @pytest.mark.parametrize("name", solver_names())
 def test_crossing_bounds_give_invalid_input_and_zero(name: str) -> None:
-    """lower > upper (a joint outside its range): status invalid_input, zero velocities, no raise."""
+    """lower > upper (inconsistent input: velocity_bounds never gives it): status invalid_input, zero velocities."""
     rng = np.random.default_rng(23)
     p = random_problem(rng, 1.0)
     lower = p.lower.copy()
@@ -294,16 +298,49 @@ def return_nothing(problem: Problem) -> tuple:
     return None, "infeasible", 4, "QP infeasible"
 
 
+def return_max_iter(problem: Problem) -> tuple:
+    return np.full(problem.jacobian.shape[1], 1e3), "max_iter", 10000, "QP max_iter"
+
+
 @pytest.mark.parametrize("name", solver_names())
-@pytest.mark.parametrize("failure", [raise_linalg_error, raise_runtime_error, return_infinite, return_nothing])
-def test_numerical_failures_never_raise(name: str, failure: Callable, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Whatever _solve does (raise, inf, no solution), solve() returns a failure status and zero velocities."""
+@pytest.mark.parametrize("failure", [raise_linalg_error, raise_runtime_error, return_infinite, return_nothing,
+                                     return_max_iter])
+def test_numerical_failures_give_the_bounded_least_squares_fallback(name: str, failure: Callable,
+                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """Whatever _solve does (raise, inf, no solution, iteration cap), solve() returns status "fallback" with
+    the reason in detail and the bounded least-squares step: inside the bounds, and its residual no worse
+    than any other point of the box sampled here (it is the box's least-squares optimum)."""
     solver = make_solver(name)
     monkeypatch.setattr(solver, "_solve", failure)
-    res = solver.solve(random_problem(np.random.default_rng(26), 1.0))
-    assert res.failed and res.status in ("failed", "infeasible")
-    np.testing.assert_array_equal(res.velocities, np.zeros(14))
-    assert res.detail
+    p = random_problem(np.random.default_rng(26), 1.0)
+    res = solver.solve(p)
+    assert res.status == "fallback" and res.fell_back and not res.failed
+    assert "bounded least-squares step" in res.detail and res.detail.split(":")[0] in ("failed", "infeasible",
+                                                                                      "max_iter")
+    assert np.all(res.velocities >= p.lower) and np.all(res.velocities <= p.upper)
+    rng = np.random.default_rng(27)
+    for _ in range(50):
+        other = rng.uniform(p.lower, p.upper)
+        assert res.task_residual <= np.linalg.norm(p.jacobian @ other - p.reference) + 1e-9
+
+
+@pytest.mark.parametrize("name", solver_names())
+def test_failed_fallback_gives_the_command_nearest_to_rest(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """If the bounded least squares fails too: the original failure status and clip(0, lower, upper)."""
+    from dualarm_control.solvers import base
+
+    solver = make_solver(name)
+    monkeypatch.setattr(solver, "_solve", return_nothing)
+    monkeypatch.setattr(base, "bounded_least_squares", lambda *args: None)
+    p = random_problem(np.random.default_rng(28), 1.0)
+    lower = p.lower.copy()
+    lower[2] = 0.3  # a joint that must move (beyond its lower limit): rest is not inside its bounds
+    upper = np.maximum(p.upper, lower)
+    res = solver.solve(Problem(p.jacobian, p.reference, lower, upper, p.repulsive))
+    assert res.status == "infeasible" and res.failed and "nearest-to-rest" in res.detail
+    expected = np.zeros(14)
+    expected[2] = 0.3
+    np.testing.assert_array_equal(res.velocities, expected)
 
 
 @pytest.mark.parametrize("solver", ["sparse_qp", "hierarchical_sparse_qp"])

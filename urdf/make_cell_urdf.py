@@ -1,7 +1,17 @@
 """Generate ``dualarm_cell.urdf``: two KUKA LWR4 arms on a fixed torso (BAZAR-like).
 
-Run ``python urdf/make_cell_urdf.py`` after editing; the generated URDF is committed so
-pinocchio and pybullet load the very same file.
+Run ``python urdf/make_cell_urdf.py`` after editing; the generated URDFs are committed so
+pinocchio and pybullet load the very same file. Two tool sets, same arms:
+
+* ``dualarm_cell.urdf`` (tools ``assembly``, paper 000): a hole block on the left flange, a
+  peg on the right one.
+* ``dualarm_cell_pan.urdf`` (tools ``pan_cleaning``, paper 001): a pan on the left flange,
+  tool frame ``left_tool`` at the centre of its top surface with z the pan normal; a brush
+  on the right flange, tool frame ``right_tool`` at the brush tip with z the brush axis
+  (pointing out of the tip). The brush body is the ``right_tool`` link itself, child of the
+  force/torque sensor joint ``right_tool_joint``, so contact forces on the brush pass
+  through the sensor. The brush head is a sphere (robust sliding contact in pybullet) with
+  a compliant contact (``BRUSH_CONTACT``: bristles, about 3 mm for 5 N).
 
 Nominal LWR4 kinematics: shoulder 0.3105 m above the base, elbow +0.40 m, wrist +0.39 m,
 flange +0.078 m past the wrist centre (A6 and A7 intersect). Axes z, y, z, y, z, y, z.
@@ -47,7 +57,7 @@ def _cyl_link(name: str, mass: float, length: float, rgba: str) -> str:
 """
 
 
-def _arm(side: str, y: float, rpy: tuple[float, float, float]) -> str:
+def _arm(side: str, y: float, rpy: tuple[float, float, float], tools: str) -> str:
     out = [
         (
             f'  <joint name="{side}_mount" type="fixed"><parent link="torso"/><child link="{side}_link_0"/>'
@@ -72,13 +82,69 @@ def _arm(side: str, y: float, rpy: tuple[float, float, float]) -> str:
         f'  <joint name="{side}_flange_joint" type="fixed"><parent link="{parent}"/><child link="{side}_flange"/>'
         f'<origin xyz="0 0 {FLANGE_OFFSET}"/></joint>\n'
     )
-    out.append(_tool(side))
+    out.append(_tool(side, tools))
     return "".join(out)
 
 
-def _tool(side: str) -> str:
+PAN_RADIUS = 0.13
+"""Pan radius [m] (visual cylinder; the collision shape is a 0.26 m square plate, 1 cm thick)."""
+PAN_SURFACE = 0.07
+"""Height [m] of the pan's top surface (frame ``left_tool``) above the left flange."""
+BRUSH_LENGTH = 0.16
+"""Flange-to-tip length [m] of the brush (frame ``right_tool`` at the tip)."""
+BRUSH_HEAD_RADIUS = 0.015
+"""Radius [m] of the brush head sphere; its lowest point is the tip."""
+BRUSH_MASS = 0.1
+"""Mass [kg] of the brush link (what the F/T sensor carries)."""
+BRUSH_CONTACT = {"stiffness": 1500.0, "damping": 60.0, "lateral_friction": 0.2}
+"""pybullet contact of the brush head: normal stiffness [N/m], damping [N s/m], friction [-]."""
+
+
+def _pan_tool(side: str) -> str:
+    """Left: a pan (stem + plate), frame at the centre of the top surface, z = pan normal.
+    Right: a brush (handle + spherical head) in the ``right_tool`` link, frame at the tip."""
+    if side == "left":
+        half = PAN_SURFACE - 0.005
+        return (
+            '  <link name="left_flange"><inertial><origin xyz="0 0 0.04"/><mass value="0.8"/>'
+            f'{_inertia(0.8, 0.08, 0.1)}</inertial>'
+            f'<visual><origin xyz="0 0 {half / 2:.4f}"/><geometry><cylinder radius="0.02" length="{half:.4f}"/></geometry>'
+            '<material name="pan_stem"><color rgba="0.3 0.3 0.3 1"/></material></visual>'
+            f'<visual><origin xyz="0 0 {half:.4f}"/><geometry><cylinder radius="{PAN_RADIUS}" length="0.01"/></geometry>'
+            '<material name="pan"><color rgba="0.15 0.15 0.15 1"/></material></visual>'
+            f'<collision><origin xyz="0 0 {half:.4f}"/><geometry><box size="0.26 0.26 0.01"/></geometry></collision>'
+            '</link>\n'
+            f'  <joint name="left_tool_joint" type="fixed"><parent link="left_flange"/><child link="left_tool"/>'
+            f'<origin xyz="0 0 {PAN_SURFACE}"/></joint>\n'
+            '  <link name="left_tool"><inertial><mass value="0.001"/>'
+            '<inertia ixx="1e-7" ixy="0" ixz="0" iyy="1e-7" iyz="0" izz="1e-7"/></inertial></link>\n'
+        )
+    head = BRUSH_HEAD_RADIUS
+    handle = BRUSH_LENGTH - 2 * head
+    contact = "".join(f'<{k} value="{v}"/>' for k, v in BRUSH_CONTACT.items())
+    return (
+        '  <link name="right_flange"><inertial><mass value="0.001"/>'
+        '<inertia ixx="1e-7" ixy="0" ixz="0" iyy="1e-7" iyz="0" izz="1e-7"/></inertial></link>\n'
+        f'  <joint name="right_tool_joint" type="fixed"><parent link="right_flange"/><child link="right_tool"/>'
+        f'<origin xyz="0 0 {BRUSH_LENGTH}"/></joint>\n'
+        f'  <link name="right_tool"><contact>{contact}</contact>'
+        f'<inertial><origin xyz="0 0 {-BRUSH_LENGTH / 2:.4f}"/><mass value="{BRUSH_MASS}"/>'
+        f'{_inertia(BRUSH_MASS, BRUSH_LENGTH, 0.015)}</inertial>'
+        f'<visual><origin xyz="0 0 {-(2 * head + handle / 2):.4f}"/><geometry><cylinder radius="0.01" length="{handle:.4f}"/></geometry>'
+        '<material name="brush_handle"><color rgba="0.6 0.4 0.2 1"/></material></visual>'
+        f'<visual><origin xyz="0 0 {-head}"/><geometry><sphere radius="{head}"/></geometry>'
+        '<material name="bristles"><color rgba="0.9 0.9 0.2 1"/></material></visual>'
+        f'<collision><origin xyz="0 0 {-head}"/><geometry><sphere radius="{head}"/></geometry></collision>'
+        '</link>\n'
+    )
+
+
+def _tool(side: str, tools: str = "assembly") -> str:
     """Left: a block with a hole, tool frame at the hole entrance, z out of the hole.
-    Right: a peg, tool frame at the peg tip, z along the peg pointing out of the tip."""
+    Right: a peg, tool frame at the peg tip, z along the peg pointing out of the tip.
+    ``tools="pan_cleaning"``: the pan and the brush of :func:`_pan_tool` instead."""
+    if tools == "pan_cleaning":
+        return _pan_tool(side)
     if side == "left":
         body = (
             '  <link name="left_flange"><inertial><origin xyz="0 0 0.04"/><mass value="0.6"/>'
@@ -105,7 +171,11 @@ def _tool(side: str) -> str:
     )
 
 
-def make_urdf() -> str:
+TOOL_SETS = {"assembly": "dualarm_cell.urdf", "pan_cleaning": "dualarm_cell_pan.urdf"}
+"""Tool set -> generated file name."""
+
+
+def make_urdf(tools: str = "assembly") -> str:
     torso = (
         '  <link name="world"/>\n'
         '  <joint name="torso_joint" type="fixed"><parent link="world"/><child link="torso"/></joint>\n'
@@ -115,11 +185,12 @@ def make_urdf() -> str:
         '<material name="torso"><color rgba="0.5 0.5 0.5 1"/></material></visual>'
         '<collision><origin xyz="-0.1 0 0.5"/><geometry><box size="0.2 0.4 1.0"/></geometry></collision></link>\n'
     )
-    arms = "".join(_arm(side, y, rpy) for side, y, rpy in MOUNTS)
+    arms = "".join(_arm(side, y, rpy, tools) for side, y, rpy in MOUNTS)
     return f'<?xml version="1.0"?>\n<!-- generated by urdf/make_cell_urdf.py: do not edit by hand -->\n<robot name="dualarm_cell">\n{torso}{arms}</robot>\n'
 
 
 if __name__ == "__main__":
-    out = Path(__file__).with_name("dualarm_cell.urdf")
-    out.write_text(make_urdf())
-    print(f"wrote {out}")
+    for tool_set, file_name in TOOL_SETS.items():
+        out = Path(__file__).with_name(file_name)
+        out.write_text(make_urdf(tool_set))
+        print(f"wrote {out}")

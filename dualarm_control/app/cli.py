@@ -15,6 +15,7 @@ from dualarm_control.app.progress import progress_bar
 from dualarm_control.errors import DualArmError
 
 EXIT_USAGE = 2
+DEFAULT_SOLVERS = "standard_qp,sparse_qp,hierarchical_sparse_qp"
 EXIT_INTERRUPTED = 130
 
 
@@ -32,8 +33,13 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     from dualarm_control.scenario import load_scenario
 
     scenario = load_scenario(args.scenario)
+    if scenario.tasks is not None:
+        return cmd_task_experiment(args, scenario)
+    if args.gains or args.force or args.duration:
+        raise DualArmError(f"--gains, --force and --duration apply to task scenarios (pan_cleaning), "
+                           f"not to {scenario.name!r}")
     base = read_params_files(args.params, "controller_node")
-    solvers = [s.strip() for s in args.solver.split(",") if s.strip()]
+    solvers = [s.strip() for s in (args.solver or DEFAULT_SOLVERS).split(",") if s.strip()]
     configs = {name: controller_params({**base, "solver": name}) for name in solvers}  # validates all first
     out = Path(args.output)
     model = DualArmModel()
@@ -56,6 +62,69 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     plot_velocity_norms(runs, out / "velocity_norms.png", title=f"{scenario.name}: |qd_i| and active joints")
     print(format_table(results))
     print(f"\nwrote {out / 'metrics.json'} and {out / 'velocity_norms.png'}")
+    return 0
+
+
+def cmd_task_experiment(args: argparse.Namespace, scenario) -> int:
+    """Task scenario (paper 001): one run per gain k (force variant with --force); metrics.json, figures."""
+    from dualarm_control.app.report import write_metrics
+    from dualarm_control.app.task_experiment import (
+        run_task_scenario,
+        summarize_task_run,
+    )
+    from dualarm_control.app.task_report import (
+        format_task_table,
+        plot_contact_force,
+        plot_joint_velocities,
+        plot_task_values,
+        plot_tool_paths,
+    )
+    from dualarm_control.controller import controller_params
+    from dualarm_control.params import read_params_files
+    from dualarm_control.tasks import CircleTask
+
+    spec = scenario.tasks
+    base = read_params_files(args.params, "controller_node")
+    solver = args.solver or "constraint_based"
+    if "," in solver:
+        raise DualArmError("a task scenario runs one solver (constraint_based); got --solver " + solver)
+    params = controller_params({**base, "solver": solver})
+    try:
+        gains = [float(g) for g in args.gains.split(",") if g.strip()] if args.gains else (
+            [spec.force.gain] if args.force else list(spec.gains))
+    except ValueError:
+        raise DualArmError(f"--gains {args.gains!r}: expected comma-separated numbers > 0") from None
+    if not gains or any(not g > 0 for g in gains):
+        raise DualArmError(f"--gains {args.gains!r}: expected comma-separated numbers > 0")
+    out = Path(args.output)
+    print(f"scenario {scenario.name!r} ({scenario.source}); solver {solver}; gains {gains}"
+          f"{'; force feedback' if args.force else ''}; output: {out}", file=sys.stderr)
+    results, logs = {}, []
+    try:
+        for gain in gains:
+            start = time.perf_counter()
+            label = f"k={gain:g}" + (" force" if args.force else "")
+            log = run_task_scenario(scenario, params, gain, args.force, duration=args.duration,
+                                    progress=progress_bar(label))
+            results[log.label] = summarize_task_run(log, scenario)
+            logs.append(log)
+            print(f"[{label}] done: {len(log.time)} cycles in {time.perf_counter() - start:.1f} s wall", file=sys.stderr)
+    except KeyboardInterrupt:
+        print("\ninterrupted: writing what is complete", file=sys.stderr)
+        if results:
+            write_metrics(out / "metrics.json", results)
+        return EXIT_INTERRUPTED
+    write_metrics(out / "metrics.json", results)
+    circle = next(t for t in spec.build(1.0) if isinstance(t, CircleTask))
+    plot_tool_paths(logs, circle.radius, out / "tool_path.png")
+    plot_task_values(logs, out / "task_values.png")
+    plot_joint_velocities(logs[0], out / "joint_velocities.png")
+    files = ["metrics.json", "tool_path.png", "task_values.png", "joint_velocities.png"]
+    if args.force:
+        plot_contact_force(logs[0], out / "contact_force.png")
+        files.append("contact_force.png")
+    print(format_task_table(results))
+    print(f"\nwrote {', '.join(str(out / f) for f in files)}")
     return 0
 
 
@@ -417,14 +486,26 @@ def build_parser() -> argparse.ArgumentParser:
         "experiment",
         help="run a scenario in-process for several solvers (Table I, Fig. 5)",
         description="Run SCENARIO in one process in lockstep (pybullet cell + controller + ruckig targets) "
-        "for each solver; print a Table-I-style table, write DIR/metrics.json and DIR/velocity_norms.png.",
+        "for each solver; print a Table-I-style table, write DIR/metrics.json and DIR/velocity_norms.png. "
+        "A task scenario (pan_cleaning, paper 001) runs the constraint_based solver once per gain (--gains, "
+        "--force) and writes DIR/metrics.json, tool_path.png, task_values.png, joint_velocities.png "
+        "(and contact_force.png).",
     )
     exp.add_argument("scenario", help="scenario name (config/scenarios/<name>.yaml) or a YAML path")
-    exp.add_argument("--solver", default="standard_qp,sparse_qp,hierarchical_sparse_qp",
-                     help="comma-separated solver names (default: %(default)s)")
+    exp.add_argument("--solver", default=None,
+                     help=f"comma-separated solver names (default: {DEFAULT_SOLVERS}; for a task scenario: "
+                     "constraint_based)")
     exp.add_argument("--params", action="append", default=[], metavar="FILE",
                      help="ROS-style parameter file for controller_node (repeatable; later files win)")
     exp.add_argument("--output", default="out/experiment", metavar="DIR", help="output directory (default: %(default)s)")
+    exp.add_argument("--gains", default="", metavar="K,K,...",
+                     help="task scenarios: task gains k [1/s] to compare (default: the scenario's, e.g. 1,0.5,0.2; "
+                     "with --force the scenario's force.gain)")
+    exp.add_argument("--force", action="store_true",
+                     help="task scenarios: force feedback variant (eq 9): real brush-pan contact, noisy filtered "
+                     "F/T sensor, PI force control, pan modelling error")
+    exp.add_argument("--duration", type=float, default=None, metavar="S",
+                     help="task scenarios: run time [s] (default: the scenario's)")
     exp.set_defaults(func=cmd_experiment)
 
     demo = sub.add_parser("demo", help="the main job: three nodes over ROS per solver, bags, reports",

@@ -23,9 +23,13 @@ Either sends the safe state: a zero-velocity command every period and /diagnosti
 cycle whose inputs are fresh again: commands resume, /diagnostics goes back to OK, the
 recovery is logged once with the time spent in the safe state.
 
-Safe behaviour (documented): an unusable message (wrong joint count or names, NaN) is
-rejected and the last valid state kept (it goes stale -> zero command); no target yet -> zero
-command; solver failures give the solver's safe command.
+Safe behaviour (documented, docs/safety.md): an unusable message (malformed CDR, wrong,
+missing or duplicate joint names, wrong counts, NaN/inf, a stamp older than the last accepted
+one, a target beyond the cell's reach) is rejected with a throttled log line and a
+/diagnostics entry, and the last valid input kept (a state then goes stale -> zero command);
+a time source that restarted is accepted after 3 consecutive monotonic samples ("time source
+restarted"); no target yet -> zero command; a solver failure gives the bounded least-squares
+fallback (status "fallback", counted as ``solver_fallbacks``).
 
 Live parameters: ``solver``, ``gain``, ``l1_weight``, the QP tolerances (every controller
 parameter that is not read-only) can be set on the running node (``dualarm param set`` or
@@ -59,6 +63,7 @@ from dualarm_control.kinematics import DualArmModel
 from dualarm_control.metrics import percentiles
 from dualarm_control.params import ParamSpec, positive
 from dualarm_control.ros import convert
+from dualarm_control.ros.inputs import StampGate, Throttle, subscribe_checked
 from dualarm_control.ros.node import (
     declare,
     priority_from_args,
@@ -110,11 +115,13 @@ class ControllerNode:
         self.pub_cmd = n.create_publisher(Float64MultiArray, "/velocity_controller/commands", qos)
         self.pub_pose = n.create_publisher(PoseStamped, "/relative_pose", 10)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        n.create_subscription(JointState, "/joint_states", self.on_joint_state, qos)
-        n.create_subscription(MultiDOFJointTrajectory, "/relative_target", self.on_target, qos)
+        subscribe_checked(n, JointState, "/joint_states", self.on_joint_state, qos, self.on_malformed)
+        subscribe_checked(n, MultiDOFJointTrajectory, "/relative_target", self.on_target, qos, self.on_malformed)
         self.joint_mode = self.values["reference"] == "joint"
         if self.joint_mode:
-            n.create_subscription(JointTrajectory, "/joint_reference", self.on_joint_reference, qos)
+            subscribe_checked(n, JointTrajectory, "/joint_reference", self.on_joint_reference, qos, self.on_malformed)
+        self.gates = {name: StampGate(name) for name in ("joint_states", "relative_target", "joint_reference")}
+        self.reach = self.model.relative_reach()
         self.joint_ref: tuple[int, np.ndarray, np.ndarray] | None = None
         self.joint_refs: dict[int, tuple[int, np.ndarray, np.ndarray]] = {}  # lockstep: by stamp
         n.add_on_set_parameters_callback(self.on_set_parameters)
@@ -124,11 +131,12 @@ class ControllerNode:
         self.targets: dict[int, convert.TargetValue] = {}  # lockstep: by stamp
         self.last_commanded_stamp: int | None = None
         self.cycles = self.missed = self.failures = self.switches = self.safe_commands = 0
+        self.fallbacks = self.rejected = 0
         self.target_received: int | None = None  # monotonic ns of the last valid target / joint reference
         self.fault: tuple[str, int] | None = None  # watchdog reason and monotonic ns it started
         self.trips = 0
         self.unmatched = 0  # commands published while no subscriber was matched (nobody received them)
-        self.last_warning = 0.0
+        self.throttle = Throttle(1.0)
         self.last_arrival_ns: int | None = None
         self.interval = float("nan")  # last joint-state inter-arrival time [s]
         self.jitter: list[float] = []
@@ -148,6 +156,7 @@ class ControllerNode:
         jp = percentiles(np.array(self.jitter)) if self.jitter else NAN2
         lp = percentiles(np.array(self.latency)) if self.latency else NAN2
         self.log.info(f"{self.cycles} cycles, {self.missed} missed deadlines, {self.failures} solver failures, "
+                      f"{self.fallbacks} solver fallbacks, {self.rejected} rejected inputs, "
                       f"{self.safe_commands} safe commands, {self.unmatched} unmatched commands, "
                       f"{self.trips} watchdog trips, {self.switches} parameter switches, "
                       f"period jitter p50/p99 {jp[0] * 1e3:.3f}/{jp[1] * 1e3:.3f} ms, "
@@ -187,11 +196,37 @@ class ControllerNode:
                       + ", ".join(f"{k}={v!r}" for k, v in changed.items()))
 
     # --- inputs -----------------------------------------------------------------
+    def on_malformed(self, reason: str) -> None:
+        """A sample that failed to deserialize (see :func:`subscribe_checked`): reported, dropped."""
+        self.reject(self.node.get_clock().now().nanoseconds, reason)
+
+    def reject(self, stamp: int, reason: str) -> None:
+        """A rejected input: counted, on /diagnostics and in the throttled log; the last valid input is kept."""
+        self.rejected += 1
+        self.report(stamp, reason, "input_rejected")
+
+    def stamp_accepted(self, stream: str, stamp: int) -> bool:
+        """Monotonic stamps per stream (:class:`StampGate`); a restarted time source is logged and reported."""
+        verdict = self.gates[stream].check(stamp)
+        if not verdict.accepted:
+            self.reject(stamp, verdict.message)
+        elif verdict.message:
+            self.log.warning(verdict.message)
+            self.report(stamp, verdict.message, "time_source_restarted")
+            for pending in (self.targets, self.joint_refs):  # lockstep samples of the old time base
+                for old in [s for s in pending if s > stamp]:
+                    del pending[old]
+            if stream == "joint_states":
+                self.last_commanded_stamp = None
+        return verdict.accepted
+
     def on_joint_state(self, msg: Any) -> None:
         decoded = convert.joint_vectors(msg, self.order)
         stamp = convert.stamp_ns(msg.header.stamp)
         if isinstance(decoded, str):  # keep the last good state; it goes stale -> safe command
-            self.report(stamp, decoded, "input_rejected")
+            self.reject(stamp, decoded)
+            return
+        if not self.stamp_accepted("joint_states", stamp):
             return
         now = time.monotonic_ns()
         self.track_arrival(now)
@@ -206,9 +241,11 @@ class ControllerNode:
             self.cycle(self.target, self.joint_ref)
 
     def on_target(self, msg: Any) -> None:
-        value = convert.target_value(msg)
+        value = convert.target_value(msg, self.reach)
         if isinstance(value, str):
-            self.report(convert.stamp_ns(msg.header.stamp), f"relative_target rejected: {value}", "input_rejected")
+            self.reject(convert.stamp_ns(msg.header.stamp), f"relative_target rejected: {value}")
+            return
+        if not self.stamp_accepted("relative_target", value.stamp_ns):
             return
         self.target = value
         self.target_received = time.monotonic_ns()
@@ -219,7 +256,9 @@ class ControllerNode:
     def on_joint_reference(self, msg: Any) -> None:
         value = convert.joint_reference(msg, self.order)
         if isinstance(value, str):
-            self.report(convert.stamp_ns(msg.header.stamp), f"joint_reference rejected: {value}", "input_rejected")
+            self.reject(convert.stamp_ns(msg.header.stamp), f"joint_reference rejected: {value}")
+            return
+        if not self.stamp_accepted("joint_reference", value[0]):
             return
         self.joint_ref = value
         self.target_received = time.monotonic_ns()
@@ -324,6 +363,9 @@ class ControllerNode:
         if out.result.failed:
             self.failures += 1
             self.warn(f"solver {out.result.status}: {out.result.detail}; safe command sent")
+        elif out.result.fell_back:
+            self.fallbacks += 1
+            self.warn(f"solver fallback: {out.result.detail}")
         if np.all(np.isfinite(out.position)):
             self.pub_pose.publish(convert.pose_stamped(stamp, out.position, out.rotation))
         self.publish_diagnostics(stamp, out, latency)
@@ -340,19 +382,17 @@ class ControllerNode:
             self.unmatched += 1
 
     def warn(self, text: str) -> None:
-        """Log at most once a second."""
-        now = time.monotonic()
-        if now - self.last_warning > 1.0:
-            self.last_warning = now
-            self.log.warning(text)
+        """Log at most once a second (with the count of suppressed lines)."""
+        line = self.throttle.text(text)
+        if line is not None:
+            self.log.warning(line)
 
     def report(self, stamp: int, reason: str, status: str, level: int = 1) -> None:
         """Reason on /diagnostics (every time, WARN unless ``level`` says otherwise) and in the log
         (throttled), with the counters that account for every command sent."""
         self.warn(f"{status}: {reason}")
         self.pub_diag.publish(convert.diagnostics(stamp, "controller_node", level, reason, {
-            "solver": self.params.solver, "status": status, "watchdog": self.watchdog_text(),
-            **self.counters()}))
+            "solver": self.params.solver, "status": status, "watchdog": self.watchdog_text(), **self.counters()}))
 
     def watchdog_text(self) -> str:
         return "ok" if self.fault is None else self.fault[0]
@@ -361,7 +401,8 @@ class ControllerNode:
         """Cumulative counts: ``cycles + safe_commands`` is every command this node has published,
         ``unmatched_commands`` of them while no subscriber was matched."""
         return {"cycles": self.cycles, "safe_commands": self.safe_commands, "unmatched_commands": self.unmatched,
-                "watchdog_trips": self.trips, "missed_deadlines": self.missed, "solver_failures": self.failures}
+                "watchdog_trips": self.trips, "missed_deadlines": self.missed, "solver_failures": self.failures,
+                "solver_fallbacks": self.fallbacks, "rejected_inputs": self.rejected}
 
     def publish_diagnostics(self, stamp: int, out: ControlOutput, latency: float) -> None:
         r = out.result

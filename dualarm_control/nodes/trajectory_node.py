@@ -6,7 +6,9 @@ joint state on the node's clock (simulation time with ``use_sim_time``). Lockste
 target per joint state, stamped with the joint state's stamp, so the controller can pair them. When the trajectory plus the
 scenario's settle time has elapsed the node logs completion, publishes a final
 ``/diagnostics`` status "complete" and exits 0; with ``repeat:=true`` (soak runs) it starts the
-scenario again from the pose of the next joint state instead, forever.
+scenario again from the pose of the next joint state instead, forever. A malformed or unusable
+joint state (bad CDR, wrong or missing joint names, NaN; in lockstep a stamp older than the
+last one) is rejected with a throttled log line and not used.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import ParamSpec, positive
 from dualarm_control.planning.execution import PlanExecution
 from dualarm_control.ros import convert
+from dualarm_control.ros.inputs import StampGate, Throttle, subscribe_checked
 from dualarm_control.ros.node import (
     declare,
     priority_from_args,
@@ -67,8 +70,10 @@ class TrajectoryNode:
         self.pub = n.create_publisher(MultiDOFJointTrajectory, "/relative_target", qos)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.pub_joint = n.create_publisher(JointTrajectory, "/joint_reference", qos)
-        n.create_subscription(JointState, "/joint_states", self.on_joint_state, qos)
+        subscribe_checked(n, JointState, "/joint_states", self.on_joint_state, qos, self.reject)
         self.log = n.get_logger()
+        self.throttle = Throttle(1.0)
+        self.gate = StampGate("joint_states")
         self.trajectory: RelativeTrajectory | None = None
         self.start_ns = 0
         self.segment = -1
@@ -86,11 +91,16 @@ class TrajectoryNode:
         if self.finished:
             return
         stamp = convert.stamp_ns(msg.header.stamp)
+        decoded = convert.joint_vectors(msg, self.order)
+        if isinstance(decoded, str):
+            self.reject(f"joint state rejected: {decoded}")
+            return
+        verdict = self.gate.check(stamp)
+        if verdict.message:
+            self.reject(verdict.message)
+        if not verdict.accepted:
+            return
         if self.trajectory is None:
-            decoded = convert.joint_vectors(msg, self.order)
-            if isinstance(decoded, str):
-                self.log.error(f"cannot start from this joint state: {decoded}")
-                return
             self.trajectory = self.scenario.trajectory(*self.model.relative_pose(decoded[0]))
             self.start_ns = stamp if self.lockstep else self.node.get_clock().now().nanoseconds
             duration, settle = ((self.plan.duration, self.plan.settle_time) if self.plan
@@ -99,6 +109,12 @@ class TrajectoryNode:
             self.log.info(f"trajectory: {duration:.2f} s + settle {settle:.2f} s")
         if self.lockstep:
             self.publish(stamp, stamp - self.start_ns)
+
+    def reject(self, reason: str) -> None:
+        """Throttled warning for an unusable input (the sample is not used)."""
+        line = self.throttle.text(reason)
+        if line is not None:
+            self.log.warning(line)
 
     def on_tick(self) -> None:
         if self.trajectory is not None:

@@ -1,5 +1,6 @@
 """What rclpy does not do for this package: message <-> core conversions, node plumbing
-(validated parameter declaration, clean run/exit), and the tool verbs (topic, param, bag record).
+(validated parameter declaration, clean run/exit), input guards (malformed samples, stamps,
+throttled logs: ``inputs``), and the tool verbs (topic, param, bag record).
 
 Everything here is plain rclpy (from ROS 2 Jazzy, apt or the ``ros-jazzy-*`` wheels); the
 core (kinematics, solvers, controller, ...) never imports this package.

@@ -59,18 +59,50 @@ def joint_state(names: Sequence[str], ns: int, q: np.ndarray, qd: np.ndarray) ->
                                velocity=[float(v) for v in qd], effort=[])
 
 
+def joint_indices(names: Sequence[str], order: Mapping[str, int], what: str) -> list[int] | str:
+    """Index in ``names`` of each of the model's joints (``order``: name -> model index), or why not.
+
+    Order is mapped by name; extra names (joints the controller does not drive) are ignored;
+    a missing or duplicated name makes the message unusable.
+    """
+    position = {name: i for i, name in enumerate(names)}
+    if len(position) != len(names):
+        duplicates = sorted({n for n in names if names.count(n) > 1})
+        return f"{what} has duplicate joint names {duplicates[:3]}"
+    missing = [n for n in order if n not in position]
+    if missing:
+        return f"{what} is missing {len(missing)} of the {len(order)} joints, e.g. {missing[:3]} (got {list(names)[:3]}...)"
+    return [position[n] for n in order]
+
+
 def joint_vectors(msg: Any, order: Mapping[str, int]) -> tuple[np.ndarray, np.ndarray] | str:
-    """(q, qd) in the model's joint order from a JointState, or a reason string if unusable."""
+    """(q, qd) in the model's joint order from a JointState, or a reason string if unusable.
+
+    Rejected: duplicate or missing names, a position count different from the name count, a
+    velocity count that is neither 0 (then qd = 0) nor the name count, NaN or inf.
+    """
     names = list(msg.name)
-    missing = [n for n in order if n not in names]
-    if missing or len(msg.position) != len(names):
-        return f"joint_states with {len(names)} names / {len(msg.position)} positions; missing {missing[:3]}"
-    idx = [names.index(n) for n in order]
+    idx = joint_indices(names, order, "joint_states")
+    if isinstance(idx, str):
+        return idx
+    if len(msg.position) != len(names) or len(msg.velocity) not in (0, len(names)):
+        return (f"joint_states with {len(names)} names but {len(msg.position)} positions and "
+                f"{len(msg.velocity)} velocities")
     q = np.asarray(msg.position, dtype=float)[idx]
-    qd = np.asarray(msg.velocity, dtype=float)[idx] if len(msg.velocity) == len(names) else np.zeros(len(idx))
+    qd = np.asarray(msg.velocity, dtype=float)[idx] if len(msg.velocity) else np.zeros(len(idx))
     if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
         return "joint_states contains NaN or inf"
     return q, qd
+
+
+def command_vector(msg: Any, size: int) -> np.ndarray | str:
+    """The joint velocity command [rad/s], (size,), of a Float64MultiArray, or why it is unusable."""
+    data = np.asarray(msg.data, dtype=float)
+    if data.shape != (size,):
+        return f"command with {data.size} values rejected: expected {size}"
+    if not np.all(np.isfinite(data)):
+        return f"command with NaN or inf at indices {np.flatnonzero(~np.isfinite(data))[:5].tolist()} rejected"
+    return data
 
 
 def float_array(values: np.ndarray) -> Any:
@@ -132,8 +164,13 @@ def target_message(ns: int, elapsed_ns: int, sample: Any) -> Any:
     return MultiDOFJointTrajectory(header=header(ns, LEFT_FRAME), joint_names=[RIGHT_FRAME], points=[point])
 
 
-def target_value(msg: Any) -> TargetValue | str:
-    """Decode a relative target message, or return why it is unusable."""
+def target_value(msg: Any, max_distance: float = float("inf")) -> TargetValue | str:
+    """Decode a relative target message, or return why it is unusable.
+
+    Rejected: not exactly one point with one transform and one velocity, NaN or inf, a zero
+    quaternion, a relative position farther than ``max_distance`` [m] (the cell's reach,
+    :meth:`DualArmModel.relative_reach`).
+    """
     if len(msg.points) != 1 or len(msg.points[0].transforms) != 1 or len(msg.points[0].velocities) != 1:
         return "relative_target must carry exactly one point with one transform and one velocity"
     tr, tw = msg.points[0].transforms[0], msg.points[0].velocities[0]
@@ -146,7 +183,11 @@ def target_value(msg: Any) -> TargetValue | str:
     )
     parts = (value.position, value.rotation, value.linear_velocity, value.angular_velocity)
     if not all(np.all(np.isfinite(x)) for x in parts):
-        return "relative_target contains NaN or inf"
+        return "relative_target contains NaN or inf (or a zero quaternion)"
+    distance = float(np.linalg.norm(value.position))
+    if distance > max_distance:
+        return (f"relative_target position {distance:.3f} m from the left tool is beyond the cell's reach "
+                f"{max_distance:.3f} m")
     return value
 
 
@@ -186,10 +227,12 @@ def joint_reference(msg: Any, order: Mapping[str, int]) -> tuple[int, np.ndarray
     if len(msg.points) != 1:
         return "joint_reference must carry exactly one point"
     point = msg.points[0]
-    missing = [n for n in order if n not in names]
-    if missing or len(point.positions) != len(names) or len(point.velocities) != len(names):
-        return f"joint_reference with {len(names)} names / {len(point.positions)} positions; missing {missing[:3]}"
-    idx = [names.index(n) for n in order]
+    idx = joint_indices(names, order, "joint_reference")
+    if isinstance(idx, str):
+        return idx
+    if len(point.positions) != len(names) or len(point.velocities) != len(names):
+        return (f"joint_reference with {len(names)} names but {len(point.positions)} positions and "
+                f"{len(point.velocities)} velocities")
     q = np.asarray(point.positions, dtype=float)[idx]
     qd = np.asarray(point.velocities, dtype=float)[idx]
     if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):

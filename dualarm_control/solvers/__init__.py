@@ -1,7 +1,8 @@
-"""Kinematic solvers of paper 000 behind one registry: ``make_solver("sparse_qp")``."""
+"""Kinematic solvers of papers 000 and 001 behind one registry: ``make_solver("sparse_qp")``."""
 
 from __future__ import annotations
 
+from dualarm_control.solvers import constraint_based as _constraint_based  # noqa: F401 - fills the registry
 from dualarm_control.solvers import methods as _methods  # noqa: F401 - fills the registry
 from dualarm_control.solvers.base import (
     ACTIVITY_THRESHOLD,

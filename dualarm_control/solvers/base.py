@@ -1,8 +1,15 @@
-"""What every kinematic solver takes and returns, and the safe fallback.
+"""What every kinematic solver takes and returns, and the solver failure policy.
 
 A solver is a pure function of the problem (Jacobian, reference twist, velocity bounds,
 repulsive velocity) to joint velocities, plus its own warm-start memory. The same object
 serves the in-process experiment, the controller node and the benchmark.
+
+Failure policy (docs/safety.md, "Input validation and solver failure"): when a solver's QP
+is infeasible, stops at its iteration cap, fails numerically, raises, or returns a
+non-finite vector, the command is the best bounded least-squares step
+(:func:`bounded_least_squares`), status "fallback" with the reason in ``detail``; if that
+fails too, the bounded command nearest to rest (:func:`rest_command`). Every command is
+finite and inside the velocity bounds of eq (23).
 """
 
 from __future__ import annotations
@@ -14,6 +21,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+# scipy.optimize imported here, not in the fallback: a first import inside the loop takes ~0.3 s
+from scipy.optimize import lsq_linear
+
 from dualarm_control.qp import DEFAULT_BACKEND, QPSettings, QPSolution, make_backend
 
 FloatArray = npt.NDArray[np.float64]
@@ -22,6 +32,12 @@ ACTIVITY_THRESHOLD = 1e-3
 """A joint is active when |qd_i| > 1e-3 rad/s (paper 000, Fig. 5 and Table I)."""
 
 FAILURE_STATUSES = frozenset({"infeasible", "failed", "invalid_input"})
+FALLBACK_TRIGGERS = frozenset({"infeasible", "failed", "max_iter"})
+"""Solver statuses whose result is replaced by the bounded least-squares step."""
+FALLBACK_STATUS = "fallback"
+FALLBACK_DAMPING = 1e-6
+"""Damping of :func:`bounded_least_squares` [(m/s)^2 per (rad/s)^2]: selects a small step
+among the least-squares ones and keeps the problem well posed at singular configurations."""
 
 
 @dataclass(frozen=True)
@@ -35,6 +51,11 @@ class ControlProblem:
         lower, upper: joint velocity bounds Qd_min, Qd_max of eq (23) [rad/s], (n,).
         repulsive: repulsive joint velocity qd_r of eq (25) [rad/s], (n,); used by the
             hierarchical solver's secondary task only.
+        inequality_jacobian: A_ie of paper 001 eq (13), (m_ie, n), or None (no inequality
+            rows; the solvers of paper 000 ignore them).
+        inequality_bound: h of ``A_ie qd <= h``, k(b - f) - df/dt of eq (13), (m_ie,).
+        equality_weights: slack weight of each row of ``jacobian`` (>= 0), (m,), or None (1).
+        inequality_weights: slack weight of each inequality row (> 0), (m_ie,), or None.
     """
 
     jacobian: FloatArray
@@ -42,6 +63,10 @@ class ControlProblem:
     lower: FloatArray
     upper: FloatArray
     repulsive: FloatArray
+    inequality_jacobian: FloatArray | None = None
+    inequality_bound: FloatArray | None = None
+    equality_weights: FloatArray | None = None
+    inequality_weights: FloatArray | None = None
 
     def problem_with_invalid_input(self) -> str:
         """Return a description of what is wrong with the inputs, or '' when they are usable.
@@ -61,10 +86,35 @@ class ControlProblem:
             for name in ("jacobian", "reference", "lower", "upper", "repulsive"):
                 if not np.all(np.isfinite(getattr(self, name))):
                     return f"non-finite values in {name}"
+        optional = self._problem_with_optional_rows(m, n)
+        if optional:
+            return optional
         gap = self.lower - self.upper
         if gap.max() > 1e-12:
             i = int(np.argmax(gap))
             return f"velocity bounds cross at joint {i}: lower {self.lower[i]:.4g} > upper {self.upper[i]:.4g} (joint outside its position range)"
+        return ""
+
+    def _problem_with_optional_rows(self, m: int, n: int) -> str:
+        """Shapes and finiteness of the optional inequality rows and weights ('' when usable)."""
+        a, h = self.inequality_jacobian, self.inequality_bound
+        if (a is None) != (h is None):
+            return "inequality_jacobian and inequality_bound must be given together"
+        m_ie = 0
+        if a is not None and h is not None:
+            m_ie = a.shape[0] if a.ndim == 2 else -1
+            if a.shape != (m_ie, n) or h.shape != (m_ie,):
+                return f"bad shapes: inequality_jacobian {a.shape}, inequality_bound {h.shape}"
+            if not math.isfinite(a.sum() + h.sum()):
+                return "non-finite values in the inequality rows"
+        for name, size in (("equality_weights", m), ("inequality_weights", m_ie)):
+            w = getattr(self, name)
+            if w is None:
+                continue
+            if w.shape != (size,):
+                return f"bad shape of {name}: {w.shape}, expected ({size},)"
+            if not math.isfinite(w.sum()) or w.min(initial=0.0) < 0:
+                return f"{name} must be finite and >= 0"
         return ""
 
 
@@ -75,9 +125,10 @@ class SolverResult:
     Attributes:
         velocities: joint velocities to command [rad/s], (n,); always finite and inside
             the bounds (the safe command on failure).
-        status: "solved", "max_iter" (best iterate, clipped to the bounds, used),
-            "scaled" (pseudo-inverse shrunk into the bounds), or a failure:
-            "infeasible", "failed", "invalid_input" (then velocities is the safe command).
+        status: "solved", "scaled" (pseudo-inverse shrunk into the bounds), "fallback"
+            (the solver failed; the bounded least-squares step is used, the reason in
+            ``detail``), or a failure: "infeasible", "failed" (the fallback failed too:
+            velocities is :func:`rest_command`), "invalid_input" (zero velocities).
         solve_time: wall time of the whole call [s].
         iterations: QP iterations summed over the QPs solved (0 for closed forms).
         active_joints: count of |qd_i| > 1e-3 rad/s.
@@ -96,6 +147,11 @@ class SolverResult:
     @property
     def failed(self) -> bool:
         return self.status in FAILURE_STATUSES
+
+    @property
+    def fell_back(self) -> bool:
+        """The solver failed and the bounded least-squares step was commanded."""
+        return self.status == FALLBACK_STATUS
 
 
 @dataclass(frozen=True)
@@ -130,11 +186,14 @@ class SolverParams:
 
 
 class Solver:
-    """Base class: validation, timing, clipping and the safe fallback around ``_solve``.
+    """Base class: validation, timing, clipping and the failure policy around ``_solve``.
 
-    The safe command on failure is zero joint velocity (arms hold still), which is what a
-    velocity-controlled LWR4/ros2_control hardware does on a stop. It is always inside the
-    bounds of eq (23) while the joints are inside their position range.
+    Failure policy: a result with status in ``FALLBACK_TRIGGERS`` ("infeasible", "max_iter",
+    "failed"), an exception (ValueError, LinAlgError, RuntimeError) or a non-finite vector is
+    replaced by :func:`bounded_least_squares` (status "fallback", ``detail`` names the
+    original failure), else by :func:`rest_command` (the original failure status). Invalid
+    input (NaN, wrong shapes, crossing bounds) gives zero velocity, status "invalid_input".
+    Warm-start memory is reset after any failure.
     """
 
     name = "base"
@@ -157,27 +216,15 @@ class Solver:
         raise NotImplementedError
 
     def solve(self, problem: ControlProblem) -> SolverResult:
-        """Solve one cycle; never raises on numerical trouble, never returns NaN."""
+        """Solve one cycle; never raises on numerical trouble, never returns NaN or leaves the bounds."""
         start = time.perf_counter()
         n = problem.jacobian.shape[1] if problem.jacobian.ndim == 2 else problem.lower.shape[0]
         invalid = problem.problem_with_invalid_input()
         if invalid:
-            qd, status, iters, detail = None, "invalid_input", 0, invalid
+            qd: FloatArray = np.zeros(max(n, 0))
+            status, iters, detail, residual = "invalid_input", 0, invalid, float("nan")
         else:
-            try:
-                qd, status, iters, detail = self._solve(problem)
-            except (ValueError, np.linalg.LinAlgError, RuntimeError) as exc:
-                qd, status, iters, detail = None, "failed", 0, f"{type(exc).__name__}: {exc}"
-        if qd is None or not math.isfinite(qd.sum()):  # NaN or inf anywhere makes the sum non-finite
-            if status not in FAILURE_STATUSES:
-                status, detail = "failed", detail or "solver returned non-finite velocities"
-            self.reset()
-            qd = np.zeros(max(n, 0))
-        elif not invalid:
-            qd = np.minimum(np.maximum(qd, problem.lower), problem.upper)  # tolerance overshoot; a third of np.clip's cost
-        if invalid:
-            residual = float("nan")
-        else:
+            qd, status, iters, detail = self._solve_or_fall_back(problem)
             d = problem.jacobian @ qd - problem.reference
             residual = math.sqrt(float(d @ d))
         return SolverResult(
@@ -190,11 +237,82 @@ class Solver:
             detail=detail,
         )
 
+    def _solve_or_fall_back(self, problem: ControlProblem) -> tuple[FloatArray, str, int, str]:
+        """``_solve`` on a valid problem, its result clipped to the bounds, or the failure policy's command."""
+        try:
+            qd, status, iters, detail = self._solve(problem)
+        except (ValueError, np.linalg.LinAlgError, RuntimeError) as exc:
+            qd, status, iters, detail = None, "failed", 0, f"{type(exc).__name__}: {exc}"
+        if qd is None or status in FALLBACK_TRIGGERS or not math.isfinite(qd.sum()):
+            self.reset()
+            velocities, status, detail = fallback(problem, qd, status, detail)
+            return velocities, status, iters, detail
+        return np.minimum(np.maximum(qd, problem.lower), problem.upper), status, iters, detail  # tolerance overshoot
+
+
+def fallback(problem: ControlProblem, qd: FloatArray | None, status: str, detail: str) -> tuple[FloatArray, str, str]:
+    """The failure policy for a valid problem whose solver gave no usable result.
+
+    Returns (velocities, status, detail): the bounded least-squares step with status
+    "fallback", or :func:`rest_command` with the original failure status ("failed" for a
+    "max_iter" or non-finite result) when the least-squares step fails too.
+    """
+    if qd is not None and status not in FALLBACK_TRIGGERS:
+        status, detail = "failed", detail or "solver returned non-finite velocities"
+    reason = f"{status}: {detail or 'no solution'}"
+    step = bounded_least_squares(problem.jacobian, problem.reference, problem.lower, problem.upper)
+    if step is not None:
+        return step, FALLBACK_STATUS, f"{reason}; bounded least-squares step used"
+    final = "failed" if status == "max_iter" else status
+    return rest_command(problem.lower, problem.upper), final, f"{reason}; bounded least squares failed, nearest-to-rest command"
+
+
+def rest_command(lower: FloatArray, upper: FloatArray) -> FloatArray:
+    """The command inside [lower, upper] nearest to rest: clip(0, lower, upper) [rad/s], (n,).
+
+    Zero velocity while every joint is inside its position range (eq 23 contains 0); for a
+    joint beyond a limit, the slowest motion back toward the range (:func:`velocity_bounds`).
+    """
+    return np.minimum(np.maximum(0.0, lower), upper)
+
+
+def bounded_least_squares(jacobian: FloatArray, reference: FloatArray, lower: FloatArray, upper: FloatArray,
+                          damping: float = FALLBACK_DAMPING) -> FloatArray | None:
+    """The fallback step: argmin ||J qd - r||^2 + damping ||qd||^2  s.t.  lower <= qd <= upper.
+
+    Eq (14) with its bounds (eq 23), solved by bounded-variable least squares
+    (scipy.optimize.lsq_linear, BVLS) on the stacked system [J; sqrt(damping) I] qd = [r; 0],
+    which is well posed even where J is singular. Joints whose bounds (nearly) coincide are
+    fixed at them first (BVLS needs lower < upper).
+
+    Args:
+        jacobian: J (m, n); reference: r (m,) [m/s; rad/s]; lower, upper: bounds [rad/s], (n,).
+        damping: weight of ||qd||^2, >= 0.
+
+    Returns:
+        qd [rad/s], (n,), finite and inside the bounds; None when the solve fails.
+    """
+    qd = rest_command(lower, upper)
+    free = upper - lower > 1e-12
+    if not free.any():
+        return qd
+    a = np.vstack((jacobian[:, free], math.sqrt(damping) * np.eye(int(free.sum()))))
+    b = np.concatenate((reference - jacobian[:, ~free] @ qd[~free], np.zeros(int(free.sum()))))
+    try:
+        solution = lsq_linear(a, b, bounds=(lower[free], upper[free]), method="bvls")
+    except (ValueError, np.linalg.LinAlgError):  # e.g. non-finite data
+        return None
+    x = np.asarray(solution.x, dtype=float)
+    if solution.status < 0 or x.shape != (int(free.sum()),) or not math.isfinite(x.sum()):
+        return None
+    qd[free] = x
+    return np.minimum(np.maximum(qd, lower), upper)
+
 
 def from_qp(solution: QPSolution, transform=None) -> tuple[FloatArray | None, str, int, str]:
     """Map a QP solution to the ``_solve`` tuple, applying ``transform`` to x when usable."""
     if solution.x is None:
         return None, solution.status, solution.iterations, f"QP {solution.status}"
     x = solution.x if transform is None else transform(solution.x)
-    detail = "" if solution.status == "solved" else f"QP {solution.status}; best iterate used"
+    detail = "" if solution.status == "solved" else f"QP {solution.status}"
     return x, solution.status, solution.iterations, detail

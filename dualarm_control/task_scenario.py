@@ -1,0 +1,161 @@
+"""Task scenarios (paper 001): a set of tasks instead of relative motion segments.
+
+Keys under ``scenario.`` (flattened, see :mod:`dualarm_control.scenario`):
+  ``duration`` [s]; ``table_height`` [m, world z of the table top];
+  ``convergence_time`` [s] (metrics after it); ``gains`` (k values to compare, 1/s);
+  ``tasks`` (ordered names) and per task ``<task>.type``:
+
+  * ``circle`` (eq 8/9): ``pan_frame``, ``tool_frame``, ``radius`` [m], ``period`` [s]
+    (L = 2 pi / period), ``height`` [m] (tip above the pan surface);
+  * ``cone`` (f_4): ``pan_frame``, ``tool_frame``, ``max_angle_deg``;
+  * ``singularity`` (eq 10): ``frame``, ``side`` (left|right), ``bound`` (b_5 < 0);
+  * ``table`` (eq 11): ``frames`` and ``radii`` [m] (spheres), ``bound`` (b_6 < 0, m);
+
+  optional ``<task>.weight`` (slack weight). ``force.*`` configures the force variant
+  (eq 9), see :class:`~dualarm_control.force.ForceParams`; ``contact_links`` (two link
+  names) are the links that touch in the force variant (pan and brush).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from typing import Any
+
+from dualarm_control.errors import ScenarioError
+from dualarm_control.force import ForceParams
+from dualarm_control.scenario import (  # the scenario file's readers and messages
+    PREFIX,
+    _get,
+    _number,
+)
+from dualarm_control.tasks import (
+    DEFAULT_EQUALITY_WEIGHT,
+    DEFAULT_INEQUALITY_WEIGHT,
+    CircleTask,
+    ConeTask,
+    ManipulabilityTask,
+    TablePlaneTask,
+    Task,
+)
+
+TASK_TYPES = ("circle", "cone", "singularity", "table")
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """One task as written in the file: its flattened parameters (``scenario.<name>.<key>``),
+    validated when the task is built."""
+
+    name: str
+    type: str
+    values: Mapping[str, Any]
+
+
+@dataclass(frozen=True)
+class TaskScenario:
+    """The task part of a scenario.
+
+    Attributes:
+        duration: run time [s]. table_height: table top, world z [m].
+        convergence_time: time after which tracking metrics are taken [s].
+        gains: the k values [1/s] the experiment compares by default.
+        tasks: task specs in order. force: the force variant's parameters.
+        contact_links: the two links that make contact in the force variant.
+    """
+
+    duration: float
+    table_height: float
+    convergence_time: float
+    gains: tuple[float, ...]
+    tasks: tuple[TaskSpec, ...]
+    force: ForceParams
+    contact_links: tuple[str, str] = ("left_flange", "right_tool")
+
+    def build(self, gain: float, height_offset: float = 0.0) -> list[Task]:
+        """Task objects with gain k for every task; ``height_offset`` [m] is added to the circle
+        height (a modelling error of the pan along its normal: the model's pan surface is
+        that far above the real one)."""
+        return [_build(spec, gain, self.table_height, height_offset) for spec in self.tasks]
+
+
+def _value(spec: TaskSpec, key: str, kind: type, default: Any = None) -> Any:
+    """``scenario.<task>.<key>`` as a number, a string or a list; ScenarioError naming the key."""
+    full = f"{spec.name}.{key}"
+    if kind is float:
+        return _number(spec.values, full, default)
+    value = _get(spec.values, full, default)
+    if not isinstance(value, kind):
+        raise ScenarioError(f"scenario parameter '{PREFIX}{full}': got {value!r}, expected a {kind.__name__}")
+    return value
+
+
+def _build(spec: TaskSpec, gain: float, table_height: float, height_offset: float) -> Task:
+    weight_default = DEFAULT_EQUALITY_WEIGHT if spec.type == "circle" else DEFAULT_INEQUALITY_WEIGHT
+    common = {"gain": gain, "weight": _value(spec, "weight", float, weight_default), "name": spec.name}
+    try:
+        if spec.type == "circle":
+            period = _value(spec, "period", float)
+            return CircleTask(_value(spec, "pan_frame", str), _value(spec, "tool_frame", str),
+                              radius=_value(spec, "radius", float), rate=2 * math.pi / period,
+                              height=_value(spec, "height", float, 0.0) + height_offset, **common)
+        if spec.type == "cone":
+            return ConeTask(_value(spec, "pan_frame", str), _value(spec, "tool_frame", str),
+                            max_angle=math.radians(_value(spec, "max_angle_deg", float)), **common)
+        if spec.type == "singularity":
+            return ManipulabilityTask(_value(spec, "frame", str), _value(spec, "side", str),
+                                      bound=_value(spec, "bound", float), **common)
+        frames, radii = _value(spec, "frames", list), _value(spec, "radii", list)
+        if len(frames) != len(radii):
+            raise ScenarioError(f"scenario parameter 'scenario.{spec.name}': {len(frames)} frames but "
+                                f"{len(radii)} radii")
+        return TablePlaneTask(tuple(zip(frames, (float(r) for r in radii), strict=True)), table_height,
+                              bound=_value(spec, "bound", float), **common)
+    except ValueError as exc:
+        if isinstance(exc, ScenarioError):
+            raise
+        raise ScenarioError(f"scenario task {spec.name!r}: {exc}") from None
+
+
+def parse_task_scenario(flat: Mapping[str, Any]) -> TaskScenario:
+    """Read the task keys (module docstring) from flattened parameters; ScenarioError on a bad value."""
+
+    names = _get(flat, "tasks")
+    if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
+        raise ScenarioError(f"scenario parameter '{PREFIX}tasks': got {names!r}, expected a list of task names")
+    specs = []
+    for name in names:
+        sub = PREFIX + name + "."
+        values = {k: v for k, v in flat.items() if k.startswith(sub)}
+        kind = values.get(sub + "type")
+        if kind not in TASK_TYPES:
+            raise ScenarioError(f"scenario parameter '{sub}type': got {kind!r}, expected one of: "
+                                f"{', '.join(TASK_TYPES)}")
+        specs.append(TaskSpec(name, str(kind), values))
+    gains = _get(flat, "gains", [1.0])
+    if not isinstance(gains, list) or not gains or not all(
+            isinstance(g, int | float) and not isinstance(g, bool) and g > 0 for g in gains):
+        raise ScenarioError(f"scenario parameter '{PREFIX}gains': got {gains!r}, expected numbers > 0")
+    force_keys = {f.name for f in fields(ForceParams)}
+    force_values = {k[len(PREFIX) + 6:]: v for k, v in flat.items() if k.startswith(PREFIX + "force.")}
+    unknown = sorted(set(force_values) - force_keys)
+    if unknown:
+        raise ScenarioError(f"scenario force parameters: unknown {', '.join(unknown)}; valid: "
+                            f"{', '.join(sorted(force_keys))}")
+    try:
+        force = ForceParams(**force_values)
+    except (TypeError, ValueError) as exc:
+        raise ScenarioError(f"scenario force parameters: {exc}") from None
+    links = _get(flat, "contact_links", ["left_flange", "right_tool"])
+    if not isinstance(links, list) or len(links) != 2 or not all(isinstance(n, str) for n in links):
+        raise ScenarioError(f"scenario parameter '{PREFIX}contact_links': got {links!r}, expected two link names")
+    out = TaskScenario(duration=_number(flat, "duration"), table_height=_number(flat, "table_height"),
+                       convergence_time=_number(flat, "convergence_time", 5.0), gains=tuple(float(g) for g in gains),
+                       tasks=tuple(specs), force=force, contact_links=(links[0], links[1]))
+    if out.duration <= out.convergence_time:
+        raise ScenarioError(f"scenario parameter '{PREFIX}duration' must exceed convergence_time "
+                            f"({out.convergence_time} s), got {out.duration}")
+    for gain in out.gains:
+        out.build(gain)  # validate every task now, with the message naming it
+    return out
