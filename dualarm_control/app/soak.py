@@ -101,6 +101,7 @@ def _final(lines: list[str], pattern: str) -> dict[str, int]:
 
 
 CONTROLLER_SUMMARY = (r"(?P<cycles>\d+) cycles, (?P<missed>\d+) missed deadlines, (?P<failures>\d+) solver failures, "
+                      r"(?P<fallbacks>\d+) solver fallbacks, (?P<rejected>\d+) rejected inputs, "
                       r"(?P<safe>\d+) safe commands, (?P<unmatched>\d+) unmatched commands, (?P<trips>\d+) watchdog trips")
 SIM_SUMMARY = r"(?P<received>\d+) commands received, (?P<rejected>\d+) rejected, (?P<timeouts>\d+) command timeouts"
 
@@ -222,6 +223,7 @@ def format_soak(doc: dict[str, Any]) -> str:
               f"of the warm-up (start-up discovery), {doc['final_shortfall']} at the end "
               f"({'no command lost after the start-up' if doc['accounted'] else 'COMMANDS LOST'}); "
               f"watchdog trips {c.get('trips', 0)}, solver failures {c.get('failures', 0)}, "
+              f"solver fallbacks {c.get('fallbacks', 0)}, rejected inputs {c.get('rejected', 0)}, "
               f"command timeouts {s.get('timeouts', 'n/a')}")]
     return "\n".join(lines)
 
