@@ -9,8 +9,9 @@ and their closing log lines give the final counters.
 * **RSS growth** per node: (largest RSS after the warm-up - RSS at the end of the warm-up) /
   RSS at the end of the warm-up; the warm-up is the first repetition or 10 % of the run,
   whichever is longer. Must be <= 5 %.
-* **Missed-deadline bursts**: one-second windows in which the controller's missed-deadline
-  counter rose by :data:`BURST` or more (2.5 % of the window's 200 cycles). Must be none.
+* **Missed-deadline bursts**: one-second windows after the warm-up in which the controller's
+  missed-deadline counter rose by :data:`BURST` or more (2.5 % of the window's 200 cycles).
+  Must be none. (Start-up, while the nodes import and load the cell, is reported apart.)
 * **Accounting**: every command the controller published (``cycles + safe_commands``) after
   the start-up was received by the simulator. Start-up loses a few: those published while no
   subscriber was matched (``unmatched_commands``) and those sent while discovery was matched on
@@ -186,7 +187,9 @@ def summarize(samples: list[dict[str, Any]], controller: dict[str, int], sim: di
         rss[name] = {"baseline_mib": base / 2**20, "max_after_mib": top / 2**20, "final_mib": series[-1] / 2**20,
                      "growth": (top - base) / base}
     per_window = [b["missed_deadlines"] - a["missed_deadlines"] for a, b in itertools.pairwise(samples)]
-    bursts = sum(1 for d in per_window if d >= BURST)
+    steady = per_window[warm:] if warm is not None else per_window
+    bursts = sum(1 for d in steady if d >= BURST)
+    startup_missed = samples[warm]["missed_deadlines"] if warm is not None else None
     published = controller.get("cycles", 0) + controller.get("safe", 0)
     expected = published - controller.get("unmatched", 0)
     final_shortfall = expected - sim["received"] if controller and sim else None
@@ -200,6 +203,7 @@ def summarize(samples: list[dict[str, Any]], controller: dict[str, int], sim: di
         "rss": rss, "rss_growth_ok": growth_ok,
         "missed_deadlines": controller.get("missed", 0), "max_missed_per_s": max(per_window, default=0),
         "seconds_with_missed": sum(1 for d in per_window if d > 0), "bursts": bursts, "bursts_ok": bursts == 0,
+        "startup_missed": startup_missed, "max_missed_per_s_after_warmup": max(steady, default=0),
         "controller": controller, "sim": sim, "commands_published": published, "commands_expected": expected,
         "startup_shortfall": at_warmup, "final_shortfall": final_shortfall, "accounted": accounted,
         "passed": growth_ok and bursts == 0 and accounted,
@@ -214,9 +218,10 @@ def format_soak(doc: dict[str, Any]) -> str:
     for name, r in doc["rss"].items():
         lines.append(f"| {name} | {r['baseline_mib']:.1f} | {r['max_after_mib']:.1f} | {r['growth']:+.2%} |")
     lines += ["", f"- RSS growth <= {MAX_RSS_GROWTH:.0%}: {'yes' if doc['rss_growth_ok'] else 'NO'}",
-              (f"- missed deadlines: {doc['missed_deadlines']} in {c.get('cycles', 0)} cycles; "
-              f"{doc['seconds_with_missed']} one-second windows with any, at most {doc['max_missed_per_s']} in one; "
-              f"bursts (>= {BURST} in a second): {doc['bursts']}"),
+              (f"- missed deadlines: {doc['missed_deadlines']} in {c.get('cycles', 0)} cycles, {doc['startup_missed']} "
+               f"of them during the warm-up; {doc['seconds_with_missed']} one-second windows with any; at most "
+               f"{doc['max_missed_per_s_after_warmup']} in one after the warm-up; bursts after the warm-up (>= {BURST} "
+               f"in a second): {doc['bursts']}"),
               (f"- accounting: {c.get('cycles', 0)} cycles + {c.get('safe', 0)} safe commands = "
               f"{doc['commands_published']} published, {c.get('unmatched', 0)} while no subscriber was matched; "
               f"the simulator received {s.get('received', 'n/a')}; shortfall {doc['startup_shortfall']} at the end "
