@@ -569,9 +569,9 @@ def build_parser() -> argparse.ArgumentParser:
                          "cannot run here are reported as skipped, with the reason.")
     fau.add_argument("--output", default="out/faults", metavar="DIR", help="output directory (default: %(default)s)")
     fau.add_argument("--scenario", default="assembly", help="scenario of the runs (default: %(default)s)")
-    fau.add_argument("--only", metavar="ROW,...", help="run only these rows (default: all): stale_states, "
-                     "target_stopped, kill_sim, kill_controller, recorder_sigint, recorder_sigterm, best_effort_loss, "
-                     "across_hosts, link_cut, link_netem")
+    from dualarm_control.app.faults import ROWS
+
+    fau.add_argument("--only", metavar="ROW,...", help=f"run only these rows (default: all): {', '.join(ROWS)}")
     fau.set_defaults(func=cmd_faults)
     soak = sub.add_parser("soak", help="benchmark: the scenario on repeat at 200 Hz over ROS for minutes",
                           description="Run the three nodes with the scenario on repeat (trajectory_node repeat:=true) "
