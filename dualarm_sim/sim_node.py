@@ -3,9 +3,12 @@
 Publishes ``/joint_states``, ``/wrench`` and ``/clock`` (simulation time, steps x period)
 every control period; applies
 ``/velocity_controller/commands`` (Float64MultiArray, 14 values, controller joint order).
-A command older than ``command_timeout`` brings the arms to rest. A malformed command (bad
-CDR, wrong length, NaN/inf) is rejected (throttled log, WARN on ``/diagnostics``, counted)
-and the last valid one kept, so the timeout still applies.
+A command older than ``command_timeout`` (simulation time, counted in steps, as a robot's
+own cycle counts it) brings the arms to rest, in both modes. A malformed command (bad CDR,
+wrong length, NaN/inf) is rejected (throttled log, WARN on ``/diagnostics``, counted) and the
+last valid one kept, so the timeout still applies. Once a second a ``sim_node`` status on
+``/diagnostics`` counts the steps, the commands received and rejected, and the command
+timeouts (WARN while the arms are held at rest by the timeout).
 
 Real-time mode: a drift-free timer steps the physics one control period per tick, stamps
 are the wall clock. Lockstep mode (``lockstep:=true``): the state of step k (stamped with
@@ -35,8 +38,10 @@ from dualarm_control.ros.node import (
     priority_from_args,
     request_realtime_priority,
     run,
+    thread_priority_spec,
     usage,
 )
+from dualarm_control.ros.qos import QOS_PARAMETER, stream_qos
 from dualarm_control.scenario import load_scenario, scenario_names
 from dualarm_sim.cell import CellConfig, DualArmCell
 
@@ -47,15 +52,16 @@ PARAMETERS = (
     ParamSpec("command_timeout", 0.05, "command age that brings the arms to rest [s]", check=positive),
     ParamSpec("lockstep", False, "advance one period per received command", read_only=True),
     ParamSpec("plan", "", "plan.json of `dualarm plan`: start at its first configuration", read_only=True),
-    ParamSpec("thread_priority", 50, "SCHED_FIFO priority of the physics loop (0: normal scheduling)",
-              check=lambda v: "" if 0 <= v <= 99 else "an integer in [0, 99]", read_only=True, bounds=(0, 99)),
+    thread_priority_spec(50, "the physics loop"),
     ParamSpec("lockstep_subscribers", 2, "joint_states readers to wait for before the first lockstep state",
               check=non_negative),
     ParamSpec("lockstep_resend", 0.5, "re-publish the pending state after this long without a command [s]",
               check=positive),
     ParamSpec("lockstep_start_delay", 0.5, "wait after the joint_states readers matched, so that their other "
               "subscriptions (a recorder's /clock, /wrench) match too [s]", check=non_negative, read_only=True),
+    QOS_PARAMETER,
 )
+STATUS_PERIOD_S = 1.0
 
 DEFAULT_PRIORITY = 50
 
@@ -87,17 +93,20 @@ class SimNode:
         self.start_delay = float(p["lockstep_start_delay"])
         self.readers_matched_at: float | None = None
         n = self.node
-        self.pub_js = n.create_publisher(JointState, "/joint_states", 10)
+        qos = stream_qos(p["qos_reliability"])
+        self.pub_js = n.create_publisher(JointState, "/joint_states", qos)
         self.pub_wrench = n.create_publisher(WrenchStamped, "/wrench", 10)
         self.pub_clock = n.create_publisher(Clock, "/clock", 10)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        subscribe_checked(n, Float64MultiArray, "/velocity_controller/commands", self.on_command, 10, self.reject)
+        subscribe_checked(n, Float64MultiArray, "/velocity_controller/commands", self.on_command, qos, self.reject)
         self.log = n.get_logger()
         self.throttle = Throttle(1.0)
         self.steps = 0
         self.started = False
         self.last_publish = 0.0
-        self.rejected = 0
+        self.rejected = self.received = self.timeouts = 0
+        self.timed_out = False
+        n.create_timer(STATUS_PERIOD_S, self.publish_status)
         if self.lockstep:
             n.create_timer(0.05, self.lockstep_watchdog)
         else:
@@ -110,7 +119,7 @@ class SimNode:
 
     def close(self) -> None:
         self.log.info(f"stopping after {self.steps} steps ({self.steps * self.period_ns / 1e9:.3f} s sim time), "
-                      f"{self.rejected} commands rejected")
+                      f"{self.received} commands received, {self.rejected} rejected, {self.timeouts} command timeouts")
         self.cell.close()
 
     def _stamp_ns(self) -> int:
@@ -134,6 +143,7 @@ class SimNode:
                                                   {"status": "input_rejected", "rejected_inputs": self.rejected}))
 
     def on_command(self, msg: Any) -> None:
+        self.received += 1
         data = convert.command_vector(msg, len(self.cell.joint_names))
         if isinstance(data, str):
             self.reject(data)
@@ -144,14 +154,32 @@ class SimNode:
             if line is not None:
                 self.log.warning(line)
         if self.lockstep and self.started:
-            self.cell.step()
-            self.steps += 1
+            self.step()
             self.publish_state()
 
     def on_tick(self) -> None:
+        self.step()
+        self.publish_state()
+
+    def step(self) -> None:
+        """One period of physics; a command older than ``command_timeout`` is replaced by rest (cell)."""
+        timed_out = self.cell.timed_out
+        if timed_out and not self.timed_out:
+            self.timeouts += 1
+            self.log.warning(f"no command for more than {self.cell.config.command_timeout:g} s (sim time): "
+                             "arms brought to rest")
+        elif self.timed_out and not timed_out:
+            self.log.info("commands resumed")
+        self.timed_out = timed_out
         self.cell.step()
         self.steps += 1
-        self.publish_state()
+
+    def publish_status(self) -> None:
+        values = {"steps": self.steps, "commands_received": self.received, "commands_rejected": self.rejected,
+                  "command_timeouts": self.timeouts, "timed_out": self.timed_out}
+        message = "arms at rest: command timeout" if self.timed_out else "running"
+        self.pub_diag.publish(convert.diagnostics(self._stamp_ns(), "sim_node", 1 if self.timed_out else 0,
+                                                  message, values))
 
     def lockstep_watchdog(self) -> None:
         """Start once the readers are matched; re-send a state that got no command (discovery races)."""

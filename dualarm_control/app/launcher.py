@@ -13,7 +13,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -40,6 +40,12 @@ def node_command(node: str, ros_args: Sequence[str]) -> list[str]:
                                                          else ["--ros-args", *args])]
 
 
+def recorder_command(path: Path, topics: Sequence[str], use_sim_time: bool = False) -> list[str]:
+    """Command line of ``dualarm bag record -o PATH TOPICS`` with this interpreter."""
+    return [sys.executable, "-u", "-m", "dualarm_control.app.cli", "bag", "record", "-o", str(path), *topics,
+            *(["--use-sim-time"] if use_sim_time else [])]
+
+
 @dataclass
 class Process:
     name: str
@@ -49,15 +55,20 @@ class Process:
 
 
 class Launch:
-    """A group of child processes with prefixed output and orderly shutdown."""
+    """A group of child processes with prefixed output and orderly shutdown.
 
-    def __init__(self, ready_marker: str = "bag: ready") -> None:
+    Every output line is kept in its :class:`Process`; ``echo`` also prints it, prefixed."""
+
+    def __init__(self, ready_marker: str = "bag: ready", echo: bool = True) -> None:
         self.procs: list[Process] = []
         self.ready_marker = ready_marker
+        self.echo = echo
         self._lock = threading.Lock()
 
-    def start(self, name: str, cmd: list[str]) -> Process:
-        env = dict(localhost_environment(os.environ), PYTHONUNBUFFERED="1")
+    def start(self, name: str, cmd: list[str], env: Mapping[str, str] | None = None) -> Process:
+        """Start ``cmd`` (its own process group); ``env`` adds to this process's environment, and the
+        localhost discovery default applies unless the result sets its own discovery."""
+        env = dict(localhost_environment({**os.environ, **(env or {})}), PYTHONUNBUFFERED="1")
         env[LAUNCHER_PID_VARIABLE] = str(os.getpid())  # the node stops if the launcher dies (ros.node)
         popen = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
                                  start_new_session=True)
@@ -74,8 +85,10 @@ class Launch:
                 proc.ready.set()
             if "pybullet build time" in line:
                 continue
-            with self._lock:
-                print(f"[{proc.name}] {line}", flush=True)
+            proc.lines.append(line)
+            if self.echo:
+                with self._lock:
+                    print(f"[{proc.name}] {line}", flush=True)
 
     def wait_until(self, finished: str, timeout: float | None = None) -> dict[str, int | None]:
         """Wait until process ``finished`` exits, any process fails, or ``timeout`` [s]; then stop all."""
@@ -138,8 +151,7 @@ def launch_scenario(
         if plan is not None and record_topics == GRAPH_TOPICS:
             record_topics = PLAN_TOPICS
         if record is not None:  # subscribes the graph's topics once they all have a publisher
-            launch.start("bag", [sys.executable, "-u", "-m", "dualarm_control.app.cli", "bag", "record", "-o",
-                                 str(record), *record_topics, *(["--use-sim-time"] if lockstep else [])])
+            launch.start("bag", recorder_command(record, record_topics, lockstep))
         readers = 2 + (record is not None)
         launch.start("controller_node", node_command("controller_node", [*common, *sim_time, *controller_args]))
         launch.start("trajectory_node", node_command("trajectory_node", [*common, *sim_time, *with_scenario]))

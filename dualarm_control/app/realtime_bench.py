@@ -32,7 +32,7 @@ def controller_cycles(bag: Path) -> dict[str, np.ndarray]:
             msg: Any = reader.deserialize(raw, conn.msgtype)
             for status in msg.status:
                 values = {kv.key: kv.value for kv in status.values}
-                if status.name != "controller_node" or "cycles" not in values:
+                if status.name != "controller_node" or "state_interval_s" not in values:
                     continue
                 rows["interval"].append(float(values["state_interval_s"]))
                 rows["latency"].append(float(values["state_to_command_latency_s"]))

@@ -6,9 +6,22 @@ All control math is :class:`dualarm_control.controller.RelativeController`.
 
 Cycle (real-time mode): event-driven, read -> update -> write as ros2_control does: a
 command is computed as soon as a joint state arrives. A timer at the control period is only
-the watchdog: no joint state yet, or none for more than ``stale_timeout``, gives a
-zero-velocity command with the reason on /diagnostics and in the log. Lockstep mode: one
-command per joint-state stamp, computed when the target with the same stamp has arrived.
+the watchdog. Lockstep mode: one command per joint-state stamp, computed when the target with
+the same stamp has arrived (no watchdog: the simulator waits for the command).
+
+Watchdogs (real-time mode), checked on every watchdog tick and before every cycle:
+
+* **stale joint states**: none received for more than ``stale_timeout`` (default 15 ms, 3
+  periods);
+* **target stream stopped mid-motion**: no ``/relative_target`` (or ``/joint_reference``)
+  received for more than ``target_timeout`` (default 50 ms, 10 periods) while the last one was
+  moving (a non-zero twist, or a non-zero joint reference velocity). A stream that stops with a
+  target at rest (the end of a trajectory, a hold) is not a fault: the pose is held.
+
+Either sends the safe state: a zero-velocity command every period and /diagnostics level ERROR
+(2) with the reason, logged once when it starts. The node recovers by itself at the first
+cycle whose inputs are fresh again: commands resume, /diagnostics goes back to OK, the
+recovery is logged once with the time spent in the safe state.
 
 Safe behaviour (documented, docs/safety.md): an unusable message (malformed CDR, wrong,
 missing or duplicate joint names, wrong counts, NaN/inf, a stamp older than the last accepted
@@ -58,11 +71,15 @@ from dualarm_control.ros.node import (
     run,
     usage,
 )
+from dualarm_control.ros.qos import QOS_PARAMETER, stream_qos
 
 NODE_PARAMETERS = (
     ParamSpec("lockstep", False, "compute one command per joint-state stamp (deterministic runs)", read_only=True),
     ParamSpec("stale_timeout", 0.015, "joint states older than this give a zero command [s] (3 periods)",
               check=positive),
+    ParamSpec("target_timeout", 0.05, "no target for longer than this while the last one was moving gives a "
+              "zero command [s] (10 periods, the simulator's command timeout)", check=positive),
+    QOS_PARAMETER,
     ParamSpec("thread_priority", 50, "SCHED_FIFO priority of the control loop (0: normal scheduling)",
               check=lambda v: "" if 0 <= v <= 99 else "an integer in [0, 99]", read_only=True, bounds=(0, 99)),
     ParamSpec("reference", "relative", "what is tracked: the relative target (the solvers) or a planned "
@@ -74,6 +91,8 @@ DEFAULT_PRIORITY = 50
 WINDOW = 2000  # samples kept for jitter/latency percentiles
 STATS_EVERY = 200  # cycles between percentile updates
 NAN2 = (float("nan"), float("nan"))
+MOVING = 1e-9  # a target twist / reference velocity norm above this is motion [m/s, rad/s]
+ERROR = 2
 
 
 class ControllerNode:
@@ -86,19 +105,21 @@ class ControllerNode:
         self.params = controller_params(self.values, self.node.get_name())
         self.lockstep = bool(self.values["lockstep"])
         self.stale_ns = int(self.values["stale_timeout"] * 1e9)
+        self.target_ns = int(self.values["target_timeout"] * 1e9)
         self.model = DualArmModel()
         self.controller = RelativeController(self.model, self.params)
         self.pending: tuple[dict[str, Any], RelativeController] | None = None
         self.order = {name: i for i, name in enumerate(self.model.joint_names)}
         n = self.node
-        self.pub_cmd = n.create_publisher(Float64MultiArray, "/velocity_controller/commands", 10)
+        qos = stream_qos(self.values["qos_reliability"])
+        self.pub_cmd = n.create_publisher(Float64MultiArray, "/velocity_controller/commands", qos)
         self.pub_pose = n.create_publisher(PoseStamped, "/relative_pose", 10)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        subscribe_checked(n, JointState, "/joint_states", self.on_joint_state, 10, self.on_malformed)
-        subscribe_checked(n, MultiDOFJointTrajectory, "/relative_target", self.on_target, 10, self.on_malformed)
+        subscribe_checked(n, JointState, "/joint_states", self.on_joint_state, qos, self.on_malformed)
+        subscribe_checked(n, MultiDOFJointTrajectory, "/relative_target", self.on_target, qos, self.on_malformed)
         self.joint_mode = self.values["reference"] == "joint"
         if self.joint_mode:
-            subscribe_checked(n, JointTrajectory, "/joint_reference", self.on_joint_reference, 10, self.on_malformed)
+            subscribe_checked(n, JointTrajectory, "/joint_reference", self.on_joint_reference, qos, self.on_malformed)
         self.gates = {name: StampGate(name) for name in ("joint_states", "relative_target", "joint_reference")}
         self.reach = self.model.relative_reach()
         self.joint_ref: tuple[int, np.ndarray, np.ndarray] | None = None
@@ -111,6 +132,10 @@ class ControllerNode:
         self.last_commanded_stamp: int | None = None
         self.cycles = self.missed = self.failures = self.switches = self.safe_commands = 0
         self.fallbacks = self.rejected = 0
+        self.target_received: int | None = None  # monotonic ns of the last valid target / joint reference
+        self.fault: tuple[str, int] | None = None  # watchdog reason and monotonic ns it started
+        self.trips = 0
+        self.unmatched = 0  # commands published while no subscriber was matched (nobody received them)
         self.throttle = Throttle(1.0)
         self.last_arrival_ns: int | None = None
         self.interval = float("nan")  # last joint-state inter-arrival time [s]
@@ -132,7 +157,8 @@ class ControllerNode:
         lp = percentiles(np.array(self.latency)) if self.latency else NAN2
         self.log.info(f"{self.cycles} cycles, {self.missed} missed deadlines, {self.failures} solver failures, "
                       f"{self.fallbacks} solver fallbacks, {self.rejected} rejected inputs, "
-                      f"{self.safe_commands} safe commands, {self.switches} parameter switches, "
+                      f"{self.safe_commands} safe commands, {self.unmatched} unmatched commands, "
+                      f"{self.trips} watchdog trips, {self.switches} parameter switches, "
                       f"period jitter p50/p99 {jp[0] * 1e3:.3f}/{jp[1] * 1e3:.3f} ms, "
                       f"state-to-command latency p50/p99 {lp[0] * 1e3:.3f}/{lp[1] * 1e3:.3f} ms "
                       f"(last {WINDOW} cycles)")
@@ -164,6 +190,7 @@ class ControllerNode:
         changed = {k: v for k, v in merged.items() if self.values.get(k) != v}
         self.values, self.controller, self.params = merged, controller, controller.params
         self.stale_ns = int(merged["stale_timeout"] * 1e9)
+        self.target_ns = int(merged["target_timeout"] * 1e9)
         self.switches += 1
         self.log.info(f"parameters changed at cycle {self.cycles}: "
                       + ", ".join(f"{k}={v!r}" for k, v in changed.items()))
@@ -221,6 +248,7 @@ class ControllerNode:
         if not self.stamp_accepted("relative_target", value.stamp_ns):
             return
         self.target = value
+        self.target_received = time.monotonic_ns()
         if self.lockstep:
             self.targets[value.stamp_ns] = value
             self.try_lockstep()
@@ -233,6 +261,7 @@ class ControllerNode:
         if not self.stamp_accepted("joint_reference", value[0]):
             return
         self.joint_ref = value
+        self.target_received = time.monotonic_ns()
         if self.lockstep:
             self.joint_refs[value[0]] = value
             self.try_lockstep()
@@ -263,23 +292,66 @@ class ControllerNode:
         self.cycle(target, ref)
 
     def on_watchdog(self) -> None:
-        """Real-time mode: zero command while there is no joint state or it is stale."""
+        """Real-time mode: zero command while there is no joint state yet, or a watchdog fault."""
         if self.state is None:
             self.publish_safe(self.node.get_clock().now().nanoseconds, "waiting for joint_states")
             return
-        age = time.monotonic_ns() - self.state[2]
-        if age > self.stale_ns:
-            self.publish_safe(self.state[0], f"joint_states stale by {age / 1e6:.1f} ms")
+        now = time.monotonic_ns()
+        age = now - self.state[2]
+        reason = f"joint_states stale by {age / 1e6:.1f} ms" if age > self.stale_ns else self.target_fault(now)
+        if reason:
+            self.enter_safe_state(self.state[0], reason)
+
+    def target_moving(self) -> bool:
+        """The last target asks for motion: non-zero twist, or non-zero joint reference velocity."""
+        if self.target is None:
+            return False
+        twist = max(float(np.linalg.norm(self.target.linear_velocity)),
+                    float(np.linalg.norm(self.target.angular_velocity)))
+        if self.joint_mode and self.joint_ref is not None:
+            twist = max(twist, float(np.linalg.norm(self.joint_ref[2])))
+        return twist > MOVING
+
+    def target_fault(self, now: int) -> str:
+        """Why the target stream counts as stopped mid-motion ('' if it does not)."""
+        if self.target_received is None or not self.target_moving():
+            return ""
+        age = now - self.target_received
+        if age <= self.target_ns:
+            return ""
+        name = "joint_reference" if self.joint_mode else "relative_target"
+        return f"{name} stopped mid-motion: none for {age / 1e6:.1f} ms"
+
+    def enter_safe_state(self, stamp: int, reason: str) -> None:
+        """Watchdog fault: zero command, /diagnostics ERROR with the reason, logged once per fault."""
+        if self.fault is None:
+            self.fault = (reason, time.monotonic_ns())
+            self.trips += 1
+            self.log.error(f"safe state: {reason}; zero-velocity commands until the inputs return")
+        self.publish_safe(stamp, reason, ERROR)
+
+    def leave_safe_state(self) -> None:
+        if self.fault is not None:
+            reason, since = self.fault
+            self.fault = None
+            self.log.info(f"recovered after {(time.monotonic_ns() - since) / 1e9:.3f} s in the safe state "
+                          f"({reason}); commands resume")
 
     def cycle(self, target: convert.TargetValue, ref: tuple[int, np.ndarray, np.ndarray] | None = None) -> None:
         assert self.state is not None
+        if not self.lockstep:
+            reason = self.target_fault(time.monotonic_ns())
+            if reason:
+                self.enter_safe_state(self.state[0], reason)
+                return
+            self.leave_safe_state()
         self.apply_pending()
         stamp, q, received = self.state
         if ref is not None:
             out = self.controller.track_joints(q, ref[1], ref[2], target, self.values["joint_gain"])
         else:
             out = self.controller.step(q, target)
-        self.pub_cmd.publish(convert.float_array(out.velocities))
+        self.send_command(out.velocities)
         # Real time: from the state's stamp (its publication, wall clock) to the command's
         # publication, transport included. Lockstep stamps are simulation time: from receipt.
         latency = (time.monotonic_ns() - received if self.lockstep else time.time_ns() - stamp) / 1e9
@@ -298,11 +370,16 @@ class ControllerNode:
             self.pub_pose.publish(convert.pose_stamped(stamp, out.position, out.rotation))
         self.publish_diagnostics(stamp, out, latency)
 
-    def publish_safe(self, stamp: int, reason: str) -> None:
-        """Zero-velocity command with the reason on /diagnostics and in the (throttled) log."""
-        self.pub_cmd.publish(convert.float_array(np.zeros(self.model.nq)))
+    def publish_safe(self, stamp: int, reason: str, level: int = 1) -> None:
+        """Zero-velocity command with the reason on /diagnostics (``level``) and in the (throttled) log."""
+        self.send_command(np.zeros(self.model.nq))
         self.safe_commands += 1
-        self.report(stamp, reason, "safe_command")
+        self.report(stamp, reason, "safe_command", level)
+
+    def send_command(self, velocities: np.ndarray) -> None:
+        self.pub_cmd.publish(convert.float_array(velocities))
+        if self.pub_cmd.get_subscription_count() == 0:
+            self.unmatched += 1
 
     def warn(self, text: str) -> None:
         """Log at most once a second (with the count of suppressed lines)."""
@@ -310,12 +387,22 @@ class ControllerNode:
         if line is not None:
             self.log.warning(line)
 
-    def report(self, stamp: int, reason: str, status: str) -> None:
-        """Reason on /diagnostics (every time, WARN) and in the log (throttled)."""
+    def report(self, stamp: int, reason: str, status: str, level: int = 1) -> None:
+        """Reason on /diagnostics (every time, WARN unless ``level`` says otherwise) and in the log
+        (throttled), with the counters that account for every command sent."""
         self.warn(f"{status}: {reason}")
-        self.pub_diag.publish(convert.diagnostics(stamp, "controller_node", 1, reason,
-                                                  {"solver": self.params.solver, "status": status,
-                                                   "rejected_inputs": self.rejected}))
+        self.pub_diag.publish(convert.diagnostics(stamp, "controller_node", level, reason, {
+            "solver": self.params.solver, "status": status, "watchdog": self.watchdog_text(), **self.counters()}))
+
+    def watchdog_text(self) -> str:
+        return "ok" if self.fault is None else self.fault[0]
+
+    def counters(self) -> dict[str, int]:
+        """Cumulative counts: ``cycles + safe_commands`` is every command this node has published,
+        ``unmatched_commands`` of them while no subscriber was matched."""
+        return {"cycles": self.cycles, "safe_commands": self.safe_commands, "unmatched_commands": self.unmatched,
+                "watchdog_trips": self.trips, "missed_deadlines": self.missed, "solver_failures": self.failures,
+                "solver_fallbacks": self.fallbacks, "rejected_inputs": self.rejected}
 
     def publish_diagnostics(self, stamp: int, out: ControlOutput, latency: float) -> None:
         r = out.result
@@ -335,12 +422,8 @@ class ControllerNode:
             "orientation_error_rad": f"{out.orientation_error:.6e}",
             "control_period_s": self.params.period,
             "stamp_ns": stamp,
-            "cycles": self.cycles,
-            "missed_deadlines": self.missed,
-            "solver_failures": self.failures,
-            "solver_fallbacks": self.fallbacks,
-            "rejected_inputs": self.rejected,
-            "safe_commands": self.safe_commands,
+            **self.counters(),
+            "watchdog": self.watchdog_text(),
             "parameter_switches": self.switches,
             "period_jitter_p50_s": f"{jit[0]:.6e}",
             "period_jitter_p99_s": f"{jit[1]:.6e}",

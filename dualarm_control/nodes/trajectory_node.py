@@ -5,13 +5,15 @@ kinematics). Real-time mode: one target per control period on a timer, timed fro
 joint state on the node's clock (simulation time with ``use_sim_time``). Lockstep mode: one
 target per joint state, stamped with the joint state's stamp, so the controller can pair them. When the trajectory plus the
 scenario's settle time has elapsed the node logs completion, publishes a final
-``/diagnostics`` status "complete" and exits 0. A malformed or unusable joint state (bad CDR,
-wrong or missing joint names, NaN; in lockstep a stamp older than the last one) is rejected
-with a throttled log line and not used.
+``/diagnostics`` status "complete" and exits 0; with ``repeat:=true`` (soak runs) it starts the
+scenario again from the pose of the next joint state instead, forever. A malformed or unusable
+joint state (bad CDR, wrong or missing joint names, NaN; in lockstep a stamp older than the
+last one) is rejected with a throttled log line and not used.
 """
 
 from __future__ import annotations
 
+import sys
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -24,35 +26,51 @@ from dualarm_control.params import ParamSpec, positive
 from dualarm_control.planning.execution import PlanExecution
 from dualarm_control.ros import convert
 from dualarm_control.ros.inputs import StampGate, Throttle, subscribe_checked
-from dualarm_control.ros.node import declare, run, usage
+from dualarm_control.ros.node import (
+    declare,
+    priority_from_args,
+    request_realtime_priority,
+    run,
+    thread_priority_spec,
+    usage,
+)
+from dualarm_control.ros.qos import QOS_PARAMETER, stream_qos
 from dualarm_control.scenario import load_scenario
 from dualarm_control.trajectory import RelativeTrajectory
 
+DEFAULT_PRIORITY = 40
 PARAMETERS = (
     ParamSpec("scenario", "assembly", "scenario name (config/scenarios/<name>.yaml) or YAML path", read_only=True),
     ParamSpec("control_period", 0.005, "target period in real-time mode [s]", check=positive, read_only=True),
     ParamSpec("lockstep", False, "publish one target per joint state, with its stamp", read_only=True),
     ParamSpec("plan", "", "plan.json of `dualarm plan`: stream its joint trajectory on /joint_reference "
               "(and its relative pose on /relative_target) instead of the scenario's segments", read_only=True),
+    QOS_PARAMETER,
+    thread_priority_spec(DEFAULT_PRIORITY, "the target stream (below the simulator's and controller's 50)"),
+    ParamSpec("repeat", False, "start the scenario again from the current pose when it completes (soak runs)",
+              read_only=True),
 )
 
 
 class TrajectoryNode:
     """Node shell around :class:`RelativeTrajectory`."""
 
-    def __init__(self, context: Any) -> None:
+    def __init__(self, context: Any, priority_note: str = "disabled") -> None:
         self.node = Node("trajectory_node", context=context)
         p = declare(self.node, PARAMETERS)
         self.scenario = load_scenario(p["scenario"])
         self.lockstep = bool(p["lockstep"])
+        self.repeat = bool(p["repeat"])
+        self.repetitions = 0
         self.model = DualArmModel()
         self.plan = PlanExecution(self.model, p["plan"]) if p["plan"] else None
         self.order = {name: i for i, name in enumerate(self.model.joint_names)}
         n = self.node
-        self.pub = n.create_publisher(MultiDOFJointTrajectory, "/relative_target", 10)
+        qos = stream_qos(p["qos_reliability"])
+        self.pub = n.create_publisher(MultiDOFJointTrajectory, "/relative_target", qos)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.pub_joint = n.create_publisher(JointTrajectory, "/joint_reference", 10)
-        subscribe_checked(n, JointState, "/joint_states", self.on_joint_state, 10, self.reject)
+        self.pub_joint = n.create_publisher(JointTrajectory, "/joint_reference", qos)
+        subscribe_checked(n, JointState, "/joint_states", self.on_joint_state, qos, self.reject)
         self.log = n.get_logger()
         self.throttle = Throttle(1.0)
         self.gate = StampGate("joint_states")
@@ -66,6 +84,8 @@ class TrajectoryNode:
         what = f"plan {p['plan']}" if self.plan else f"{len(self.scenario.segments)} segments"
         self.log.info(f"scenario '{self.scenario.name}': {what}, "
                       f"{'lockstep' if self.lockstep else 'real-time'}; waiting for /joint_states")
+        if priority_note and priority_note != "disabled":
+            self.log.warning(priority_note)
 
     def on_joint_state(self, msg: Any) -> None:
         if self.finished:
@@ -107,7 +127,11 @@ class TrajectoryNode:
         if t >= self.end_s:  # no target at or after the end: as many cycles as the in-process run
             self.log.info(f"scenario '{self.scenario.name}' complete at t={t:.2f} s")
             self._status(stamp, 0, "complete", t)
-            self.finished = True  # run() stops spinning after this callback
+            self.repetitions += 1
+            if self.repeat:  # the next joint state plans the next run from where the arms are
+                self.trajectory, self.segment = None, -1
+            else:
+                self.finished = True  # run() stops spinning after this callback
             return
         if self.plan is not None:
             ref = self.plan.sample(t)
@@ -124,12 +148,18 @@ class TrajectoryNode:
             self._status(stamp, 0, f"segment {sample.segment_name}", t)
 
     def _status(self, stamp: int, level: int, message: str, t: float) -> None:
-        values = {"scenario": self.scenario.name, "time_s": f"{t:.3f}", "duration_s": f"{self.end_s:.3f}"}
+        values = {"scenario": self.scenario.name, "time_s": f"{t:.3f}", "duration_s": f"{self.end_s:.3f}",
+                  "repetitions": self.repetitions}
         self.pub_diag.publish(convert.diagnostics(stamp, "trajectory_node", level, message, values))
 
 
 def main(args: list[str] | None = None) -> int:
-    return run(TrajectoryNode, args, usage("trajectory_node", __doc__ or "", PARAMETERS))
+    argv = list(sys.argv if args is None else args)
+    # Before any middleware thread exists, so they inherit the scheduling: a starved target stream
+    # stops the controller (target_timeout), as `dualarm soak` showed on a loaded machine.
+    why_not = request_realtime_priority(priority_from_args(argv, DEFAULT_PRIORITY))
+    return run(lambda context: TrajectoryNode(context, why_not), argv,
+               usage("trajectory_node", __doc__ or "", PARAMETERS))
 
 
 if __name__ == "__main__":

@@ -232,6 +232,12 @@ def tool_node(name: str) -> Iterator[tuple[Any, Any, _StopOnSignal]]:
         context.try_shutdown()
 
 
+def thread_priority_spec(default: int, what: str) -> ParamSpec:
+    """The ``thread_priority`` parameter of a node whose ``what`` runs every control period."""
+    return ParamSpec("thread_priority", default, f"SCHED_FIFO priority of {what} (0: normal scheduling)",
+                     check=lambda v: "" if 0 <= v <= 99 else "an integer in [0, 99]", read_only=True, bounds=(0, 99))
+
+
 def priority_from_args(argv: Sequence[str], default: int) -> int:
     """``thread_priority`` from ``-p thread_priority:=N`` in ``argv`` (read before rclpy exists, so
     the middleware's threads inherit the scheduling); ``default`` when absent or malformed

@@ -1,0 +1,371 @@
+"""``dualarm faults``: the fault matrix, against real processes, on loopback and private namespaces.
+
+Each row injects one fault into a real-time run of the cell (the three nodes and a reference
+recorder as separate processes, :class:`~dualarm_control.app.fault_run.CellRun`) and judges
+the outcome from the run's bag (:mod:`~dualarm_control.app.fault_bag`) and the nodes' logs.
+A row that cannot run here (no root, no ``ip``, no netem in the kernel) is *skipped* with the
+reason, never passed. Rows that share a run: the loopback faults (one run, in sequence, each
+while the target moves), the across-hosts run and its link cut.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from dualarm_control.app.fault_bag import (
+    RunRecord,
+    arm_stop,
+    check_signalled_bag,
+    completion,
+    safe_episode,
+)
+from dualarm_control.app.fault_run import CellRun, RunError
+from dualarm_control.app.netns import Link, netem_unavailable, private_link, unavailable
+from dualarm_control.paths import config_path
+
+PERIOD = 0.005
+STALE_TIMEOUT = 0.015  # controller defaults (controller_node.NODE_PARAMETERS)
+TARGET_TIMEOUT = 0.05
+COMMAND_TIMEOUT_STEPS = 10  # sim_node command_timeout 0.05 s / 5 ms
+PAUSE_S = 0.5
+CUT_S = 1.0
+RESTART_AFTER_S = 0.5
+RECOVER_WITHIN_MS = 1000.0
+RESTART_RECOVER_WITHIN_MS = 30000.0
+FINAL_POSITION_M = 1e-3
+FINAL_ORIENTATION_RAD = 1e-2
+LOSS = ("loss", "10%")
+LINK_NETEM = ("delay", "2ms", "1ms", "loss", "2%")
+
+LOOPBACK_ROWS = ("stale_states", "target_stopped", "kill_sim", "kill_controller", "recorder_sigint",
+                 "recorder_sigterm")
+ROWS = (*LOOPBACK_ROWS, "best_effort_loss", "across_hosts", "link_cut", "link_netem")
+QUICK = ("stale_states", "kill_controller", "recorder_sigterm")
+"""The default test suite's subset (test/test_faults.py)."""
+
+EXPECTED = {
+    "stale_states": f"sim_node SIGSTOP {PAUSE_S:g} s mid-motion: zero commands + /diagnostics ERROR once joint states "
+                    f"are older than stale_timeout {STALE_TIMEOUT * 1e3:.0f} ms (tripped at <= +2 periods); OK again "
+                    f"< {RECOVER_WITHIN_MS:.0f} ms after SIGCONT; one log line each way",
+    "target_stopped": f"trajectory_node SIGSTOP {PAUSE_S:g} s mid-motion: zero commands + ERROR once no target for "
+                      f"target_timeout {TARGET_TIMEOUT * 1e3:.0f} ms (<= +2 periods); OK again < "
+                      f"{RECOVER_WITHIN_MS:.0f} ms after SIGCONT; one log line each way",
+    "kill_sim": f"kill -9 sim_node mid-run, restart it {RESTART_AFTER_S:g} s later: zero commands + ERROR while it is "
+                f"gone, cycles resume (OK) once the new simulator publishes (< {RESTART_RECOVER_WITHIN_MS / 1e3:.0f} s)",
+    "kill_controller": f"kill -9 controller_node mid-motion: the arms are at rest (all joints < 1e-3 rad/s) within "
+                       f"command_timeout ({COMMAND_TIMEOUT_STEPS} steps) + 3 steps of the last state it answered",
+    "recorder_sigint": "SIGINT to a bag recorder mid-run: exit 0, bag readable (rosbags AnyReader), every message "
+                       "decodes, every /joint_states stamped before the signal (- 1 ms) is in it",
+    "recorder_sigterm": "SIGTERM to a bag recorder mid-run: as for SIGINT",
+    "best_effort_loss": "best-effort streams losing 10 % of their messages (netem loss on lo of a private namespace, "
+                        "UDP only; without netem a relay process dropping 10 % of every stream): the scenario "
+                        f"completes, final error < {FINAL_POSITION_M * 1e3:g} mm / {FINAL_ORIENTATION_RAD * 1e3:g} mrad",
+    "across_hosts": "sim_node and controller/trajectory in two namespaces joined by a veth pair (10.231.x.x), Fast DDS "
+                    "bound to it (config/fastdds_link.xml + ROS_STATIC_PEERS): scenario completes, final error < "
+                    f"{FINAL_POSITION_M * 1e3:g} mm, no packet on the simulator namespace's lo; latency figures",
+    "link_cut": f"link down {CUT_S:g} s mid-motion (ip link set down): ERROR (stale joint states), OK again < "
+                f"{RECOVER_WITHIN_MS:.0f} ms after the link is up",
+    "link_netem": f"across hosts with netem {' '.join(LINK_NETEM)} on the link, best-effort streams: completes, "
+                  f"final error < {FINAL_POSITION_M * 1e3:g} mm; latency figures",
+}
+
+
+@dataclass
+class Row:
+    name: str
+    fault: str
+    expected: str
+    observed: str
+    status: str  # "pass", "FAIL" or "skipped"
+    figures: dict[str, Any] = field(default_factory=dict)
+
+
+def _row(name: str, passed: bool, observed: str, **figures: Any) -> Row:
+    return Row(name, name.replace("_", " "), EXPECTED[name], observed, "pass" if passed else "FAIL", figures)
+
+
+def _skipped(name: str, reason: str) -> Row:
+    return Row(name, name.replace("_", " "), EXPECTED[name], f"skipped: {reason}", "skipped")
+
+
+def _failed(names: Sequence[str], why: str) -> list[Row]:
+    return [_row(n, False, f"run failed: {why}") for n in names]
+
+
+# ------------------------------------------------------------------------------------- loopback run
+
+
+@dataclass
+class _Episode:
+    start: int  # wall-clock ns of the fault
+    resume: int  # wall-clock ns the input came back (process continued or restarted, link up)
+    logs: tuple[int, int]  # controller log lines 'safe state' and 'recovered' during the episode
+
+
+def _recovered(run: CellRun, line: int, timeout: float = 30.0) -> tuple[int, int]:
+    """Wait for the controller's recovery line after log line ``line``; the episode's log counts."""
+    end = run.wait_line("controller_node", "recovered after", timeout, start=line) + 1
+    lines = run.process("controller_node").lines[line:end]
+    return sum("safe state:" in t for t in lines), sum("recovered after" in t for t in lines)
+
+
+def _episode_row(name: str, rec: RunRecord, ep: _Episode, reason: str, limit_ms: float, within_ms: float) -> Row:
+    e = safe_episode(rec, ep.start, ep.resume, reason)
+    logs = ep.logs
+    passed = (e.age_ms <= limit_ms and e.other_commands == 0 and e.zero_commands > 0
+              and e.recovered_ms <= within_ms and logs[0] == logs[1] >= 1)
+    return _row(name, passed, f"{e.text()}; log: {logs[0]} 'safe state', {logs[1]} 'recovered'",
+                detected_ms=e.detected_ms, input_age_ms=e.age_ms, zero_commands=e.zero_commands,
+                other_commands=e.other_commands, recovered_ms=e.recovered_ms)
+
+
+def loopback_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[str], None]) -> list[Row]:
+    """The process faults on one loopback run, in sequence, each while the target moves."""
+    names = [n for n in LOOPBACK_ROWS if n in only]
+    if not names:
+        return []
+    run = CellRun(out / "loopback", scenario)
+    recorders: dict[str, Path] = {n: out / "loopback" / n for n in ("recorder_sigint", "recorder_sigterm")
+                                  if n in names}
+    episodes: dict[str, _Episode] = {}
+    signalled: dict[str, int] = {}
+    killed_controller = False
+    try:
+        say(f"loopback run of '{scenario}': starting the nodes and {1 + len(recorders)} recorder(s)")
+        run.start(recorders)
+        for name, sig in (("recorder_sigint", signal.SIGINT), ("recorder_sigterm", signal.SIGTERM)):
+            if name in recorders:
+                run.wait_moving(0.1, earliest=1.0)
+                signalled[name] = run.send(name, sig)
+                say(f"{name}: {signal.Signals(sig).name} sent at t={run.elapsed():.2f} s")
+        for name, node, reason in (("stale_states", "sim_node", "joint_states stale"),
+                                   ("target_stopped", "trajectory_node", "stopped mid-motion")):
+            if name in names:
+                run.wait_moving(PAUSE_S + 0.3)
+                line = len(run.process("controller_node").lines)
+                say(f"{name}: SIGSTOP {node} for {PAUSE_S:g} s at t={run.elapsed():.2f} s")
+                start, resume = run.pause(node, PAUSE_S)
+                episodes[name] = _Episode(start, resume, _recovered(run, line))
+        if "kill_sim" in names:
+            run.wait_moving(1.0)
+            line = len(run.process("controller_node").lines)
+            say(f"kill_sim: SIGKILL sim_node at t={run.elapsed():.2f} s, restart in {RESTART_AFTER_S:g} s")
+            start = run.send("sim_node", signal.SIGKILL)
+            time.sleep(RESTART_AFTER_S)
+            resume = time.time_ns()
+            run.start_node("sim_node")
+            episodes["kill_sim"] = _Episode(start, resume, _recovered(run, line, RESTART_RECOVER_WITHIN_MS / 1e3))
+        if "kill_controller" in names:
+            run.wait_moving(1.0, earliest=run.elapsed() + 0.5)
+            say(f"kill_controller: SIGKILL controller_node at t={run.elapsed():.2f} s")
+            run.send("controller_node", signal.SIGKILL)
+            killed_controller = True
+            time.sleep(1.0)
+    except RunError as exc:
+        run.stop()
+        return _failed(names, str(exc))
+    codes = run.stop()
+    rec = run.record()
+    rows = []
+    limits = {"stale_states": (STALE_TIMEOUT + 2 * PERIOD) * 1e3, "target_stopped": (TARGET_TIMEOUT + 2 * PERIOD) * 1e3,
+              "kill_sim": (STALE_TIMEOUT + 2 * PERIOD) * 1e3}
+    reasons = {"stale_states": "joint_states stale", "target_stopped": "stopped mid-motion",
+               "kill_sim": "joint_states stale"}
+    for name in names:
+        if name in episodes:
+            within = RESTART_RECOVER_WITHIN_MS if name == "kill_sim" else RECOVER_WITHIN_MS
+            rows.append(_episode_row(name, rec, episodes[name], reasons[name], limits[name], within))
+        elif name == "kill_controller":
+            stop = arm_stop(rec, 0)
+            passed = killed_controller and stop.speed_at_last > 0.01 and 0 <= stop.steps <= COMMAND_TIMEOUT_STEPS + 3
+            rows.append(_row(name, passed, stop.text(PERIOD), speed_at_kill=stop.speed_at_last, steps=stop.steps,
+                             sim_ms=stop.steps * PERIOD * 1e3, wall_ms=stop.wall_ms))
+        elif name in signalled:
+            check = check_signalled_bag(recorders[name], rec, signalled[name])
+            code = codes.get(name)
+            closed = any("bag closed (signal" in line for line in run.process(name).lines)
+            passed = check.readable and check.missing == 0 and check.expected >= 50 and code == 0 and closed
+            rows.append(_row(name, passed, f"exit {code}, {check.text()}", messages=check.messages,
+                             expected=check.expected, missing=check.missing))
+    return rows
+
+
+# ---------------------------------------------------------------------------------- namespace runs
+
+
+def _ros_env(profile: bool, peer: str = "") -> dict[str, str]:
+    if not profile:  # one namespace, loopback only, UDP (shared memory would bypass lo and its netem)
+        return {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
+    return {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "ROS_STATIC_PEERS": peer,
+            "FASTRTPS_DEFAULT_PROFILES_FILE": str(config_path("fastdds_link.xml"))}
+
+
+def _completion_row(name: str, rec: RunRecord, extra: str = "", ok: bool = True, **figures: Any) -> Row:
+    c = completion(rec)
+    passed = (ok and c.complete and c.position_error_m < FINAL_POSITION_M
+              and c.orientation_error_rad < FINAL_ORIENTATION_RAD)
+    return _row(name, passed, c.text() + extra, cycles=c.cycles, trips=c.trips, position_error_m=c.position_error_m,
+                orientation_error_rad=c.orientation_error_rad, latency_p50_ms=c.latency_p50_ms,
+                latency_p99_ms=c.latency_p99_ms, **figures)
+
+
+def _run_to_completion(run: CellRun) -> None:
+    end = run.times[-1] + 30.0
+    run.wait_line("trajectory_node", "complete at", timeout=max(1.0, end - run.elapsed()))
+
+
+RELAY_ROUTES = ("/raw/joint_states:/joint_states:sensor_msgs/msg/JointState",
+                "/velocity_controller/commands:/raw/velocity_controller/commands:std_msgs/msg/Float64MultiArray",
+                "/raw/relative_target:/relative_target:trajectory_msgs/msg/MultiDOFJointTrajectory")
+RELAY_REMAPS = {"sim_node": ["-r", "/joint_states:=/raw/joint_states",
+                             "-r", "/velocity_controller/commands:=/raw/velocity_controller/commands"],
+                "trajectory_node": ["-r", "/relative_target:=/raw/relative_target"]}
+
+
+def loss_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[str], None],
+              relay_loss: float = 0.1) -> list[Row]:
+    """Best-effort streams with 10 % loss: netem on lo of a private namespace, or (no netem in this
+    kernel) a lossy relay process on loopback that every stream goes through. Runs to completion."""
+    if "best_effort_loss" not in only:
+        return []
+    best_effort = ["-p", "qos_reliability:=best_effort"]
+    why = netem_unavailable()
+    if why and relay_loss <= 0.0:
+        return [_skipped("best_effort_loss", why)]
+    try:
+        if not why:
+            with private_link(peer=False) as link:
+                link.netem(link.a, "lo", LOSS)
+                say(f"best_effort_loss: netem {' '.join(LOSS)} on lo of {link.a}, best-effort streams")
+                run = CellRun(out / "best_effort_loss", scenario, best_effort, sim_ns=link.a, ctrl_ns=link.a,
+                              env=_ros_env(False))
+                _run_whole(run)
+            how = f"netem {' '.join(LOSS)} on lo"
+        else:
+            relay = [sys.executable, "-u", "-m", "dualarm_control.app.lossy_relay", "--loss", str(relay_loss),
+                     *RELAY_ROUTES]
+            say(f"best_effort_loss: no netem ({why}); a relay process drops {relay_loss:.0%} of every stream")
+            run = CellRun(out / "best_effort_loss", scenario, best_effort, node_extra=RELAY_REMAPS,
+                          helpers={"relay": relay})
+            _run_whole(run)
+            how = "relay: " + "; ".join(line.removeprefix("relay ") for line in run.process("relay").lines
+                                        if "dropped" in line) + f" (netem unavailable: {why})"
+    except RunError as exc:
+        return _failed(["best_effort_loss"], str(exc))
+    return [_completion_row("best_effort_loss", run.record(), f"; loss by {how}")]
+
+
+def _run_whole(run: CellRun) -> None:
+    """Start ``run``, wait for the scenario to complete, stop (also on failure)."""
+    try:
+        run.start()
+        _run_to_completion(run)
+    finally:
+        run.stop()
+
+
+def link_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[str], None]) -> list[Row]:
+    """Across hosts (and the link cut on the same run), then with netem on the link."""
+    rows: list[Row] = []
+    names = [n for n in ("across_hosts", "link_cut") if n in only]
+    why = unavailable()
+    if why:
+        return [_skipped(n, why) for n in (*names, *(["link_netem"] if "link_netem" in only else []))]
+    if names:
+        rows += _link_run(out / "across_hosts", scenario, names, [], [], say)
+    if "link_netem" in only:
+        why = netem_unavailable()
+        if why:
+            rows.append(_skipped("link_netem", why))
+        else:
+            rows += _link_run(out / "link_netem", scenario, ["link_netem"], list(LINK_NETEM),
+                              ["-p", "qos_reliability:=best_effort"], say)
+    return rows
+
+
+def _link_run(out: Path, scenario: str, names: Sequence[str], netem: list[str], node_args: list[str],
+              say: Callable[[str], None]) -> list[Row]:
+    with private_link() as link:
+        if netem:
+            link.netem(link.a, link.device, netem)
+            link.netem(link.b, link.device, netem)
+        run = CellRun(out, scenario, node_args, sim_ns=link.a, ctrl_ns=link.b,
+                      env=_ros_env(True, link.address_a), sim_env=_ros_env(True, link.address_b))
+        cut: _Episode | None = None
+        try:
+            say(f"{', '.join(names)}: sim_node in {link.a} ({link.address_a}), controller in {link.b} "
+                f"({link.address_b})" + (f", netem {' '.join(netem)}" if netem else ""))
+            run.start()
+            if "link_cut" in names:
+                cut = _cut_link(run, link, say)
+            _run_to_completion(run)
+        except RunError as exc:
+            run.stop()
+            return _failed(names, str(exc))
+        run.stop()
+        packets = link.tx_packets(link.a)
+    rec = run.record()
+    rows = []
+    for name in names:
+        if name == "link_cut" and cut is not None:
+            rows.append(_episode_row(name, rec, cut, "joint_states stale", float("inf"), RECOVER_WITHIN_MS))
+        elif name != "link_cut":
+            on_link = f"; simulator namespace sent {packets.get(link.device, 0)} packets on the link, {packets['lo']} on lo"
+            rows.append(_completion_row(name, rec, on_link, ok=packets["lo"] == 0 and packets.get(link.device, 0) > 0,
+                                        link_packets=packets.get(link.device, 0), lo_packets=packets["lo"]))
+    return rows
+
+
+def _cut_link(run: CellRun, link: Link, say: Callable[[str], None]) -> _Episode:
+    run.wait_moving(CUT_S + 0.5)
+    line = len(run.process("controller_node").lines)
+    say(f"link_cut: {link.device} down for {CUT_S:g} s at t={run.elapsed():.2f} s")
+    start = time.time_ns()
+    link.set_up(False)
+    time.sleep(CUT_S)
+    resume = time.time_ns()
+    link.set_up(True)
+    return _Episode(start, resume, _recovered(run, line))
+
+
+# ------------------------------------------------------------------------------------------ matrix
+
+
+def run_matrix(out: Path, scenario: str = "assembly", only: Sequence[str] = ROWS,
+               say: Callable[[str], None] = print) -> list[Row]:
+    """Run the selected rows; each row's outcome as soon as it is known."""
+    unknown = [n for n in only if n not in ROWS]
+    if unknown:
+        raise ValueError(f"unknown fault rows {', '.join(unknown)}; valid: {', '.join(ROWS)}")
+    rows: list[Row] = []
+    for group in (loopback_rows, loss_rows, link_rows):
+        t = time.monotonic()
+        got = group(out, scenario, only, say)
+        for row in got:
+            say(f"[{row.status}] {row.name}: {row.observed}")
+        if got:
+            say(f"({time.monotonic() - t:.0f} s)")
+        rows += got
+    return sorted(rows, key=lambda r: ROWS.index(r.name))
+
+
+def format_table(rows: Sequence[Row]) -> str:
+    lines = ["| fault | expected behaviour | observed | pass |", "|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r.fault} | {r.expected} | {r.observed} | {r.status} |")
+    return "\n".join(lines)
+
+
+def write_results(out: Path, rows: Sequence[Row], seconds: float) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    doc = {"seconds": round(seconds, 1), "passed": all(r.status != "FAIL" for r in rows),
+           "rows": [asdict(r) for r in rows]}
+    (out / "faults.json").write_text(json.dumps(doc, indent=2, default=str) + "\n")
+    (out / "faults.md").write_text(f"# Fault matrix ({seconds:.0f} s)\n\n{format_table(rows)}\n")

@@ -1,0 +1,29 @@
+"""QoS of the cell's periodic streams (joint states, commands, targets).
+
+``qos_reliability`` (read-only, every node): ``reliable`` (the default, rclpy's) or
+``best_effort`` (sensor-like: a lost sample is not re-sent; the next one supersedes it).
+A best-effort subscription also matches a reliable publisher, not the other way round, so
+all nodes of a cell should use the same value. /diagnostics and /clock stay reliable.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from dualarm_control.params import ParamSpec
+
+RELIABILITIES = ("reliable", "best_effort")
+STREAM_DEPTH = 10
+
+QOS_PARAMETER = ParamSpec(
+    "qos_reliability", "reliable",
+    "reliability of the periodic streams (joint states, commands, targets): reliable or best_effort",
+    choices=lambda: list(RELIABILITIES), read_only=True)
+
+
+def stream_qos(reliability: str) -> Any:
+    """The rclpy QoSProfile of a periodic stream: keep-last 10, volatile, ``reliability``."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    policy = ReliabilityPolicy.BEST_EFFORT if reliability == "best_effort" else ReliabilityPolicy.RELIABLE
+    return QoSProfile(depth=STREAM_DEPTH, reliability=policy)
