@@ -8,8 +8,9 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 from dualarm_control.app.progress import progress_bar
 from dualarm_control.errors import DualArmError
@@ -25,7 +26,6 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     from dualarm_control.app.report import (
         format_table,
         plot_velocity_norms,
-        write_metrics,
     )
     from dualarm_control.controller import controller_params
     from dualarm_control.kinematics import DualArmModel
@@ -43,31 +43,54 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     configs = {name: controller_params({**base, "solver": name}) for name in solvers}  # validates all first
     out = Path(args.output)
     model = DualArmModel()
-    results: dict[str, dict[str, float | int]] = {}
-    runs = {}
     print(f"scenario {scenario.name!r} ({scenario.source}); solvers: {', '.join(solvers)}; output: {out}", file=sys.stderr)
-    try:
-        for name, params in configs.items():
-            start = time.perf_counter()
-            log = run_scenario(scenario, params, model, progress=progress_bar(name))
-            results[name] = summarize_log(log, scenario, model)
-            runs[name] = (log.time, log.commands)
-            print(f"[{name}] done: {len(log.time)} cycles in {time.perf_counter() - start:.1f} s wall", file=sys.stderr)
-    except KeyboardInterrupt:
-        print("\ninterrupted: writing what is complete", file=sys.stderr)
-        if results:
-            write_metrics(out / "metrics.json", results)
+
+    def job(name: str, params: Any) -> Callable[[Any], tuple[str, dict[str, Any], Any]]:
+        def run(progress: Any) -> tuple[str, dict[str, Any], Any]:
+            log = run_scenario(scenario, params, model, progress=progress)
+            return name, summarize_log(log, scenario, model), log
+        return run
+
+    done = run_all([(name, job(name, params)) for name, params in configs.items()], out)
+    if done is None:
         return EXIT_INTERRUPTED
-    write_metrics(out / "metrics.json", results)
+    results, logs = done
+    runs = {log.solver: (log.time, log.commands) for log in logs}
     plot_velocity_norms(runs, out / "velocity_norms.png", title=f"{scenario.name}: |qd_i| and active joints")
     print(format_table(results))
     print(f"\nwrote {out / 'metrics.json'} and {out / 'velocity_norms.png'}")
     return 0
 
 
+def run_all(jobs: list[tuple[str, Callable[[Any], tuple[str, dict[str, Any], Any]]]],
+            out: Path) -> tuple[dict[str, dict[str, Any]], list[Any]] | None:
+    """Run each (label, run) in order; ``run(progress)`` returns (metrics key, metrics, log).
+
+    Prints a progress bar and the wall time per run and writes ``out/metrics.json``. On
+    Ctrl-C the metrics of the runs completed so far are written and None is returned.
+    """
+    from dualarm_control.app.report import write_metrics
+
+    results: dict[str, dict[str, Any]] = {}
+    logs: list[Any] = []
+    try:
+        for label, run in jobs:
+            start = time.perf_counter()
+            key, metrics, log = run(progress_bar(label))
+            results[key] = metrics
+            logs.append(log)
+            print(f"[{label}] done: {len(log.time)} cycles in {time.perf_counter() - start:.1f} s wall", file=sys.stderr)
+    except KeyboardInterrupt:
+        print("\ninterrupted: writing what is complete", file=sys.stderr)
+        if results:
+            write_metrics(out / "metrics.json", results)
+        return None
+    write_metrics(out / "metrics.json", results)
+    return results, logs
+
+
 def cmd_task_experiment(args: argparse.Namespace, scenario) -> int:
     """Task scenario (paper 001): one run per gain k (force variant with --force); metrics.json, figures."""
-    from dualarm_control.app.report import write_metrics
     from dualarm_control.app.task_experiment import (
         run_task_scenario,
         summarize_task_run,
@@ -99,22 +122,17 @@ def cmd_task_experiment(args: argparse.Namespace, scenario) -> int:
     out = Path(args.output)
     print(f"scenario {scenario.name!r} ({scenario.source}); solver {solver}; gains {gains}"
           f"{'; force feedback' if args.force else ''}; output: {out}", file=sys.stderr)
-    results, logs = {}, []
-    try:
-        for gain in gains:
-            start = time.perf_counter()
-            label = f"k={gain:g}" + (" force" if args.force else "")
-            log = run_task_scenario(scenario, params, gain, args.force, duration=args.duration,
-                                    progress=progress_bar(label))
-            results[log.label] = summarize_task_run(log, scenario)
-            logs.append(log)
-            print(f"[{label}] done: {len(log.time)} cycles in {time.perf_counter() - start:.1f} s wall", file=sys.stderr)
-    except KeyboardInterrupt:
-        print("\ninterrupted: writing what is complete", file=sys.stderr)
-        if results:
-            write_metrics(out / "metrics.json", results)
+
+    def job(gain: float) -> Callable[[Any], tuple[str, dict[str, Any], Any]]:
+        def run(progress: Any) -> tuple[str, dict[str, Any], Any]:
+            log = run_task_scenario(scenario, params, gain, args.force, duration=args.duration, progress=progress)
+            return log.label, summarize_task_run(log, scenario), log
+        return run
+
+    done = run_all([(f"k={gain:g}" + (" force" if args.force else ""), job(gain)) for gain in gains], out)
+    if done is None:
         return EXIT_INTERRUPTED
-    write_metrics(out / "metrics.json", results)
+    results, logs = done
     circle = next(t for t in spec.build(1.0) if isinstance(t, CircleTask))
     plot_tool_paths(logs, circle.radius, out / "tool_path.png")
     plot_task_values(logs, out / "task_values.png")
