@@ -192,6 +192,7 @@ def test_ctrl_c_mid_recorded_launch(tmp_path: Path) -> None:
     bag = tmp_path / "bag"
     launch = Launch(str(SLOW), "--record", str(bag))
     try:
+        launch.wait_for("bag: ready")  # the recorder subscribes once every recorded topic has a publisher
         launch.wait_for("segment 1/1 'move'")
         time.sleep(2.0)
         launch.popen.send_signal(signal.SIGINT)

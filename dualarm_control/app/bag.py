@@ -1,6 +1,6 @@
 """``bag info`` and the bag report: reading rosbag2 bags with ``rosbags`` (no ROS needed).
 
-Recording is :mod:`dualarm_control.ros.recorder` (rclpy). The report reads a bag with
+Recording is :mod:`dualarm_control.app.recorder` (rclpy). The report reads a bag with
 ``rosbags.highlevel.AnyReader`` and builds the same metrics record as an in-process
 experiment (:func:`dualarm_control.app.report.summarize`).
 """
@@ -11,7 +11,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import Any, Final
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -22,14 +22,6 @@ from dualarm_control.errors import DualArmError
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
-
-BAG_VERSION: Final = 9
-"""rosbag2 metadata version written by Jazzy."""
-RECORD_DEPTH = 1000
-"""Keep-last depth of the recording subscriptions."""
-PROGRESS_INTERVAL_S = 2.0
-READY_LINE = "bag: ready"
-"""Printed on stdout once every subscription exists (launchers wait for it)."""
 
 COMMANDS_TOPIC = "/velocity_controller/commands"
 JOINT_STATES_TOPIC = "/joint_states"
