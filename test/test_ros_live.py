@@ -81,6 +81,9 @@ def test_live_solver_switch_and_refusal(launch_slow: Launch) -> None:
     out = dualarm("param", "set", "/controller_node", "solver", "standard_qp")
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "Set parameter successful"
+    # while the run is certainly going (each tool call is a process start: seconds on a loaded machine)
+    echo = dualarm("topic", "echo", "/diagnostics", "-n", "5", "--timeout", "10")
+    assert "value: standard_qp" in echo.stdout and "key: parameter_switches\n    value: '1'" in echo.stdout
     bad = dualarm("param", "set", "/controller_node", "solver", "nope")
     assert bad.returncode == 2
     assert "nope" in bad.stderr and "sparse_qp" in bad.stderr and "refused" in bad.stderr
@@ -90,8 +93,6 @@ def test_live_solver_switch_and_refusal(launch_slow: Launch) -> None:
     assert read_only.returncode == 2 and "read-only" in read_only.stderr
     got = dualarm("param", "get", "/controller_node", "solver")
     assert got.stdout.strip() == "String value is: standard_qp"
-    echo = dualarm("topic", "echo", "/diagnostics", "-n", "5", "--timeout", "10")
-    assert "value: standard_qp" in echo.stdout and "key: parameter_switches\n    value: '1'" in echo.stdout
     assert launch_slow.finish() == 0
     log = "\n".join(launch_slow.lines)
     assert "parameters changed at cycle" in log and "solver='standard_qp'" in log

@@ -215,6 +215,23 @@ class Recorder:
             message_class(type_name), topic, self._callback(topic), qos, raw=True)
 
 
+DRAIN_IDLE_S = 0.3
+"""After a stop signal, messages are taken until none arrived for this long [s] ..."""
+DRAIN_MAX_S = 5.0
+"""... or for at most this long [s] (below the launcher's 10 s grace before SIGTERM)."""
+
+
+def drain(executor: Any, bag: BagWriter) -> None:
+    """Take what is still queued after a stop signal: every message sent before the signal is
+    kept even when the recorder lags behind a fast (lockstep) run."""
+    start = last = time.monotonic()
+    total = bag.total
+    while (now := time.monotonic()) - last < DRAIN_IDLE_S and now - start < DRAIN_MAX_S:
+        executor.spin_once(timeout_sec=0.01)
+        if bag.total != total:
+            total, last = bag.total, time.monotonic()
+
+
 def record(path: Path, topics: Sequence[str], *, record_all: bool = False, duration: float | None = None,
            use_sim_time: bool = False, log: TextIO = sys.stderr) -> int:
     """Record into the bag directory ``path`` until SIGINT/SIGTERM or ``duration`` [s]; return 0.
@@ -253,9 +270,7 @@ def record(path: Path, topics: Sequence[str], *, record_all: bool = False, durat
                 executor.spin_once(timeout_sec=0.02)
             if stop.signal is not None:
                 stopped_by = f" (signal {signal.Signals(stop.signal).name})"
-                drain_end = time.monotonic() + 0.2  # what already arrived is kept
-                while time.monotonic() < drain_end:
-                    executor.spin_once(timeout_sec=0.01)
+                drain(executor, bag)
     finally:
         bag.close()
     print(f"bag closed{stopped_by}: {path}, {bag.total} messages", file=log, flush=True)
