@@ -47,6 +47,8 @@ LINK_NETEM = ("delay", "2ms", "1ms", "loss", "2%")
 LOOPBACK_ROWS = ("stale_states", "target_stopped", "kill_sim", "kill_controller", "recorder_sigint",
                  "recorder_sigterm")
 ROWS = (*LOOPBACK_ROWS, "best_effort_loss", "across_hosts", "link_cut", "link_netem")
+KILL_INTO_MOTION_S = 0.6
+"""kill_controller: seconds into a window of at least 1.5 s of motion (a segment starts from rest)."""
 QUICK = ("stale_states", "kill_controller", "recorder_sigterm")
 """The default test suite's subset (test/test_faults.py)."""
 
@@ -163,7 +165,8 @@ def loopback_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[
             run.start_node("sim_node")
             episodes["kill_sim"] = _Episode(start, resume, _recovered(run, line, RESTART_RECOVER_WITHIN_MS / 1e3))
         if "kill_controller" in names:
-            run.wait_moving(1.0, earliest=run.elapsed() + 0.5)
+            run.wait_moving(1.5, earliest=run.elapsed() + 0.5)
+            time.sleep(KILL_INTO_MOTION_S)  # past the segment's jerk-limited start: the arms move at speed
             say(f"kill_controller: SIGKILL controller_node at t={run.elapsed():.2f} s")
             run.send("controller_node", signal.SIGKILL)
             killed_controller = True
