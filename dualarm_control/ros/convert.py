@@ -204,6 +204,15 @@ def wrench_stamped(ns: int, wrench: np.ndarray, frame_id: str = RIGHT_FRAME) -> 
     return WrenchStamped(header=header(ns, frame_id), wrench=Wrench(force=_vec3(wrench[:3]), torque=_vec3(wrench[3:])))
 
 
+def wrench_vector(msg: Any) -> np.ndarray | str:
+    """geometry_msgs/WrenchStamped -> [fx, fy, fz, tx, ty, tz] (6,), or why it is unusable."""
+    f, t = msg.wrench.force, msg.wrench.torque
+    values = np.array([f.x, f.y, f.z, t.x, t.y, t.z], dtype=float)
+    if not np.all(np.isfinite(values)):
+        return "wrench has non-finite values"
+    return values
+
+
 def clock(ns: int) -> Any:
     """rosgraph_msgs/Clock at ``ns`` (simulation time)."""
     return Clock(clock=stamp(ns))
