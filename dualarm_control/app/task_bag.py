@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -58,7 +58,7 @@ def is_task_bag(path: Path) -> bool:
             return False
         connections = [c for c in reader.connections if c.topic == DIAGNOSTICS_TOPIC]
         for conn, _, raw in reader.messages(connections=connections):
-            for status in reader.deserialize(raw, conn.msgtype).status:
+            for status in cast(Any, reader.deserialize(raw, conn.msgtype)).status:
                 if status.name == CONTROLLER_STATUS and any(kv.key == TASK_KEY for kv in status.values):
                     return True
         return False
@@ -73,12 +73,12 @@ def _read(path: Path) -> _TaskBag:
         topics = (JOINT_STATES_TOPIC, COMMANDS_TOPIC, DIAGNOSTICS_TOPIC)
         connections = [c for c in reader.connections if c.topic in topics]
         for conn, t, raw in reader.messages(connections=connections):
-            msg = reader.deserialize(raw, conn.msgtype)
+            msg: Any = reader.deserialize(raw, conn.msgtype)
             if conn.topic == JOINT_STATES_TOPIC:  # a re-sent state (lockstep) has the same stamp and values
                 out.joint_states.setdefault(stamp_ns(msg.header.stamp),
-                                            (list(msg.name), np.asarray(msg.position, dtype=float)))
+                                            (list(msg.name), np.array(msg.position, dtype=np.float64)))
             elif conn.topic == COMMANDS_TOPIC:
-                out.commands.append((t, np.asarray(msg.data, dtype=float)))
+                out.commands.append((t, np.array(msg.data, dtype=np.float64)))
             else:
                 for status in msg.status:
                     values = {kv.key: kv.value for kv in status.values}

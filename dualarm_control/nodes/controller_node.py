@@ -114,6 +114,7 @@ STATS_EVERY = 200  # cycles between percentile updates
 NAN2 = (float("nan"), float("nan"))
 MOVING = 1e-9  # a target twist / reference velocity norm above this is motion [m/s, rad/s]
 ERROR = 2
+END_DELAY_S = 0.5  # task mode: spin this long after the last cycle, so that a recorder gets the last messages
 
 
 class ControllerNode:
@@ -129,7 +130,6 @@ class ControllerNode:
         self.target_ns = int(self.values["target_timeout"] * 1e9)
         self.task: TaskScenarioController | None = None
         self.task_gain = float("nan")
-        self.completed = False  # task mode: duration reached
         self.task_steps = 0  # task mode: cycles to run (duration / period, rounded up)
         if self.values["scenario"]:
             self.task = self.make_task_controller()
@@ -180,7 +180,7 @@ class ControllerNode:
         self.first_stamp: int | None = None  # task mode: stamp of the first joint state (t = 0)
         self.wrench: tuple[int, np.ndarray, int] | None = None  # task mode: (stamp_ns, wrench, received ns)
         self.wrenches: dict[int, np.ndarray] = {}  # lockstep force variant: by stamp
-        self.finished = False  # run() stops spinning once set (task complete)
+        self.completed_at: float | None = None  # task mode: monotonic s at which the duration was reached
         if not self.lockstep:
             n.create_timer(self.params.period, self.on_watchdog)
         tracked = "joint reference" if self.joint_mode else f"solver '{self.params.solver}'"
@@ -344,7 +344,7 @@ class ControllerNode:
         (force variant); real time: the latest wrench, which must be fresh."""
         assert self.task is not None and self.state is not None
         stamp = self.state[0]
-        if self.completed or stamp == self.last_commanded_stamp:
+        if self.completed_at is not None or stamp == self.last_commanded_stamp:
             return
         wrench = None
         if self.task.force:
@@ -381,11 +381,16 @@ class ControllerNode:
     def complete(self, stamp: int) -> None:
         """Task time is over: report it, stop commanding (the simulator's command timeout brings the
         arms to rest) and end spinning half a second later, so that the last messages reach a recorder."""
-        self.completed = True
+        self.completed_at = time.monotonic()
         self.log.info(f"task scenario '{self.values['scenario']}' complete after {self.cycles} cycles")
         self.pub_diag.publish(convert.diagnostics(stamp, "controller_node", 0, "complete", {
             "solver": self.params.solver, "status": "complete", **self.counters()}))
-        self.end_timer = self.node.create_timer(0.5, lambda: setattr(self, "finished", True))
+
+    @property
+    def finished(self) -> bool:
+        """run() stops spinning once set: half a second (wall clock: sim time stops with the
+        lockstep commands) after the task completed."""
+        return self.completed_at is not None and time.monotonic() - self.completed_at > END_DELAY_S
 
     def publish_task_diagnostics(self, stamp: int, t: float, cycle: TaskCycle) -> None:
         """Per task cycle: status and timing, plus the cycle's task time, normal offset and filtered
