@@ -162,6 +162,8 @@ def launch_scenario(
     if tasks:
         with_scenario += ["-p", f"force:={'true' if force else 'false'}"]
         controller_args = [*with_scenario, *controller_args]
+        if record is not None:  # real time: the task starts once the recorder reads /diagnostics
+            controller_args += ["-p", "task_start_readers:=1"]
         if record_topics == GRAPH_TOPICS:
             record_topics = TASK_TOPICS
     finisher = "controller_node" if tasks else "trajectory_node"

@@ -106,6 +106,9 @@ NODE_PARAMETERS = (
     ParamSpec("force", False, "task mode: force feedback on /wrench (eq 9)", read_only=True),
     ParamSpec("duration", 0.0, "task mode: run length [s] of task time, then exit (0: the scenario's)",
               check=non_negative, read_only=True),
+    ParamSpec("task_start_readers", 0, "task mode, real time: zero commands until /diagnostics has this many "
+              "readers (the launcher sets 1 when recording: the bag then holds the run from t = 0)",
+              check=non_negative, read_only=True),
     ParamSpec("joint_gain", 30.0, "K of the joint-space tracking of reference:=joint [1/s]", check=positive),
 )
 DEFAULT_PRIORITY = 50
@@ -364,6 +367,10 @@ class ControllerNode:
                     return
                 wrench = self.wrench[1]
         if self.first_stamp is None:
+            readers = int(self.values["task_start_readers"])
+            if not self.lockstep and self.pub_diag.get_subscription_count() < readers:
+                self.publish_safe(stamp, f"waiting for {readers} /diagnostics reader(s) before the task starts")
+                return
             self.first_stamp = stamp
         elapsed = stamp - self.first_stamp
         step = round(elapsed / (self.params.period * 1e9))
