@@ -13,7 +13,10 @@ table contact points summed over the steps (``table_contacts``).
 
 A task scenario (pan_cleaning) loads its cell URDF (pan and brush) and its table; with
 ``force:=true`` its ``contact_links`` (pan and brush) make real contact, as in the in-process
-runner (the pan's modelling error is the controller's, not the simulator's).
+runner (the pan's modelling error is the controller's, not the simulator's), and
+``/contact_force`` (geometry_msgs/Vector3Stamped, ``vector.z`` = pybullet's normal contact
+force brush-pan [N], stamped like the joint state after the step) gives the physics' ground
+truth for the report's force metrics.
 
 Real-time mode: a drift-free timer steps the physics one control period per tick, stamps
 are the wall clock. Lockstep mode (``lockstep:=true``): the state of step k (stamped with
@@ -29,7 +32,7 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import WrenchStamped
+from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -97,6 +100,7 @@ class SimNode:
             initial_positions=plan_start(p["plan"]) if p["plan"] else scenario.initial_positions,
         )
         self.table = tasks is not None
+        self.contact = tasks.contact_links if tasks is not None and p["force"] else None
         self.table_contacts = 0  # contact points with the table, summed over steps (as the in-process runner)
         self.period_ns = round(p["control_period"] * 1e9)
         self.lockstep = bool(p["lockstep"])
@@ -110,6 +114,8 @@ class SimNode:
         self.pub_wrench = n.create_publisher(WrenchStamped, "/wrench", 10)
         self.pub_clock = n.create_publisher(Clock, "/clock", 10)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.pub_contact = (n.create_publisher(Vector3Stamped, "/contact_force", 10) if self.contact is not None
+                            else None)
         subscribe_checked(n, Float64MultiArray, "/velocity_controller/commands", self.on_command, qos, self.reject)
         self.log = n.get_logger()
         self.throttle = Throttle(1.0)
@@ -143,6 +149,8 @@ class SimNode:
         self.pub_clock.publish(convert.clock(self.steps * self.period_ns))
         self.pub_js.publish(convert.joint_state(self.cell.joint_names, ns, sample.positions, sample.velocities))
         self.pub_wrench.publish(convert.wrench_stamped(ns, self.cell.wrench()))
+        if self.pub_contact is not None and self.contact is not None:
+            self.pub_contact.publish(convert.contact_force(ns, self.cell.contact_force(*self.contact)))
         self.last_publish = time.monotonic()
 
     def reject(self, reason: str) -> None:

@@ -8,14 +8,12 @@ reported and the circle is tracked. The watchdogs keep their meaning in task mod
 
 from __future__ import annotations
 
-import math
 import os
 import signal
 import time
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from dualarm_control.app.launcher import Launch, launch_scenario, node_command
 from dualarm_control.app.task_bag import is_task_bag, read_task_run, task_report
@@ -110,17 +108,20 @@ def test_task_mode_stale_state_watchdog_fires_target_watchdog_does_not() -> None
     assert "complete after" in text
 
 
-@pytest.mark.parametrize("duration", [7.0])
-def test_force_variant_lockstep(tmp_path: Path, duration: float) -> None:
-    """Force variant over ROS, lockstep: the force loop runs on /wrench; the bag's metrics equal the
-    in-process ones (the contact force of pybullet is not in the bag: the filtered sensor force is)."""
+def test_force_variant_lockstep_bag_metrics_equal_in_process(tmp_path: Path) -> None:
+    """Force variant over ROS, lockstep: the force loop runs on /wrench, the simulator's contact force
+    is on /contact_force; every metric of the bag (force ones included) equals the in-process one, and
+    contact is kept after the first touch."""
+    duration = 7.0
     bag = tmp_path / "bag"
     assert launch_scenario("pan_cleaning", [PARAMS], ["-p", f"duration:={duration!r}"], True, bag,
                            timeout=120.0, force=True) == 0
     log, scenario = read_task_run(bag)
     from_bag = summarize_task_run(log, scenario)
     expected = in_process(duration, force=True)
-    for key in ("circle_rms_error_m", "max_inequality_violation", "min_table_distance_m", "min_singularity_margin"):
-        assert from_bag[key] == expected[key], key
-    assert log.force and np.isfinite(log.measured_force[-100:]).all()
-    assert math.isfinite(float(from_bag["circle_rms_error_m"]))
+    assert set(from_bag) == set(expected)
+    for key, value in expected.items():
+        if key not in WALL_CLOCK:
+            assert from_bag[key] == value, key
+    assert log.force and from_bag["contact_lost_cycles"] == 0
+    assert float(from_bag["force_rms_error_n"]) < 1.0

@@ -30,7 +30,8 @@ GRAPH_TOPICS = ("/joint_states", "/velocity_controller/commands", "/relative_tar
 PLAN_TOPICS = (*GRAPH_TOPICS, "/joint_reference")
 """What ``--record`` records: the cell's graph."""
 TASK_TOPICS = ("/joint_states", "/velocity_controller/commands", "/diagnostics", "/wrench", "/clock")
-"""What ``--record`` records on a task scenario (no target, no relative pose)."""
+"""What ``--record`` records on a task scenario (no target, no relative pose; the force variant adds
+the simulator's ``/contact_force``)."""
 
 
 def node_command(node: str, ros_args: Sequence[str]) -> list[str]:
@@ -165,7 +166,7 @@ def launch_scenario(
         if record is not None:  # real time: the task starts once the recorder reads /diagnostics
             controller_args += ["-p", "task_start_readers:=1"]
         if record_topics == GRAPH_TOPICS:
-            record_topics = TASK_TOPICS
+            record_topics = (*TASK_TOPICS, "/contact_force") if force else TASK_TOPICS
     finisher = "controller_node" if tasks else "trajectory_node"
     launch = Launch()
     interrupted = False

@@ -11,8 +11,9 @@ and :func:`~dualarm_control.app.task_experiment.summarize_task_run` gives the me
 lockstep the joint states, times and offsets are bit-identical to the in-process run, so are
 the metrics (except the cycle times, which are wall-clock measurements).
 
-Not in the bag: pybullet's brush-pan contact force (``contact_force`` is NaN, so the force
-metrics of a force run are the ``measured_force_*`` ones only) and the per-step table
+The force variant's bag also holds ``/contact_force`` (pybullet's brush-pan normal force, the
+ground truth the force metrics use; cycle k takes the sample stamped after its step, as the
+in-process runner measures after ``cell.step()``). Not in the bag: the per-step table
 contacts; ``table_contacts`` is the simulator's running total from its last 1 Hz status.
 """
 
@@ -40,6 +41,7 @@ from dualarm_control.scenario import Scenario, load_scenario
 TASK_KEY = "task_scenario"
 """A controller status with this key is a task cycle (controller_node task mode)."""
 SIM_STATUS = "sim_node"
+CONTACT_TOPIC = "/contact_force"
 
 
 @dataclass
@@ -48,6 +50,7 @@ class _TaskBag:
     commands: list[tuple[int, FloatArray]] = field(default_factory=list)  # (receive ns, data)
     cycles: list[tuple[int, dict[str, str]]] = field(default_factory=list)  # (receive ns, values)
     table_contacts: int = 0
+    contact: dict[int, float] = field(default_factory=dict)  # /contact_force by header stamp
 
 
 def is_task_bag(path: Path) -> bool:
@@ -70,13 +73,15 @@ def _read(path: Path) -> _TaskBag:
     reader = open_reader(path)
     out = _TaskBag()
     try:
-        topics = (JOINT_STATES_TOPIC, COMMANDS_TOPIC, DIAGNOSTICS_TOPIC)
+        topics = (JOINT_STATES_TOPIC, COMMANDS_TOPIC, DIAGNOSTICS_TOPIC, CONTACT_TOPIC)
         connections = [c for c in reader.connections if c.topic in topics]
         for conn, t, raw in reader.messages(connections=connections):
             msg: Any = reader.deserialize(raw, conn.msgtype)
             if conn.topic == JOINT_STATES_TOPIC:  # a re-sent state (lockstep) has the same stamp and values
                 out.joint_states.setdefault(stamp_ns(msg.header.stamp),
                                             (list(msg.name), np.array(msg.position, dtype=np.float64)))
+            elif conn.topic == CONTACT_TOPIC:
+                out.contact.setdefault(stamp_ns(msg.header.stamp), float(msg.vector.z))
             elif conn.topic == COMMANDS_TOPIC:
                 out.commands.append((t, np.array(msg.data, dtype=np.float64)))
             else:
@@ -122,13 +127,19 @@ def read_task_run(path: Path) -> tuple[TaskRunLog, Scenario]:
 
     table = np.zeros(len(stamps))
     table[-1] = bag.table_contacts
-    nan = np.full(len(stamps), np.nan)
+    contact = np.full(len(stamps), np.nan)
+    if bag.contact:  # cycle k's contact is the one after its step: the first sample stamped after it
+        contact_stamps = np.array(sorted(bag.contact), dtype=np.int64)
+        after = np.searchsorted(contact_stamps, np.array(stamps, dtype=np.int64), side="right")
+        for k, i in enumerate(after):
+            if i < len(contact_stamps):
+                contact[k] = bag.contact[int(contact_stamps[i])]
     log = task_run_log(
         scenario, model, float(first["task_gain"]), first["force"] == "1", float(first["control_period_s"]),
         time=column("task_time_s"), positions=positions, commands=commands,
         status=[v["status"] for _, v in cycles], cycle_time=column("cycle_time_s"),
         normal_offset=column("normal_offset_m"), measured_force=column("measured_force_n"),
-        contact_force=nan, table_contacts=table)
+        contact_force=contact, table_contacts=table)
     return log, scenario
 
 
