@@ -13,8 +13,6 @@ import signal
 import time
 from pathlib import Path
 
-import numpy as np
-
 from dualarm_control.app.launcher import Launch, launch_scenario, node_command
 from dualarm_control.app.task_bag import is_task_bag, read_task_run, task_report
 from dualarm_control.app.task_experiment import run_task_scenario, summarize_task_run
@@ -70,10 +68,10 @@ def test_realtime_200hz_reports_cycle_time_and_tracks_the_circle(tmp_path: Path)
     log, scenario = read_task_run(bag)
     metrics = summarize_task_run(log, scenario)
     print({k: metrics[k] for k in ("cycle_time_p50_s", "cycle_time_p99_s", "circle_rms_error_m")})
-    # The recorder subscribes once every topic has a publisher: the first few hundred ms of
-    # cycles may precede it. From then on every cycle is in the bag, up to the end.
-    assert len(log.time) >= 0.85 * DURATION / 0.005
-    assert np.all(np.diff(log.time) < 2.5 * 0.005) and log.time[-1] > DURATION - 0.01
+    # The task starts once the recorder reads /diagnostics (task_start_readers): the bag holds the
+    # run from t = 0 to the end; a cycle may be missing where the loaded machine missed a period.
+    assert log.time[0] == 0.0 and log.time[-1] > DURATION - 0.01
+    assert len(log.time) >= 0.95 * DURATION / 0.005
     assert 0.0 < float(metrics["cycle_time_p99_s"]) < 0.005
     assert float(metrics["circle_rms_error_m"]) < 1e-3
     assert float(metrics["max_inequality_violation"]) <= 1e-4
