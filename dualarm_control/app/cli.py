@@ -149,7 +149,7 @@ def cmd_task_experiment(args: argparse.Namespace, scenario) -> int:
 def cmd_launch(args: argparse.Namespace) -> int:
     """Start the three nodes as processes on a scenario; optionally record a bag."""
     from dualarm_control.app.launcher import launch_scenario
-    from dualarm_control.scenario import scenario_file
+    from dualarm_control.scenario import load_scenario, scenario_file
 
     scenario_file(args.scenario)  # fail early (exit 2) on an unknown scenario
     for f in args.params:
@@ -158,6 +158,9 @@ def cmd_launch(args: argparse.Namespace) -> int:
     extra = []
     if args.solver:
         extra += ["-p", f"solver:={args.solver}"]
+    if (args.gain is not None or args.duration is not None or args.force) and load_scenario(args.scenario).tasks is None:
+        raise DualArmError(f"--gain, --duration and --force apply to task scenarios (pan_cleaning), "
+                           f"not to {args.scenario!r}")
     if args.gain is not None:
         extra += ["-p", f"task_gain:={float(args.gain)!r}"]
     if args.duration is not None:
@@ -171,11 +174,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
         planned = read_plan(plan, DualArmModel().joint_names).scenario  # exit 2 on a bad plan file
         if planned != args.scenario:
             raise DualArmError(f"--plan {plan} was planned on scenario {planned!r}, not {args.scenario!r}")
-    try:
-        return launch_scenario(args.scenario, args.params, extra, args.lockstep, record, args.timeout, args.rate,
-                               plan=plan, force=args.force)
-    except ValueError as exc:
-        raise DualArmError(str(exc)) from None
+    return launch_scenario(args.scenario, args.params, extra, args.lockstep, record, args.timeout, args.rate,
+                           plan=plan, force=args.force)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
