@@ -65,7 +65,7 @@ class TaskScenarioController:
         self.force = force
         self.period = params.period
         self.controller = RelativeController(model, params)
-        self.tasks: list[Task] = spec.build(gain, height_offset=spec.force.model_error if force else 0.0)
+        self.tasks: list[Task] = spec.build_variant(gain, force)
         _check_frames(model, self.tasks)
         index = [i for i, t in enumerate(self.tasks) if isinstance(t, CircleTask)]
         if force and len(index) != 1:

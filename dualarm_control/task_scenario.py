@@ -79,6 +79,11 @@ class TaskScenario:
         that far above the real one)."""
         return [_build(spec, gain, self.table_height, height_offset) for spec in self.tasks]
 
+    def build_variant(self, gain: float, force: bool) -> list[Task]:
+        """The tasks a run uses: with ``force`` the circle includes the pan modelling error
+        (``force.model_error``) that the force loop has to absorb."""
+        return self.build(gain, height_offset=self.force.model_error if force else 0.0)
+
 
 def _value(spec: TaskSpec, key: str, kind: type, default: Any = None) -> Any:
     """``scenario.<task>.<key>`` as a number, a string or a list; ScenarioError naming the key."""

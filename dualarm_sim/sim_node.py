@@ -8,7 +8,15 @@ own cycle counts it) brings the arms to rest, in both modes. A malformed command
 wrong length, NaN/inf) is rejected (throttled log, WARN on ``/diagnostics``, counted) and the
 last valid one kept, so the timeout still applies. Once a second a ``sim_node`` status on
 ``/diagnostics`` counts the steps, the commands received and rejected, and the command
-timeouts (WARN while the arms are held at rest by the timeout).
+timeouts (WARN while the arms are held at rest by the timeout), and in a task scenario the
+table contact points summed over the steps (``table_contacts``).
+
+A task scenario (pan_cleaning) loads its cell URDF (pan and brush) and its table; with
+``force:=true`` its ``contact_links`` (pan and brush) make real contact, as in the in-process
+runner (the pan's modelling error is the controller's, not the simulator's), and
+``/contact_force`` (geometry_msgs/Vector3Stamped, ``vector.z`` = pybullet's normal contact
+force brush-pan [N], stamped like the joint state after the step) gives the physics' ground
+truth for the report's force metrics.
 
 Real-time mode: a drift-free timer steps the physics one control period per tick, stamps
 are the wall clock. Lockstep mode (``lockstep:=true``): the state of step k (stamped with
@@ -24,7 +32,7 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import WrenchStamped
+from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -47,6 +55,8 @@ from dualarm_sim.cell import CellConfig, DualArmCell
 
 PARAMETERS = (
     ParamSpec("scenario", "assembly", "scenario name or YAML path (initial configuration)", read_only=True),
+    ParamSpec("force", False, "task scenario: its contact_links touch (the force variant of pan_cleaning)",
+              read_only=True),
     ParamSpec("control_period", 0.005, "control period [s]", check=positive, read_only=True),
     ParamSpec("physics_rate_hz", 1000.0, "physics rate [Hz] (>= 1000)", check=positive, read_only=True),
     ParamSpec("command_timeout", 0.05, "command age that brings the arms to rest [s]", check=positive),
@@ -81,11 +91,17 @@ class SimNode:
         self.node = Node("sim_node", context=context)
         p = declare(self.node, PARAMETERS)
         scenario = load_scenario(p["scenario"])
+        tasks = scenario.tasks  # a task scenario: its cell (pan and brush), table and contact pair
         self.cell = DualArmCell(
-            CellConfig(control_period=p["control_period"], physics_rate_hz=p["physics_rate_hz"],
-                       command_timeout=p["command_timeout"]),
+            CellConfig(urdf=scenario.urdf_path, control_period=p["control_period"],
+                       physics_rate_hz=p["physics_rate_hz"], command_timeout=p["command_timeout"],
+                       table_height=tasks.table_height if tasks is not None else None,
+                       contact_pairs=(tasks.contact_links,) if tasks is not None and p["force"] else ()),
             initial_positions=plan_start(p["plan"]) if p["plan"] else scenario.initial_positions,
         )
+        self.table = tasks is not None
+        self.contact = tasks.contact_links if tasks is not None and p["force"] else None
+        self.table_contacts = 0  # contact points with the table, summed over steps (as the in-process runner)
         self.period_ns = round(p["control_period"] * 1e9)
         self.lockstep = bool(p["lockstep"])
         self.wait_for = int(p["lockstep_subscribers"])
@@ -98,6 +114,8 @@ class SimNode:
         self.pub_wrench = n.create_publisher(WrenchStamped, "/wrench", 10)
         self.pub_clock = n.create_publisher(Clock, "/clock", 10)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.pub_contact = (n.create_publisher(Vector3Stamped, "/contact_force", 10) if self.contact is not None
+                            else None)
         subscribe_checked(n, Float64MultiArray, "/velocity_controller/commands", self.on_command, qos, self.reject)
         self.log = n.get_logger()
         self.throttle = Throttle(1.0)
@@ -131,6 +149,8 @@ class SimNode:
         self.pub_clock.publish(convert.clock(self.steps * self.period_ns))
         self.pub_js.publish(convert.joint_state(self.cell.joint_names, ns, sample.positions, sample.velocities))
         self.pub_wrench.publish(convert.wrench_stamped(ns, self.cell.wrench()))
+        if self.pub_contact is not None and self.contact is not None:
+            self.pub_contact.publish(convert.contact_force(ns, self.cell.contact_force(*self.contact)))
         self.last_publish = time.monotonic()
 
     def reject(self, reason: str) -> None:
@@ -173,10 +193,13 @@ class SimNode:
         self.timed_out = timed_out
         self.cell.step()
         self.steps += 1
+        if self.table:
+            self.table_contacts += self.cell.table_contacts()
 
     def publish_status(self) -> None:
         values = {"steps": self.steps, "commands_received": self.received, "commands_rejected": self.rejected,
-                  "command_timeouts": self.timeouts, "timed_out": self.timed_out}
+                  "command_timeouts": self.timeouts, "timed_out": self.timed_out,
+                  **({"table_contacts": self.table_contacts} if self.table else {})}
         message = "arms at rest: command timeout" if self.timed_out else "running"
         self.pub_diag.publish(convert.diagnostics(self._stamp_ns(), "sim_node", 1 if self.timed_out else 0,
                                                   message, values))

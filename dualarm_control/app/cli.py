@@ -149,7 +149,7 @@ def cmd_task_experiment(args: argparse.Namespace, scenario) -> int:
 def cmd_launch(args: argparse.Namespace) -> int:
     """Start the three nodes as processes on a scenario; optionally record a bag."""
     from dualarm_control.app.launcher import launch_scenario
-    from dualarm_control.scenario import scenario_file
+    from dualarm_control.scenario import load_scenario, scenario_file
 
     scenario_file(args.scenario)  # fail early (exit 2) on an unknown scenario
     for f in args.params:
@@ -158,6 +158,13 @@ def cmd_launch(args: argparse.Namespace) -> int:
     extra = []
     if args.solver:
         extra += ["-p", f"solver:={args.solver}"]
+    if (args.gain is not None or args.duration is not None or args.force) and load_scenario(args.scenario).tasks is None:
+        raise DualArmError(f"--gain, --duration and --force apply to task scenarios (pan_cleaning), "
+                           f"not to {args.scenario!r}")
+    if args.gain is not None:
+        extra += ["-p", f"task_gain:={float(args.gain)!r}"]
+    if args.duration is not None:
+        extra += ["-p", f"duration:={float(args.duration)!r}"]
     record = Path(args.record) if args.record else None
     plan = Path(args.plan) if args.plan else None
     if plan is not None:
@@ -168,7 +175,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         if planned != args.scenario:
             raise DualArmError(f"--plan {plan} was planned on scenario {planned!r}, not {args.scenario!r}")
     return launch_scenario(args.scenario, args.params, extra, args.lockstep, record, args.timeout, args.rate,
-                           plan=plan)
+                           plan=plan, force=args.force)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -338,8 +345,16 @@ def cmd_report(args: argparse.Namespace) -> int:
     """Metrics of a recorded run: DIR/metrics.json, DIR/velocity_norms.png and the table."""
     from dualarm_control.app.bag import report
     from dualarm_control.app.report import format_table
+    from dualarm_control.app.task_bag import is_task_bag, task_report
+    from dualarm_control.app.task_report import format_task_table
 
     out = Path(args.output)
+    if is_task_bag(Path(args.bag)):  # a task scenario (pan_cleaning over ROS): the experiment's task metrics
+        task_results = task_report(Path(args.bag), out)
+        print(format_task_table(task_results))
+        print(f"\nwrote {out / 'metrics.json'}, {out / 'tool_path.png'}, {out / 'task_values.png'} and "
+              f"{out / 'joint_velocities.png'}")
+        return 0
     results = report(Path(args.bag), out)
     print(format_table(results))
     print(f"\nwrote {out / 'metrics.json'} and {out / 'velocity_norms.png'}")
@@ -578,6 +593,13 @@ def build_parser() -> argparse.ArgumentParser:
     lau.add_argument("--plan", metavar="PLAN_JSON",
                      help="execute a plan of 'dualarm plan': the sim starts at its first configuration, the "
                      "trajectory node streams its joint trajectory, the controller tracks it (reference:=joint)")
+    lau.add_argument("--force", action="store_true",
+                     help="task scenario: force feedback variant (contact in the sim, -p force:=true on both nodes)")
+    lau.add_argument("--gain", type=float, metavar="K",
+                     help="task scenario: gain k of every task (-p task_gain:=K; default: the scenario's first "
+                     "gain, or force.gain with --force)")
+    lau.add_argument("--duration", type=float, metavar="S",
+                     help="task scenario: run S seconds of task time (-p duration:=S; default: the scenario's)")
     lau.add_argument("--timeout", type=float, default=None, metavar="S", help="stop after S seconds")
     lau.set_defaults(func=cmd_launch)
     fau = sub.add_parser("faults", help="fault matrix against real processes (watchdogs, kills, signals, links)",

@@ -29,6 +29,9 @@ GRAPH_TOPICS = ("/joint_states", "/velocity_controller/commands", "/relative_tar
                 "/diagnostics", "/wrench", "/clock")
 PLAN_TOPICS = (*GRAPH_TOPICS, "/joint_reference")
 """What ``--record`` records: the cell's graph."""
+TASK_TOPICS = ("/joint_states", "/velocity_controller/commands", "/diagnostics", "/wrench", "/clock")
+"""What ``--record`` records on a task scenario (no target, no relative pose; the force variant adds
+the simulator's ``/contact_force``)."""
 
 
 def node_command(node: str, ros_args: Sequence[str]) -> list[str]:
@@ -132,9 +135,21 @@ def launch_scenario(
     rate_hz: float | None = None,
     record_topics: Sequence[str] = GRAPH_TOPICS,
     plan: Path | None = None,
+    force: bool = False,
 ) -> int:
     """Run the three nodes (and a recorder of ``record_topics``) on ``scenario``; ``rate_hz`` sets every
-    node's control period. Returns 0 if the scenario completed cleanly, 130 on Ctrl-C."""
+    node's control period. Returns 0 if the scenario completed cleanly, 130 on Ctrl-C.
+
+    A task scenario (pan_cleaning, paper 001) runs sim_node and controller_node only: the
+    controller runs the scenario's tasks (``-p scenario:=NAME``), its task time comes from the
+    joint-state stamps, so there is no trajectory_node; the run ends when the controller reports
+    the scenario's duration complete. ``force`` selects the force variant in both nodes.
+    """
+    from dualarm_control.scenario import load_scenario
+
+    tasks = load_scenario(scenario).tasks is not None
+    if force and not tasks:
+        raise ValueError(f"force feedback applies to task scenarios (pan_cleaning), not to {scenario!r}")
     common = ["-p", f"lockstep:={'true' if lockstep else 'false'}"]
     if rate_hz is not None:
         common += ["-p", f"control_period:={1.0 / rate_hz!r}"]
@@ -145,6 +160,14 @@ def launch_scenario(
         controller_args = [*controller_args, "-p", "reference:=joint"]
     for f in params:
         common += ["--params-file", str(Path(f).resolve())]
+    if tasks:
+        with_scenario += ["-p", f"force:={'true' if force else 'false'}"]
+        controller_args = [*with_scenario, *controller_args]
+        if record is not None:  # real time: the task starts once the recorder reads /diagnostics
+            controller_args += ["-p", "task_start_readers:=1"]
+        if record_topics == GRAPH_TOPICS:
+            record_topics = (*TASK_TOPICS, "/contact_force") if force else TASK_TOPICS
+    finisher = "controller_node" if tasks else "trajectory_node"
     launch = Launch()
     interrupted = False
     try:
@@ -152,12 +175,13 @@ def launch_scenario(
             record_topics = PLAN_TOPICS
         if record is not None:  # subscribes the graph's topics once they all have a publisher
             launch.start("bag", recorder_command(record, record_topics, lockstep))
-        readers = 2 + (record is not None)
+        readers = (1 if tasks else 2) + (record is not None)
         launch.start("controller_node", node_command("controller_node", [*common, *sim_time, *controller_args]))
-        launch.start("trajectory_node", node_command("trajectory_node", [*common, *sim_time, *with_scenario]))
+        if not tasks:
+            launch.start("trajectory_node", node_command("trajectory_node", [*common, *sim_time, *with_scenario]))
         launch.start("sim_node", node_command("sim_node", [*common, *with_scenario,
                                                             "-p", f"lockstep_subscribers:={readers}"]))
-        codes = launch.wait_until("trajectory_node", timeout)
+        codes = launch.wait_until(finisher, timeout)
     except KeyboardInterrupt:
         interrupted = True
         print("[launch] Ctrl-C: stopping every node", flush=True)
@@ -172,4 +196,4 @@ def launch_scenario(
         print(f"[launch] scenario complete: {', '.join(codes)} exited 0", flush=True)
     if interrupted:
         return 130
-    return 0 if codes.get("trajectory_node") == 0 and not failed else 1
+    return 0 if codes.get(finisher) == 0 and not failed else 1

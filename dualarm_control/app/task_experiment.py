@@ -13,6 +13,7 @@ offset. The table is in the cell in both variants.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -20,12 +21,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualarm_control.controller import ControllerParams
-from dualarm_control.kinematics import DualArmModel, FloatArray
+from dualarm_control.kinematics import Configuration, DualArmModel, FloatArray
 from dualarm_control.metrics import percentiles
 from dualarm_control.scenario import Scenario
 from dualarm_control.task_control import TaskScenarioController
 from dualarm_control.task_scenario import TaskScenario
-from dualarm_control.tasks import INEQUALITY, ManipulabilityTask, TablePlaneTask
+from dualarm_control.tasks import (
+    INEQUALITY,
+    CircleTask,
+    ManipulabilityTask,
+    TablePlaneTask,
+    evaluate_tasks,
+)
 from dualarm_sim.cell import CellConfig, DualArmCell
 
 
@@ -85,8 +92,7 @@ def run_task_scenario(
     spec = _task_scenario(scenario)
     model = DualArmModel(scenario.urdf_path)
     control = TaskScenarioController(model, params, spec, gain, force)
-    circle = control.circle
-    if circle is None:
+    if control.circle is None:
         raise ValueError(f"scenario {scenario.name!r} has no circle task")
     period = params.period
     steps = math.ceil((duration if duration is not None else spec.duration) / period)
@@ -97,10 +103,6 @@ def run_task_scenario(
     rec = {k: np.zeros((steps, n)) for k in ("positions", "commands")}
     scal = {k: np.zeros(steps) for k in ("time", "cycle_time", "contact_force", "normal_offset", "table_contacts",
                                          "measured_force")}
-    tip = np.zeros((steps, 3))
-    values: dict[str, list[FloatArray]] = {t.name: [] for t in control.tasks}
-    bounds: dict[str, FloatArray] = {}
-    kinds: dict[str, str] = {t.name: t.kind for t in control.tasks}
     status: list[str] = []
     every = max(steps // 100, 1)
     with DualArmCell(config, initial_positions=scenario.initial_positions) as cell:
@@ -111,9 +113,6 @@ def run_task_scenario(
             out = cycle.output
             cell.apply_command(out.velocities)
             rec["positions"][k], rec["commands"][k] = state.positions, out.velocities
-            for rows in out.rows:
-                values[rows.name].append(rows.value)
-                bounds.setdefault(rows.name, rows.bound)
             status.append(out.result.status)
             for key, value in (("time", t), ("cycle_time", out.cycle_time), ("normal_offset", cycle.normal_offset),
                                ("measured_force", cycle.measured_force)):
@@ -123,13 +122,64 @@ def run_task_scenario(
             scal["table_contacts"][k] = cell.table_contacts()
             if progress is not None and (k % every == 0 or k == steps - 1):
                 progress((k + 1) / steps, "circle")
-    for k, q in enumerate(rec["positions"]):
+    return task_run_log(scenario, model, gain, force, period, status=status, **rec, **scal)
+
+
+def task_run_log(
+    scenario: Scenario,
+    model: DualArmModel,
+    gain: float,
+    force: bool,
+    period: float,
+    *,
+    time: FloatArray,
+    positions: FloatArray,
+    commands: FloatArray,
+    status: list[str],
+    cycle_time: FloatArray,
+    normal_offset: FloatArray,
+    measured_force: FloatArray,
+    contact_force: FloatArray,
+    table_contacts: FloatArray,
+) -> TaskRunLog:
+    """The :class:`TaskRunLog` of a run from its per-cycle record (N rows each, fields as there).
+
+    The task values f_i and bounds b_i and the tool path in the pan frame are evaluated here,
+    from the measured joint positions and the cycle times (the circle at the cycle's normal
+    offset f_F in the force variant): the same values the controller solved with, computed by
+    the one piece of code that serves the in-process runner and a recorded bag
+    (:mod:`dualarm_control.app.task_bag`).
+    """
+    spec = _task_scenario(scenario)
+    tasks = spec.build_variant(gain, force)
+    circles = [(i, t) for i, t in enumerate(tasks) if isinstance(t, CircleTask)]
+    if not circles:
+        raise ValueError(f"scenario {scenario.name!r} has no circle task")
+    circle_index, circle = circles[0]
+    values: dict[str, list[FloatArray]] = {t.name: [] for t in tasks}
+    bounds: dict[str, FloatArray] = {}
+    tip = np.zeros((len(time), 3))
+    for k, (q, t) in enumerate(zip(positions, time, strict=True)):
+        cycle_tasks = tasks
+        if force:
+            cycle_tasks = list(tasks)
+            cycle_tasks[circle_index] = dataclasses.replace(circle, normal_offset=float(normal_offset[k]))
+        for rows in evaluate_tasks(cycle_tasks, Configuration(model, model.check_q(q)), float(t)):
+            values[rows.name].append(rows.value)
+            bounds.setdefault(rows.name, rows.bound)
         o1, o2 = model.frame_poses(q, (circle.pan_frame, circle.tool_frame))
         tip[k] = o1.rotation.T @ (o2.translation - o1.translation)
     label = f"k={gain:g}" + (" force" if force else "")
-    return TaskRunLog(label=label, gain=gain, force=force, period=period, status=status,
-                      values={name: np.array(v) for name, v in values.items()}, bounds=bounds, kinds=kinds,
-                      tip_in_pan=tip, set_point=spec.force.set_point if force else float("nan"), **rec, **scal)
+    return TaskRunLog(label=label, gain=gain, force=force, period=period, time=np.asarray(time, dtype=float),
+                      positions=np.asarray(positions, dtype=float), commands=np.asarray(commands, dtype=float),
+                      status=list(status), cycle_time=np.asarray(cycle_time, dtype=float),
+                      values={name: np.array(v) for name, v in values.items()}, bounds=bounds,
+                      kinds={t.name: t.kind for t in tasks}, tip_in_pan=tip,
+                      contact_force=np.asarray(contact_force, dtype=float),
+                      measured_force=np.asarray(measured_force, dtype=float),
+                      normal_offset=np.asarray(normal_offset, dtype=float),
+                      table_contacts=np.asarray(table_contacts, dtype=float),
+                      set_point=spec.force.set_point if force else float("nan"))
 
 
 def convergence_time(time: FloatArray, error: FloatArray, threshold: float) -> float:

@@ -31,6 +31,18 @@ a time source that restarted is accepted after 3 consecutive monotonic samples (
 restarted"); no target yet -> zero command; a solver failure gives the bounded least-squares
 fallback (status "fallback", counted as ``solver_fallbacks``).
 
+Task mode (paper 001, ``scenario:=pan_cleaning``, a scenario with ``tasks``): no
+``/relative_target``; every joint state drives one cycle of
+:class:`~dualarm_control.task_control.TaskScenarioController` (the tasks at gain
+``task_gain``, with ``force:=true`` the force loop of eq (9) on the latest ``/wrench``) at task
+time t = joint-state stamp - first joint-state stamp (lockstep: t = k T, k the step count of
+the stamps, as the in-process runner counts). /diagnostics carries per cycle the task time,
+the normal offset f_F and the filtered force the cycle used (full precision, what ``dualarm
+report`` needs to recompute the task values from /joint_states). The run ends after
+``duration`` (0: the scenario's) of task time: the node reports "complete" and exits 0. The
+target watchdog does not apply (there is no target stream); the stale-state watchdog does,
+and in the force variant a /wrench older than ``stale_timeout`` is stale input too.
+
 Live parameters: ``solver``, ``gain``, ``l1_weight``, the QP tolerances (every controller
 parameter that is not read-only) can be set on the running node (``dualarm param set`` or
 ``ros2 param set``). A value the core refuses is refused with its reason; an accepted change
@@ -45,7 +57,7 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -58,10 +70,10 @@ from dualarm_control.controller import (
     RelativeController,
     controller_params,
 )
-from dualarm_control.errors import DualArmError
+from dualarm_control.errors import DualArmError, ScenarioError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.metrics import percentiles
-from dualarm_control.params import ParamSpec, positive
+from dualarm_control.params import ParamSpec, non_negative, positive
 from dualarm_control.ros import convert
 from dualarm_control.ros.inputs import StampGate, Throttle, subscribe_checked
 from dualarm_control.ros.node import (
@@ -72,6 +84,8 @@ from dualarm_control.ros.node import (
     usage,
 )
 from dualarm_control.ros.qos import QOS_PARAMETER, stream_qos
+from dualarm_control.scenario import load_scenario
+from dualarm_control.task_control import TaskCycle, TaskScenarioController
 
 NODE_PARAMETERS = (
     ParamSpec("lockstep", False, "compute one command per joint-state stamp (deterministic runs)", read_only=True),
@@ -85,6 +99,16 @@ NODE_PARAMETERS = (
     ParamSpec("reference", "relative", "what is tracked: the relative target (the solvers) or a planned "
               "joint trajectory on /joint_reference (qd_ref + joint_gain (q_ref - q), eq 23 bounds)",
               choices=lambda: ["relative", "joint"], read_only=True),
+    ParamSpec("scenario", "", "task scenario (e.g. pan_cleaning, name or YAML path): run its tasks instead of "
+              "following /relative_target ('': relative mode)", read_only=True),
+    ParamSpec("task_gain", 0.0, "task mode: gain k of every task [1/s] (0: the scenario's first gain, or "
+              "force.gain with force)", check=non_negative, read_only=True),
+    ParamSpec("force", False, "task mode: force feedback on /wrench (eq 9)", read_only=True),
+    ParamSpec("duration", 0.0, "task mode: run length [s] of task time, then exit (0: the scenario's)",
+              check=non_negative, read_only=True),
+    ParamSpec("task_start_readers", 0, "task mode, real time: zero commands until /diagnostics has this many "
+              "readers (the launcher sets 1 when recording: the bag then holds the run from t = 0)",
+              check=non_negative, read_only=True),
     ParamSpec("joint_gain", 30.0, "K of the joint-space tracking of reference:=joint [1/s]", check=positive),
 )
 DEFAULT_PRIORITY = 50
@@ -93,6 +117,7 @@ STATS_EVERY = 200  # cycles between percentile updates
 NAN2 = (float("nan"), float("nan"))
 MOVING = 1e-9  # a target twist / reference velocity norm above this is motion [m/s, rad/s]
 ERROR = 2
+END_DELAY_S = 0.5  # task mode: spin this long after the last cycle, so that a recorder gets the last messages
 
 
 class ControllerNode:
@@ -106,8 +131,16 @@ class ControllerNode:
         self.lockstep = bool(self.values["lockstep"])
         self.stale_ns = int(self.values["stale_timeout"] * 1e9)
         self.target_ns = int(self.values["target_timeout"] * 1e9)
-        self.model = DualArmModel()
-        self.controller = RelativeController(self.model, self.params)
+        self.task: TaskScenarioController | None = None
+        self.task_gain = float("nan")
+        self.task_steps = 0  # task mode: cycles to run (duration / period, rounded up)
+        if self.values["scenario"]:
+            self.task = self.make_task_controller()
+            self.model = self.task.model
+            self.controller = self.task.controller
+        else:
+            self.model = DualArmModel()
+            self.controller = RelativeController(self.model, self.params)
         self.pending: tuple[dict[str, Any], RelativeController] | None = None
         self.order = {name: i for i, name in enumerate(self.model.joint_names)}
         n = self.node
@@ -116,11 +149,16 @@ class ControllerNode:
         self.pub_pose = n.create_publisher(PoseStamped, "/relative_pose", 10)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
         subscribe_checked(n, JointState, "/joint_states", self.on_joint_state, qos, self.on_malformed)
-        subscribe_checked(n, MultiDOFJointTrajectory, "/relative_target", self.on_target, qos, self.on_malformed)
+        if self.task is None:
+            subscribe_checked(n, MultiDOFJointTrajectory, "/relative_target", self.on_target, qos,
+                              self.on_malformed)
+        elif self.task.force:
+            subscribe_checked(n, WrenchStamped, "/wrench", self.on_wrench, 10, self.on_malformed)
         self.joint_mode = self.values["reference"] == "joint"
         if self.joint_mode:
             subscribe_checked(n, JointTrajectory, "/joint_reference", self.on_joint_reference, qos, self.on_malformed)
-        self.gates = {name: StampGate(name) for name in ("joint_states", "relative_target", "joint_reference")}
+        self.gates = {name: StampGate(name) for name in ("joint_states", "relative_target", "joint_reference",
+                                                         "wrench")}
         self.reach = self.model.relative_reach()
         self.joint_ref: tuple[int, np.ndarray, np.ndarray] | None = None
         self.joint_refs: dict[int, tuple[int, np.ndarray, np.ndarray]] = {}  # lockstep: by stamp
@@ -142,15 +180,34 @@ class ControllerNode:
         self.jitter: list[float] = []
         self.latency: list[float] = []
         self.stats: tuple[tuple[float, float], tuple[float, float]] = (NAN2, NAN2)
+        self.first_stamp: int | None = None  # task mode: stamp of the first joint state (t = 0)
+        self.wrench: tuple[int, np.ndarray, int] | None = None  # task mode: (stamp_ns, wrench, received ns)
+        self.wrenches: dict[int, np.ndarray] = {}  # lockstep force variant: by stamp
+        self.completed_at: float | None = None  # task mode: monotonic s at which the duration was reached
         if not self.lockstep:
             n.create_timer(self.params.period, self.on_watchdog)
         tracked = "joint reference" if self.joint_mode else f"solver '{self.params.solver}'"
+        if self.task is not None:
+            tracked += (f" on task scenario '{self.values['scenario']}' (k={self.task_gain:g}"
+                        f"{', force feedback' if self.task.force else ''}, {self.task_steps} cycles)")
         self.log.info(f"{tracked} (K={self.params.gain}, T={self.params.period} s, "
                       f"{'lockstep' if self.lockstep else 'real-time, event-driven'})")
         if priority_note and priority_note != "disabled":
             self.log.warning(priority_note)
         elif not priority_note:
             self.log.info(f"running under SCHED_FIFO priority {self.values['thread_priority']}")
+
+    def make_task_controller(self) -> TaskScenarioController:
+        """Task mode: the scenario's tasks on its URDF at gain ``task_gain`` (ScenarioError -> exit 2)."""
+        scenario = load_scenario(self.values["scenario"])
+        if scenario.tasks is None:
+            raise ScenarioError(f"controller_node.scenario: {scenario.name!r} has no tasks (a segment scenario "
+                                "follows /relative_target: leave scenario empty)")
+        spec, force = scenario.tasks, bool(self.values["force"])
+        self.task_gain = float(self.values["task_gain"]) or (spec.force.gain if force else spec.gains[0])
+        duration = float(self.values["duration"]) or spec.duration
+        self.task_steps = int(np.ceil(duration / self.params.period - 1e-9))
+        return TaskScenarioController(DualArmModel(scenario.urdf_path), self.params, spec, self.task_gain, force)
 
     def close(self) -> None:
         jp = percentiles(np.array(self.jitter)) if self.jitter else NAN2
@@ -189,6 +246,8 @@ class ControllerNode:
         self.pending = None
         changed = {k: v for k, v in merged.items() if self.values.get(k) != v}
         self.values, self.controller, self.params = merged, controller, controller.params
+        if self.task is not None:  # the task loop keeps its force state, solves with the new controller
+            self.task.controller = controller
         self.stale_ns = int(merged["stale_timeout"] * 1e9)
         self.target_ns = int(merged["target_timeout"] * 1e9)
         self.switches += 1
@@ -231,7 +290,9 @@ class ControllerNode:
         now = time.monotonic_ns()
         self.track_arrival(now)
         self.state = (stamp, decoded[0], now)
-        if self.lockstep:
+        if self.task is not None:
+            self.on_task_state()
+        elif self.lockstep:
             self.try_lockstep()
         elif self.target is None:
             self.publish_safe(stamp, "waiting for relative_target")
@@ -265,6 +326,107 @@ class ControllerNode:
         if self.lockstep:
             self.joint_refs[value[0]] = value
             self.try_lockstep()
+
+    def on_wrench(self, msg: Any) -> None:
+        """Task mode, force variant: the F/T reading at the brush (the latest one; lockstep: by stamp)."""
+        value = convert.wrench_vector(msg)
+        stamp = convert.stamp_ns(msg.header.stamp)
+        if isinstance(value, str):
+            self.reject(stamp, f"wrench rejected: {value}")
+            return
+        if not self.stamp_accepted("wrench", stamp):
+            return
+        self.wrench = (stamp, value, time.monotonic_ns())
+        if self.lockstep:
+            self.wrenches[stamp] = value
+            self.on_task_state()
+
+    # --- task mode (paper 001) ----------------------------------------------------
+    def on_task_state(self) -> None:
+        """One task cycle per joint state; lockstep: once per stamp, with the wrench of that stamp
+        (force variant); real time: the latest wrench, which must be fresh."""
+        assert self.task is not None and self.state is not None
+        stamp = self.state[0]
+        if self.completed_at is not None or stamp == self.last_commanded_stamp:
+            return
+        wrench = None
+        if self.task.force:
+            if self.lockstep:
+                if stamp not in self.wrenches:
+                    return  # its wrench is on the way
+                wrench = self.wrenches[stamp]
+                for old in [s for s in self.wrenches if s <= stamp]:
+                    del self.wrenches[old]
+            elif self.wrench is None:
+                self.publish_safe(stamp, "waiting for wrench")
+                return
+            else:
+                age = time.monotonic_ns() - self.wrench[2]
+                if age > self.stale_ns:
+                    self.enter_safe_state(stamp, f"wrench stale by {age / 1e6:.1f} ms")
+                    return
+                wrench = self.wrench[1]
+        if self.first_stamp is None:
+            readers = int(self.values["task_start_readers"])
+            if not self.lockstep and self.pub_diag.get_subscription_count() < readers:
+                self.publish_safe(stamp, f"waiting for {readers} /diagnostics reader(s) before the task starts")
+                return
+            self.first_stamp = stamp
+        elapsed = stamp - self.first_stamp
+        step = round(elapsed / (self.params.period * 1e9))
+        if step >= self.task_steps:
+            self.complete(stamp)
+            return
+        t = step * self.params.period if self.lockstep else elapsed * 1e-9  # lockstep: as the in-process runner
+        if not self.lockstep:
+            self.leave_safe_state()
+        self.apply_pending()
+        cycle = self.task.step(self.state[1], t, wrench)
+        self.finish_cycle(stamp, cycle.output.velocities, cycle.output.result, self.state[2])
+        self.publish_task_diagnostics(stamp, t, cycle)
+
+    def complete(self, stamp: int) -> None:
+        """Task time is over: report it, stop commanding (the simulator's command timeout brings the
+        arms to rest) and end spinning half a second later, so that the last messages reach a recorder."""
+        self.completed_at = time.monotonic()
+        self.log.info(f"task scenario '{self.values['scenario']}' complete after {self.cycles} cycles")
+        self.pub_diag.publish(convert.diagnostics(stamp, "controller_node", 0, "complete", {
+            "solver": self.params.solver, "status": "complete", **self.counters()}))
+
+    @property
+    def finished(self) -> bool:
+        """run() stops spinning once set: half a second (wall clock: sim time stops with the
+        lockstep commands) after the task completed."""
+        return self.completed_at is not None and time.monotonic() - self.completed_at > END_DELAY_S
+
+    def publish_task_diagnostics(self, stamp: int, t: float, cycle: TaskCycle) -> None:
+        """Per task cycle: status and timing, plus the cycle's task time, normal offset and filtered
+        force at full precision (repr) -- with /joint_states what the report recomputes the task values from."""
+        out, r = cycle.output, cycle.output.result
+        level = 2 if r.failed else (1 if r.status != "solved" else 0)
+        circle = next((rows for rows in out.rows if self.task is not None and self.task.circle is not None
+                       and rows.name == self.task.circle.name), None)
+        values = {
+            "solver": self.params.solver,
+            "status": r.status,
+            "solve_time_s": f"{r.solve_time:.6e}",
+            "cycle_time_s": repr(out.cycle_time),
+            "iterations": r.iterations,
+            "active_joints": r.active_joints,
+            "control_period_s": self.params.period,
+            "stamp_ns": stamp,
+            "task_scenario": self.values["scenario"],
+            "task_gain": repr(self.task_gain),
+            "force": int(self.task is not None and self.task.force),
+            "task_time_s": repr(t),
+            "normal_offset_m": repr(cycle.normal_offset),
+            "measured_force_n": repr(cycle.measured_force),
+            "circle_error_m": f"{float(np.linalg.norm(circle.value)) if circle is not None else float('nan'):.6e}",
+            **self.counters(),
+            "watchdog": self.watchdog_text(),
+            "mode": "lockstep" if self.lockstep else "realtime",
+        }
+        self.pub_diag.publish(convert.diagnostics(stamp, "controller_node", level, r.detail or r.status, values))
 
     # --- cycles -----------------------------------------------------------------
     def track_arrival(self, now: int) -> None:
@@ -351,7 +513,14 @@ class ControllerNode:
             out = self.controller.track_joints(q, ref[1], ref[2], target, self.values["joint_gain"])
         else:
             out = self.controller.step(q, target)
-        self.send_command(out.velocities)
+        latency = self.finish_cycle(stamp, out.velocities, out.result, received)
+        if np.all(np.isfinite(out.position)):
+            self.pub_pose.publish(convert.pose_stamped(stamp, out.position, out.rotation))
+        self.publish_diagnostics(stamp, out, latency)
+
+    def finish_cycle(self, stamp: int, velocities: np.ndarray, result: Any, received: int) -> float:
+        """Send a cycle's command and count it; returns the state-to-command latency [s]."""
+        self.send_command(velocities)
         # Real time: from the state's stamp (its publication, wall clock) to the command's
         # publication, transport included. Lockstep stamps are simulation time: from receipt.
         latency = (time.monotonic_ns() - received if self.lockstep else time.time_ns() - stamp) / 1e9
@@ -360,15 +529,13 @@ class ControllerNode:
             self.missed += 1
         self.last_commanded_stamp = stamp
         self.cycles += 1
-        if out.result.failed:
+        if result.failed:
             self.failures += 1
-            self.warn(f"solver {out.result.status}: {out.result.detail}; safe command sent")
-        elif out.result.fell_back:
+            self.warn(f"solver {result.status}: {result.detail}; safe command sent")
+        elif result.fell_back:
             self.fallbacks += 1
-            self.warn(f"solver fallback: {out.result.detail}")
-        if np.all(np.isfinite(out.position)):
-            self.pub_pose.publish(convert.pose_stamped(stamp, out.position, out.rotation))
-        self.publish_diagnostics(stamp, out, latency)
+            self.warn(f"solver fallback: {result.detail}")
+        return latency
 
     def publish_safe(self, stamp: int, reason: str, level: int = 1) -> None:
         """Zero-velocity command with the reason on /diagnostics (``level``) and in the (throttled) log."""

@@ -21,6 +21,7 @@ from geometry_msgs.msg import (
     Transform,
     Twist,
     Vector3,
+    Vector3Stamped,
     Wrench,
     WrenchStamped,
 )
@@ -200,8 +201,26 @@ def diagnostics(ns: int, name: str, level: int, message: str, values: Mapping[st
     return DiagnosticArray(header=header(ns), status=[status])
 
 
+CONTACT_FRAME = "pan_normal"
+
+
 def wrench_stamped(ns: int, wrench: np.ndarray, frame_id: str = RIGHT_FRAME) -> Any:
     return WrenchStamped(header=header(ns, frame_id), wrench=Wrench(force=_vec3(wrench[:3]), torque=_vec3(wrench[3:])))
+
+
+def contact_force(ns: int, normal_force: float) -> Any:
+    """geometry_msgs/Vector3Stamped of the simulator's brush-pan contact: ``vector.z`` is the
+    normal contact force [N] (ground truth of the physics, not a sensor), x = y = 0."""
+    return Vector3Stamped(header=header(ns, CONTACT_FRAME), vector=Vector3(x=0.0, y=0.0, z=float(normal_force)))
+
+
+def wrench_vector(msg: Any) -> np.ndarray | str:
+    """geometry_msgs/WrenchStamped -> [fx, fy, fz, tx, ty, tz] (6,), or why it is unusable."""
+    f, t = msg.wrench.force, msg.wrench.torque
+    values = np.array([f.x, f.y, f.z, t.x, t.y, t.z], dtype=float)
+    if not np.all(np.isfinite(values)):
+        return "wrench has non-finite values"
+    return values
 
 
 def clock(ns: int) -> Any:
