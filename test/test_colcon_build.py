@@ -42,7 +42,8 @@ def test_ament_layout(workspace: Path) -> None:
     share = prefix / "share" / "dualarm_control"
     assert (share / "package.xml").is_file()
     assert (share / "urdf" / "dualarm_cell.urdf").is_file()
-    assert (share / "launch" / "cell.launch.py").is_file()
+    for name in LAUNCH_FILES:
+        assert (share / "launch" / name).is_file()
     assert (share / "config" / "solvers" / "sparse_qp.yaml").is_file()
     assert (share / "config" / "scenarios" / "assembly.yaml").is_file()
     for node in NODES:
@@ -69,21 +70,56 @@ def test_installed_package_finds_its_share_through_the_ament_index(workspace: Pa
     assert Path(out.stdout.strip()) == workspace / "install" / "dualarm_control" / "share" / "dualarm_control"
 
 
-def test_launch_file_is_valid_python_with_the_nodes() -> None:
-    """ROS 2 launch is not installable here: the launch file is checked to parse, to name the
-    three executables of this package, and to import when launch_ros is available."""
-    text = (REPO / "launch" / "cell.launch.py").read_text()
-    tree = ast.parse(text)
+LAUNCH_FILES = {"cell.launch.py": NODES, "pan_cleaning.launch.py": ("sim_node", "controller_node")}
+
+
+def declared_parameters(executable: str) -> set[str]:
+    """Names the node declares (its specs), plus rclpy's own use_sim_time."""
+    from dualarm_control.controller import CONTROLLER_PARAMETERS
+    from dualarm_control.nodes import controller_node, trajectory_node
+    from dualarm_sim import sim_node
+
+    specs = {"controller_node": CONTROLLER_PARAMETERS + controller_node.NODE_PARAMETERS,
+             "trajectory_node": trajectory_node.PARAMETERS, "sim_node": sim_node.PARAMETERS}[executable]
+    return {s.name for s in specs} | {"use_sim_time"}
+
+
+def launched_parameters(tree: ast.Module) -> dict[str, set[str]]:
+    """executable -> the parameter names a launch file sets on it (``Node(executable=..., parameters=[{...}])``)."""
+    found: dict[str, set[str]] = {}
+    for call in ast.walk(tree):
+        if not (isinstance(call, ast.Call) and isinstance(call.func, ast.Name) and call.func.id == "Node"):
+            continue
+        kw = {k.arg: k.value for k in call.keywords}
+        exe = kw["executable"]
+        assert isinstance(exe, ast.Constant)
+        names = found.setdefault(str(exe.value), set())
+        for d in ast.walk(kw.get("parameters", ast.List(elts=[]))):
+            if isinstance(d, ast.Dict):
+                names |= {str(k.value) for k in d.keys if isinstance(k, ast.Constant)}
+    return found
+
+
+@pytest.mark.parametrize("name", sorted(LAUNCH_FILES))
+def test_launch_file_is_valid_python_with_the_nodes(name: str) -> None:
+    """ROS 2 launch is not installable here: each launch file is checked to parse, to start
+    its executables of this package with parameters those nodes declare, and to import when
+    launch_ros is available."""
+    path = REPO / "launch" / name
+    tree = ast.parse(path.read_text())
     assert any(isinstance(n, ast.FunctionDef) and n.name == "generate_launch_description" for n in tree.body)
-    for node in NODES:
-        assert f'"{node}"' in text or f"'{node}'" in text
+    launched = launched_parameters(tree)
+    assert set(launched) == set(LAUNCH_FILES[name])
+    for executable, names in launched.items():
+        unknown = names - declared_parameters(executable)
+        assert not unknown, f"{name}: {executable} does not declare {sorted(unknown)}"
     try:
         import launch_ros  # noqa: F401
     except ImportError:
         return
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location("cell_launch", REPO / "launch" / "cell.launch.py")
+    spec = importlib.util.spec_from_file_location(name.replace(".", "_"), path)
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
