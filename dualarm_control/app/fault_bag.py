@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from dualarm_control.metrics import percentiles
+from dualarm_control.ros.convert import stamp_ns
 
 STOPPED_SPEED = 1e-3
 """A joint is at rest below this speed [rad/s] (the papers' activity threshold)."""
@@ -49,10 +50,6 @@ class RunRecord:
     state_stamp: list[int] = field(default_factory=list)
     state_speed: list[float] = field(default_factory=list)
     pose_stamp: list[int] = field(default_factory=list)
-
-
-def stamp_ns(stamp: Any) -> int:
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
 def read_record(bag: Path) -> RunRecord:

@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from dualarm_control.app.launcher import Launch, Process, node_command
+from dualarm_control.ros.convert import stamp_ns
 
 NODES = ("sim_node", "controller_node", "trajectory_node")
 SAMPLE_S = 1.0
@@ -72,7 +73,7 @@ class Counters:
     published: deque[tuple[int, int]] = field(default_factory=lambda: deque(maxlen=1000))  # (stamp, net count)
 
     def on_message(self, msg: Any) -> None:
-        stamp = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+        stamp = stamp_ns(msg.header.stamp)
         for status in msg.status:
             values = {kv.key: kv.value for kv in status.values}
             if status.name == "controller_node" and "cycles" in values:
