@@ -578,7 +578,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("ros_args", nargs=argparse.REMAINDER, help="--ros-args ...")
     run.set_defaults(func=cmd_run)
 
-    lau = sub.add_parser("launch", help="start the three nodes as processes on a scenario",
+    lau = sub.add_parser("launch", help="start the nodes as processes on a scenario (sim, controller, trajectory; no trajectory for a task scenario)",
                          description="Start sim_node, controller_node and trajectory_node as separate processes "
                          "over ROS (localhost discovery by default), prefix their output, and stop everything when the "
                          "scenario is complete or on Ctrl-C. Exit status is non-zero if a node failed.")
