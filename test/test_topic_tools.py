@@ -19,7 +19,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header
 from trajectory_msgs.msg import MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint
 
-from dualarm_control.app.graph import (
+from dualarm_control.ros.graph import (
     RateMeter,
     RateStats,
     format_rate,

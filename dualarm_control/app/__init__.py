@@ -1,1 +1,1 @@
-"""Applications on top of the core: the `dualarm` command, launcher, the rclpy tool verbs (topic, param, bag record), bags, reports, experiments, benchmarks."""
+"""Applications on top of the core: the `dualarm` command, launcher, bags, reports, experiments, benchmarks."""

@@ -1,6 +1,6 @@
 """``bag info`` and the bag report: reading rosbag2 bags with ``rosbags`` (no ROS needed).
 
-Recording is :mod:`dualarm_control.app.recorder` (rclpy). The report reads a bag with
+Recording is :mod:`dualarm_control.ros.recorder` (rclpy). The report reads a bag with
 ``rosbags.highlevel.AnyReader`` and builds the same metrics record as an in-process
 experiment (:func:`dualarm_control.app.report.summarize`).
 """

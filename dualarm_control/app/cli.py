@@ -327,7 +327,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
 def cmd_bag_record(args: argparse.Namespace) -> int:
     """Record topics to a rosbag2 directory (MCAP, version 9) until Ctrl-C/SIGTERM or --duration."""
-    from dualarm_control.app.recorder import default_bag_path, record
+    from dualarm_control.ros.recorder import default_bag_path, record
 
     path = Path(args.output) if args.output else default_bag_path()
     return record(path, args.topics, record_all=args.all, duration=args.duration, use_sim_time=args.use_sim_time)
@@ -363,7 +363,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def cmd_topic_list(args: argparse.Namespace) -> int:
     """``ros2 topic list``."""
-    from dualarm_control.app.graph import format_topic_list, list_topics
+    from dualarm_control.ros.graph import format_topic_list, list_topics
 
     text = format_topic_list(list_topics(args.spin_time), args.show_types)
     if text:
@@ -373,7 +373,7 @@ def cmd_topic_list(args: argparse.Namespace) -> int:
 
 def cmd_topic_echo(args: argparse.Namespace) -> int:
     """``ros2 topic echo``."""
-    from dualarm_control.app.graph import echo
+    from dualarm_control.ros.graph import echo
 
     count = 1 if args.once else args.count
     try:
@@ -384,7 +384,7 @@ def cmd_topic_echo(args: argparse.Namespace) -> int:
 
 def cmd_topic_hz(args: argparse.Namespace) -> int:
     """``ros2 topic hz``."""
-    from dualarm_control.app.graph import hz
+    from dualarm_control.ros.graph import hz
 
     try:
         return hz(args.topic, window=args.window, duration=args.duration, spin_time=args.spin_time)
@@ -394,7 +394,7 @@ def cmd_topic_hz(args: argparse.Namespace) -> int:
 
 def cmd_topic_info(args: argparse.Namespace) -> int:
     """``ros2 topic info``."""
-    from dualarm_control.app.graph import format_topic_info, topic_info
+    from dualarm_control.ros.graph import format_topic_info, topic_info
 
     info = topic_info(args.topic, args.spin_time)
     if info.publishers == 0 and info.subscriptions == 0:
@@ -463,7 +463,7 @@ def _add_topic_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
 
 def cmd_param(args: argparse.Namespace) -> int:
     """``ros2 param list|get|set|describe`` on a running node."""
-    from dualarm_control.app import params_client as pc
+    from dualarm_control.ros import params_client as pc
 
     node = args.node if args.node.startswith("/") else "/" + args.node
     if args.param_verb == "list":

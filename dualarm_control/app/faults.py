@@ -204,6 +204,9 @@ def loopback_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[
 
 
 def _ros_env(profile: bool, peer: str = "") -> dict[str, str]:
+    """Environment of the processes of a namespace run. SUBNET and the link profile are set only
+    for processes started inside this tool's own network namespaces (``ip netns exec``), whose
+    veth pair and 10.231.x.x addresses exist nowhere else: no traffic can leave the machine."""
     if not profile:  # one namespace, loopback only, UDP (shared memory would bypass lo and its netem)
         return {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
     return {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "ROS_STATIC_PEERS": peer,

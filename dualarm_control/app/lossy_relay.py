@@ -20,7 +20,7 @@ READY_LINE = "relay: ready"
 
 
 def relay(routes: Sequence[tuple[str, str, str]], loss: float, seed: int) -> int:
-    from dualarm_control.app.graph import message_class
+    from dualarm_control.ros.graph import message_class
     from dualarm_control.ros.node import tool_node
     from dualarm_control.ros.qos import stream_qos
 

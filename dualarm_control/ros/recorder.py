@@ -31,8 +31,8 @@ from rosbags.interfaces import (
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from dualarm_control.app.graph import adapted_qos, fq_topic, message_class
 from dualarm_control.errors import DualArmError
+from dualarm_control.ros.graph import adapted_qos, fq_topic, message_class
 from dualarm_control.ros.node import tool_node
 
 BAG_VERSION: Final = 9
