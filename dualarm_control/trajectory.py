@@ -321,9 +321,12 @@ def _solve_segment(
     inp.target_velocity = [0.0]
     inp.target_acceleration = [0.0]
     speed = np.abs(rates[moving])
-    inp.max_velocity = [float(np.min(vmax[moving] / speed))]
-    inp.max_acceleration = [float(np.min(amax[moving] / speed))]
-    inp.max_jerk = [float(np.min(jmax[moving] / speed))]
+    # An axis with a subnormal displacement has a subnormal speed and its ratio overflows to inf;
+    # the dominant axis's ratio (speed = vmax there) is finite and <= it, so the minima are right.
+    with np.errstate(over="ignore"):
+        inp.max_velocity = [float(np.min(vmax[moving] / speed))]
+        inp.max_acceleration = [float(np.min(amax[moving] / speed))]
+        inp.max_jerk = [float(np.min(jmax[moving] / speed))]
     traj = ruckig.Trajectory(1)
     try:
         result = ruckig.Ruckig(1).calculate(inp, traj)
