@@ -27,7 +27,8 @@ RIGHT_TOOL = "right_tool"
 
 def skew(v: FloatArray) -> FloatArray:
     """Cross-product matrix S(v), so that S(v) @ w == np.cross(v, w). Shape (3,) -> (3, 3)."""
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    x, y, z = v.tolist()
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
 def relative_jacobian(r_b1: FloatArray, p_r1: FloatArray, j1_b: FloatArray, j2_b: FloatArray) -> FloatArray:
@@ -65,8 +66,8 @@ def luh_orientation_error(r_actual: FloatArray, r_desired: FloatArray) -> FloatA
     Returns:
         (3,) error [rad-like, equal to sin(theta) u for a rotation theta about u], in F1.
     """
-    m = r_desired @ r_actual.T
-    return 0.5 * np.array((m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]))
+    (m0, m1, m2) = (r_desired @ r_actual.T).tolist()  # Python floats: cheaper than indexing the array
+    return 0.5 * np.array((m2[1] - m1[2], m0[2] - m2[0], m1[0] - m0[1]))
 
 
 def pose_error(p: FloatArray, r: FloatArray, p_des: FloatArray, r_des: FloatArray) -> FloatArray:
@@ -81,9 +82,9 @@ def rotation_angle(r_a: FloatArray, r_b: FloatArray) -> float:
     machine precision over the whole range (acos of the trace loses half the digits near 0
     and pi, ~2e-8 rad).
     """
-    r = r_a.T @ r_b
-    c = (r[0, 0] + r[1, 1] + r[2, 2] - 1.0) / 2.0
-    s = 0.5 * math.sqrt((r[2, 1] - r[1, 2]) ** 2 + (r[0, 2] - r[2, 0]) ** 2 + (r[1, 0] - r[0, 1]) ** 2)
+    (r0, r1, r2) = (r_a.T @ r_b).tolist()
+    c = (r0[0] + r1[1] + r2[2] - 1.0) / 2.0
+    s = 0.5 * math.sqrt((r2[1] - r1[2]) ** 2 + (r0[2] - r2[0]) ** 2 + (r1[0] - r0[1]) ** 2)
     return math.atan2(s, c)
 
 

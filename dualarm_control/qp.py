@@ -75,12 +75,17 @@ class QPSolution:
         status: "solved", "max_iter", "infeasible" or "failed".
         iterations: back-end iterations (0 if unknown).
         solve_time: wall time of the solve call [s] (perf_counter).
+        multipliers: Lagrange multipliers z (p,) of the rows l <= C x <= u, with the sign of
+            H x + g + A^T y + C^T z = 0 (z_i > 0 where the upper bound u_i is active, < 0 at
+            l_i), or None (no C rows, no solution, or a back-end that does not report them:
+            see ``QPBackend.provides_multipliers``).
     """
 
     x: FloatArray | None
     status: str
     iterations: int
     solve_time: float
+    multipliers: FloatArray | None = None
 
     @property
     def ok(self) -> bool:
@@ -93,6 +98,11 @@ class QPBackend:
     name = "base"
     needs_positive_definite = False
     """True when the back-end only solves QPs whose H is positive definite."""
+    provides_multipliers = False
+    """True when a solved QPSolution carries the multipliers of the C rows."""
+    active_set = False
+    """True for an active-set method: the solution is a vertex of the active constraints, exact to
+    round-off, rather than an iterate that meets a tolerance (proxsuite, interior-point solvers)."""
 
     def __init__(self, settings: QPSettings) -> None:
         self.settings = settings
@@ -109,6 +119,7 @@ class ProxsuiteBackend(QPBackend):
     and otherwise updated in place with the previous result as warm start."""
 
     name = "proxsuite"
+    provides_multipliers = True
 
     def __init__(self, settings: QPSettings) -> None:
         super().__init__(settings)
@@ -159,9 +170,10 @@ class ProxsuiteBackend(QPBackend):
             out.PROXQP_DUAL_INFEASIBLE: "infeasible",
         }.get(info.status, "failed")
         x = np.array(qp.results.x, dtype=float) if status in ("solved", "max_iter") else None  # type: ignore[attr-defined]
+        z = np.array(qp.results.z[:n_in], dtype=float) if status == "solved" and n_in else None  # type: ignore[attr-defined]
         if status != "solved":
             self.reset()  # never warm-start from a failed solve
-        return QPSolution(x=x, status=status, iterations=int(info.iter), solve_time=elapsed)
+        return QPSolution(x=x, status=status, iterations=int(info.iter), solve_time=elapsed, multipliers=z)
 
 
 class DaqpBackend(QPBackend):
@@ -177,6 +189,8 @@ class DaqpBackend(QPBackend):
     """
 
     name = "daqp"
+    provides_multipliers = True
+    active_set = True
     ETA_PROX = 1e-14
     """Proximal-point stopping tolerance (change of the iterate between outer iterations)."""
     EQUALITY, INEQUALITY = 5, 0
@@ -202,7 +216,7 @@ class DaqpBackend(QPBackend):
         return self._constants[key]  # type: ignore[return-value]
 
     def _sense(self, n: int) -> npt.NDArray[np.int32]:
-        """All-inequality ``sense`` of n box bounds, built once per n."""
+        """All-inequality ``sense`` of n rows or box bounds, built once per n (daqp does not modify it)."""
         key = ("sense", n)
         if key not in self._constants:
             self._constants[key] = np.full(n, self.INEQUALITY, dtype=np.int32)
@@ -237,6 +251,9 @@ class DaqpBackend(QPBackend):
         n = problem.H.shape[0]
         if problem.A is None and problem.C is None and problem.lb is not None and problem.ub is not None:
             a, upper, lower, sense = self._box_only(n), problem.ub, problem.lb, self._sense(n)
+        elif problem.A is None and problem.lb is None and problem.C is not None \
+                and problem.l is not None and problem.u is not None:
+            a, upper, lower, sense = problem.C, problem.u, problem.l, self._sense(problem.C.shape[0])
         else:
             a, upper, lower, sense = self._stack(problem, n)
         start = time.perf_counter()
@@ -252,8 +269,10 @@ class DaqpBackend(QPBackend):
         x = np.array(x, dtype=float)  # one copy, shared by the result and the warm start (neither is modified)
         usable = status in ("solved", "max_iter") and math.isfinite(x.sum())
         self._previous = x if status == "solved" else None
+        n_c = 0 if problem.C is None else problem.C.shape[0]  # daqp's lam: box, equalities, then the C rows
+        z = np.array(info["lam"][-n_c:], dtype=float) if n_c and status == "solved" else None
         return QPSolution(x=x if usable else None, status=status, iterations=int(info["iterations"]),
-                          solve_time=elapsed)
+                          solve_time=elapsed, multipliers=z)
 
 
 class QpsolversBackend(QPBackend):

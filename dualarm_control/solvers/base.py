@@ -71,27 +71,31 @@ class ControlProblem:
     def problem_with_invalid_input(self) -> str:
         """Return a description of what is wrong with the inputs, or '' when they are usable.
 
-        Runs every cycle: shapes are compared as tuples and finiteness is tested once on the
-        sum of all entries (NaN or inf anywhere makes it non-finite); only when that fails
-        are the arrays examined one by one to name the culprit.
+        Runs every cycle, so the common case costs four reductions: shapes are compared as
+        tuples, and one sum is finite only if J, the reference and the repulsive velocity are
+        finite and g = max(lower - upper) is finite (a NaN or an infinite bound makes it NaN
+        or +-inf). g > 1e-12 means crossing bounds. Only when a test fails are the arrays
+        examined one by one to name the culprit.
         """
         m, n = self.jacobian.shape if self.jacobian.ndim == 2 else (-1, -1)
         if m < 1 or self.reference.shape != (m,):
             return f"bad shapes: J {self.jacobian.shape}, reference {self.reference.shape}"
-        for name in ("lower", "upper", "repulsive"):
-            if getattr(self, name).shape != (n,):
-                return f"bad shape of {name}: {getattr(self, name).shape}, expected ({n},)"
-        total = self.jacobian.sum() + self.reference.sum() + self.lower.sum() + self.upper.sum() + self.repulsive.sum()
-        if not math.isfinite(total):
+        if self.lower.shape != (n,) or self.upper.shape != (n,) or self.repulsive.shape != (n,):
+            for name in ("lower", "upper", "repulsive"):
+                if getattr(self, name).shape != (n,):
+                    return f"bad shape of {name}: {getattr(self, name).shape}, expected ({n},)"
+        gap = (self.lower - self.upper).max()
+        if not math.isfinite(self.jacobian.sum() + self.reference.sum() + self.repulsive.sum() + gap):
             for name in ("jacobian", "reference", "lower", "upper", "repulsive"):
                 if not np.all(np.isfinite(getattr(self, name))):
                     return f"non-finite values in {name}"
-        optional = self._problem_with_optional_rows(m, n)
-        if optional:
-            return optional
-        gap = self.lower - self.upper
-        if gap.max() > 1e-12:
-            i = int(np.argmax(gap))
+        if self.inequality_jacobian is not None or self.inequality_bound is not None \
+                or self.equality_weights is not None or self.inequality_weights is not None:
+            optional = self._problem_with_optional_rows(m, n)
+            if optional:
+                return optional
+        if gap > 1e-12:
+            i = int(np.argmax(self.lower - self.upper))
             return f"velocity bounds cross at joint {i}: lower {self.lower[i]:.4g} > upper {self.upper[i]:.4g} (joint outside its position range)"
         return ""
 
