@@ -23,8 +23,8 @@ from dualarm_control.kinematics import (
 )
 from dualarm_control.limits import (
     JointLimits,
+    RepulsiveField,
     acceleration_bounds,
-    repulsive_velocity,
     velocity_bounds,
 )
 from dualarm_control.params import (
@@ -110,7 +110,7 @@ def acceleration_limit_problem(value: Sequence[float]) -> str:
     return "an empty list (no bound) or values > 0 [rad/s^2], one for all joints or one per joint"
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class ControlOutput:
     """Result of one cycle.
 
@@ -133,7 +133,7 @@ class ControlOutput:
     cycle_time: float
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class TaskOutput:
     """Result of one cycle of :meth:`RelativeController.solve_tasks`.
 
@@ -171,6 +171,7 @@ class RelativeController:
         self._acceleration: FloatArray | None = np.broadcast_to(np.asarray(acc, float), (n,)).copy() if acc else None
         self._previous = np.zeros(n)
         self._zeros = np.zeros(n)
+        self._repulsive = RepulsiveField(self.limits, self.params.alpha)
 
     def reset(self) -> None:
         self.solver.reset()
@@ -179,30 +180,26 @@ class RelativeController:
     def step(self, q: FloatArray, target: RelativeTarget) -> ControlOutput:
         """Compute the joint velocity command for measured positions q (n,) and a target.
 
-        Non-finite q or target never reach the solver: the solver's safe command (zero
-        velocity) is returned with status "invalid_input" and the reason in ``detail``.
+        Non-finite q or target never reach the solver (its input check rejects the problem
+        they make): the safe command is returned with status "invalid_input" and the
+        culprit in ``detail`` (see :meth:`_invalid`).
         """
         start = time.perf_counter()
         q = self.model.check_q(q)
-        p_des = np.asarray(target.position, dtype=float)
-        r_des = np.asarray(target.rotation, dtype=float)
-        twist = np.concatenate((target.linear_velocity, target.angular_velocity))
-        bad = "joint positions" if not math.isfinite(q.sum()) else (
-            "relative target" if not math.isfinite(p_des.sum() + r_des.sum() + twist.sum()) else "")
-        if bad:
-            return self._invalid(bad, start, q)
         conf = Configuration(self.model, q)
-        rows = evaluate_tasks((RelativePoseTask(target, self.params.gain),), conf, 0.0)
-        result = self._solve_rows(q, rows)
+        rows = RelativePoseTask(target, self.params.gain).evaluate(conf, 0.0)
+        result = self._solve_rows(q, (rows,))
+        if result.status == "invalid_input":
+            return self._invalid(_culprit(q, target) or result.detail, start, q)
         state = conf.relative()
-        error = rows[0].value  # -e: the position rows are p - p*
+        ex, ey, ez = rows.value[:3].tolist()  # -e: the position rows are p - p*
         return ControlOutput(
             velocities=result.velocities,
             result=result,
             position=state.position,
             rotation=state.rotation,
-            position_error=math.sqrt(error[0] ** 2 + error[1] ** 2 + error[2] ** 2),
-            orientation_error=rotation_angle(state.rotation, r_des),
+            position_error=math.sqrt(ex * ex + ey * ey + ez * ez),
+            orientation_error=rotation_angle(state.rotation, np.asarray(target.rotation, dtype=float)),
             cycle_time=time.perf_counter() - start,
         )
 
@@ -217,7 +214,7 @@ class RelativeController:
         if any(task.kind == INEQUALITY for task in tasks) and not getattr(self.solver, "supports_inequalities", False):
             raise ParameterError("solver", self.solver.name, "a solver that handles inequality tasks: constraint_based")
         if not math.isfinite(q.sum()):
-            out = self._invalid("joint positions", start, q)
+            out = self._invalid("non-finite joint positions", start, q)
             return TaskOutput(out.velocities, out.result, (), out.cycle_time)
         rows = evaluate_tasks(tasks, Configuration(self.model, q), t)
         result = self._solve_rows(q, rows)
@@ -229,7 +226,7 @@ class RelativeController:
         if self._acceleration is not None:
             lower, upper = acceleration_bounds(lower, upper, q, self.limits, self._previous, self._acceleration,
                                                self.params.period)
-        repulsive = repulsive_velocity(q, self.limits, self.params.alpha) if self.solver.uses_repulsive else self._zeros
+        repulsive = self._repulsive(q) if self.solver.uses_repulsive else self._zeros
         result = self.solver.solve(assemble_problem(rows, lower, upper, repulsive))
         self._previous = result.velocities
         return result
@@ -243,9 +240,9 @@ class RelativeController:
         q = self.model.check_q(q)
         q_ref, qd_ref = self.model.check_q(q_ref, "joint reference"), self.model.check_q(qd_ref, "joint reference")
         if not math.isfinite(q.sum()):
-            return self._invalid("joint positions", start, q)
+            return self._invalid("non-finite joint positions", start, q)
         if not math.isfinite(q_ref.sum() + qd_ref.sum()):
-            return self._invalid("joint reference", start, q)
+            return self._invalid("non-finite joint reference", start, q)
         lower, upper = velocity_bounds(q, self.limits, self.params.period)
         velocities = joint_tracking_velocity(q, q_ref, qd_ref, gain, lower, upper)
         self._previous = velocities
@@ -259,7 +256,7 @@ class RelativeController:
                              orientation_error=rotation_angle(r, r_des), cycle_time=elapsed)
 
     def _invalid(self, what: str, start: float, q: FloatArray) -> ControlOutput:
-        """The safe command for a non-finite input, with the reason in ``detail`` (status "invalid_input").
+        """The safe command for an invalid input, with the reason in ``detail`` (status "invalid_input").
 
         Zero velocity, or, when q is finite, the command of the eq (23) bounds nearest to rest
         (:func:`rest_command`: zero inside the position range, the way back beyond a limit).
@@ -270,10 +267,20 @@ class RelativeController:
         self.solver.reset()
         result = SolverResult(velocities, "invalid_input", time.perf_counter() - start, 0,
                               int(np.count_nonzero(np.abs(velocities) > ACTIVITY_THRESHOLD)), float("nan"),
-                              f"non-finite {what}")
+                              what)
         self._previous = velocities
         p, r = np.full(3, np.nan), np.full((3, 3), np.nan)
         return ControlOutput(velocities, result, p, r, float("nan"), float("nan"), time.perf_counter() - start)
+
+
+def _culprit(q: FloatArray, target: RelativeTarget) -> str:
+    """Which input of :meth:`RelativeController.step` is non-finite ('' when both are finite)."""
+    if not math.isfinite(q.sum()):
+        return "non-finite joint positions"
+    values = (target.position, target.rotation, target.linear_velocity, target.angular_velocity)
+    if not all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in values):
+        return "non-finite relative target"
+    return ""
 
 
 def _solver_choices() -> list[str]:

@@ -38,18 +38,19 @@ def relative_jacobian(r_b1: FloatArray, p_r1: FloatArray, j1_b: FloatArray, j2_b
         r_b1: R_1^b, orientation of F1 in the base frame, (3, 3).
         p_r1: p_r^1, position of F2 in F1 [m], (3,).
         j1_b, j2_b: geometric Jacobians of each tool in the base frame (linear velocity of
-            the tool origin, angular velocity), (6, n1) and (6, n2).
+            the tool origin, angular velocity) over all n joints, (6, n) each; each arm's
+            tool does not move with the other arm's joints, so J_1^b is zero in the right
+            arm's columns and J_2^b in the left arm's (pinocchio's frame Jacobians are so).
 
     Returns:
-        (6, n1 + n2) matrix mapping joint velocities [rad/s] to the relative twist
-        [v_r^1; w_r^1] of eq (4), expressed in F1.
+        (6, n) matrix mapping joint velocities [rad/s] to the relative twist
+        [v_r^1; w_r^1] of eq (4), expressed in F1. With Omega J = [R^T J_v; R^T J_w] and
+        Psi = [[I, -S(p)], [0, I]]: J = Omega J_2 - Omega J_1 + [S(p) R^T J_w1; 0].
     """
-    n1 = j1_b.shape[1]
-    base = np.empty((6, n1 + j2_b.shape[1]))
-    np.negative(j1_b, out=base[:, :n1])
-    base[:, n1:] = j2_b  # [-J_1^b, J_2^b]
-    out = np.matmul(r_b1.T, base.reshape(2, 3, -1)).reshape(6, -1)  # Omega_b^1 on both blocks at once
-    out[:3, :n1] -= skew(p_r1) @ out[3:, :n1]  # Psi_r^1: v - p x w on the left block
+    r_t = r_b1.T
+    a = r_t @ j1_b.reshape(2, 3, -1)  # Omega_b^1 J_1^b as (linear, angular) blocks
+    out = (r_t @ j2_b.reshape(2, 3, -1) - a).reshape(6, -1)
+    out[:3] += skew(p_r1) @ a[1]  # -Psi_r^1 on the J_1 block: + p x w_1
     return out
 
 
@@ -127,7 +128,7 @@ def _pairwise_cross(a: FloatArray, b: FloatArray) -> FloatArray:
     return np.stack((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), axis=1)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class FrameState:
     """World pose and geometric Jacobian of one frame at one configuration.
 
@@ -143,7 +144,7 @@ class FrameState:
     jacobian: FloatArray
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class RelativeState:
     """Relative kinematics at one configuration.
 
@@ -306,7 +307,6 @@ class Configuration:
             o1, o2 = data.oMf[m._f1], data.oMf[m._f2]
             rel = o1.actInv(o2)
             p_r1 = rel.translation.copy()
-            nl = m.n_left
-            jac = relative_jacobian(o1.rotation, p_r1, j1[:, :nl], j2[:, nl:])
+            jac = relative_jacobian(o1.rotation, p_r1, j1, j2)
             self._relative = RelativeState(position=p_r1, rotation=rel.rotation.copy(), jacobian=jac)
         return self._relative

@@ -81,15 +81,7 @@ def velocity_bounds(q: FloatArray, limits: JointLimits, period: float) -> tuple[
 
 
 def repulsive_velocity(q: FloatArray, limits: JointLimits, alpha: float) -> FloatArray:
-    """Repulsive joint-limit velocity of eq (24)-(25).
-
-    Thresholds q*_min = q_min + alpha (q_max - q_min)/2 and q*_max = q_max - alpha (q_max - q_min)/2.
-    Inside ]q*_min, q*_max[ the value is 0; in [q_min, q*_min] it is
-    ((q - q*_min)/(q_min - q*_min))^2 * qd_max (pushing up); in [q*_max, q_max] it is
-    ((q - q*_max)/(q_max - q*_max))^2 * (-qd_max) (pushing down). Beyond the limits the
-    value saturates at +-qd_max. Vectorised: with h = alpha (q_max - q_min)/2 the two
-    ratios clip((q*_min - q)/h, 0, 1) and clip((q - q*_max)/h, 0, 1) are never both
-    non-zero (q*_min <= q*_max), so qd_r = qd_max (ratio_low^2 - ratio_high^2).
+    """Repulsive joint-limit velocity of eq (24)-(25) (see :class:`RepulsiveField`).
 
     Args:
         q: joint positions [rad], (n,).
@@ -99,14 +91,39 @@ def repulsive_velocity(q: FloatArray, limits: JointLimits, alpha: float) -> Floa
     Returns:
         qd_r [rad/s], (n,).
     """
-    if not 0.0 <= alpha <= 1.0:
-        raise ValueError(f"alpha must be in [0, 1], got {alpha}")
-    if alpha == 0.0:
-        return np.zeros_like(q, dtype=float)
-    half = alpha * limits.half_range
-    ratio_low = np.clip((limits.q_min + half - q) / half, 0.0, 1.0)
-    ratio_high = np.clip((q - limits.q_max + half) / half, 0.0, 1.0)
-    return limits.qd_max * (ratio_low * ratio_low - ratio_high * ratio_high)
+    return RepulsiveField(limits, alpha)(q)
+
+
+class RepulsiveField:
+    """Repulsive joint-limit velocity of eq (24)-(25) with its thresholds computed once.
+
+    Thresholds q*_min = q_min + alpha (q_max - q_min)/2 and q*_max = q_max - alpha (q_max - q_min)/2.
+    Inside ]q*_min, q*_max[ the value is 0; in [q_min, q*_min] it is
+    ((q - q*_min)/(q_min - q*_min))^2 * qd_max (pushing up); in [q*_max, q_max] it is
+    ((q - q*_max)/(q_max - q*_max))^2 * (-qd_max) (pushing down). Beyond the limits the
+    value saturates at +-qd_max. Vectorised: with h = alpha (q_max - q_min)/2 the two
+    ratios clip((q*_min - q)/h, 0, 1) and clip((q - q*_max)/h, 0, 1) are never both
+    non-zero (q*_min <= q*_max), so qd_r = qd_max (ratio_low^2 - ratio_high^2). A controller
+    builds one field and calls it every cycle (q*_min, q*_max and h are constants).
+    """
+
+    def __init__(self, limits: JointLimits, alpha: float) -> None:
+        if not 0.0 <= alpha <= 1.0:
+            raise ValueError(f"alpha must be in [0, 1], got {alpha}")
+        self.alpha = alpha
+        self._qd_max = limits.qd_max
+        self._half = alpha * limits.half_range
+        self._low = limits.q_min + self._half  # q*_min
+        self._q_max = limits.q_max
+
+    def __call__(self, q: FloatArray) -> FloatArray:
+        """qd_r [rad/s], (n,), at joint positions q [rad], (n,)."""
+        if self.alpha == 0.0:
+            return np.zeros_like(q, dtype=float)
+        # np.minimum(np.maximum(.)) instead of np.clip: 3x cheaper on these small arrays
+        ratio_low = np.minimum(np.maximum((self._low - q) / self._half, 0.0), 1.0)
+        ratio_high = np.minimum(np.maximum((q - self._q_max + self._half) / self._half, 0.0), 1.0)
+        return self._qd_max * (ratio_low * ratio_low - ratio_high * ratio_high)
 
 
 def acceleration_bounds(

@@ -51,7 +51,7 @@ class QPSettings:
             raise ValueError(f"max_iter must be >= 1, got {self.max_iter}")
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class QPProblem:
     """A dense QP; optional blocks are None. Shapes: H (n,n), g (n,), A (m,n), C (p,n)."""
 
@@ -66,7 +66,7 @@ class QPProblem:
     ub: FloatArray | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class QPSolution:
     """Outcome of one QP solve.
 

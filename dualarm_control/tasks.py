@@ -45,7 +45,7 @@ DEFAULT_INEQUALITY_WEIGHT = 1.0e3
 """Slack weight of an inequality row (safety): expensive, kept whenever feasible."""
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class TaskRows:
     """One task evaluated at (q, t).
 

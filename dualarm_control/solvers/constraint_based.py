@@ -39,6 +39,7 @@ from dualarm_control.solvers.base import (
     Solver,
     SolverParams,
     from_qp,
+    inside,
 )
 from dualarm_control.solvers.methods import damped_least_squares
 from dualarm_control.solvers.registry import register
@@ -116,7 +117,7 @@ class ConstraintBased(Solver):
             scale = 1.0 if problem.equality_weights is None else np.sqrt(problem.equality_weights)
             qd = damped_least_squares(problem.jacobian * np.reshape(scale, (-1, 1)), problem.reference * scale,
                                       2.0 * self.params.regularization)
-            if qd is not None and np.all(qd >= problem.lower) and np.all(qd <= problem.upper):
+            if qd is not None and inside(qd, problem.lower, problem.upper):
                 return qd, "solved", 0, ""
         solution = self._qp.solve(constraint_qp(problem, self.params.regularization))
         qd, status, iters, detail = from_qp(solution, lambda x: x[:n])

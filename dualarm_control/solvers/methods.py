@@ -16,6 +16,7 @@ from dualarm_control.solvers.base import (
     Solver,
     SolverParams,
     from_qp,
+    inside,
 )
 from dualarm_control.solvers.registry import register
 
@@ -85,7 +86,7 @@ class StandardQP(_QPSolver):
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
         qd = damped_least_squares(problem.jacobian, problem.reference, self.params.regularization)
-        if qd is not None and np.all(qd >= problem.lower) and np.all(qd <= problem.upper):
+        if qd is not None and inside(qd, problem.lower, problem.upper):
             return qd, "solved", 0, ""  # eq (14)'s optimum: no bound is active
         jtj, jtr = _least_squares_terms(problem)
         n = jtj.shape[0]
@@ -184,7 +185,7 @@ class SparseQP(_QPSolver):
         proximal = mu > 0 and self._z_prev is not None and self._z_prev.shape == (2 * n,)
         if not proximal and self._dual is not None:
             qd, iterations = self._dual.solve(j, problem.reference, self.params.l1_weight)
-            if qd is not None and np.all(qd >= problem.lower) and np.all(qd <= problem.upper):
+            if qd is not None and inside(qd, problem.lower, problem.upper):
                 self._z_prev = np.concatenate((np.maximum(qd, 0.0), np.maximum(-qd, 0.0)))
                 return qd, "solved", iterations, ""  # eq (17)'s optimum lies inside the bounds
         b = np.hstack((j, -j))  # J [I, -I], (6, 2n)
@@ -288,10 +289,10 @@ class HierarchicalSparseQP(Solver):
         qd1, status, iters, detail = self._primary._solve(problem)
         if qd1 is None or not np.any(problem.repulsive):
             return qd1, status, iters, detail
-        qd1 = np.clip(qd1, problem.lower, problem.upper)
+        qd1 = np.minimum(np.maximum(qd1, problem.lower), problem.upper)
         lower2, upper2 = problem.lower - qd1, problem.upper - qd1
         qd2 = null_space_projection(problem.jacobian, problem.repulsive)
-        if qd2 is not None and np.all(qd2 >= lower2) and np.all(qd2 <= upper2):
+        if qd2 is not None and inside(qd2, lower2, upper2):
             return qd1 + qd2, status, iters, detail  # eq (27)'s optimum: no bound is active
         n = qd1.shape[0]
         qp2 = QPProblem(
