@@ -182,8 +182,8 @@ class SparseQP(_QPSolver):
         j = problem.jacobian
         n = j.shape[1]
         mu = self.params.proximal_weight
-        proximal = mu > 0 and self._z_prev is not None and self._z_prev.shape == (2 * n,)
-        if not proximal and self._dual is not None:
+        z_prev = self._z_prev if mu > 0 and self._z_prev is not None and self._z_prev.shape == (2 * n,) else None
+        if z_prev is None and self._dual is not None:
             qd, iterations = self._dual.solve(j, problem.reference, self.params.l1_weight)
             if qd is not None and inside(qd, problem.lower, problem.upper):
                 self._z_prev = np.concatenate((np.maximum(qd, 0.0), np.maximum(-qd, 0.0)))
@@ -191,9 +191,9 @@ class SparseQP(_QPSolver):
         b = np.hstack((j, -j))  # J [I, -I], (6, 2n)
         h = b.T @ b
         g = self.params.l1_weight - b.T @ problem.reference
-        if proximal:
+        if z_prev is not None:
             h.flat[:: 2 * n + 1] += mu
-            g -= mu * self._z_prev
+            g -= mu * z_prev
         lb, ub = lasso_box(problem.lower, problem.upper)
         solution = self._qp.solve(QPProblem(H=h, g=g, lb=lb, ub=ub))
         self._z_prev = solution.x if solution.ok else None
