@@ -114,6 +114,8 @@ def acceleration_limit_problem(value: Sequence[float]) -> str:
 class ControlOutput:
     """Result of one cycle.
 
+    A per-cycle record: slotted, not frozen (cheaper to build, docs/bench.md); read-only by convention.
+
     Attributes:
         velocities: command [rad/s], (n,), finite and inside the eq (23) bounds.
         result: the solver's record (status, timings, active joints).
@@ -136,6 +138,8 @@ class ControlOutput:
 @dataclass(slots=True)
 class TaskOutput:
     """Result of one cycle of :meth:`RelativeController.solve_tasks`.
+
+    A per-cycle record: slotted, not frozen (cheaper to build, docs/bench.md); read-only by convention.
 
     Attributes:
         velocities: command [rad/s], (n,), finite and inside the eq (23) bounds.

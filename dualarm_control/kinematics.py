@@ -132,6 +132,8 @@ def _pairwise_cross(a: FloatArray, b: FloatArray) -> FloatArray:
 class FrameState:
     """World pose and geometric Jacobian of one frame at one configuration.
 
+    A per-cycle record: slotted, not frozen (cheaper to build, docs/bench.md); read-only by convention.
+
     Attributes:
         position: origin in the world [m], (3,).
         rotation: axes in the world, (3, 3) (columns x, y, z).
@@ -147,6 +149,8 @@ class FrameState:
 @dataclass(slots=True)
 class RelativeState:
     """Relative kinematics at one configuration.
+
+    A per-cycle record: slotted, not frozen (cheaper to build, docs/bench.md); read-only by convention.
 
     Attributes:
         position: p_r^1 [m], (3,).

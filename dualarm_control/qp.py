@@ -53,7 +53,10 @@ class QPSettings:
 
 @dataclass(slots=True)
 class QPProblem:
-    """A dense QP; optional blocks are None. Shapes: H (n,n), g (n,), A (m,n), C (p,n)."""
+    """A dense QP; optional blocks are None. Shapes: H (n,n), g (n,), A (m,n), C (p,n).
+
+    A per-cycle record: slotted, not frozen (cheaper to build, docs/bench.md); read-only by convention.
+    """
 
     H: FloatArray
     g: FloatArray
@@ -69,6 +72,8 @@ class QPProblem:
 @dataclass(slots=True)
 class QPSolution:
     """Outcome of one QP solve.
+
+    A per-cycle record: slotted, not frozen (cheaper to build, docs/bench.md); read-only by convention.
 
     Attributes:
         x: primal solution (n,), or None when the back-end found none.

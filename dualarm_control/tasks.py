@@ -49,6 +49,8 @@ DEFAULT_INEQUALITY_WEIGHT = 1.0e3
 class TaskRows:
     """One task evaluated at (q, t).
 
+    A per-cycle record: slotted, not frozen (cheaper to build, docs/bench.md); read-only by convention.
+
     Attributes:
         name: task name (for logs and plots).
         kind: "equality" (f = b) or "inequality" (f <= b).

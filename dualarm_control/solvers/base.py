@@ -44,6 +44,8 @@ among the least-squares ones and keeps the problem well posed at singular config
 class ControlProblem:
     """Inputs of one control cycle.
 
+    A per-cycle record: slotted, not frozen (cheaper to build, docs/bench.md); read-only by convention.
+
     Attributes:
         jacobian: relative Jacobian J of eq (5), (6, n); (6 k, n) for k relative tasks stacked
             (the benchmark's 3- and 4-arm chains).
@@ -125,6 +127,8 @@ class ControlProblem:
 @dataclass(slots=True)
 class SolverResult:
     """One solver call.
+
+    A per-cycle record: slotted, not frozen (cheaper to build, docs/bench.md); read-only by convention.
 
     Attributes:
         velocities: joint velocities to command [rad/s], (n,); always finite and inside
