@@ -67,8 +67,13 @@ def luh_orientation_error(r_actual: FloatArray, r_desired: FloatArray) -> FloatA
     Returns:
         (3,) error [rad-like, equal to sin(theta) u for a rotation theta about u], in F1.
     """
+    return np.array(luh_components(r_actual, r_desired))
+
+
+def luh_components(r_actual: FloatArray, r_desired: FloatArray) -> tuple[float, float, float]:
+    """The three components of :func:`luh_orientation_error` as Python floats (no array built)."""
     (m0, m1, m2) = (r_desired @ r_actual.T).tolist()  # Python floats: cheaper than indexing the array
-    return 0.5 * np.array((m2[1] - m1[2], m0[2] - m2[0], m1[0] - m0[1]))
+    return 0.5 * (m2[1] - m1[2]), 0.5 * (m0[2] - m2[0]), 0.5 * (m1[0] - m0[1])
 
 
 def pose_error(p: FloatArray, r: FloatArray, p_des: FloatArray, r_des: FloatArray) -> FloatArray:

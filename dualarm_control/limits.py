@@ -5,6 +5,7 @@ All vectors have shape (n,): positions in rad, velocities in rad/s, the period T
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,14 +36,20 @@ class JointLimits:
         if np.any(self.qd_max <= 0):
             raise ValueError(f"qd_max must be > 0, got {self.qd_max}")
 
-    @property
+    @functools.cached_property
     def half_range(self) -> FloatArray:
         """(q_max - q_min) / 2 [rad], (n,); computed once (the limits are constant)."""
-        cached: FloatArray | None = self.__dict__.get("_half_range")
-        if cached is None:
-            cached = (self.q_max - self.q_min) / 2.0
-            object.__setattr__(self, "_half_range", cached)
-        return cached
+        return (self.q_max - self.q_min) / 2.0
+
+    @functools.cached_property
+    def position_rows(self) -> FloatArray:
+        """[q_min; q_max] [rad], (2, n): both bounds of eq (21)-(22) in one array operation."""
+        return np.stack((self.q_min, self.q_max))
+
+    @functools.cached_property
+    def negative_qd_max(self) -> FloatArray:
+        """-qd_max [rad/s], (n,)."""
+        return -self.qd_max
 
     def scaled_velocity(self, factor: float) -> JointLimits:
         """Same limits with the velocity limits multiplied by ``factor`` in (0, 1]."""
@@ -74,10 +81,9 @@ def velocity_bounds(q: FloatArray, limits: JointLimits, period: float) -> tuple[
     Returns:
         (lower, upper) [rad/s], each (n,), lower <= upper (for finite q).
     """
-    qd_max = limits.qd_max
-    lower = np.minimum(np.maximum((limits.q_min - q) / period, -qd_max), qd_max)  # np.clip costs 3x more
-    upper = np.minimum(np.maximum((limits.q_max - q) / period, -qd_max), qd_max)
-    return lower, upper
+    # both rows at once, and np.minimum(np.maximum(.)) instead of np.clip (3x cheaper on small arrays)
+    bounds = np.minimum(np.maximum((limits.position_rows - q) / period, limits.negative_qd_max), limits.qd_max)
+    return bounds[0], bounds[1]
 
 
 def repulsive_velocity(q: FloatArray, limits: JointLimits, alpha: float) -> FloatArray:
@@ -112,18 +118,18 @@ class RepulsiveField:
             raise ValueError(f"alpha must be in [0, 1], got {alpha}")
         self.alpha = alpha
         self._qd_max = limits.qd_max
-        self._half = alpha * limits.half_range
-        self._low = limits.q_min + self._half  # q*_min
-        self._q_max = limits.q_max
+        half = alpha * limits.half_range
+        self._thresholds = np.stack((limits.q_min + half, limits.q_max - half))  # q*_min, q*_max
+        self._scale = np.stack((-half, half))  # ratio_low = (q - q*_min) / -h, ratio_high = (q - q*_max) / h
 
     def __call__(self, q: FloatArray) -> FloatArray:
         """qd_r [rad/s], (n,), at joint positions q [rad], (n,)."""
         if self.alpha == 0.0:
             return np.zeros_like(q, dtype=float)
-        # np.minimum(np.maximum(.)) instead of np.clip: 3x cheaper on these small arrays
-        ratio_low = np.minimum(np.maximum((self._low - q) / self._half, 0.0), 1.0)
-        ratio_high = np.minimum(np.maximum((q - self._q_max + self._half) / self._half, 0.0), 1.0)
-        return self._qd_max * (ratio_low * ratio_low - ratio_high * ratio_high)
+        # both ratios in one (2, n) array; np.minimum(np.maximum(.)) instead of np.clip (3x cheaper)
+        ratios = np.minimum(np.maximum((q - self._thresholds) / self._scale, 0.0), 1.0)
+        ratios *= ratios
+        return self._qd_max * (ratios[0] - ratios[1])
 
 
 def acceleration_bounds(

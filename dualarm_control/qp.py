@@ -206,7 +206,10 @@ class DaqpBackend(QPBackend):
     -4 iteration limit, -5 non-convex, -6 initial point infeasible (the others: "failed")."""
 
     def __init__(self, settings: QPSettings) -> None:
+        import daqp  # imported here: a back-end's package is only needed when it is chosen
+
         super().__init__(settings)
+        self._daqp = daqp
         self._previous: FloatArray | None = None
         self._constants: dict[tuple[str, int], npt.NDArray[np.generic]] = {}
 
@@ -251,8 +254,6 @@ class DaqpBackend(QPBackend):
         return a, np.concatenate(upper), np.concatenate(lower), np.concatenate(sense)
 
     def solve(self, problem: QPProblem) -> QPSolution:
-        import daqp
-
         n = problem.H.shape[0]
         if problem.A is None and problem.C is None and problem.lb is not None and problem.ub is not None:
             a, upper, lower, sense = self._box_only(n), problem.ub, problem.lb, self._sense(n)
@@ -264,18 +265,18 @@ class DaqpBackend(QPBackend):
         start = time.perf_counter()
         warm = self._previous if self.settings.warm_start and self._previous is not None \
             and self._previous.shape == (n,) else None
-        x, _, flag, info = daqp.solve(
+        x, _, flag, info = self._daqp.solve(
             problem.H, problem.g, a, upper, lower, sense,
             primal_tol=self.settings.eps_abs, eta_prox=self.ETA_PROX, iter_limit=self.settings.max_iter,
             primal_start=warm,
         )
         elapsed = time.perf_counter() - start
         status = self.STATUS.get(int(flag), "failed")
-        x = np.array(x, dtype=float)  # one copy, shared by the result and the warm start (neither is modified)
+        x = np.asarray(x)  # a new array per call: shared by the result and the warm start (neither is modified)
         usable = status in ("solved", "max_iter") and math.isfinite(x.sum())
         self._previous = x if status == "solved" else None
         n_c = 0 if problem.C is None else problem.C.shape[0]  # daqp's lam: box, equalities, then the C rows
-        z = np.array(info["lam"][-n_c:], dtype=float) if n_c and status == "solved" else None
+        z = np.asarray(info["lam"][-n_c:]) if n_c and status == "solved" else None
         return QPSolution(x=x if usable else None, status=status, iterations=int(info["iterations"]),
                           solve_time=elapsed, multipliers=z)
 

@@ -30,7 +30,7 @@ from dualarm_control.kinematics import (
     Configuration,
     FloatArray,
     jacobian_derivatives,
-    luh_orientation_error,
+    luh_components,
     skew,
 )
 from dualarm_control.solvers.base import ControlProblem
@@ -139,10 +139,14 @@ class RelativePoseTask:
     def evaluate(self, conf: Configuration, t: float) -> TaskRows:
         state = conf.relative()
         target = self.target
-        error = np.concatenate((np.asarray(target.position, float) - state.position,
-                                luh_orientation_error(state.rotation, np.asarray(target.rotation, float))))
-        twist = np.concatenate((target.linear_velocity, target.angular_velocity))
-        return TaskRows(self.name, self.kind, -error, np.zeros(6), state.jacobian, -twist, self.gain, self.weight)
+        px, py, pz = state.position.tolist()
+        tx, ty, tz = np.asarray(target.position, float).tolist()
+        ox, oy, oz = luh_components(state.rotation, np.asarray(target.rotation, float))
+        value = np.array((px - tx, py - ty, pz - tz, -ox, -oy, -oz))  # f = -e = [p - p*; -e_o]
+        time_derivative = np.concatenate((target.linear_velocity, target.angular_velocity))
+        np.negative(time_derivative, out=time_derivative)
+        return TaskRows(self.name, self.kind, value, np.zeros(6), state.jacobian, time_derivative, self.gain,
+                        self.weight)
 
 
 @dataclass(frozen=True)
