@@ -168,7 +168,7 @@ class SparseQP(_QPSolver):
 
     def __init__(self, params: SolverParams | None = None) -> None:
         super().__init__(params)
-        self._z_prev: FloatArray | None = None
+        self._previous: FloatArray | None = None  # z (2n,) from the box QP or qd (n,) from the dual
         exact_dual = self._qp.active_set and self._qp.provides_multipliers
         self._dual = LassoDual(self._backend()) if exact_dual else None
 
@@ -176,17 +176,27 @@ class SparseQP(_QPSolver):
         super().reset()
         if self._dual is not None:
             self._dual.reset()
-        self._z_prev = None
+        self._previous = None
+
+    def _previous_z(self, n: int) -> FloatArray | None:
+        """z_prev (2n,) of the proximal term, or None. The previous solution is kept as the box
+        QP's z (2n,), or as qd (n,) when it came from the dual (split here: z = [max(qd, 0); max(-qd, 0)])."""
+        prev = self._previous
+        if prev is None:
+            return None
+        if prev.shape == (n,):
+            return np.concatenate((np.maximum(prev, 0.0), np.maximum(-prev, 0.0)))
+        return prev if prev.shape == (2 * n,) else None
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
         j = problem.jacobian
         n = j.shape[1]
         mu = self.params.proximal_weight
-        z_prev = self._z_prev if mu > 0 and self._z_prev is not None and self._z_prev.shape == (2 * n,) else None
+        z_prev = self._previous_z(n) if mu > 0 else None
         if z_prev is None and self._dual is not None:
             qd, iterations = self._dual.solve(j, problem.reference, self.params.l1_weight)
             if qd is not None and inside(qd, problem.lower, problem.upper):
-                self._z_prev = np.concatenate((np.maximum(qd, 0.0), np.maximum(-qd, 0.0)))
+                self._previous = qd  # split into z form only if the next cycle needs it
                 return qd, "solved", iterations, ""  # eq (17)'s optimum lies inside the bounds
         b = np.hstack((j, -j))  # J [I, -I], (6, 2n)
         h = b.T @ b
@@ -196,7 +206,7 @@ class SparseQP(_QPSolver):
             g -= mu * z_prev
         lb, ub = lasso_box(problem.lower, problem.upper)
         solution = self._qp.solve(QPProblem(H=h, g=g, lb=lb, ub=ub))
-        self._z_prev = solution.x if solution.ok else None
+        self._previous = solution.x if solution.ok else None
         return from_qp(solution, lambda z: z[:n] - z[n:])
 
 
