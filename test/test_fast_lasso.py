@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -204,3 +205,75 @@ def test_active_sets_helper() -> None:
     p = ControlProblem(np.eye(6, 3), np.zeros(6), np.array([-1.0, -1.0, -1.0]), np.array([1.0, 1.0, 1.0]), np.zeros(3))
     nonzero, at_bound = active_sets(p, np.array([0.0, 0.5, 1.0]), 1e-7)
     assert nonzero == {1, 2} and at_bound == {2}
+
+
+# ---- the lasso through its dual (eq 17 without bounds) ------------------------------------------
+
+
+def _box_qp_only(params: SolverParams = EXACT) -> Any:
+    """A sparse_qp that always solves eq (19)'s box QP (its dual path switched off)."""
+    solver = make_solver("sparse_qp", params)
+    solver._dual = None  # type: ignore[attr-defined]
+    return solver
+
+
+@pytest.mark.parametrize("backend", ["daqp", "proxsuite"])
+def test_qp_multipliers_satisfy_the_kkt_conditions(backend: str) -> None:
+    """QPSolution.multipliers of the C rows: H x + g + C^T z + (box multipliers) = 0, z > 0 only at u, < 0 only at l."""
+    rng = np.random.default_rng(11)
+    for _ in range(10):
+        m = rng.normal(size=(6, 6))
+        h, g = m @ m.T + np.eye(6), rng.normal(size=6) * 5
+        c = rng.normal(size=(14, 6))
+        lb, ub = np.full(6, -0.3), np.full(6, 0.3)
+        sol = make_backend(backend).solve(QPProblem(H=h, g=g, C=c, l=-np.ones(14), u=np.ones(14), lb=lb, ub=ub))
+        assert sol.ok and sol.multipliers is not None and sol.x is not None
+        x, z = sol.x, sol.multipliers
+        rows = c @ x
+        assert np.all((z <= 1e-9) | (np.abs(rows - 1.0) < 1e-7)) and np.all((z >= -1e-9) | (np.abs(rows + 1.0) < 1e-7))
+        stationarity = h @ x + g + c.T @ z  # = -(box multipliers): zero where x is strictly inside the box
+        free = (x > lb + 1e-7) & (x < ub - 1e-7)
+        np.testing.assert_allclose(stationarity[free], 0.0, atol=1e-6)
+
+
+def test_dual_equals_the_box_qp_of_eq19(problems: list[ControlProblem]) -> None:
+    """LassoDual (daqp multipliers) = eq (19)'s box QP (daqp): objective within 1e-9 relative, same support, <= 6 joints."""
+    dual, box = make_solver("sparse_qp", EXACT), _box_qp_only()
+    inside_bounds = 0
+    for p in problems:
+        dual.reset()
+        box.reset()
+        qd_dual = dual._dual.solve(p.jacobian, p.reference, LAMBDA)[0]  # type: ignore[attr-defined]
+        assert qd_dual is not None
+        if not (np.all(qd_dual >= p.lower) and np.all(qd_dual <= p.upper)):
+            continue
+        inside_bounds += 1
+        qd_box = box.solve(p).velocities
+        f_dual, f_box = lasso_objective(p, qd_dual, LAMBDA), lasso_objective(p, qd_box, LAMBDA)
+        assert abs(f_dual - f_box) <= 1e-9 * f_box
+        assert active_sets(p, qd_dual, 1e-7) == active_sets(p, qd_box, 1e-7)
+        assert np.count_nonzero(np.abs(qd_dual) > 1e-9) <= 6
+        np.testing.assert_allclose(dual.solve(p).velocities, qd_dual, atol=0.0)  # the solver uses it as is
+    assert inside_bounds >= 50
+
+
+def test_a_dual_solution_outside_the_bounds_falls_back_to_the_box_qp(problems: list[ControlProblem]) -> None:
+    """Bounds that cut the unbounded lasso: sparse_qp returns eq (19)'s box-QP optimum, inside the bounds."""
+    solver, box = make_solver("sparse_qp", EXACT), _box_qp_only()
+    for p in problems[:10]:
+        tight = ControlProblem(p.jacobian, p.reference * 20, np.maximum(p.lower, -0.05), np.minimum(p.upper, 0.05),
+                               p.repulsive)
+        solver.reset()
+        qd_dual = solver._dual.solve(tight.jacobian, tight.reference, LAMBDA)[0]  # type: ignore[attr-defined]
+        assert qd_dual is not None and (np.any(qd_dual < tight.lower) or np.any(qd_dual > tight.upper))
+        solver.reset()
+        box.reset()
+        res, ref = solver.solve(tight), box.solve(tight)
+        assert res.status == "solved"
+        np.testing.assert_allclose(res.velocities, ref.velocities, atol=1e-12)
+
+
+def test_dual_path_is_skipped_by_tolerance_based_backends() -> None:
+    """Only an active-set back-end that reports multipliers (daqp) gets the dual path; proxsuite keeps eq (19)."""
+    assert make_solver("sparse_qp", EXACT)._dual is not None  # type: ignore[attr-defined]
+    assert make_solver("sparse_qp", replace(EXACT, qp_backend="proxsuite"))._dual is None  # type: ignore[attr-defined]
