@@ -277,3 +277,18 @@ def test_malformed_scenario_yaml_is_a_scenario_error(tmp_path: Path) -> None:
     """A YAML error in a scenario file surfaces as ScenarioError with the line."""
     with pytest.raises(ScenarioError, match="line 2"):
         load_scenario(str(write(tmp_path, "/**:\n\tros__parameters: {}\n", "broken.yaml")))
+
+
+def test_thread_priority_comes_from_a_params_file_and_minus_p_wins(tmp_path: Path) -> None:
+    """The scheduling is chosen before rclpy starts: the node's params-file entry counts, -p overrides it."""
+    from dualarm_control.ros.node import priority_from_args
+
+    f = tmp_path / "p.yaml"
+    f.write_text("trajectory_node:\n  ros__parameters:\n    thread_priority: 0\n")
+    args = ["trajectory_node", "--ros-args", "--params-file", str(f)]
+    assert priority_from_args(args, 40, "trajectory_node") == 0
+    assert priority_from_args(args, 50, "controller_node") == 50  # another node's entry
+    assert priority_from_args([*args, "-p", "thread_priority:=7"], 40, "trajectory_node") == 7
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("trajectory_node: [")
+    assert priority_from_args(["x", "--ros-args", "--params-file", str(bad)], 40, "trajectory_node") == 40

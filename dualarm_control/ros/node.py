@@ -238,11 +238,18 @@ def thread_priority_spec(default: int, what: str) -> ParamSpec:
                      check=lambda v: "" if 0 <= v <= 99 else "an integer in [0, 99]", read_only=True, bounds=(0, 99))
 
 
-def priority_from_args(argv: Sequence[str], default: int) -> int:
-    """``thread_priority`` from ``-p thread_priority:=N`` in ``argv`` (read before rclpy exists, so
-    the middleware's threads inherit the scheduling); ``default`` when absent or malformed
-    (:func:`declare` then reports a malformed value with exit 2)."""
+def priority_from_args(argv: Sequence[str], default: int, node_name: str) -> int:
+    """``thread_priority`` as the node will declare it, read before rclpy exists (so the
+    middleware's threads inherit the scheduling): ``-p thread_priority:=N`` in ``argv`` wins
+    over the node's entry in ``--params-file`` files (later files win), as in ROS 2; ``default``
+    when absent or malformed (:func:`declare` then reports a malformed value with exit 2)."""
     priority = default
+    try:
+        value = read_params_files(params_files(argv), node_name).get("thread_priority", default)
+    except (DualArmError, OSError, ValueError):  # a bad file is reported by run() with exit 2
+        value = default
+    if isinstance(value, int) and not isinstance(value, bool):
+        priority = value
     for i, arg in enumerate(argv[:-1]):
         if arg == "-p" and argv[i + 1].startswith("thread_priority:="):
             try:
