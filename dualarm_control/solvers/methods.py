@@ -224,8 +224,8 @@ class LassoDual:
     J_i^T w = sign(z_i)) is the lasso's optimality condition J_i^T (r - J qd) = lambda sign(qd_i):
     so qd = lambda z is an exact minimiser, and an active-set back-end (daqp) returns a
     basic one, with at most m non-zero joints. Eq (19)'s 2n-variable QP has a semi-definite
-    H, which daqp solves with a proximal-point outer loop; this dual is about 5x faster
-    (docs/bench.md). When qd lies inside the bounds of eq (23) it is also the minimiser of
+    H, which daqp solves with a proximal-point outer loop: 48 us p50 (30 iterations) against
+    8.8 us for this dual on the random set of docs/bench.md. When qd lies inside the bounds of eq (23) it is also the minimiser of
     eq (17) with the bounds (the optimum of a relaxation, and feasible).
 
     Used with an active-set back-end that reports multipliers (daqp): the dual's w is of
