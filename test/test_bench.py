@@ -47,3 +47,25 @@ def test_unknown_backend_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[s
 def test_run_bench_without_scenario_has_no_scenario_part() -> None:
     record = run_bench(None, ["standard_qp"], ["daqp"], count=4, scaling_arms=(2,))
     assert "scenario" not in record and record["random"]["cases"] == 4
+
+
+def test_realtime_bench_refuses_a_missing_params_file(tmp_path: Path) -> None:
+    """`dualarm bench --realtime --params F`: a missing file exits 2 before any node starts."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-m", "dualarm_control.app.cli", "bench", "--realtime", "--rates", "1000",
+                          "--params", str(tmp_path / "missing.yaml"), "--output", str(tmp_path)],
+                         check=False, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2 and "file not found" in out.stderr
+    assert not (tmp_path / "realtime.md").exists()
+
+
+def test_the_1khz_realtime_params_file_sets_only_the_trajectory_nodes_scheduling() -> None:
+    from dualarm_control.paths import config_path
+    from dualarm_control.ros.node import priority_from_args
+
+    path = str(config_path("realtime_1khz.yaml"))
+    args = ["x", "--ros-args", "--params-file", path]
+    assert priority_from_args(args, 40, "trajectory_node") == 0
+    assert priority_from_args(args, 50, "controller_node") == 50 and priority_from_args(args, 50, "sim_node") == 50

@@ -243,6 +243,7 @@ def cmd_bench_realtime(args: argparse.Namespace) -> int:
         run_realtime,
         write_realtime,
     )
+    from dualarm_control.params import read_params_files
     from dualarm_control.scenario import scenario_file
     from dualarm_control.solvers import make_solver
 
@@ -251,7 +252,9 @@ def cmd_bench_realtime(args: argparse.Namespace) -> int:
     for name in solvers:
         make_solver(name)
     rates = [float(r) for r in args.rates.split(",") if r.strip()]
-    rows = run_realtime(args.scenario, solvers, rates)
+    for path in args.params:
+        read_params_files([path], "_check_")  # missing or malformed: exit 2 before any node starts
+    rows = run_realtime(args.scenario, solvers, rates, params=args.params)
     write_realtime(Path(args.output), rows, args.scenario)
     print(format_realtime(rows))
     print(f"\nwrote {Path(args.output) / 'realtime.md'} and realtime.json")
@@ -569,6 +572,9 @@ def build_parser() -> argparse.ArgumentParser:
                      "period jitter and state-to-command latency over every cycle (realtime.md/json)")
     ben.add_argument("--rates", default="200,500,1000", metavar="HZ,...",
                      help="control rates of --realtime (default: %(default)s)")
+    ben.add_argument("--params", action="append", default=[], metavar="FILE",
+                     help="--realtime: ROS-style parameter file passed to every node (repeatable), e.g. "
+                     "config/realtime_1khz.yaml")
     ben.set_defaults(func=cmd_bench)
 
     run = sub.add_parser("run", help="run one node (like ros2 run dualarm_control NODE)",

@@ -65,8 +65,8 @@ def summarize_cycles(cycles: dict[str, np.ndarray], period: float) -> dict[str, 
 
 
 def run_realtime(scenario: str, solvers: Sequence[str], rates: Sequence[float],
-                 timeout: float = 300.0) -> list[dict[str, Any]]:
-    """One real-time launch per (solver, rate); the rows of the table."""
+                 timeout: float = 300.0, params: Sequence[str] = ()) -> list[dict[str, Any]]:
+    """One real-time launch per (solver, rate), ``params`` files passed to every node; the rows of the table."""
     from dualarm_control.app.launcher import launch_scenario
 
     rows = []
@@ -75,7 +75,7 @@ def run_realtime(scenario: str, solvers: Sequence[str], rates: Sequence[float],
             with tempfile.TemporaryDirectory() as tmp:
                 bag = Path(tmp) / "diagnostics"
                 print(f"=== {solver} at {rate:g} Hz, real time", flush=True)
-                code = launch_scenario(scenario, [], ["-p", f"solver:={solver}"], False, bag, timeout,
+                code = launch_scenario(scenario, list(params), ["-p", f"solver:={solver}"], False, bag, timeout,
                                        rate_hz=rate, record_topics=("/diagnostics",))
                 row = {"solver": solver, "rate_hz": rate, "exit": code,
                        **summarize_cycles(controller_cycles(bag), 1.0 / rate)}
