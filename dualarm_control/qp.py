@@ -82,8 +82,8 @@ class QPSolution:
         solve_time: wall time of the solve call [s] (perf_counter).
         multipliers: Lagrange multipliers z (p,) of the rows l <= C x <= u, with the sign of
             H x + g + A^T y + C^T z = 0 (z_i > 0 where the upper bound u_i is active, < 0 at
-            l_i), or None (no C rows, no solution, or a back-end that does not report them:
-            see ``QPBackend.provides_multipliers``).
+            l_i), or None (no C rows, no solution, or a qpsolvers back-end, which does not
+            report them; daqp and proxsuite do).
     """
 
     x: FloatArray | None
@@ -103,11 +103,10 @@ class QPBackend:
     name = "base"
     needs_positive_definite = False
     """True when the back-end only solves QPs whose H is positive definite."""
-    provides_multipliers = False
-    """True when a solved QPSolution carries the multipliers of the C rows."""
     active_set = False
-    """True for an active-set method: the solution is a vertex of the active constraints, exact to
-    round-off, rather than an iterate that meets a tolerance (proxsuite, interior-point solvers)."""
+    """True for an active-set method that reports the multipliers of the C rows: the solution is a
+    vertex of the active constraints, exact to round-off, rather than an iterate that meets a
+    tolerance (proxsuite, interior-point solvers)."""
 
     def __init__(self, settings: QPSettings) -> None:
         self.settings = settings
@@ -124,7 +123,6 @@ class ProxsuiteBackend(QPBackend):
     and otherwise updated in place with the previous result as warm start."""
 
     name = "proxsuite"
-    provides_multipliers = True
 
     def __init__(self, settings: QPSettings) -> None:
         super().__init__(settings)
@@ -194,7 +192,6 @@ class DaqpBackend(QPBackend):
     """
 
     name = "daqp"
-    provides_multipliers = True
     active_set = True
     ETA_PROX = 1e-14
     """Proximal-point stopping tolerance (change of the iterate between outer iterations)."""

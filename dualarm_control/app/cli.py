@@ -146,15 +146,22 @@ def cmd_task_experiment(args: argparse.Namespace, scenario) -> int:
     return 0
 
 
+def check_params_files(paths: list[str]) -> None:
+    """Every ``--params`` file exists and is a ROS-style parameter file; ParameterFileError (exit 2,
+    naming the file and the problem) before any node starts."""
+    from dualarm_control.params import read_params_files
+
+    for path in paths:
+        read_params_files([path], "_check_")
+
+
 def cmd_launch(args: argparse.Namespace) -> int:
     """Start the three nodes as processes on a scenario; optionally record a bag."""
     from dualarm_control.app.launcher import launch_scenario
     from dualarm_control.scenario import load_scenario, scenario_file
 
     scenario_file(args.scenario)  # fail early (exit 2) on an unknown scenario
-    for f in args.params:
-        if not Path(f).is_file():
-            raise DualArmError(f"--params {f}: file not found")
+    check_params_files(args.params)
     extra = []
     if args.solver:
         extra += ["-p", f"solver:={args.solver}"]
@@ -243,7 +250,6 @@ def cmd_bench_realtime(args: argparse.Namespace) -> int:
         run_realtime,
         write_realtime,
     )
-    from dualarm_control.params import read_params_files
     from dualarm_control.scenario import scenario_file
     from dualarm_control.solvers import make_solver
 
@@ -252,8 +258,7 @@ def cmd_bench_realtime(args: argparse.Namespace) -> int:
     for name in solvers:
         make_solver(name)
     rates = [float(r) for r in args.rates.split(",") if r.strip()]
-    for path in args.params:
-        read_params_files([path], "_check_")  # missing or malformed: exit 2 before any node starts
+    check_params_files(args.params)
     rows = run_realtime(args.scenario, solvers, rates, params=args.params)
     write_realtime(Path(args.output), rows, args.scenario)
     print(format_realtime(rows))

@@ -23,10 +23,11 @@ from dualarm_control.metrics import percentiles
 
 def controller_cycles(bag: Path) -> dict[str, np.ndarray]:
     """Per-cycle controller figures from a bag's /diagnostics (status ``controller_node`` with a solver status)."""
-    from rosbags.highlevel import AnyReader
+    from dualarm_control.app.bag import open_reader
 
     rows: dict[str, list[float]] = {"interval": [], "latency": [], "missed": [], "cycles": [], "failures": []}
-    with AnyReader([bag]) as reader:
+    reader = open_reader(bag)
+    try:
         conns = [c for c in reader.connections if c.topic == "/diagnostics"]
         for conn, _, raw in reader.messages(connections=conns):
             msg: Any = reader.deserialize(raw, conn.msgtype)
@@ -39,6 +40,8 @@ def controller_cycles(bag: Path) -> dict[str, np.ndarray]:
                 rows["missed"].append(float(values["missed_deadlines"]))
                 rows["cycles"].append(float(values["cycles"]))
                 rows["failures"].append(float(values["solver_failures"]))
+    finally:
+        reader.close()
     return {k: np.array(v) for k, v in rows.items()}
 
 

@@ -168,9 +168,8 @@ class SparseQP(_QPSolver):
 
     def __init__(self, params: SolverParams | None = None) -> None:
         super().__init__(params)
-        self._previous: FloatArray | None = None  # z (2n,) from the box QP or qd (n,) from the dual
-        exact_dual = self._qp.active_set and self._qp.provides_multipliers
-        self._dual = LassoDual(self._backend()) if exact_dual else None
+        self._previous: FloatArray | None = None  # the previous solution qd (n,), for the proximal term
+        self._dual = LassoDual(self._backend()) if self._qp.active_set else None
 
     def reset(self) -> None:
         super().reset()
@@ -178,36 +177,27 @@ class SparseQP(_QPSolver):
             self._dual.reset()
         self._previous = None
 
-    def _previous_z(self, n: int) -> FloatArray | None:
-        """z_prev (2n,) of the proximal term, or None. The previous solution is kept as the box
-        QP's z (2n,), or as qd (n,) when it came from the dual (split here: z = [max(qd, 0); max(-qd, 0)])."""
-        prev = self._previous
-        if prev is None:
-            return None
-        if prev.shape == (n,):
-            return np.concatenate((np.maximum(prev, 0.0), np.maximum(-prev, 0.0)))
-        return prev if prev.shape == (2 * n,) else None
-
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
         j = problem.jacobian
         n = j.shape[1]
         mu = self.params.proximal_weight
-        z_prev = self._previous_z(n) if mu > 0 else None
-        if z_prev is None and self._dual is not None:
+        prev = self._previous if mu > 0 and self._previous is not None and self._previous.shape == (n,) else None
+        if prev is None and self._dual is not None:
             qd, iterations = self._dual.solve(j, problem.reference, self.params.l1_weight)
             if qd is not None and inside(qd, problem.lower, problem.upper):
-                self._previous = qd  # split into z form only if the next cycle needs it
+                self._previous = qd
                 return qd, "solved", iterations, ""  # eq (17)'s optimum lies inside the bounds
         b = np.hstack((j, -j))  # J [I, -I], (6, 2n)
         h = b.T @ b
         g = self.params.l1_weight - b.T @ problem.reference
-        if z_prev is not None:
+        if prev is not None:  # z_prev = [max(qd, 0); max(-qd, 0)]: the split of an optimum (no overlap)
             h.flat[:: 2 * n + 1] += mu
-            g -= mu * z_prev
+            g -= mu * np.concatenate((np.maximum(prev, 0.0), np.maximum(-prev, 0.0)))
         lb, ub = lasso_box(problem.lower, problem.upper)
         solution = self._qp.solve(QPProblem(H=h, g=g, lb=lb, ub=ub))
-        self._previous = solution.x if solution.ok else None
-        return from_qp(solution, lambda z: z[:n] - z[n:])
+        qd, status, iterations, detail = from_qp(solution, lambda z: z[:n] - z[n:])
+        self._previous = qd if solution.ok else None
+        return qd, status, iterations, detail
 
 
 class LassoDual:
