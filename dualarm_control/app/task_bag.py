@@ -104,8 +104,14 @@ def read_task_run(path: Path) -> tuple[TaskRunLog, Scenario]:
     by_stamp: dict[int, tuple[int, dict[str, str]]] = {}
     for t, values in bag.cycles:
         by_stamp.setdefault(int(values["stamp_ns"]), (t, values))
-    stamps = sorted(by_stamp)
-    first = by_stamp[stamps[0]][1]
+    first = by_stamp[min(by_stamp)][1]
+    # A real-time recording starts when the recorder's subscriptions are matched, which can be
+    # a few states after the first cycle: cycles before the first recorded state are outside
+    # the bag. From that state on, every cycle's state must be in the bag.
+    covered_from = min(bag.joint_states, default=min(by_stamp))
+    stamps = sorted(s for s in by_stamp if s >= covered_from)
+    if not stamps:
+        raise BagError(f"bag {path}: no controller task cycle at or after the first recorded {JOINT_STATES_TOPIC}")
     scenario = load_scenario(first[TASK_KEY])
     model = DualArmModel(scenario.urdf_path)
     order: dict[tuple[str, ...], list[int]] = {}
