@@ -116,7 +116,8 @@ class SimNode:
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.pub_contact = (n.create_publisher(Vector3Stamped, "/contact_force", 10) if self.contact is not None
                             else None)
-        subscribe_checked(n, Float64MultiArray, "/velocity_controller/commands", self.on_command, qos, self.reject)
+        subscribe_checked(n, Float64MultiArray, "/velocity_controller/commands", self.on_command, qos, self.reject,
+                          convert.CommandInput(len(self.cell.joint_names)))
         self.log = n.get_logger()
         self.throttle = Throttle(1.0)
         self.steps = 0
@@ -162,9 +163,8 @@ class SimNode:
         self.pub_diag.publish(convert.diagnostics(self._stamp_ns(), "sim_node", 1, reason,
                                                   {"status": "input_rejected", "rejected_inputs": self.rejected}))
 
-    def on_command(self, msg: Any) -> None:
+    def on_command(self, data: np.ndarray | str) -> None:
         self.received += 1
-        data = convert.command_vector(msg, len(self.cell.joint_names))
         if isinstance(data, str):
             self.reject(data)
             return

@@ -258,8 +258,8 @@ def test_garbled_cdr_and_bad_messages_on_running_nodes() -> None:
     types = {"/joint_states": JointState, "/relative_target": MultiDOFJointTrajectory,
              "/velocity_controller/commands": Float64MultiArray}
     pubs = {topic: node.create_publisher(kind, topic, 1000) for topic, kind in types.items()}
-    valid = {"/joint_states": serialize_message(convert.joint_state(names, time.time_ns(), np.zeros(14), np.zeros(14))),
-             "/relative_target": serialize_message(bad_messages(names)["/relative_target"][0]),
+    valid = {"/joint_states": convert.joint_state(names, time.time_ns(), np.zeros(14), np.zeros(14)),  # CDR bytes
+             "/relative_target": bad_messages(names)["/relative_target"][0],
              "/velocity_controller/commands": serialize_message(Float64MultiArray(data=[0.0] * 14))}
 
     def spin(seconds: float) -> None:

@@ -5,8 +5,8 @@ Subscribes ``/joint_states`` and ``/relative_target``; publishes
 All control math is :class:`dualarm_control.controller.RelativeController`.
 
 Cycle (real-time mode): event-driven, read -> update -> write as ros2_control does: a
-command is computed as soon as a joint state arrives. A timer at the control period is only
-the watchdog. Lockstep mode: one command per joint-state stamp, computed when the target with
+command is computed as soon as a joint state arrives. A timer at the control period, but at
+most 200 Hz (one wake-up fewer per cycle at 1 kHz), is only the watchdog. Lockstep mode: one command per joint-state stamp, computed when the target with
 the same stamp has arrived (no watchdog: the simulator waits for the command).
 
 Watchdogs (real-time mode), checked on every watchdog tick and before every cycle:
@@ -18,7 +18,7 @@ Watchdogs (real-time mode), checked on every watchdog tick and before every cycl
   moving (a non-zero twist, or a non-zero joint reference velocity). A stream that stops with a
   target at rest (the end of a trajectory, a hold) is not a fault: the pose is held.
 
-Either sends the safe state: a zero-velocity command every period and /diagnostics level ERROR
+Either sends the safe state: a zero-velocity command every watchdog tick and /diagnostics level ERROR
 (2) with the reason, logged once when it starts. The node recovers by itself at the first
 cycle whose inputs are fresh again: commands resume, /diagnostics goes back to OK, the
 recovery is logged once with the time spent in the safe state.
@@ -112,6 +112,7 @@ NODE_PARAMETERS = (
     ParamSpec("joint_gain", 30.0, "K of the joint-space tracking of reference:=joint [1/s]", check=positive),
 )
 DEFAULT_PRIORITY = 50
+WATCHDOG_MIN_PERIOD_S = 0.005  # the watchdog ticks at the control rate, at most 200 Hz
 WINDOW = 2000  # samples kept for jitter/latency percentiles
 STATS_EVERY = 200  # cycles between percentile updates
 NAN2 = (float("nan"), float("nan"))
@@ -148,10 +149,12 @@ class ControllerNode:
         self.pub_cmd = n.create_publisher(Float64MultiArray, "/velocity_controller/commands", qos)
         self.pub_pose = n.create_publisher(PoseStamped, "/relative_pose", 10)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        subscribe_checked(n, JointState, "/joint_states", self.on_joint_state, qos, self.on_malformed)
+        self.reach = self.model.relative_reach()
+        subscribe_checked(n, JointState, "/joint_states", self.on_joint_state, qos, self.on_malformed,
+                          convert.JointStateInput(self.order))
         if self.task is None:
             subscribe_checked(n, MultiDOFJointTrajectory, "/relative_target", self.on_target, qos,
-                              self.on_malformed)
+                              self.on_malformed, convert.TargetInput(self.reach))
         elif self.task.force:
             subscribe_checked(n, WrenchStamped, "/wrench", self.on_wrench, 10, self.on_malformed)
         self.joint_mode = self.values["reference"] == "joint"
@@ -159,7 +162,6 @@ class ControllerNode:
             subscribe_checked(n, JointTrajectory, "/joint_reference", self.on_joint_reference, qos, self.on_malformed)
         self.gates = {name: StampGate(name) for name in ("joint_states", "relative_target", "joint_reference",
                                                          "wrench")}
-        self.reach = self.model.relative_reach()
         self.joint_ref: tuple[int, np.ndarray, np.ndarray] | None = None
         self.joint_refs: dict[int, tuple[int, np.ndarray, np.ndarray]] = {}  # lockstep: by stamp
         n.add_on_set_parameters_callback(self.on_set_parameters)
@@ -185,7 +187,7 @@ class ControllerNode:
         self.wrenches: dict[int, np.ndarray] = {}  # lockstep force variant: by stamp
         self.completed_at: float | None = None  # task mode: monotonic s at which the duration was reached
         if not self.lockstep:
-            n.create_timer(self.params.period, self.on_watchdog)
+            n.create_timer(max(self.params.period, WATCHDOG_MIN_PERIOD_S), self.on_watchdog)
         tracked = "joint reference" if self.joint_mode else f"solver '{self.params.solver}'"
         if self.task is not None:
             tracked += (f" on task scenario '{self.values['scenario']}' (k={self.task_gain:g}"
@@ -279,9 +281,8 @@ class ControllerNode:
                 self.last_commanded_stamp = None
         return verdict.accepted
 
-    def on_joint_state(self, msg: Any) -> None:
-        decoded = convert.joint_vectors(msg, self.order)
-        stamp = convert.stamp_ns(msg.header.stamp)
+    def on_joint_state(self, sample: tuple[int, tuple[np.ndarray, np.ndarray] | str]) -> None:
+        stamp, decoded = sample
         if isinstance(decoded, str):  # keep the last good state; it goes stale -> safe command
             self.reject(stamp, decoded)
             return
@@ -301,10 +302,10 @@ class ControllerNode:
         else:
             self.cycle(self.target, self.joint_ref)
 
-    def on_target(self, msg: Any) -> None:
-        value = convert.target_value(msg, self.reach)
+    def on_target(self, sample: tuple[int, convert.TargetValue | str]) -> None:
+        stamp, value = sample
         if isinstance(value, str):
-            self.reject(convert.stamp_ns(msg.header.stamp), f"relative_target rejected: {value}")
+            self.reject(stamp, f"relative_target rejected: {value}")
             return
         if not self.stamp_accepted("relative_target", value.stamp_ns):
             return
@@ -468,8 +469,7 @@ class ControllerNode:
         """The last target asks for motion: non-zero twist, or non-zero joint reference velocity."""
         if self.target is None:
             return False
-        twist = max(float(np.linalg.norm(self.target.linear_velocity)),
-                    float(np.linalg.norm(self.target.angular_velocity)))
+        twist = self.target.speed
         if self.joint_mode and self.joint_ref is not None:
             twist = max(twist, float(np.linalg.norm(self.joint_ref[2])))
         return twist > MOVING

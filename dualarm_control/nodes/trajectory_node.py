@@ -8,7 +8,9 @@ scenario's settle time has elapsed the node logs completion, publishes a final
 ``/diagnostics`` status "complete" and exits 0; with ``repeat:=true`` (soak runs) it starts the
 scenario again from the pose of the next joint state instead, forever. A malformed or unusable
 joint state (bad CDR, wrong or missing joint names, NaN; in lockstep a stamp older than the
-last one) is rejected with a throttled log line and not used.
+last one) is rejected with a throttled log line and not used. In real-time mode the node
+subscribes to ``/joint_states`` only until the trajectory starts (and again for the next run
+with ``repeat``): at 1 kHz a state it does not use costs a wake-up and a decode every period.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from __future__ import annotations
 import sys
 from typing import Any
 
+import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -70,7 +73,9 @@ class TrajectoryNode:
         self.pub = n.create_publisher(MultiDOFJointTrajectory, "/relative_target", qos)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.pub_joint = n.create_publisher(JointTrajectory, "/joint_reference", qos)
-        subscribe_checked(n, JointState, "/joint_states", self.on_joint_state, qos, self.reject)
+        self.qos = qos
+        self.states: Any = None  # the /joint_states subscription while one is needed
+        self.subscribe_states()
         self.log = n.get_logger()
         self.throttle = Throttle(1.0)
         self.gate = StampGate("joint_states")
@@ -87,11 +92,14 @@ class TrajectoryNode:
         if priority_note and priority_note != "disabled":
             self.log.warning(priority_note)
 
-    def on_joint_state(self, msg: Any) -> None:
+    def subscribe_states(self) -> None:
+        self.states = subscribe_checked(self.node, JointState, "/joint_states", self.on_joint_state, self.qos,
+                                        self.reject, convert.JointStateInput(self.order))
+
+    def on_joint_state(self, sample: tuple[int, tuple[np.ndarray, np.ndarray] | str]) -> None:
         if self.finished:
             return
-        stamp = convert.stamp_ns(msg.header.stamp)
-        decoded = convert.joint_vectors(msg, self.order)
+        stamp, decoded = sample
         if isinstance(decoded, str):
             self.reject(f"joint state rejected: {decoded}")
             return
@@ -118,6 +126,9 @@ class TrajectoryNode:
 
     def on_tick(self) -> None:
         if self.trajectory is not None:
+            if self.states is not None:  # started: the timer drives the stream (not destroyed in its own callback)
+                self.node.destroy_subscription(self.states)
+                self.states = None
             now = self.node.get_clock().now().nanoseconds
             self.publish(now, now - self.start_ns)
 
@@ -130,6 +141,8 @@ class TrajectoryNode:
             self.repetitions += 1
             if self.repeat:  # the next joint state plans the next run from where the arms are
                 self.trajectory, self.segment = None, -1
+                if self.states is None:
+                    self.subscribe_states()
             else:
                 self.finished = True  # run() stops spinning after this callback
             return

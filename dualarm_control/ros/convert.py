@@ -1,10 +1,16 @@
 """Conversions between the core's values and the standard ROS 2 messages (no control math here).
 
-Only ``common_interfaces`` types, so any ROS tool reads what the nodes publish.
+Only ``common_interfaces`` types, so any ROS tool reads what the nodes publish. What the nodes
+send or receive every control period is written and read as CDR bytes (:mod:`.cdr`,
+``Publisher.publish(bytes)``): at 1 kHz rclpy's message objects cost more than the control
+step (docs/bench.md). Inputs are decoded by :class:`JointStateInput` and
+:class:`TargetInput`, which read the bytes directly and fall back to the rclpy message
+(:func:`dualarm_control.ros.inputs.subscribe_checked`); both paths share the checks.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -12,28 +18,10 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 from builtin_interfaces.msg import Duration, Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import (
-    Point,
-    Pose,
-    PoseStamped,
-    Quaternion,
-    Transform,
-    Twist,
-    Vector3,
-    Vector3Stamped,
-    Wrench,
-    WrenchStamped,
-)
-from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray, Header
-from trajectory_msgs.msg import (
-    JointTrajectory,
-    JointTrajectoryPoint,
-    MultiDOFJointTrajectory,
-    MultiDOFJointTrajectoryPoint,
-)
+from std_msgs.msg import Header
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from dualarm_control.ros import cdr
 
 LEFT_FRAME = "left_tool"
 RIGHT_FRAME = "right_tool"
@@ -54,10 +42,9 @@ def header(ns: int, frame_id: str = "") -> Any:
     return Header(stamp=stamp(ns), frame_id=frame_id)
 
 
-def joint_state(names: Sequence[str], ns: int, q: np.ndarray, qd: np.ndarray) -> Any:
-    """sensor_msgs/JointState with positions [rad] and velocities [rad/s]; effort left empty."""
-    return JointState(header=header(ns), name=list(names), position=[float(v) for v in q],
-                               velocity=[float(v) for v in qd], effort=[])
+def joint_state(names: Sequence[str], ns: int, q: np.ndarray, qd: np.ndarray) -> bytes:
+    """sensor_msgs/JointState (CDR) with positions [rad] and velocities [rad/s]; effort left empty."""
+    return cdr.joint_state(ns, names, q, qd)
 
 
 def joint_indices(names: Sequence[str], order: Mapping[str, int], what: str) -> list[int] | str:
@@ -76,43 +63,93 @@ def joint_indices(names: Sequence[str], order: Mapping[str, int], what: str) -> 
     return [position[n] for n in order]
 
 
-def joint_vectors(msg: Any, order: Mapping[str, int]) -> tuple[np.ndarray, np.ndarray] | str:
-    """(q, qd) in the model's joint order from a JointState, or a reason string if unusable.
+class JointStateInput:
+    """/joint_states -> (stamp ns, (q, qd) in the model's joint order | why the message is unusable).
 
     Rejected: duplicate or missing names, a position count different from the name count, a
-    velocity count that is neither 0 (then qd = 0) nor the name count, NaN or inf.
+    velocity count that is neither 0 (then qd = 0) nor the name count, NaN or inf. The name ->
+    index mapping is computed once per distinct names tuple (a stream repeats its names).
     """
-    names = list(msg.name)
-    idx = joint_indices(names, order, "joint_states")
-    if isinstance(idx, str):
-        return idx
-    if len(msg.position) != len(names) or len(msg.velocity) not in (0, len(names)):
-        return (f"joint_states with {len(names)} names but {len(msg.position)} positions and "
-                f"{len(msg.velocity)} velocities")
-    q = np.asarray(msg.position, dtype=float)[idx]
-    qd = np.asarray(msg.velocity, dtype=float)[idx] if len(msg.velocity) else np.zeros(len(idx))
-    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
-        return "joint_states contains NaN or inf"
-    return q, qd
+
+    def __init__(self, order: Mapping[str, int]) -> None:
+        self.order = order
+        self.read = cdr.JointStateReader()
+        self._names: tuple[str, ...] | None = None
+        self._idx: list[int] | str = ""
+
+    def from_bytes(self, data: bytes) -> tuple[int, tuple[np.ndarray, np.ndarray] | str]:
+        """The fast path: the CDR payload (raises :class:`cdr.CdrError` if it cannot read it)."""
+        stamp, names, position, velocity = self.read(data)
+        return stamp, self.vectors(names, position, velocity)
+
+    def from_message(self, msg: Any) -> tuple[int, tuple[np.ndarray, np.ndarray] | str]:
+        return stamp_ns(msg.header.stamp), self.message_vectors(msg)
+
+    def message_vectors(self, msg: Any) -> tuple[np.ndarray, np.ndarray] | str:
+        """(q, qd) | reason from a message's ``name``, ``position`` and ``velocity``."""
+        return self.vectors(tuple(msg.name), np.asarray(msg.position, dtype=float),
+                            np.asarray(msg.velocity, dtype=float))
+
+    def vectors(self, names: tuple[str, ...], position: np.ndarray,
+                velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray] | str:
+        if names is not self._names and names != self._names:
+            self._names, self._idx = names, joint_indices(list(names), self.order, "joint_states")
+        idx = self._idx
+        if isinstance(idx, str):
+            return idx
+        n = len(names)
+        if len(position) != n or len(velocity) not in (0, n):
+            return f"joint_states with {n} names but {len(position)} positions and {len(velocity)} velocities"
+        q = position[idx]
+        qd = velocity[idx] if len(velocity) else np.zeros(len(idx))
+        if not finite(q) or not finite(qd):
+            return "joint_states contains NaN or inf"
+        return q, qd
+
+
+def joint_vectors(msg: Any, order: Mapping[str, int]) -> tuple[np.ndarray, np.ndarray] | str:
+    """(q, qd) in the model's joint order from a JointState message, or why it is unusable
+    (:class:`JointStateInput`'s checks)."""
+    return JointStateInput(order).message_vectors(msg)
+
+
+def finite(values: np.ndarray) -> bool:
+    """Every entry finite (the sum first: one pass in the common case; overflow is checked entrywise)."""
+    return math.isfinite(float(values.sum())) or bool(np.isfinite(values).all())
+
+
+class CommandInput:
+    """/velocity_controller/commands -> the joint velocity command [rad/s], (size,), or why it is unusable."""
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+
+    def from_bytes(self, data: bytes) -> np.ndarray | str:
+        return self.check(cdr.float64_multi_array_data(data))
+
+    def from_message(self, msg: Any) -> np.ndarray | str:
+        return self.check(np.asarray(msg.data, dtype=float))
+
+    def check(self, data: np.ndarray) -> np.ndarray | str:
+        if data.shape != (self.size,):
+            return f"command with {data.size} values rejected: expected {self.size}"
+        if not finite(data):
+            return f"command with NaN or inf at indices {np.flatnonzero(~np.isfinite(data))[:5].tolist()} rejected"
+        return data.copy()
 
 
 def command_vector(msg: Any, size: int) -> np.ndarray | str:
-    """The joint velocity command [rad/s], (size,), of a Float64MultiArray, or why it is unusable."""
-    data = np.asarray(msg.data, dtype=float)
-    if data.shape != (size,):
-        return f"command with {data.size} values rejected: expected {size}"
-    if not np.all(np.isfinite(data)):
-        return f"command with NaN or inf at indices {np.flatnonzero(~np.isfinite(data))[:5].tolist()} rejected"
-    return data
+    """The joint velocity command [rad/s], (size,), of a Float64MultiArray message, or why it is unusable."""
+    return CommandInput(size).from_message(msg)
 
 
-def float_array(values: np.ndarray) -> Any:
-    """std_msgs/Float64MultiArray (JointGroupVelocityController convention: layout empty)."""
-    return Float64MultiArray(data=[float(v) for v in values])
+def float_array(values: np.ndarray) -> bytes:
+    """std_msgs/Float64MultiArray (CDR; JointGroupVelocityController convention: layout empty)."""
+    return cdr.float64_multi_array(values)
 
 
-def quaternion(rotation: np.ndarray) -> Any:
-    """geometry_msgs/Quaternion of a rotation matrix, normalised.
+def quaternion_xyzw(rotation: np.ndarray) -> tuple[float, float, float, float]:
+    """Unit quaternion (x, y, z, w) of a rotation matrix.
 
     Through ``SE3ToXYZQUAT``: building a ``pin.Quaternion`` from a 3x3 matrix leaks about 80 bytes
     per call (eigenpy 3.13 / pinocchio 4.1), which `dualarm soak` showed as RSS growing 1 MiB a
@@ -120,98 +157,117 @@ def quaternion(rotation: np.ndarray) -> Any:
     """
     xyzw = pin.SE3ToXYZQUAT(pin.SE3(np.asarray(rotation, dtype=float), np.zeros(3)))[3:]
     x, y, z, w = (float(v) for v in xyzw / np.linalg.norm(xyzw))
-    return Quaternion(x=x, y=y, z=z, w=w)
+    return x, y, z, w
+
+
+def rotation_xyzw(v: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a quaternion (x, y, z, w), (4,), normalised; NaN if non-finite or zero."""
+    if not finite(v) or np.linalg.norm(v) < 1e-9:
+        return np.full((3, 3), np.nan)
+    v = v / np.linalg.norm(v)
+    return pin.Quaternion(v[3], v[0], v[1], v[2]).toRotationMatrix()
 
 
 def rotation(q: Any) -> np.ndarray:
     """Rotation matrix of a geometry_msgs/Quaternion (normalised; NaN stays NaN)."""
-    v = np.array([q.x, q.y, q.z, q.w], dtype=float)
-    if not np.all(np.isfinite(v)) or np.linalg.norm(v) < 1e-9:
-        return np.full((3, 3), np.nan)
-    v /= np.linalg.norm(v)
-    return pin.Quaternion(v[3], v[0], v[1], v[2]).toRotationMatrix()
+    return rotation_xyzw(np.array([q.x, q.y, q.z, q.w], dtype=float))
 
 
-def pose_stamped(ns: int, position: np.ndarray, rot: np.ndarray) -> Any:
-    """Measured relative pose (right tool in left tool frame)."""
-    p = Point(x=float(position[0]), y=float(position[1]), z=float(position[2]))
-    return PoseStamped(header=header(ns, LEFT_FRAME), pose=Pose(position=p, orientation=quaternion(rot)))
-
-
-def _vec3(v: np.ndarray) -> Any:
-    return Vector3(x=float(v[0]), y=float(v[1]), z=float(v[2]))
+def pose_stamped(ns: int, position: np.ndarray, rot: np.ndarray) -> bytes:
+    """Measured relative pose (right tool in left tool frame), geometry_msgs/PoseStamped (CDR)."""
+    return cdr.pose_stamped(ns, LEFT_FRAME, position, quaternion_xyzw(rot))
 
 
 @dataclass(frozen=True)
 class TargetValue:
-    """A relative target decoded from a message (fields as the controller's RelativeTarget)."""
+    """A relative target decoded from a message (fields as the controller's RelativeTarget).
+
+    ``speed``: max(|linear velocity| [m/s], |angular velocity| [rad/s]), computed once.
+    """
 
     stamp_ns: int
     position: np.ndarray
     rotation: np.ndarray
     linear_velocity: np.ndarray
     angular_velocity: np.ndarray
+    speed: float = 0.0
 
 
-def target_message(ns: int, elapsed_ns: int, sample: Any) -> Any:
-    """trajectory_msgs/MultiDOFJointTrajectory carrying one sample atomically: pose, twist, acceleration."""
-    transform = Transform(translation=_vec3(sample.position), rotation=quaternion(sample.rotation))
-    twist = Twist(linear=_vec3(sample.linear_velocity), angular=_vec3(sample.angular_velocity))
-    accel = Twist(linear=_vec3(sample.linear_acceleration), angular=_vec3(sample.angular_acceleration))
-    point = MultiDOFJointTrajectoryPoint(
-        transforms=[transform], velocities=[twist], accelerations=[accel],
-        time_from_start=duration(elapsed_ns),
-    )
-    return MultiDOFJointTrajectory(header=header(ns, LEFT_FRAME), joint_names=[RIGHT_FRAME], points=[point])
+def target_message(ns: int, elapsed_ns: int, sample: Any) -> bytes:
+    """trajectory_msgs/MultiDOFJointTrajectory (CDR) carrying one sample atomically: pose, twist, acceleration."""
+    return cdr.multi_dof_point(
+        ns, LEFT_FRAME, RIGHT_FRAME, [*sample.position, *quaternion_xyzw(sample.rotation)],
+        [*sample.linear_velocity, *sample.angular_velocity],
+        [*sample.linear_acceleration, *sample.angular_acceleration], elapsed_ns)
 
 
-def target_value(msg: Any, max_distance: float = float("inf")) -> TargetValue | str:
-    """Decode a relative target message, or return why it is unusable.
+class TargetInput:
+    """/relative_target -> (stamp ns, :class:`TargetValue` | why the message is unusable).
 
     Rejected: not exactly one point with one transform and one velocity, NaN or inf, a zero
     quaternion, a relative position farther than ``max_distance`` [m] (the cell's reach,
     :meth:`DualArmModel.relative_reach`).
     """
-    if len(msg.points) != 1 or len(msg.points[0].transforms) != 1 or len(msg.points[0].velocities) != 1:
-        return "relative_target must carry exactly one point with one transform and one velocity"
-    tr, tw = msg.points[0].transforms[0], msg.points[0].velocities[0]
-    value = TargetValue(
-        stamp_ns=stamp_ns(msg.header.stamp),
-        position=np.array([tr.translation.x, tr.translation.y, tr.translation.z], dtype=float),
-        rotation=rotation(tr.rotation),
-        linear_velocity=np.array([tw.linear.x, tw.linear.y, tw.linear.z], dtype=float),
-        angular_velocity=np.array([tw.angular.x, tw.angular.y, tw.angular.z], dtype=float),
-    )
-    parts = (value.position, value.rotation, value.linear_velocity, value.angular_velocity)
-    if not all(np.all(np.isfinite(x)) for x in parts):
-        return "relative_target contains NaN or inf (or a zero quaternion)"
-    distance = float(np.linalg.norm(value.position))
-    if distance > max_distance:
-        return (f"relative_target position {distance:.3f} m from the left tool is beyond the cell's reach "
-                f"{max_distance:.3f} m")
-    return value
+
+    def __init__(self, max_distance: float = float("inf")) -> None:
+        self.max_distance = max_distance
+
+    def from_bytes(self, data: bytes) -> tuple[int, TargetValue | str]:
+        """The fast path: the CDR payload (raises :class:`cdr.CdrError` if it cannot read it)."""
+        stamp, points, transforms, velocities = cdr.relative_target(data)
+        return stamp, self.value(stamp, points, transforms, velocities)
+
+    def from_message(self, msg: Any) -> tuple[int, TargetValue | str]:
+        stamp = stamp_ns(msg.header.stamp)
+        points = msg.points
+        if not points:
+            return stamp, self.value(stamp, 0, np.empty((0, 7)), np.empty((0, 6)))
+        transforms = np.array([[t.translation.x, t.translation.y, t.translation.z, t.rotation.x, t.rotation.y,
+                                t.rotation.z, t.rotation.w] for t in points[0].transforms], dtype=float)
+        velocities = np.array([[v.linear.x, v.linear.y, v.linear.z, v.angular.x, v.angular.y, v.angular.z]
+                               for v in points[0].velocities], dtype=float)
+        return stamp, self.value(stamp, len(points), transforms, velocities)
+
+    def value(self, stamp: int, points: int, transforms: np.ndarray, velocities: np.ndarray) -> TargetValue | str:
+        """The checks on the first point's transforms (k, 7) [x y z qx qy qz qw] and velocities (m, 6)."""
+        if points != 1 or len(transforms) != 1 or len(velocities) != 1:
+            return "relative_target must carry exactly one point with one transform and one velocity"
+        pose, twist = transforms[0], velocities[0]
+        rot = rotation_xyzw(pose[3:])
+        if not finite(pose[:3]) or not finite(twist) or not finite(rot):
+            return "relative_target contains NaN or inf (or a zero quaternion)"
+        position = pose[:3].copy()
+        distance = float(np.linalg.norm(position))
+        if distance > self.max_distance:
+            return (f"relative_target position {distance:.3f} m from the left tool is beyond the cell's reach "
+                    f"{self.max_distance:.3f} m")
+        linear, angular = twist[:3].copy(), twist[3:].copy()
+        return TargetValue(stamp, position, rot, linear, angular,
+                           max(float(np.linalg.norm(linear)), float(np.linalg.norm(angular))))
 
 
-def diagnostics(ns: int, name: str, level: int, message: str, values: Mapping[str, Any]) -> Any:
-    """diagnostic_msgs/DiagnosticArray with one status whose values are ``key: str(value)``."""
-    status = DiagnosticStatus(
-        level=bytes([level]), name=name, message=message, hardware_id="dualarm_cell",
-        values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
-    )
-    return DiagnosticArray(header=header(ns), status=[status])
+def target_value(msg: Any, max_distance: float = float("inf")) -> TargetValue | str:
+    """A relative target message decoded, or why it is unusable (:class:`TargetInput`'s checks)."""
+    return TargetInput(max_distance).from_message(msg)[1]
+
+
+def diagnostics(ns: int, name: str, level: int, message: str, values: Mapping[str, Any]) -> bytes:
+    """diagnostic_msgs/DiagnosticArray (CDR) with one status whose values are ``key: str(value)``."""
+    return cdr.diagnostic_array(ns, level, name, message, "dualarm_cell", values)
 
 
 CONTACT_FRAME = "pan_normal"
 
 
-def wrench_stamped(ns: int, wrench: np.ndarray, frame_id: str = RIGHT_FRAME) -> Any:
-    return WrenchStamped(header=header(ns, frame_id), wrench=Wrench(force=_vec3(wrench[:3]), torque=_vec3(wrench[3:])))
+def wrench_stamped(ns: int, wrench: np.ndarray, frame_id: str = RIGHT_FRAME) -> bytes:
+    """geometry_msgs/WrenchStamped (CDR), ``wrench`` = [fx, fy, fz, tx, ty, tz] [N, N m]."""
+    return cdr.wrench_stamped(ns, frame_id, wrench)
 
 
-def contact_force(ns: int, normal_force: float) -> Any:
-    """geometry_msgs/Vector3Stamped of the simulator's brush-pan contact: ``vector.z`` is the
+def contact_force(ns: int, normal_force: float) -> bytes:
+    """geometry_msgs/Vector3Stamped (CDR) of the simulator's brush-pan contact: ``vector.z`` is the
     normal contact force [N] (ground truth of the physics, not a sensor), x = y = 0."""
-    return Vector3Stamped(header=header(ns, CONTACT_FRAME), vector=Vector3(x=0.0, y=0.0, z=float(normal_force)))
+    return cdr.vector3_stamped(ns, CONTACT_FRAME, (0.0, 0.0, float(normal_force)))
 
 
 def wrench_vector(msg: Any) -> np.ndarray | str:
@@ -223,9 +279,9 @@ def wrench_vector(msg: Any) -> np.ndarray | str:
     return values
 
 
-def clock(ns: int) -> Any:
-    """rosgraph_msgs/Clock at ``ns`` (simulation time)."""
-    return Clock(clock=stamp(ns))
+def clock(ns: int) -> bytes:
+    """rosgraph_msgs/Clock (CDR) at ``ns`` (simulation time)."""
+    return cdr.clock(ns)
 
 
 def duration(ns: int) -> Any:
