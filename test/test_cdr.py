@@ -12,7 +12,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped, Transform, Twist, Vector3Stamped, WrenchStamped
+from geometry_msgs.msg import (
+    PoseStamped,
+    Transform,
+    Twist,
+    Vector3Stamped,
+    WrenchStamped,
+)
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from rclpy.serialization import deserialize_message, serialize_message
