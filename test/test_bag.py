@@ -379,3 +379,11 @@ def test_nearest_labels() -> None:
     ref = np.array([10, 20, 30], dtype=np.int64)
     labels = nearest_labels(np.array([0, 14, 16, 26, 99], dtype=np.int64), ref, ["a", "b", "c"])
     assert list(labels) == ["a", "a", "b", "c", "c"]
+
+
+def test_after_data_must_name_a_recorded_topic(tmp_path: Path) -> None:
+    """--after-data TOPIC (a topic subscribed once the others deliver) must be one of the topics."""
+    out = subprocess.run(dualarm("bag", "record", "-o", str(tmp_path / "b"), "--duration", "0.2", "/a",
+                                 "--after-data", "/b"), cwd=REPO, capture_output=True, text=True, timeout=30,
+                         check=False)
+    assert out.returncode != 0 and "--after-data /b is not one of the topics to record ['/a']" in out.stderr

@@ -338,7 +338,8 @@ def cmd_bag_record(args: argparse.Namespace) -> int:
     from dualarm_control.ros.recorder import default_bag_path, record
 
     path = Path(args.output) if args.output else default_bag_path()
-    return record(path, args.topics, record_all=args.all, duration=args.duration, use_sim_time=args.use_sim_time)
+    return record(path, args.topics, record_all=args.all, duration=args.duration, use_sim_time=args.use_sim_time,
+                  after_data=args.after_data)
 
 
 def cmd_bag_info(args: argparse.Namespace) -> int:
@@ -431,6 +432,9 @@ def _add_bag_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     rec.add_argument("--use-sim-time", action="store_true",
                      help="stamp messages with /clock (simulation time), as rosbag2 does with use_sim_time")
     rec.add_argument("-d", "--duration", type=float, metavar="S", help="stop after S seconds")
+    rec.add_argument("--after-data", action="append", default=[], metavar="TOPIC",
+                     help="subscribe this named topic only once every other named topic has delivered a message "
+                     "(repeatable): a node that waits for a reader on TOPIC then starts with the others recorded")
     rec.set_defaults(func=cmd_bag_record)
     info = verbs.add_parser("info", help="summary of a bag (like ros2 bag info)")
     info.add_argument("bag", help="rosbag2 directory")

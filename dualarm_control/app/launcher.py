@@ -43,10 +43,11 @@ def node_command(node: str, ros_args: Sequence[str]) -> list[str]:
                                                          else ["--ros-args", *args])]
 
 
-def recorder_command(path: Path, topics: Sequence[str], use_sim_time: bool = False) -> list[str]:
+def recorder_command(path: Path, topics: Sequence[str], use_sim_time: bool = False,
+                     after_data: Sequence[str] = ()) -> list[str]:
     """Command line of ``dualarm bag record -o PATH TOPICS`` with this interpreter."""
     return [sys.executable, "-u", "-m", "dualarm_control.app.cli", "bag", "record", "-o", str(path), *topics,
-            *(["--use-sim-time"] if use_sim_time else [])]
+            *(["--use-sim-time"] if use_sim_time else []), *(f"--after-data={t}" for t in after_data)]
 
 
 @dataclass
@@ -174,7 +175,10 @@ def launch_scenario(
         if plan is not None and record_topics == GRAPH_TOPICS:
             record_topics = PLAN_TOPICS
         if record is not None:  # subscribes the graph's topics once they all have a publisher
-            launch.start("bag", recorder_command(record, record_topics, lockstep))
+            # Real-time task runs start once the recorder reads /diagnostics (task_start_readers); it
+            # subscribes that topic last, once the others deliver: the bag then holds the run from t = 0.
+            gate = ("/diagnostics",) if tasks and not lockstep else ()
+            launch.start("bag", recorder_command(record, record_topics, lockstep, gate))
         readers = (1 if tasks else 2) + (record is not None)
         launch.start("controller_node", node_command("controller_node", [*common, *sim_time, *controller_args]))
         if not tasks:

@@ -175,9 +175,15 @@ class BagWriter:
 class Recorder:
     """Subscribes topics as discovery finds them and writes every message to a :class:`BagWriter`."""
 
-    def __init__(self, node: Any, bag: BagWriter, topics: Sequence[str], record_all: bool) -> None:
+    def __init__(self, node: Any, bag: BagWriter, topics: Sequence[str], record_all: bool,
+                 after_data: Sequence[str] = ()) -> None:
         self.node, self.bag = node, bag
         self.named = [fq_topic(t) for t in topics]
+        self.later = [fq_topic(t) for t in after_data]
+        """Named topics subscribed only once every other named topic has delivered a message."""
+        unknown = [t for t in self.later if t not in self.named]
+        if unknown:
+            raise BagError(f"--after-data {unknown[0]} is not one of the topics to record {self.named}")
         self.record_all = record_all
         self.subscriptions: dict[str, Any] = {}
 
@@ -190,12 +196,18 @@ class Recorder:
         return on_message
 
     def poll(self) -> None:
-        """Subscribe the wanted topics that have a publisher now (named ones all at once)."""
+        """Subscribe the wanted topics that have a publisher now (named ones all at once; the
+        ``after_data`` ones once each of the others has delivered a message: a node waiting for a
+        reader on such a topic then starts with the others already flowing into the bag)."""
         known = dict(self.node.get_topic_names_and_types())
-        wanted = [t for t in self.named if t not in self.subscriptions]
-        if wanted and all(t in known and self.node.count_publishers(t) for t in wanted):
-            for topic in wanted:
-                self._subscribe(topic, known[topic][0])
+        first = [t for t in self.named if t not in self.later]
+        for group in (first, self.later):
+            wanted = [t for t in group if t not in self.subscriptions]
+            if group is self.later and not all(self.bag.counts.get(t, 0) for t in first):
+                break
+            if wanted and all(t in known and self.node.count_publishers(t) for t in wanted):
+                for topic in wanted:
+                    self._subscribe(topic, known[topic][0])
         if self.record_all:
             for topic, types in known.items():
                 if (topic not in self.subscriptions and topic not in EXCLUDED_BY_ALL
@@ -233,11 +245,12 @@ def drain(executor: Any, bag: BagWriter) -> None:
 
 
 def record(path: Path, topics: Sequence[str], *, record_all: bool = False, duration: float | None = None,
-           use_sim_time: bool = False, log: TextIO = sys.stderr) -> int:
+           use_sim_time: bool = False, after_data: Sequence[str] = (), log: TextIO = sys.stderr) -> int:
     """Record into the bag directory ``path`` until SIGINT/SIGTERM or ``duration`` [s]; return 0.
 
     ``topics`` are recorded as soon as all of them have a publisher; ``record_all`` adds every
-    topic discovery finds (but /rosout and /parameter_events). Prints :data:`READY_LINE` on
+    topic discovery finds (but /rosout and /parameter_events); ``after_data`` topics (among
+    ``topics``) are subscribed once every other named topic has delivered a message. Prints :data:`READY_LINE` on
     stdout once the named topics are subscribed, progress on stderr.
     """
     if not topics and not record_all:
@@ -250,7 +263,7 @@ def record(path: Path, topics: Sequence[str], *, record_all: bool = False, durat
         with tool_node("_dualarm_bag_recorder") as (node, executor, stop):
             if use_sim_time:
                 node.set_parameters([Parameter("use_sim_time", value=True)])
-            recorder = Recorder(node, bag, topics, record_all)
+            recorder = Recorder(node, bag, topics, record_all, after_data)
             print(f"recording to {path} ({', '.join(recorder.named) or 'all topics'})", file=log, flush=True)
             start = time.monotonic()
             next_poll = next_progress = start
