@@ -69,3 +69,26 @@ def test_the_1khz_realtime_params_file_sets_only_the_trajectory_nodes_scheduling
     args = ["x", "--ros-args", "--params-file", path]
     assert priority_from_args(args, 40, "trajectory_node") == 0
     assert priority_from_args(args, 50, "controller_node") == 50 and priority_from_args(args, 50, "sim_node") == 50
+
+
+def test_message_bench_times_both_paths(tmp_path: Path) -> None:
+    """`dualarm bench --messages`: every per-period message timed through rclpy objects and as CDR
+    bytes in one run (no timing asserts), written as messages.md/json."""
+    from dualarm_control.app.message_bench import (
+        format_message_bench,
+        run_message_bench,
+        write_message_bench,
+    )
+
+    rows = run_message_bench(number=20, repeat=1)
+    assert [r["message"].split()[0] for r in rows] == ["/joint_states", "/relative_target", "/diagnostics",
+                                                       "/velocity_controller/commands", "/joint_states"]
+    assert all(r["rclpy_us"] > 0 and r["cdr_us"] > 0 and r["ratio"] == r["cdr_us"] / r["rclpy_us"] for r in rows)
+    write_message_bench(tmp_path, rows)
+    assert json.loads((tmp_path / "messages.json").read_text()) == rows
+    assert format_message_bench(rows) in (tmp_path / "messages.md").read_text()
+
+
+def test_realtime_and_messages_are_separate(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench", "--realtime", "--messages", "--output", str(tmp_path)]) == 2
+    assert "choose one" in capsys.readouterr().err

@@ -266,10 +266,29 @@ def cmd_bench_realtime(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_messages(args: argparse.Namespace) -> int:
+    """Per-period messages through rclpy objects and as CDR bytes; write DIR/messages.md and messages.json."""
+    from dualarm_control.app.message_bench import (
+        format_message_bench,
+        run_message_bench,
+        write_message_bench,
+    )
+
+    rows = run_message_bench()
+    write_message_bench(Path(args.output), rows)
+    print(format_message_bench(rows))
+    print(f"\nwrote {Path(args.output) / 'messages.md'} and messages.json")
+    return 0
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     """Solver x QP back-end timings (random set, scenario), pink, exactness, scaling: DIR/bench.md and bench.json."""
+    if args.realtime and args.messages:
+        raise DualArmError("--realtime and --messages are separate benchmarks: choose one")
     if args.realtime:
         return cmd_bench_realtime(args)
+    if args.messages:
+        return cmd_bench_messages(args)
     from dualarm_control.app.bench import format_bench, run_bench, write_bench
     from dualarm_control.qp import make_backend
     from dualarm_control.scenario import load_scenario
@@ -579,6 +598,9 @@ def build_parser() -> argparse.ArgumentParser:
     ben.add_argument("--realtime", action="store_true",
                      help="instead: the three nodes over ROS in real time per solver and --rates; missed deadlines, "
                      "period jitter and state-to-command latency over every cycle (realtime.md/json)")
+    ben.add_argument("--messages", action="store_true",
+                     help="instead: the per-period messages (joint states, target, diagnostics, command) built and "
+                     "read through rclpy message objects and as CDR bytes, in one process (messages.md/json)")
     ben.add_argument("--rates", default="200,500,1000", metavar="HZ,...",
                      help="control rates of --realtime (default: %(default)s)")
     ben.add_argument("--params", action="append", default=[], metavar="FILE",
