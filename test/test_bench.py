@@ -74,7 +74,7 @@ def test_the_1khz_realtime_params_file_sets_only_the_trajectory_nodes_scheduling
 def test_message_bench_times_both_paths(tmp_path: Path) -> None:
     """`dualarm bench --messages`: every per-period message timed through rclpy objects and as CDR
     bytes in one run (no timing asserts), written as messages.md/json."""
-    from dualarm_control.app.message_bench import (
+    from dualarm_control.ros.message_bench import (
         format_message_bench,
         run_message_bench,
         write_message_bench,

@@ -72,13 +72,13 @@ def test_diagnostic_array_writer_reads_back_in_rclpy(ns: int, level: int, name: 
        st.lists(floats, max_size=20))
 def test_fixed_layout_writers_read_back_in_rclpy(ns: int, frame: str, seven: list[float], six: list[float],
                                                  values: list[float]) -> None:
-    pose = deserialize_message(cdr.pose_stamped(ns, frame, seven[:3], seven[3:]), PoseStamped)
+    pose = deserialize_message(cdr.stamped_doubles(ns, frame, seven), PoseStamped)
     p, o = pose.pose.position, pose.pose.orientation
     assert (ns_of(pose.header.stamp), pose.header.frame_id) == (ns, frame)
     assert [p.x, p.y, p.z, o.x, o.y, o.z, o.w] == seven
-    wrench = deserialize_message(cdr.wrench_stamped(ns, frame, six), WrenchStamped).wrench
+    wrench = deserialize_message(cdr.stamped_doubles(ns, frame, six), WrenchStamped).wrench
     assert [wrench.force.x, wrench.force.y, wrench.force.z, wrench.torque.x, wrench.torque.y, wrench.torque.z] == six
-    vector = deserialize_message(cdr.vector3_stamped(ns, frame, six[:3]), Vector3Stamped).vector
+    vector = deserialize_message(cdr.stamped_doubles(ns, frame, six[:3]), Vector3Stamped).vector
     assert [vector.x, vector.y, vector.z] == six[:3]
     assert ns_of(deserialize_message(cdr.clock(ns), Clock).clock) == ns
     array = deserialize_message(cdr.float64_multi_array(values), Float64MultiArray)

@@ -41,7 +41,7 @@ def test_joint_order_is_mapped_by_name(order: dict[str, int]) -> None:
     names = list(order)
     q = np.arange(14) * 0.1
     msg = joint_state([*reversed(names), "gripper"], [*reversed(q.tolist()), 9.0], [*reversed((q * 2).tolist()), 0.0])
-    decoded = convert.joint_vectors(msg, order)
+    decoded = convert.JointStateInput(order).message_vectors(msg)
     assert not isinstance(decoded, str)
     np.testing.assert_array_equal(decoded[0], q)
     np.testing.assert_array_equal(decoded[1], 2 * q)
@@ -59,12 +59,12 @@ def test_joint_order_is_mapped_by_name(order: dict[str, int]) -> None:
 def test_unusable_joint_states_are_rejected_with_the_reason(order: dict[str, int], edit, fragment: str) -> None:
     """Missing, unknown or duplicate names, wrong counts, NaN/inf: a reason string, never arrays."""
     names, q, v = edit(list(order), [0.0] * 14, [0.0] * 14)
-    decoded = convert.joint_vectors(joint_state(names, q, v), order)
+    decoded = convert.JointStateInput(order).message_vectors(joint_state(names, q, v))
     assert isinstance(decoded, str) and fragment in decoded, decoded
 
 
 def test_joint_state_without_velocities_gives_zero_velocities(order: dict[str, int]) -> None:
-    decoded = convert.joint_vectors(joint_state(list(order), [0.2] * 14), order)
+    decoded = convert.JointStateInput(order).message_vectors(joint_state(list(order), [0.2] * 14))
     assert not isinstance(decoded, str)
     np.testing.assert_array_equal(decoded[1], np.zeros(14))
 
@@ -89,10 +89,10 @@ def test_joint_reference_checks_names_counts_and_values(order: dict[str, int]) -
 
 
 def test_commands_with_wrong_length_or_non_finite_values_are_rejected() -> None:
-    assert convert.command_vector(SimpleNamespace(data=[0.0] * 13), 14) == "command with 13 values rejected: expected 14"
-    bad = convert.command_vector(SimpleNamespace(data=[0.0] * 3 + [np.nan] + [0.0] * 10), 14)
+    assert convert.CommandInput(14).from_message(SimpleNamespace(data=[0.0] * 13)) == "command with 13 values rejected: expected 14"
+    bad = convert.CommandInput(14).from_message(SimpleNamespace(data=[0.0] * 3 + [np.nan] + [0.0] * 10))
     assert isinstance(bad, str) and "NaN or inf at indices [3]" in bad
-    good = convert.command_vector(SimpleNamespace(data=[0.5] * 14), 14)
+    good = convert.CommandInput(14).from_message(SimpleNamespace(data=[0.5] * 14))
     assert not isinstance(good, str)
     np.testing.assert_array_equal(good, np.full(14, 0.5))
 
@@ -121,9 +121,9 @@ def test_relative_reach_bounds_every_configuration(model: DualArmModel) -> None:
 
 def test_target_beyond_the_reach_is_rejected(model: DualArmModel) -> None:
     reach = model.relative_reach()
-    inside = convert.target_value(target([0.0, 0.0, 0.5]), reach)
+    inside = convert.TargetInput(reach).from_message(target([0.0, 0.0, 0.5]))[1]
     assert not isinstance(inside, str) and inside.stamp_ns == 2 * NS + 5
-    beyond = convert.target_value(target([3.0, 0.0, 0.0]), reach)
+    beyond = convert.TargetInput(reach).from_message(target([3.0, 0.0, 0.0]))[1]
     assert isinstance(beyond, str) and "3.000 m" in beyond and "reach 2.870 m" in beyond
 
 
@@ -132,13 +132,13 @@ def test_target_beyond_the_reach_is_rejected(model: DualArmModel) -> None:
     target([0.0, 0.0, 0.0], (np.inf, 0.0, 0.0, 1.0)),
 ])
 def test_non_finite_targets_or_zero_quaternions_are_rejected(bad: SimpleNamespace) -> None:
-    assert "NaN or inf" in str(convert.target_value(bad, 2.87))
+    assert "NaN or inf" in str(convert.TargetInput(2.87).from_message(bad)[1])
 
 
 def test_target_with_several_points_is_rejected() -> None:
     msg = target([0.0, 0.0, 0.0])
     msg.points = msg.points * 2
-    assert "exactly one point" in str(convert.target_value(msg))
+    assert "exactly one point" in str(convert.TargetInput().from_message(msg)[1])
 
 
 # ---- stamps -------------------------------------------------------------------------------------

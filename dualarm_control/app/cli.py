@@ -268,7 +268,7 @@ def cmd_bench_realtime(args: argparse.Namespace) -> int:
 
 def cmd_bench_messages(args: argparse.Namespace) -> int:
     """Per-period messages through rclpy objects and as CDR bytes; write DIR/messages.md and messages.json."""
-    from dualarm_control.app.message_bench import (
+    from dualarm_control.ros.message_bench import (
         format_message_bench,
         run_message_bench,
         write_message_bench,

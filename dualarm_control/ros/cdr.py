@@ -67,11 +67,7 @@ class Writer:
         self.buf += _TIME.pack(ns // NS, ns % NS)
 
     def string(self, text: str) -> None:
-        raw = text.encode()
-        self.align(4)
-        self.buf += _U32.pack(len(raw) + 1)
-        self.buf += raw
-        self.buf += b"\x00"
+        self.strings([text], count=False)
 
     def strings(self, texts: Sequence[str], count: bool = True) -> None:
         """sequence<string> (``count=False``: the strings alone, as consecutive string fields).
@@ -109,7 +105,8 @@ class Writer:
 
 
 class Reader:
-    """Reads CDR fields from a payload; every read checks the payload's length."""
+    """Reads CDR fields from a payload; every read checks the payload's length first
+    (:meth:`_need`), so a short payload raises :class:`CdrError`, never ``struct.error``."""
 
     __slots__ = ("data", "pos")
 
@@ -182,11 +179,12 @@ def float64_multi_array(values: Sequence[float] | np.ndarray) -> bytes:
     return w.bytes()
 
 
-def pose_stamped(ns: int, frame_id: str, position: Sequence[float], quaternion_xyzw: Sequence[float]) -> bytes:
-    """geometry_msgs/PoseStamped: position [m] (3,) and orientation (x, y, z, w) (4,)."""
+def stamped_doubles(ns: int, frame_id: str, values: Sequence[float] | np.ndarray) -> bytes:
+    """A std_msgs/Header followed by float64 fields: geometry_msgs/PoseStamped (x, y, z, qx, qy,
+    qz, qw) (7,), WrenchStamped [fx, fy, fz, tx, ty, tz] (6,), Vector3Stamped (3,)."""
     w = Writer()
     w.header(ns, frame_id)
-    w.doubles([*position, *quaternion_xyzw])
+    w.doubles(values)
     return w.bytes()
 
 
@@ -220,22 +218,6 @@ def clock(ns: int) -> bytes:
     """rosgraph_msgs/Clock."""
     w = Writer()
     w.time(ns)
-    return w.bytes()
-
-
-def wrench_stamped(ns: int, frame_id: str, wrench: Sequence[float] | np.ndarray) -> bytes:
-    """geometry_msgs/WrenchStamped: [fx, fy, fz, tx, ty, tz] [N, N m] (6,)."""
-    w = Writer()
-    w.header(ns, frame_id)
-    w.doubles(wrench)
-    return w.bytes()
-
-
-def vector3_stamped(ns: int, frame_id: str, vector: Sequence[float]) -> bytes:
-    """geometry_msgs/Vector3Stamped."""
-    w = Writer()
-    w.header(ns, frame_id)
-    w.doubles(vector)
     return w.bytes()
 
 
@@ -274,23 +256,20 @@ class JointStateReader:
         self._names: tuple[str, ...] = ()
 
     def __call__(self, data: bytes) -> tuple[int, tuple[str, ...], np.ndarray, np.ndarray]:
-        try:
-            r = Reader(data)
-            stamp = r.time()
-            r.string()  # frame_id
-            r.align(4)
-            start = r.pos
-            if self._raw and data.startswith(self._raw, start):
-                r.pos = start + len(self._raw)
-                names = self._names
-            else:
-                names = r.strings()
-                self._raw, self._names = data[start:r.pos], names
-            position = r.double_seq()
-            velocity = r.double_seq()
-            r.double_seq()  # effort
-        except struct.error as exc:
-            raise CdrError(str(exc)) from None
+        r = Reader(data)
+        stamp = r.time()
+        r.string()  # frame_id
+        r.align(4)
+        start = r.pos
+        if self._raw and data.startswith(self._raw, start):
+            r.pos = start + len(self._raw)
+            names = self._names
+        else:
+            names = r.strings()
+            self._raw, self._names = data[start:r.pos], names
+        position = r.double_seq()
+        velocity = r.double_seq()
+        r.double_seq()  # effort
         return stamp, names, position, velocity
 
 
@@ -300,32 +279,26 @@ def relative_target(data: bytes) -> tuple[int, int, np.ndarray, np.ndarray]:
 
     With no point the arrays are empty; with several, only the first is read.
     """
-    try:
-        r = Reader(data)
-        stamp = r.time()
-        r.string()  # frame_id
-        r.strings()  # joint_names
-        points = r.count(16)
-        if points == 0:
-            return stamp, 0, np.empty((0, 7)), np.empty((0, 6))
-        transforms = r.doubles(7 * r.count(56)).reshape(-1, 7)
-        velocities = r.doubles(6 * r.count(48)).reshape(-1, 6)
-        r.doubles(6 * r.count(48))  # accelerations
-        r.time()  # time_from_start
-    except struct.error as exc:
-        raise CdrError(str(exc)) from None
+    r = Reader(data)
+    stamp = r.time()
+    r.string()  # frame_id
+    r.strings()  # joint_names
+    points = r.count(16)
+    if points == 0:
+        return stamp, 0, np.empty((0, 7)), np.empty((0, 6))
+    transforms = r.doubles(7 * r.count(56)).reshape(-1, 7)
+    velocities = r.doubles(6 * r.count(48)).reshape(-1, 6)
+    r.doubles(6 * r.count(48))  # accelerations
+    r.time()  # time_from_start
     return stamp, points, transforms, velocities
 
 
 def float64_multi_array_data(data: bytes) -> np.ndarray:
     """std_msgs/Float64MultiArray -> its data (n,), a read-only view of the payload (the layout is read, not used)."""
-    try:
-        r = Reader(data)
-        for _ in range(r.count(12)):  # layout.dim: label, size, stride
-            r.string()
-            r.u32()
-            r.u32()
-        r.u32()  # layout.data_offset
-        return r.double_seq()
-    except struct.error as exc:
-        raise CdrError(str(exc)) from None
+    r = Reader(data)
+    for _ in range(r.count(12)):  # layout.dim: label, size, stride
+        r.string()
+        r.u32()
+        r.u32()
+    r.u32()  # layout.data_offset
+    return r.double_seq()

@@ -107,12 +107,6 @@ class JointStateInput:
         return q, qd
 
 
-def joint_vectors(msg: Any, order: Mapping[str, int]) -> tuple[np.ndarray, np.ndarray] | str:
-    """(q, qd) in the model's joint order from a JointState message, or why it is unusable
-    (:class:`JointStateInput`'s checks)."""
-    return JointStateInput(order).message_vectors(msg)
-
-
 def finite(values: np.ndarray) -> bool:
     """Every entry finite (the sum first: one pass in the common case; overflow is checked entrywise)."""
     return math.isfinite(float(values.sum())) or bool(np.isfinite(values).all())
@@ -136,11 +130,6 @@ class CommandInput:
         if not finite(data):
             return f"command with NaN or inf at indices {np.flatnonzero(~np.isfinite(data))[:5].tolist()} rejected"
         return data.copy()
-
-
-def command_vector(msg: Any, size: int) -> np.ndarray | str:
-    """The joint velocity command [rad/s], (size,), of a Float64MultiArray message, or why it is unusable."""
-    return CommandInput(size).from_message(msg)
 
 
 def float_array(values: np.ndarray) -> bytes:
@@ -168,14 +157,9 @@ def rotation_xyzw(v: np.ndarray) -> np.ndarray:
     return pin.Quaternion(v[3], v[0], v[1], v[2]).toRotationMatrix()
 
 
-def rotation(q: Any) -> np.ndarray:
-    """Rotation matrix of a geometry_msgs/Quaternion (normalised; NaN stays NaN)."""
-    return rotation_xyzw(np.array([q.x, q.y, q.z, q.w], dtype=float))
-
-
 def pose_stamped(ns: int, position: np.ndarray, rot: np.ndarray) -> bytes:
     """Measured relative pose (right tool in left tool frame), geometry_msgs/PoseStamped (CDR)."""
-    return cdr.pose_stamped(ns, LEFT_FRAME, position, quaternion_xyzw(rot))
+    return cdr.stamped_doubles(ns, LEFT_FRAME, [*position, *quaternion_xyzw(rot)])
 
 
 @dataclass(frozen=True)
@@ -190,7 +174,7 @@ class TargetValue:
     rotation: np.ndarray
     linear_velocity: np.ndarray
     angular_velocity: np.ndarray
-    speed: float = 0.0
+    speed: float
 
 
 def target_message(ns: int, elapsed_ns: int, sample: Any) -> bytes:
@@ -246,11 +230,6 @@ class TargetInput:
                            max(float(np.linalg.norm(linear)), float(np.linalg.norm(angular))))
 
 
-def target_value(msg: Any, max_distance: float = float("inf")) -> TargetValue | str:
-    """A relative target message decoded, or why it is unusable (:class:`TargetInput`'s checks)."""
-    return TargetInput(max_distance).from_message(msg)[1]
-
-
 def diagnostics(ns: int, name: str, level: int, message: str, values: Mapping[str, Any]) -> bytes:
     """diagnostic_msgs/DiagnosticArray (CDR) with one status whose values are ``key: str(value)``."""
     return cdr.diagnostic_array(ns, level, name, message, "dualarm_cell", values)
@@ -261,13 +240,13 @@ CONTACT_FRAME = "pan_normal"
 
 def wrench_stamped(ns: int, wrench: np.ndarray, frame_id: str = RIGHT_FRAME) -> bytes:
     """geometry_msgs/WrenchStamped (CDR), ``wrench`` = [fx, fy, fz, tx, ty, tz] [N, N m]."""
-    return cdr.wrench_stamped(ns, frame_id, wrench)
+    return cdr.stamped_doubles(ns, frame_id, wrench)
 
 
 def contact_force(ns: int, normal_force: float) -> bytes:
     """geometry_msgs/Vector3Stamped (CDR) of the simulator's brush-pan contact: ``vector.z`` is the
     normal contact force [N] (ground truth of the physics, not a sensor), x = y = 0."""
-    return cdr.vector3_stamped(ns, CONTACT_FRAME, (0.0, 0.0, float(normal_force)))
+    return cdr.stamped_doubles(ns, CONTACT_FRAME, (0.0, 0.0, float(normal_force)))
 
 
 def wrench_vector(msg: Any) -> np.ndarray | str:

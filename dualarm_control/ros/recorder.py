@@ -201,18 +201,21 @@ class Recorder:
         reader on such a topic then starts with the others already flowing into the bag)."""
         known = dict(self.node.get_topic_names_and_types())
         first = [t for t in self.named if t not in self.later]
-        for group in (first, self.later):
-            wanted = [t for t in group if t not in self.subscriptions]
-            if group is self.later and not all(self.bag.counts.get(t, 0) for t in first):
-                break
-            if wanted and all(t in known and self.node.count_publishers(t) for t in wanted):
-                for topic in wanted:
-                    self._subscribe(topic, known[topic][0])
+        self._subscribe_all(known, first)
+        if all(self.bag.counts.get(t, 0) for t in first):
+            self._subscribe_all(known, self.later)
         if self.record_all:
             for topic, types in known.items():
                 if (topic not in self.subscriptions and topic not in EXCLUDED_BY_ALL
                         and self.node.count_publishers(topic) and not topic.startswith("/_")):
                     self._subscribe(topic, types[0])
+
+    def _subscribe_all(self, known: dict[str, list[str]], topics: Sequence[str]) -> None:
+        """Subscribe ``topics`` not subscribed yet, all at once when each has a publisher."""
+        wanted = [t for t in topics if t not in self.subscriptions]
+        if wanted and all(t in known and self.node.count_publishers(t) for t in wanted):
+            for topic in wanted:
+                self._subscribe(topic, known[topic][0])
 
     @property
     def ready(self) -> bool:
