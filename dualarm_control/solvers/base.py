@@ -159,7 +159,7 @@ class SolverResult:
             an exception, invalid input, or a record not made by :meth:`Solver.solve`).
         bound_excess: how far ``raw_velocities`` lies beyond [lower, upper] at its worst
             joint, max(lower - qd, qd - upper, 0) [rad/s] (:func:`bound_excess`); NaN when
-            there is no raw result or it is not finite. "solved"/"scaled" results have
+            there is no raw result, NaN or inf when it is not finite. "solved"/"scaled" results have
             ``bound_excess <= solver.bound_tolerance``.
     """
 
