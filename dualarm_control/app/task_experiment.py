@@ -24,6 +24,7 @@ from dualarm_control.controller import ControllerParams
 from dualarm_control.kinematics import Configuration, DualArmModel, FloatArray
 from dualarm_control.metrics import percentiles
 from dualarm_control.scenario import Scenario
+from dualarm_control.solvers.base import FAILURE_STATUSES
 from dualarm_control.task_control import TaskScenarioController
 from dualarm_control.task_scenario import TaskScenario
 from dualarm_control.tasks import (
@@ -220,7 +221,7 @@ def summarize_task_run(log: TaskRunLog, scenario: Scenario) -> dict[str, float |
         "table_contacts": int(log.table_contacts.sum()),
         "min_singularity_margin": margin,
         "min_manipulability_det": manip,
-        "solver_failures": int(sum(s in ("infeasible", "failed", "invalid_input") for s in log.status)),
+        "solver_failures": int(sum(s in FAILURE_STATUSES for s in log.status)),
         "cycle_time_p50_s": p50,
         "cycle_time_p99_s": p99,
     }
