@@ -49,8 +49,6 @@ LOOPBACK_ROWS = ("stale_states", "target_stopped", "kill_sim", "kill_controller"
 ROWS = (*LOOPBACK_ROWS, "best_effort_loss", "across_hosts", "link_cut", "link_netem")
 KILL_INTO_MOTION_S = 0.6
 """kill_controller: seconds into a window of at least 1.5 s of motion (a segment starts from rest)."""
-QUICK = ("stale_states", "kill_controller", "recorder_sigterm")
-"""The default test suite's subset (test/test_faults.py)."""
 
 EXPECTED = {
     "stale_states": f"sim_node SIGSTOP {PAUSE_S:g} s mid-motion: zero commands + /diagnostics ERROR once joint states "
