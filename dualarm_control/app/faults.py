@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import signal
+import subprocess
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -220,9 +221,19 @@ def _completion_row(name: str, rec: RunRecord, extra: str = "", ok: bool = True,
                 latency_p99_ms=c.latency_p99_ms, **figures)
 
 
+DELIVERY_S = 1.0
+"""After the trajectory node's exit: time for its last messages (the 'complete' status) to reach
+the recorder before everything is stopped (the node logs 'complete at' before it publishes it)."""
+
+
 def _run_to_completion(run: CellRun) -> None:
     end = run.times[-1] + 30.0
     run.wait_line("trajectory_node", "complete at", timeout=max(1.0, end - run.elapsed()))
+    try:
+        run.process("trajectory_node").popen.wait(timeout=10.0)  # it stops by itself once complete
+    except subprocess.TimeoutExpired:
+        pass  # stopped with the others
+    time.sleep(DELIVERY_S)
 
 
 RELAY_ROUTES = ("/raw/joint_states:/joint_states:sensor_msgs/msg/JointState",
