@@ -48,6 +48,8 @@ LINK_NETEM = ("delay", "2ms", "1ms", "loss", "2%")
 LOOPBACK_ROWS = ("stale_states", "target_stopped", "kill_sim", "kill_controller", "recorder_sigint",
                  "recorder_sigterm")
 ROWS = (*LOOPBACK_ROWS, "best_effort_loss", "across_hosts", "link_cut", "link_netem")
+RECORDER_EXIT_S = 30.0
+"""How long a signalled recorder may take to close its bag and exit before the run is stopped."""
 KILL_INTO_MOTION_S = 0.6
 """kill_controller: seconds into a window of at least 1.5 s of motion (a segment starts from rest)."""
 
@@ -173,6 +175,11 @@ def loopback_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[
     except RunError as exc:
         run.stop()
         return _failed(names, str(exc))
+    for name in signalled:  # it closes its bag and exits by itself (seconds on a loaded machine): not stopped early
+        try:
+            run.process(name).popen.wait(timeout=RECORDER_EXIT_S)
+        except subprocess.TimeoutExpired:
+            pass  # stopped with the others; its exit code says so
     codes = run.stop()
     rec = run.record()
     rows = []
