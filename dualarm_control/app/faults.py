@@ -11,6 +11,7 @@ while the target moves), the across-hosts run and its link cut.
 from __future__ import annotations
 
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -129,6 +130,18 @@ def _episode_row(name: str, rec: RunRecord, ep: _Episode, reason: str, limit_ms:
                 other_commands=e.other_commands, recovered_ms=e.recovered_ms)
 
 
+def _recently_safe(run: CellRun, seconds: float) -> bool:
+    """Whether the controller is in the safe state, or left it less than ``seconds`` ago (from the
+    wall-clock stamp of its last 'recovered after' log line)."""
+    for line in reversed(run.process("controller_node").lines):
+        if "safe state:" in line:
+            return True
+        if "recovered after" in line:
+            stamp = re.search(r"\[(\d+\.\d+)\]", line)
+            return stamp is None or time.time() - float(stamp[1]) < seconds
+    return False
+
+
 def loopback_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[str], None]) -> list[Row]:
     """The process faults on one loopback run, in sequence, each while the target moves."""
     names = [n for n in LOOPBACK_ROWS if n in only]
@@ -166,8 +179,15 @@ def loopback_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[
             run.start_node("sim_node")
             episodes["kill_sim"] = _Episode(start, resume, _recovered(run, line, RESTART_RECOVER_WITHIN_MS / 1e3))
         if "kill_controller" in names:
-            run.wait_moving(1.5, earliest=run.elapsed() + 0.5)
-            time.sleep(KILL_INTO_MOTION_S)  # past the segment's jerk-limited start: the arms move at speed
+            earliest = run.elapsed() + 0.5
+            while True:
+                run.wait_moving(1.5, earliest=earliest)
+                time.sleep(KILL_INTO_MOTION_S)  # past the segment's jerk-limited start: the arms move at speed
+                if not _recently_safe(run, KILL_INTO_MOTION_S):
+                    break
+                # a watchdog episode of a loaded machine just now: the arms may be at rest; the next window
+                say(f"kill_controller: the controller was in the safe state within {KILL_INTO_MOTION_S:g} s; waiting")
+                earliest = run.elapsed() + 0.5
             say(f"kill_controller: SIGKILL controller_node at t={run.elapsed():.2f} s")
             run.send("controller_node", signal.SIGKILL)
             killed_controller = True
