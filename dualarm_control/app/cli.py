@@ -466,11 +466,15 @@ def _add_topic_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
                            "unless ROS_AUTOMATIC_DISCOVERY_RANGE / ROS_STATIC_PEERS / a DDS profile is set.")
     verbs = topic.add_subparsers(dest="topic_verb", metavar="TOPIC_VERB")
     verbs.required = True
-    spin = {"type": float, "default": 3.0, "metavar": "S",
-            "help": "discovery wait; echo, hz and info answer as soon as the topic is found (default: %(default)s s)"}
+    from dualarm_control.ros.graph import DEFAULT_SPIN_TIME
+    from dualarm_control.ros.node import DISCOVERY_TIMEOUT_S
+
+    spin = {"type": float, "default": DISCOVERY_TIMEOUT_S, "metavar": "S",
+            "help": "wait up to S s for the topic's discovery; answers as soon as it is found (default: %(default)s)"}
     lst = verbs.add_parser("list", help="topics with publishers or subscriptions")
     lst.add_argument("-t", "--show-types", action="store_true", help="also print each topic's type")
-    lst.add_argument("--spin-time", **spin)
+    lst.add_argument("--spin-time", type=float, default=DEFAULT_SPIN_TIME, metavar="S",
+                     help="collect what discovery finds for S s (default: %(default)s)")
     lst.set_defaults(func=cmd_topic_list)
     ech = verbs.add_parser("echo", help="print messages as YAML")
     ech.add_argument("topic")
@@ -498,15 +502,15 @@ def cmd_param(args: argparse.Namespace) -> int:
 
     node = args.node if args.node.startswith("/") else "/" + args.node
     if args.param_verb == "list":
-        print("\n".join(f"  {name}" for name in pc.list_parameters(node)))
+        print("\n".join(f"  {name}" for name in pc.list_parameters(node, args.timeout)))
     elif args.param_verb == "get":
-        value = pc.get_parameter(node, args.name)
+        value = pc.get_parameter(node, args.name, args.timeout)
         kind = {bool: "Boolean", int: "Integer", float: "Double", str: "String"}.get(type(value), "Value")
         print(f"{kind} value is: {value}")
     elif args.param_verb == "describe":
-        print(pc.describe_parameter(node, args.name))
+        print(pc.describe_parameter(node, args.name, args.timeout))
     else:
-        print(pc.set_parameter(node, args.name, pc.yaml_value(args.value)))
+        print(pc.set_parameter(node, args.name, pc.yaml_value(args.value), args.timeout))
     return 0
 
 
@@ -517,15 +521,24 @@ def _add_param_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
                          "the controller applies accepted changes at the next cycle boundary.")
     verbs = par.add_subparsers(dest="param_verb", metavar="PARAM_VERB")
     verbs.required = True
-    verbs.add_parser("list", help="parameter names").add_argument("node", help="node name, e.g. /controller_node")
+    from dualarm_control.ros.node import DISCOVERY_TIMEOUT_S
+
+    timeout = {"type": float, "default": DISCOVERY_TIMEOUT_S, "metavar": "S",
+               "help": "wait up to S s for the node's parameter services, and as long for its answer "
+               "(default: %(default)s)"}
+    lst = verbs.add_parser("list", help="parameter names")
+    lst.add_argument("node", help="node name, e.g. /controller_node")
+    lst.add_argument("--timeout", **timeout)
     for verb, helptext in (("get", "a parameter's value"), ("describe", "type, description, constraints")):
         v = verbs.add_parser(verb, help=helptext)
         v.add_argument("node")
         v.add_argument("name")
+        v.add_argument("--timeout", **timeout)
     st = verbs.add_parser("set", help="set a parameter (value read as YAML: 10.0 double, 10 integer)")
     st.add_argument("node")
     st.add_argument("name")
     st.add_argument("value")
+    st.add_argument("--timeout", **timeout)
     par.set_defaults(func=cmd_param)
 
 

@@ -85,7 +85,7 @@ from dualarm_control.ros.node import (
     run,
     usage,
 )
-from dualarm_control.ros.qos import QOS_PARAMETER, stream_qos
+from dualarm_control.ros.qos import QOS_PARAMETER, publisher_depth, stream_qos
 from dualarm_control.scenario import load_scenario
 from dualarm_control.solvers.base import BOUNDS_VIOLATED
 from dualarm_control.task_control import TaskCycle, TaskScenarioController
@@ -149,9 +149,11 @@ class ControllerNode:
         self.order = {name: i for i, name in enumerate(self.model.joint_names)}
         n = self.node
         qos = stream_qos(self.values["qos_reliability"])
-        self.pub_cmd = n.create_publisher(Float64MultiArray, "/velocity_controller/commands", qos)
-        self.pub_pose = n.create_publisher(PoseStamped, "/relative_pose", 10)
-        self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        depth = publisher_depth(self.lockstep)
+        self.pub_cmd = n.create_publisher(Float64MultiArray, "/velocity_controller/commands",
+                                          stream_qos(self.values["qos_reliability"], depth))
+        self.pub_pose = n.create_publisher(PoseStamped, "/relative_pose", depth)
+        self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", depth)
         self.reach = self.model.relative_reach()
         subscribe_checked(n, JointState, "/joint_states", self.on_joint_state, qos, self.on_malformed,
                           convert.JointStateInput(self.order))

@@ -37,7 +37,7 @@ from dualarm_control.ros.node import (
     thread_priority_spec,
     usage,
 )
-from dualarm_control.ros.qos import QOS_PARAMETER, stream_qos
+from dualarm_control.ros.qos import QOS_PARAMETER, publisher_depth, stream_qos
 from dualarm_control.scenario import load_scenario
 from dualarm_control.trajectory import RelativeTrajectory
 
@@ -70,9 +70,10 @@ class TrajectoryNode:
         self.order = {name: i for i, name in enumerate(self.model.joint_names)}
         n = self.node
         qos = stream_qos(p["qos_reliability"])
-        self.pub = n.create_publisher(MultiDOFJointTrajectory, "/relative_target", qos)
+        depth = publisher_depth(self.lockstep)
+        self.pub = n.create_publisher(MultiDOFJointTrajectory, "/relative_target", stream_qos(p["qos_reliability"], depth))
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.pub_joint = n.create_publisher(JointTrajectory, "/joint_reference", qos)
+        self.pub_joint = n.create_publisher(JointTrajectory, "/joint_reference", stream_qos(p["qos_reliability"], depth))
         self.qos = qos
         self.states: Any = None  # the /joint_states subscription while one is needed
         self.subscribe_states()
