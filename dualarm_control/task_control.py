@@ -1,6 +1,6 @@
 """One control cycle of a task scenario (paper 001): tasks at gain k, optional force feedback (eq 9).
 
-The same object serves the in-process experiment (``app/task_experiment.py``) and a node:
+The same object serves the in-process experiment (``app/run/tasks.py``) and a node:
 give it the measured joint positions, the time since the start of the task and, in the
 force variant, the raw F/T sensor reading at the brush; it returns the joint velocity
 command with the evaluated tasks, the filtered normal force and the offset f_F.

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from dualarm_control.app.cli import main
-from dualarm_control.app.report import METRIC_KEYS, TRACKING_KEYS
+from dualarm_control.app.record.report import METRIC_KEYS, TRACKING_KEYS
 
 SOLVERS = ("standard_qp", "sparse_qp", "hierarchical_sparse_qp")
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dualarm_control.app.cli import main
-from dualarm_control.app.task_experiment import run_task_scenario, summarize_task_run
+from dualarm_control.app.run.tasks import run_task_scenario, summarize_task_run
 from dualarm_control.controller import controller_params
 from dualarm_control.errors import ScenarioError
 from dualarm_control.force import (

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from dualarm_control.app.soak import format_soak, run_soak, write_soak
+from dualarm_control.app.faults.soak import format_soak, run_soak, write_soak
 
 SHORT = Path(__file__).parent / "data" / "short.yaml"
 

@@ -13,9 +13,9 @@ import signal
 import time
 from pathlib import Path
 
-from dualarm_control.app.launcher import Launch, launch_scenario, node_command
-from dualarm_control.app.task_bag import is_task_bag, read_task_run, task_report
-from dualarm_control.app.task_experiment import run_task_scenario, summarize_task_run
+from dualarm_control.app.record.tasks import is_task_bag, read_task_run, task_report
+from dualarm_control.app.run.launcher import Launch, launch_scenario, node_command
+from dualarm_control.app.run.tasks import run_task_scenario, summarize_task_run
 from dualarm_control.controller import controller_params
 from dualarm_control.params import read_params_files
 from dualarm_control.scenario import load_scenario

@@ -12,7 +12,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from dualarm_control.app.progress import progress_bar
+from dualarm_control.app.run.progress import progress_bar
 from dualarm_control.errors import DualArmError
 
 EXIT_USAGE = 2
@@ -22,11 +22,11 @@ EXIT_INTERRUPTED = 130
 
 def cmd_experiment(args: argparse.Namespace) -> int:
     """Run a scenario in-process (lockstep) for each solver; write metrics.json and plots."""
-    from dualarm_control.app.experiment import run_scenario, summarize_log
-    from dualarm_control.app.report import (
+    from dualarm_control.app.record.report import (
         format_table,
         plot_velocity_norms,
     )
+    from dualarm_control.app.run.experiment import run_scenario, summarize_log
     from dualarm_control.controller import controller_params
     from dualarm_control.kinematics import DualArmModel
     from dualarm_control.params import read_params_files
@@ -69,7 +69,7 @@ def run_all(jobs: list[tuple[str, Callable[[Any], tuple[str, dict[str, Any], Any
     Prints a progress bar and the wall time per run and writes ``out/metrics.json``. On
     Ctrl-C the metrics of the runs completed so far are written and None is returned.
     """
-    from dualarm_control.app.report import write_metrics
+    from dualarm_control.app.record.report import write_metrics
 
     results: dict[str, dict[str, Any]] = {}
     logs: list[Any] = []
@@ -91,16 +91,16 @@ def run_all(jobs: list[tuple[str, Callable[[Any], tuple[str, dict[str, Any], Any
 
 def cmd_task_experiment(args: argparse.Namespace, scenario) -> int:
     """Task scenario (paper 001): one run per gain k (force variant with --force); metrics.json, figures."""
-    from dualarm_control.app.task_experiment import (
-        run_task_scenario,
-        summarize_task_run,
-    )
-    from dualarm_control.app.task_report import (
+    from dualarm_control.app.record.figures_tasks import (
         format_task_table,
         plot_contact_force,
         plot_joint_velocities,
         plot_task_values,
         plot_tool_paths,
+    )
+    from dualarm_control.app.run.tasks import (
+        run_task_scenario,
+        summarize_task_run,
     )
     from dualarm_control.controller import controller_params
     from dualarm_control.params import read_params_files
@@ -157,7 +157,7 @@ def check_params_files(paths: list[str]) -> None:
 
 def cmd_launch(args: argparse.Namespace) -> int:
     """Start the three nodes as processes on a scenario; optionally record a bag."""
-    from dualarm_control.app.launcher import launch_scenario
+    from dualarm_control.app.run.launcher import launch_scenario
     from dualarm_control.scenario import load_scenario, scenario_file
 
     scenario_file(args.scenario)  # fail early (exit 2) on an unknown scenario
@@ -189,7 +189,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     """Run one node in the foreground (like ``ros2 run dualarm_control NODE``)."""
     import os
 
-    from dualarm_control.app.launcher import NODES, node_command
+    from dualarm_control.app.run.launcher import NODES, node_command
 
     if args.node not in NODES:
         raise DualArmError(f"unknown node {args.node!r}; valid choices: {', '.join(NODES)}")
@@ -203,7 +203,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     ``dualarm report`` on the bag, then the in-process experiment, and a comparison of both."""
     import json
 
-    from dualarm_control.app.launcher import launch_scenario
+    from dualarm_control.app.run.launcher import launch_scenario
 
     out = Path(args.output)
     solvers = [s.strip() for s in args.solver.split(",") if s.strip()]
@@ -245,7 +245,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def cmd_bench_realtime(args: argparse.Namespace) -> int:
     """Real-time runs over ROS per solver and rate; write DIR/realtime.md and DIR/realtime.json."""
-    from dualarm_control.app.realtime_bench import (
+    from dualarm_control.app.bench.realtime import (
         format_realtime,
         run_realtime,
         write_realtime,
@@ -289,7 +289,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         return cmd_bench_realtime(args)
     if args.messages:
         return cmd_bench_messages(args)
-    from dualarm_control.app.bench import format_bench, run_bench, write_bench
+    from dualarm_control.app.bench.suite import format_bench, run_bench, write_bench
     from dualarm_control.qp import make_backend
     from dualarm_control.scenario import load_scenario
     from dualarm_control.solvers import make_solver
@@ -311,7 +311,12 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 def cmd_faults(args: argparse.Namespace) -> int:
     """The fault matrix against real processes: DIR/faults.md and faults.json; exit 1 if a row failed."""
-    from dualarm_control.app.faults import ROWS, format_table, run_matrix, write_results
+    from dualarm_control.app.faults.matrix import (
+        ROWS,
+        format_table,
+        run_matrix,
+        write_results,
+    )
     from dualarm_control.scenario import scenario_file
 
     scenario_file(args.scenario)
@@ -333,7 +338,7 @@ def cmd_faults(args: argparse.Namespace) -> int:
 
 def cmd_soak(args: argparse.Namespace) -> int:
     """The scenario on repeat over ROS: RSS growth, missed-deadline bursts, accounting (soak.md/json)."""
-    from dualarm_control.app.soak import format_soak, run_soak, write_soak
+    from dualarm_control.app.faults.soak import format_soak, run_soak, write_soak
     from dualarm_control.scenario import scenario_file
 
     scenario_file(args.scenario)
@@ -346,8 +351,8 @@ def cmd_soak(args: argparse.Namespace) -> int:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    """Global manipulability plan of a relative path (paper 003); logic in app/plan_command.py."""
-    from dualarm_control.app.plan_command import run_plan_command
+    """Global manipulability plan of a relative path (paper 003); logic in app/plan/command.py."""
+    from dualarm_control.app.plan.command import run_plan_command
 
     return run_plan_command(args)
 
@@ -363,7 +368,7 @@ def cmd_bag_record(args: argparse.Namespace) -> int:
 
 def cmd_bag_info(args: argparse.Namespace) -> int:
     """Print a ``ros2 bag info``-style summary."""
-    from dualarm_control.app.bag import bag_info
+    from dualarm_control.app.record.bag import bag_info
 
     print(bag_info(Path(args.bag)))
     return 0
@@ -371,10 +376,10 @@ def cmd_bag_info(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Metrics of a recorded run: DIR/metrics.json, DIR/velocity_norms.png and the table."""
-    from dualarm_control.app.bag import report
-    from dualarm_control.app.report import format_table
-    from dualarm_control.app.task_bag import is_task_bag, task_report
-    from dualarm_control.app.task_report import format_task_table
+    from dualarm_control.app.record.bag import report
+    from dualarm_control.app.record.figures_tasks import format_task_table
+    from dualarm_control.app.record.report import format_table
+    from dualarm_control.app.record.tasks import is_task_bag, task_report
 
     out = Path(args.output)
     if is_task_bag(Path(args.bag)):  # a task scenario (pan_cleaning over ROS): the experiment's task metrics
@@ -646,7 +651,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "cannot run here are reported as skipped, with the reason.")
     fau.add_argument("--output", default="out/faults", metavar="DIR", help="output directory (default: %(default)s)")
     fau.add_argument("--scenario", default="assembly", help="scenario of the runs (default: %(default)s)")
-    from dualarm_control.app.faults import ROWS
+    from dualarm_control.app.faults.matrix import ROWS
 
     fau.add_argument("--only", metavar="ROW,...", help=f"run only these rows (default: all): {', '.join(ROWS)}")
     fau.set_defaults(func=cmd_faults)
@@ -663,7 +668,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_topic_parser(sub)
     _add_param_parser(sub)
     _add_report_parser(sub)
-    from dualarm_control.app.plan_command import add_plan_parser
+    from dualarm_control.app.plan.command import add_plan_parser
 
     add_plan_parser(sub, cmd_plan)
     return parser

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from dualarm_control.app.task_experiment import TaskRunLog
+from dualarm_control.app.run.tasks import TaskRunLog
 
 
 def _pyplot() -> Any:

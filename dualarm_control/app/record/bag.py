@@ -2,7 +2,7 @@
 
 Recording is :mod:`dualarm_control.ros.recorder` (rclpy). The report reads a bag with
 ``rosbags.highlevel.AnyReader`` and builds the same metrics record as an in-process
-experiment (:func:`dualarm_control.app.report.summarize`).
+experiment (:func:`dualarm_control.app.record.report.summarize`).
 """
 
 from __future__ import annotations
@@ -342,7 +342,7 @@ def summarize_run(run: RunData, model: Any) -> list[SolverRun]:
     receive time (a bag normally holds one solver). ``model`` gives joint limits
     (``q_min``, ``q_max``, ``qd_max``).
     """
-    from dualarm_control.app.report import summarize
+    from dualarm_control.app.record.report import summarize
 
     diag = run.diagnostics
     solvers = list(dict.fromkeys(diag.solver))
@@ -394,7 +394,7 @@ def report(path: Path, output: Path) -> dict[str, dict[str, float | int]]:
 
     Returns ``{solver: record}``; BagError when the bag lacks needed topics.
     """
-    from dualarm_control.app.report import plot_velocity_norms, write_metrics
+    from dualarm_control.app.record.report import plot_velocity_norms, write_metrics
     from dualarm_control.kinematics import DualArmModel
 
     model = DualArmModel()

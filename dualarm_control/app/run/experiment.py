@@ -96,8 +96,8 @@ def final_errors(log: RunLog, scenario: Scenario, model: DualArmModel) -> tuple[
 
 
 def summarize_log(log: RunLog, scenario: Scenario, model: DualArmModel) -> dict[str, float | int]:
-    """The metrics.json record of an in-process run (see :func:`dualarm_control.app.report.summarize`)."""
-    from dualarm_control.app.report import summarize
+    """The metrics.json record of an in-process run (see :func:`dualarm_control.app.record.report.summarize`)."""
+    from dualarm_control.app.record.report import summarize
 
     return summarize(
         commands=log.commands,

@@ -148,7 +148,7 @@ def task_run_log(
     from the measured joint positions and the cycle times (the circle at the cycle's normal
     offset f_F in the force variant): the same values the controller solved with, computed by
     the one piece of code that serves the in-process runner and a recorded bag
-    (:mod:`dualarm_control.app.task_bag`).
+    (:mod:`dualarm_control.app.record.tasks`).
     """
     spec = _task_scenario(scenario)
     tasks = spec.build_variant(gain, force)

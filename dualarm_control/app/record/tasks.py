@@ -5,9 +5,9 @@ A task run's bag holds ``/joint_states``, ``/velocity_controller/commands``, ``/
 (``/wrench``, ``/clock``). The controller's per-cycle status names the scenario, the gain k,
 the force variant, and gives the cycle's joint-state stamp, task time, normal offset f_F,
 filtered force, solver status and cycle time. The task values f_i and bounds b_i are not
-recorded: :func:`~dualarm_control.app.task_experiment.task_run_log` recomputes them from the
+recorded: :func:`~dualarm_control.app.run.tasks.task_run_log` recomputes them from the
 joint state of each cycle's stamp and its task time -- the code the in-process runner uses --
-and :func:`~dualarm_control.app.task_experiment.summarize_task_run` gives the metrics. In
+and :func:`~dualarm_control.app.run.tasks.summarize_task_run` gives the metrics. In
 lockstep the joint states, times and offsets are bit-identical to the in-process run, so are
 the metrics (except the cycle times, which are wall-clock measurements).
 
@@ -25,7 +25,7 @@ from typing import Any, cast
 
 import numpy as np
 
-from dualarm_control.app.bag import (
+from dualarm_control.app.record.bag import (
     COMMANDS_TOPIC,
     CONTROLLER_STATUS,
     DIAGNOSTICS_TOPIC,
@@ -33,7 +33,7 @@ from dualarm_control.app.bag import (
     BagError,
     open_reader,
 )
-from dualarm_control.app.task_experiment import TaskRunLog, task_run_log
+from dualarm_control.app.run.tasks import TaskRunLog, task_run_log
 from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.ros.convert import stamp_ns
 from dualarm_control.scenario import Scenario, load_scenario
@@ -152,13 +152,13 @@ def read_task_run(path: Path) -> tuple[TaskRunLog, Scenario]:
 def task_report(path: Path, output: Path) -> dict[str, dict[str, Any]]:
     """``dualarm report`` on a task bag: ``output/metrics.json`` ({label: record}, the keys of
     ``dualarm experiment pan_cleaning``), the tool path, task values and joint velocity plots."""
-    from dualarm_control.app.report import write_metrics
-    from dualarm_control.app.task_experiment import summarize_task_run
-    from dualarm_control.app.task_report import (
+    from dualarm_control.app.record.figures_tasks import (
         plot_joint_velocities,
         plot_task_values,
         plot_tool_paths,
     )
+    from dualarm_control.app.record.report import write_metrics
+    from dualarm_control.app.run.tasks import summarize_task_run
     from dualarm_control.tasks import CircleTask
 
     log, scenario = read_task_run(path)
