@@ -18,13 +18,13 @@ from dualarm_control.controller import ControllerParams, RelativeController, Tas
 from dualarm_control.errors import ScenarioError
 from dualarm_control.force import ForcePI, ForceSensorModel, contact_normal_force
 from dualarm_control.kinematics import Configuration, DualArmModel, FloatArray
-from dualarm_control.task_scenario import TaskScenario
+from dualarm_control.references.tasks import TasksSource
 from dualarm_control.tasks import CircleTask, Task
 
 
 @dataclass(frozen=True)
 class TaskCycle:
-    """Result of one :meth:`TaskScenarioController.step`.
+    """Result of one :meth:`TasksController.step`.
 
     Attributes:
         output: the controller's cycle (command, solver record, evaluated tasks, cycle time).
@@ -49,7 +49,7 @@ def _check_frames(model: DualArmModel, tasks: list[Task]) -> None:
             raise ScenarioError(f"scenario task {task.name!r}: {exc.args[0]}") from None
 
 
-class TaskScenarioController:
+class TasksController:
     """The tasks of a task scenario at gain k and, with ``force``, the force loop of eq (9):
     F/T reading -> noise and low-pass (:class:`ForceSensorModel`, the simulated sensor chain)
     -> f_c = N^T F (N and R_2 from the controller's own kinematics) -> PI -> circle offset.
@@ -58,7 +58,7 @@ class TaskScenarioController:
     (``force.model_error``), which the force loop has to absorb.
     """
 
-    def __init__(self, model: DualArmModel, params: ControllerParams, spec: TaskScenario, gain: float,
+    def __init__(self, model: DualArmModel, params: ControllerParams, spec: TasksSource, gain: float,
                  force: bool = False) -> None:
         self.model = model
         self.spec = spec

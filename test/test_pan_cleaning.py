@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dualarm_control.app.cli import main
-from dualarm_control.app.run.tasks import run_task_scenario, summarize_task_run
+from dualarm_control.app.run.tasks import run_tasks, summarize_task_run
 from dualarm_control.controller import controller_params
 from dualarm_control.errors import ScenarioError
 from dualarm_control.force import (
@@ -36,7 +36,7 @@ def params():
 
 def test_scenario_has_the_papers_tasks_and_cell(scenario) -> None:
     spec = scenario.tasks
-    assert spec is not None and scenario.urdf == "dualarm_cell_pan.urdf" and scenario.segments == ()
+    assert spec is not None and scenario.urdf == "dualarm_cell_pan.urdf" and scenario.reference.kind == "tasks"
     assert [t.type for t in spec.tasks] == ["circle", "cone", "singularity", "singularity", "table", "table"]
     assert spec.gains == (1.0, 0.5, 0.2) and spec.table_height == pytest.approx(0.4)
     assert [t.gain for t in spec.build(0.5)] == [0.5] * 6
@@ -53,7 +53,7 @@ def test_bad_task_parameters_name_the_key() -> None:
         scenario_from_parameters({**flat, "scenario.force.stiffness": 1.0}, path)
     typo = scenario_from_parameters({**flat, "scenario.cone.pan_frame": "left_tol"}, path)
     with pytest.raises(ScenarioError, match="cone.*unknown frame 'left_tol'"):
-        run_task_scenario(typo, controller_params({"solver": "constraint_based"}), 1.0, duration=0.1)
+        run_tasks(typo, controller_params({"solver": "constraint_based"}), 1.0, duration=0.1)
 
 
 def test_force_pi_integrates_and_saturates() -> None:
@@ -86,7 +86,7 @@ def test_contact_normal_force_removes_the_tool_weight() -> None:
 
 def test_circle_converges_below_1_mm_and_no_inequality_is_violated(scenario, params) -> None:
     """k = 1, 8 s: RMS circle error after 5 s < 1 mm; f_i <= b_i every cycle; the table is never touched."""
-    log = run_task_scenario(scenario, params, 1.0, duration=8.0)
+    log = run_tasks(scenario, params, 1.0, duration=8.0)
     metrics = summarize_task_run(log, scenario)
     assert metrics["circle_rms_error_m"] < 1e-3
     assert metrics["max_inequality_violation"] <= 1e-4
@@ -98,7 +98,7 @@ def test_larger_gain_converges_faster(scenario, params) -> None:
     """The paper's ordering (Fig. 4-5): ||f_1-3|| at 2.5 s is smaller for larger k."""
     errors = []
     for gain in (1.0, 0.5, 0.2):
-        log = run_task_scenario(scenario, params, gain, duration=2.5)
+        log = run_tasks(scenario, params, gain, duration=2.5)
         errors.append(float(np.linalg.norm(log.values["circle"][-1])))
     assert errors[0] < errors[1] < errors[2]
     for gain, error in zip((1.0, 0.5, 0.2), errors, strict=True):  # close to exp(-k t) of the 5 cm start error
@@ -107,7 +107,7 @@ def test_larger_gain_converges_faster(scenario, params) -> None:
 
 def test_force_feedback_keeps_contact_at_the_set_point(scenario, params) -> None:
     """eq (9) with a 1 cm pan modelling error: contact after first touch, force RMS error < 1 N."""
-    log = run_task_scenario(scenario, params, scenario.tasks.force.gain, force=True, duration=8.0)
+    log = run_tasks(scenario, params, scenario.tasks.force.gain, force=True, duration=8.0)
     metrics = summarize_task_run(log, scenario)
     assert metrics["first_contact_s"] < 4.0
     assert metrics["contact_lost_cycles"] == 0
@@ -118,7 +118,7 @@ def test_force_feedback_keeps_contact_at_the_set_point(scenario, params) -> None
 def test_without_feedback_the_modelling_error_leaves_the_brush_above_the_pan(params) -> None:
     """The control case of the force test: ki = 0, the brush circles 1 cm above the real pan."""
     scenario = variant(**{"force.ki": 0.0})
-    log = run_task_scenario(scenario, params, scenario.tasks.force.gain, force=True, duration=4.0)
+    log = run_tasks(scenario, params, scenario.tasks.force.gain, force=True, duration=4.0)
     assert log.contact_force.max() == 0.0
     assert log.tip_in_pan[-1, 2] == pytest.approx(scenario.tasks.force.model_error, abs=1e-3)
 
@@ -136,7 +136,7 @@ def test_cli_writes_metrics_and_figures(tmp_path: Path) -> None:
     assert main(["experiment", "pan_cleaning", "--solver", "standard_qp", "--output", str(out)]) == 2
 
 
-def test_a_task_scenario_has_no_relative_trajectory(scenario) -> None:
+def test_a_tasks_source_has_no_relative_trajectory(scenario) -> None:
     with pytest.raises(ScenarioError, match="task scenario"):
         scenario.trajectory(np.zeros(3), np.eye(3))
 
@@ -152,7 +152,7 @@ def test_an_active_inequality_is_kept_while_the_circle_is_tracked(params) -> Non
     """A 5 deg cone: the brush tilts more than that on the plain run, so f_4 reaches its bound and
     stays on it (bound margin, eq 5) while the circle is still tracked below 1 mm."""
     scenario = variant(**{"cone.max_angle_deg": 5.0})
-    log = run_task_scenario(scenario, params, 1.0, duration=8.0)
+    log = run_tasks(scenario, params, 1.0, duration=8.0)
     margin = log.values["cone"][:, 0] - log.bounds["cone"][0]
     assert np.mean(margin > -1e-4) > 0.05  # active for a part of the run
     assert margin.max() <= 1e-4
@@ -163,7 +163,7 @@ def test_a_violated_inequality_decays_at_least_exponentially(params) -> None:
     """Table clearance 0.15 m demanded of the left arm, 0.148 m at the start: f_6 - b_6 > 0 decays no
     slower than exp(-k t)."""
     scenario = variant(**{"table_left.bound": -0.15})
-    log = run_task_scenario(scenario, params, 1.0, duration=4.0)
+    log = run_tasks(scenario, params, 1.0, duration=4.0)
     excess = (log.values["table_left"] - log.bounds["table_left"]).max(axis=1)
     assert excess[0] > 1e-3
     assert np.all(excess <= excess[0] * np.exp(-1.0 * log.time) + 1e-4)
@@ -173,10 +173,10 @@ def test_a_violated_inequality_decays_at_least_exponentially(params) -> None:
 def test_task_controller_holds_the_force_loop_on_a_bad_reading(scenario, params) -> None:
     """The per-cycle object a node would use: a NaN wrench keeps the previous offset, no wrench is refused."""
     from dualarm_control.kinematics import DualArmModel
-    from dualarm_control.task_control import TaskScenarioController
+    from dualarm_control.task_control import TasksController
 
     model = DualArmModel(scenario.urdf_path)
-    control = TaskScenarioController(model, params, scenario.tasks, 2.0, force=True)
+    control = TasksController(model, params, scenario.tasks, 2.0, force=True)
     q = scenario.initial_positions
     tool = model.frame_poses(q, ("right_tool",))[0]
     at_rest = np.concatenate((tool.rotation.T @ np.array([0.0, 0.0, 0.1 * 9.81]), np.zeros(3)))  # holds the weight

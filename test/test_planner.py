@@ -294,7 +294,7 @@ def test_corner_scenario_has_the_paper_settings_and_a_start_on_the_path(model: D
     path = cfg.corner.sample()
     e_p, e_r = closure_errors(model, scenario.initial_positions, path.positions[0], path.rotation)
     assert e_p < 1e-6 and e_r < 1e-6  # degrees with 6 decimals in the file
-    ends = [s.position for s in scenario.segments]
+    ends = [s.position for s in scenario.reference.segments]
     on_path = [path.positions[i] for i in (0, 12, 13, 14, 15, 16, 17, 18, 30)]
     np.testing.assert_allclose(np.array(ends), np.array(on_path), atol=1e-6)
 

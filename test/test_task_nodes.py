@@ -15,7 +15,7 @@ from pathlib import Path
 
 from dualarm_control.app.record.tasks import is_task_bag, read_task_run, task_report
 from dualarm_control.app.run.launcher import Launch, launch_scenario, node_command
-from dualarm_control.app.run.tasks import run_task_scenario, summarize_task_run
+from dualarm_control.app.run.tasks import run_tasks, summarize_task_run
 from dualarm_control.controller import controller_params
 from dualarm_control.params import read_params_files
 from dualarm_control.scenario import load_scenario
@@ -30,7 +30,7 @@ def in_process(duration: float, force: bool = False) -> dict[str, float | int | 
     params = controller_params({**read_params_files([PARAMS], "controller_node"), "solver": "constraint_based"})
     assert scenario.tasks is not None
     gain = scenario.tasks.force.gain if force else scenario.tasks.gains[0]
-    log = run_task_scenario(scenario, params, gain, force, duration=duration)
+    log = run_tasks(scenario, params, gain, force, duration=duration)
     return summarize_task_run(log, scenario)
 
 

@@ -99,7 +99,7 @@ def cmd_task_experiment(args: argparse.Namespace, scenario) -> int:
         plot_tool_paths,
     )
     from dualarm_control.app.run.tasks import (
-        run_task_scenario,
+        run_tasks,
         summarize_task_run,
     )
     from dualarm_control.controller import controller_params
@@ -125,7 +125,7 @@ def cmd_task_experiment(args: argparse.Namespace, scenario) -> int:
 
     def job(gain: float) -> Callable[[Any], tuple[str, dict[str, Any], Any]]:
         def run(progress: Any) -> tuple[str, dict[str, Any], Any]:
-            log = run_task_scenario(scenario, params, gain, args.force, duration=args.duration, progress=progress)
+            log = run_tasks(scenario, params, gain, args.force, duration=args.duration, progress=progress)
             return log.label, summarize_task_run(log, scenario), log
         return run
 

@@ -33,7 +33,7 @@ fallback (status "fallback", counted as ``solver_fallbacks``).
 
 Task mode (paper 001, ``scenario:=pan_cleaning``, a scenario with ``tasks``): no
 ``/relative_target``; every joint state drives one cycle of
-:class:`~dualarm_control.task_control.TaskScenarioController` (the tasks at gain
+:class:`~dualarm_control.task_control.TasksController` (the tasks at gain
 ``task_gain``, with ``force:=true`` the force loop of eq (9) on the latest ``/wrench``) at task
 time t = joint-state stamp - first joint-state stamp (lockstep: t = k T, k the step count of
 the stamps, as the in-process runner counts). /diagnostics carries per cycle the task time,
@@ -85,7 +85,7 @@ from dualarm_control.ros.node import (
 )
 from dualarm_control.ros.qos import QOS_PARAMETER, stream_qos
 from dualarm_control.scenario import load_scenario
-from dualarm_control.task_control import TaskCycle, TaskScenarioController
+from dualarm_control.task_control import TaskCycle, TasksController
 
 NODE_PARAMETERS = (
     ParamSpec("lockstep", False, "compute one command per joint-state stamp (deterministic runs)", read_only=True),
@@ -132,7 +132,7 @@ class ControllerNode:
         self.lockstep = bool(self.values["lockstep"])
         self.stale_ns = int(self.values["stale_timeout"] * 1e9)
         self.target_ns = int(self.values["target_timeout"] * 1e9)
-        self.task: TaskScenarioController | None = None
+        self.task: TasksController | None = None
         self.task_gain = float("nan")
         self.task_steps = 0  # task mode: cycles to run (duration / period, rounded up)
         if self.values["scenario"]:
@@ -199,7 +199,7 @@ class ControllerNode:
         elif not priority_note:
             self.log.info(f"running under SCHED_FIFO priority {self.values['thread_priority']}")
 
-    def make_task_controller(self) -> TaskScenarioController:
+    def make_task_controller(self) -> TasksController:
         """Task mode: the scenario's tasks on its URDF at gain ``task_gain`` (ScenarioError -> exit 2)."""
         scenario = load_scenario(self.values["scenario"])
         if scenario.tasks is None:
@@ -209,7 +209,7 @@ class ControllerNode:
         self.task_gain = float(self.values["task_gain"]) or (spec.force.gain if force else spec.gains[0])
         duration = float(self.values["duration"]) or spec.duration
         self.task_steps = int(np.ceil(duration / self.params.period - 1e-9))
-        return TaskScenarioController(DualArmModel(scenario.urdf_path), self.params, spec, self.task_gain, force)
+        return TasksController(DualArmModel(scenario.urdf_path), self.params, spec, self.task_gain, force)
 
     def close(self) -> None:
         jp = percentiles(np.array(self.jitter)) if self.jitter else NAN2
@@ -416,7 +416,7 @@ class ControllerNode:
             "active_joints": r.active_joints,
             "control_period_s": self.params.period,
             "stamp_ns": stamp,
-            "task_scenario": self.values["scenario"],
+            "scenario": self.values["scenario"],
             "task_gain": repr(self.task_gain),
             "force": int(self.task is not None and self.task.force),
             "task_time_s": repr(t),

@@ -38,8 +38,10 @@ from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.ros.convert import stamp_ns
 from dualarm_control.scenario import Scenario, load_scenario
 
-TASK_KEY = "task_scenario"
+TASK_KEY = "task_gain"
 """A controller status with this key is a task cycle (controller_node task mode)."""
+SCENARIO_KEY = "scenario"
+"""The task scenario's name or path in a task cycle's status."""
 SIM_STATUS = "sim_node"
 CONTACT_TOPIC = "/contact_force"
 
@@ -112,7 +114,7 @@ def read_task_run(path: Path) -> tuple[TaskRunLog, Scenario]:
     stamps = sorted(s for s in by_stamp if s >= covered_from)
     if not stamps:
         raise BagError(f"bag {path}: no controller task cycle at or after the first recorded {JOINT_STATES_TOPIC}")
-    scenario = load_scenario(first[TASK_KEY])
+    scenario = load_scenario(first[SCENARIO_KEY])
     model = DualArmModel(scenario.urdf_path)
     order: dict[tuple[str, ...], list[int]] = {}
     positions = np.zeros((len(stamps), model.nq))

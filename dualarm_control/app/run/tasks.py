@@ -23,9 +23,9 @@ import numpy as np
 from dualarm_control.controller import ControllerParams
 from dualarm_control.kinematics import Configuration, DualArmModel, FloatArray
 from dualarm_control.metrics import percentiles
+from dualarm_control.references.tasks import TasksSource
 from dualarm_control.scenario import Scenario
-from dualarm_control.task_control import TaskScenarioController
-from dualarm_control.task_scenario import TaskScenario
+from dualarm_control.task_control import TasksController
 from dualarm_control.tasks import (
     INEQUALITY,
     CircleTask,
@@ -74,13 +74,13 @@ class TaskRunLog:
     set_point: float
 
 
-def _task_scenario(scenario: Scenario) -> TaskScenario:
+def _tasks_source(scenario: Scenario) -> TasksSource:
     if scenario.tasks is None:
         raise ValueError(f"scenario {scenario.name!r} has no tasks (a segment scenario: use 'dualarm experiment')")
     return scenario.tasks
 
 
-def run_task_scenario(
+def run_tasks(
     scenario: Scenario,
     params: ControllerParams,
     gain: float,
@@ -89,9 +89,9 @@ def run_task_scenario(
     progress: Callable[[float, str], None] | None = None,
 ) -> TaskRunLog:
     """Run the task scenario with all task gains k = ``gain`` (force variant if ``force``)."""
-    spec = _task_scenario(scenario)
+    spec = _tasks_source(scenario)
     model = DualArmModel(scenario.urdf_path)
-    control = TaskScenarioController(model, params, spec, gain, force)
+    control = TasksController(model, params, spec, gain, force)
     if control.circle is None:
         raise ValueError(f"scenario {scenario.name!r} has no circle task")
     period = params.period
@@ -150,7 +150,7 @@ def task_run_log(
     the one piece of code that serves the in-process runner and a recorded bag
     (:mod:`dualarm_control.app.record.tasks`).
     """
-    spec = _task_scenario(scenario)
+    spec = _tasks_source(scenario)
     tasks = spec.build_variant(gain, force)
     circles = [(i, t) for i, t in enumerate(tasks) if isinstance(t, CircleTask)]
     if not circles:
@@ -193,7 +193,7 @@ def convergence_time(time: FloatArray, error: FloatArray, threshold: float) -> f
 
 def summarize_task_run(log: TaskRunLog, scenario: Scenario) -> dict[str, float | int | str]:
     """The metrics.json record of one task run (keys in docs/constraint_based.md)."""
-    spec = _task_scenario(scenario)
+    spec = _tasks_source(scenario)
     after = log.time >= spec.convergence_time
     circle_name = next(s.name for s in spec.tasks if s.type == "circle")
     circle_error = np.linalg.norm(log.values[circle_name], axis=1)

@@ -1,4 +1,4 @@
-"""The reference stream of a plan's execution: joint trajectory sample + its relative pose and twist.
+"""Reference source of paper 003: a plan's joint trajectory sample + its relative pose and twist.
 
 The trajectory node streams it; the controller tracks the joint reference
 (:func:`~dualarm_control.joint_tracking.joint_tracking_velocity`) and measures the relative
@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
@@ -16,6 +17,7 @@ from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.planning.config import load_plan_config
 from dualarm_control.planning.joint_trajectory import plan_trajectory
 from dualarm_control.planning.plan_file import read_plan
+from dualarm_control.references.base import JOINT_REFERENCE
 
 
 @dataclass(frozen=True)
@@ -39,11 +41,15 @@ class PlanReference:
     angular_acceleration: FloatArray
 
 
-class PlanExecution:
-    """A plan.json turned into the executable joint trajectory of its scenario's path."""
+class PlanSource:
+    """A plan.json turned into the executable joint trajectory of its scenario's path: a
+    :class:`~dualarm_control.references.base.ReferenceSource` (stream: /joint_reference)."""
+
+    kind: ClassVar[str] = "plan"
 
     def __init__(self, model: DualArmModel, plan_path: str | Path) -> None:
         self.model = model
+        self.path = Path(plan_path)
         plan = read_plan(plan_path, model.joint_names)
         self.config = load_plan_config(plan.scenario)
         self.initial_positions = plan.configurations[0]
@@ -52,6 +58,13 @@ class PlanExecution:
         self.duration = self.trajectory.duration
         self.settle_time = self.config.execution_settle
         self.gain = self.config.execution_gain
+
+    @property
+    def streams(self) -> tuple[str, ...]:
+        return (JOINT_REFERENCE,)
+
+    def describe(self) -> str:
+        return f"plan {self.path}"
 
     def sample(self, t: float) -> PlanReference:
         """The reference at ``t`` [s] (held at the last configuration after the end)."""

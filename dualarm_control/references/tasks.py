@@ -1,4 +1,4 @@
-"""Task scenarios (paper 001): a set of tasks instead of relative motion segments.
+"""Reference source of paper 001: a set of tasks with gains and bounds instead of relative segments.
 
 Keys under ``scenario.`` (flattened, see :mod:`dualarm_control.scenario`):
   ``duration`` [s]; ``table_height`` [m, world z of the table top];
@@ -21,15 +21,11 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, ClassVar
 
 from dualarm_control.errors import ScenarioError
 from dualarm_control.force import ForceParams
-from dualarm_control.scenario import (  # the scenario file's readers and messages
-    PREFIX,
-    _get,
-    _number,
-)
+from dualarm_control.references.base import PREFIX, get, number
 from dualarm_control.tasks import (
     DEFAULT_EQUALITY_WEIGHT,
     DEFAULT_INEQUALITY_WEIGHT,
@@ -54,8 +50,10 @@ class TaskSpec:
 
 
 @dataclass(frozen=True)
-class TaskScenario:
-    """The task part of a scenario.
+class TasksSource:
+    """Tasks (paper 001): a :class:`~dualarm_control.references.base.ReferenceSource`.
+
+    No stream besides /joint_states; the force variant (a run option) adds /wrench.
 
     Attributes:
         duration: run time [s]. table_height: table top, world z [m].
@@ -72,6 +70,14 @@ class TaskScenario:
     tasks: tuple[TaskSpec, ...]
     force: ForceParams
     contact_links: tuple[str, str] = ("left_flange", "right_tool")
+    kind: ClassVar[str] = "tasks"
+
+    @property
+    def streams(self) -> tuple[str, ...]:
+        return ()
+
+    def describe(self) -> str:
+        return f"{len(self.tasks)} tasks"
 
     def build(self, gain: float, height_offset: float = 0.0) -> list[Task]:
         """Task objects with gain k for every task; ``height_offset`` [m] is added to the circle
@@ -89,8 +95,8 @@ def _value(spec: TaskSpec, key: str, kind: type, default: Any = None) -> Any:
     """``scenario.<task>.<key>`` as a number, a string or a list; ScenarioError naming the key."""
     full = f"{spec.name}.{key}"
     if kind is float:
-        return _number(spec.values, full, default)
-    value = _get(spec.values, full, default)
+        return number(spec.values, full, default)
+    value = get(spec.values, full, default)
     if not isinstance(value, kind):
         raise ScenarioError(f"scenario parameter '{PREFIX}{full}': got {value!r}, expected a {kind.__name__}")
     return value
@@ -123,10 +129,10 @@ def _build(spec: TaskSpec, gain: float, table_height: float, height_offset: floa
         raise ScenarioError(f"scenario task {spec.name!r}: {exc}") from None
 
 
-def parse_task_scenario(flat: Mapping[str, Any]) -> TaskScenario:
+def parse_tasks(flat: Mapping[str, Any]) -> TasksSource:
     """Read the task keys (module docstring) from flattened parameters; ScenarioError on a bad value."""
 
-    names = _get(flat, "tasks")
+    names = get(flat, "tasks")
     if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
         raise ScenarioError(f"scenario parameter '{PREFIX}tasks': got {names!r}, expected a list of task names")
     specs = []
@@ -138,7 +144,7 @@ def parse_task_scenario(flat: Mapping[str, Any]) -> TaskScenario:
             raise ScenarioError(f"scenario parameter '{sub}type': got {kind!r}, expected one of: "
                                 f"{', '.join(TASK_TYPES)}")
         specs.append(TaskSpec(name, str(kind), values))
-    gains = _get(flat, "gains", [1.0])
+    gains = get(flat, "gains", [1.0])
     if not isinstance(gains, list) or not gains or not all(
             isinstance(g, int | float) and not isinstance(g, bool) and g > 0 for g in gains):
         raise ScenarioError(f"scenario parameter '{PREFIX}gains': got {gains!r}, expected numbers > 0")
@@ -152,12 +158,12 @@ def parse_task_scenario(flat: Mapping[str, Any]) -> TaskScenario:
         force = ForceParams(**force_values)
     except (TypeError, ValueError) as exc:
         raise ScenarioError(f"scenario force parameters: {exc}") from None
-    links = _get(flat, "contact_links", ["left_flange", "right_tool"])
+    links = get(flat, "contact_links", ["left_flange", "right_tool"])
     if not isinstance(links, list) or len(links) != 2 or not all(isinstance(n, str) for n in links):
         raise ScenarioError(f"scenario parameter '{PREFIX}contact_links': got {links!r}, expected two link names")
-    out = TaskScenario(duration=_number(flat, "duration"), table_height=_number(flat, "table_height"),
-                       convergence_time=_number(flat, "convergence_time", 5.0), gains=tuple(float(g) for g in gains),
-                       tasks=tuple(specs), force=force, contact_links=(links[0], links[1]))
+    out = TasksSource(duration=number(flat, "duration"), table_height=number(flat, "table_height"),
+                      convergence_time=number(flat, "convergence_time", 5.0), gains=tuple(float(g) for g in gains),
+                      tasks=tuple(specs), force=force, contact_links=(links[0], links[1]))
     if out.duration <= out.convergence_time:
         raise ScenarioError(f"scenario parameter '{PREFIX}duration' must exceed convergence_time "
                             f"({out.convergence_time} s), got {out.duration}")
