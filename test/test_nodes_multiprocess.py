@@ -135,12 +135,12 @@ def test_table_one_means_from_the_bag_equal_in_process(lockstep_bags: dict[str, 
                                                        tmp_path: Path) -> None:
     """``dualarm report`` on the lockstep bag gives the in-process experiment's Table I means."""
     from dualarm_control.app.record.bag import report
-    from dualarm_control.app.run.experiment import summarize_log
+    from dualarm_control.app.record.report import summarize_run
 
     scenario = load_scenario(str(SHORT))
     model = DualArmModel()
     log = run_scenario(scenario, controller_params({"solver": solver}), model)
-    expected = summarize_log(log, scenario, model)
+    expected = summarize_run(log, scenario, model)
     got = report(lockstep_bags[solver], tmp_path)[solver]
     for key in ("l0_mean", "l1_mean", "l2_mean"):
         assert got[key] == pytest.approx(expected[key], rel=1e-9, abs=1e-12), key

@@ -25,8 +25,9 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     from dualarm_control.app.record.report import (
         format_table,
         plot_velocity_norms,
+        summarize_run,
     )
-    from dualarm_control.app.run.experiment import run_scenario, summarize_log
+    from dualarm_control.app.run.experiment import run_scenario
     from dualarm_control.controller import controller_params
     from dualarm_control.kinematics import DualArmModel
     from dualarm_control.params import read_params_files
@@ -34,7 +35,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
     scenario = load_scenario(args.scenario)
     if scenario.tasks is not None:
-        return cmd_task_experiment(args, scenario)
+        return experiment_tasks(args, scenario)
     if args.gains or args.force or args.duration:
         raise DualArmError(f"--gains, --force and --duration apply to task scenarios (pan_cleaning), "
                            f"not to {scenario.name!r}")
@@ -48,14 +49,14 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     def job(name: str, params: Any) -> Callable[[Any], tuple[str, dict[str, Any], Any]]:
         def run(progress: Any) -> tuple[str, dict[str, Any], Any]:
             log = run_scenario(scenario, params, model, progress=progress)
-            return name, summarize_log(log, scenario, model), log
+            return name, summarize_run(log, scenario, model), log
         return run
 
     done = run_all([(name, job(name, params)) for name, params in configs.items()], out)
     if done is None:
         return EXIT_INTERRUPTED
     results, logs = done
-    runs = {log.solver: (log.time, log.commands) for log in logs}
+    runs = {log.label: (log.time, log.commands) for log in logs}
     plot_velocity_norms(runs, out / "velocity_norms.png", title=f"{scenario.name}: |qd_i| and active joints")
     print(format_table(results))
     print(f"\nwrote {out / 'metrics.json'} and {out / 'velocity_norms.png'}")
@@ -89,20 +90,19 @@ def run_all(jobs: list[tuple[str, Callable[[Any], tuple[str, dict[str, Any], Any
     return results, logs
 
 
-def cmd_task_experiment(args: argparse.Namespace, scenario) -> int:
+def experiment_tasks(args: argparse.Namespace, scenario) -> int:
     """Task scenario (paper 001): one run per gain k (force variant with --force); metrics.json, figures."""
-    from dualarm_control.app.record.figures_tasks import (
+    from dualarm_control.app.record.report import (
         format_task_table,
         plot_contact_force,
         plot_joint_velocities,
         plot_task_values,
         plot_tool_paths,
+        summarize_run,
     )
-    from dualarm_control.app.run.tasks import (
-        run_tasks,
-        summarize_task_run,
-    )
+    from dualarm_control.app.run.experiment import run_scenario
     from dualarm_control.controller import controller_params
+    from dualarm_control.kinematics import DualArmModel
     from dualarm_control.params import read_params_files
     from dualarm_control.tasks import CircleTask
 
@@ -120,13 +120,14 @@ def cmd_task_experiment(args: argparse.Namespace, scenario) -> int:
     if not gains or any(not g > 0 for g in gains):
         raise DualArmError(f"--gains {args.gains!r}: expected comma-separated numbers > 0")
     out = Path(args.output)
+    model = DualArmModel(scenario.urdf_path)
     print(f"scenario {scenario.name!r} ({scenario.source}); solver {solver}; gains {gains}"
           f"{'; force feedback' if args.force else ''}; output: {out}", file=sys.stderr)
 
     def job(gain: float) -> Callable[[Any], tuple[str, dict[str, Any], Any]]:
         def run(progress: Any) -> tuple[str, dict[str, Any], Any]:
-            log = run_tasks(scenario, params, gain, args.force, duration=args.duration, progress=progress)
-            return log.label, summarize_task_run(log, scenario), log
+            log = run_scenario(scenario, params, None, progress, gain=gain, force=args.force, duration=args.duration)
+            return log.label, summarize_run(log, scenario, model), log
         return run
 
     done = run_all([(f"k={gain:g}" + (" force" if args.force else ""), job(gain)) for gain in gains], out)
@@ -377,8 +378,7 @@ def cmd_bag_info(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     """Metrics of a recorded run: DIR/metrics.json, DIR/velocity_norms.png and the table."""
     from dualarm_control.app.record.bag import report
-    from dualarm_control.app.record.figures_tasks import format_task_table
-    from dualarm_control.app.record.report import format_table
+    from dualarm_control.app.record.report import format_table, format_task_table
     from dualarm_control.app.record.tasks import is_task_bag, task_report
 
     out = Path(args.output)

@@ -33,7 +33,7 @@ fallback (status "fallback", counted as ``solver_fallbacks``).
 
 Task mode (paper 001, ``scenario:=pan_cleaning``, a scenario with ``tasks``): no
 ``/relative_target``; every joint state drives one cycle of
-:class:`~dualarm_control.task_control.TasksController` (the tasks at gain
+:class:`~dualarm_control.references.tasks.TasksController` (the tasks at gain
 ``task_gain``, with ``force:=true`` the force loop of eq (9) on the latest ``/wrench``) at task
 time t = joint-state stamp - first joint-state stamp (lockstep: t = k T, k the step count of
 the stamps, as the in-process runner counts). /diagnostics carries per cycle the task time,
@@ -74,6 +74,8 @@ from dualarm_control.errors import DualArmError, ScenarioError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.metrics import percentiles
 from dualarm_control.params import ParamSpec, non_negative, positive
+from dualarm_control.references.base import Cycle
+from dualarm_control.references.tasks import TasksController
 from dualarm_control.ros import convert
 from dualarm_control.ros.inputs import StampGate, Throttle, subscribe_checked
 from dualarm_control.ros.node import (
@@ -85,7 +87,6 @@ from dualarm_control.ros.node import (
 )
 from dualarm_control.ros.qos import QOS_PARAMETER, stream_qos
 from dualarm_control.scenario import load_scenario
-from dualarm_control.task_control import TaskCycle, TasksController
 
 NODE_PARAMETERS = (
     ParamSpec("lockstep", False, "compute one command per joint-state stamp (deterministic runs)", read_only=True),
@@ -383,7 +384,7 @@ class ControllerNode:
             self.leave_safe_state()
         self.apply_pending()
         cycle = self.task.step(self.state[1], t, wrench)
-        self.finish_cycle(stamp, cycle.output.velocities, cycle.output.result, self.state[2])
+        self.finish_cycle(stamp, cycle.velocities, cycle.result, self.state[2])
         self.publish_task_diagnostics(stamp, t, cycle)
 
     def complete(self, stamp: int) -> None:
@@ -400,10 +401,10 @@ class ControllerNode:
         lockstep commands) after the task completed."""
         return self.completed_at is not None and time.monotonic() - self.completed_at > END_DELAY_S
 
-    def publish_task_diagnostics(self, stamp: int, t: float, cycle: TaskCycle) -> None:
+    def publish_task_diagnostics(self, stamp: int, t: float, cycle: Cycle) -> None:
         """Per task cycle: status and timing, plus the cycle's task time, normal offset and filtered
         force at full precision (repr) -- with /joint_states what the report recomputes the task values from."""
-        out, r = cycle.output, cycle.output.result
+        out, r = cycle, cycle.result
         level = 2 if r.failed else (1 if r.status != "solved" else 0)
         circle = next((rows for rows in out.rows if self.task is not None and self.task.circle is not None
                        and rows.name == self.task.circle.name), None)

@@ -66,7 +66,7 @@ class TrajectoryNode:
         self.repeat = bool(p["repeat"])
         self.repetitions = 0
         self.model = DualArmModel()
-        self.plan = PlanSource(self.model, p["plan"]) if p["plan"] else None
+        self.plan = PlanSource.from_file(self.model, p["plan"]) if p["plan"] else None
         self.order = {name: i for i, name in enumerate(self.model.joint_names)}
         n = self.node
         qos = stream_qos(p["qos_reliability"])

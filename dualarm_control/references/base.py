@@ -13,26 +13,107 @@ follow. The kinds today:
 * ``plan`` (paper 003, :class:`~dualarm_control.references.plan.PlanSource`): a planned
   joint trajectory (/joint_reference) tracked in joint space.
 
+A source is parsed from the scenario file (frozen, no run state). For a run it makes a
+:class:`Follower` (:meth:`ReferenceSource.follower`): the source bound to a controller from
+the measured start configuration, giving one :class:`Cycle` per control period. The
+in-process runner (:mod:`dualarm_control.app.run.experiment`) is one loop over a follower,
+whatever the kind.
+
 A fourth source, e.g. timed relative goals and twists replanned online by ruckig (issue 18),
-is one more class with these members; the consumers (runner, nodes, report) read only them.
+is one more class with these members (``kind``, ``streams``, ``describe``, ``cell``,
+``follower``) and a follower whose ``cycle`` samples its generator at t and calls
+:meth:`~dualarm_control.controller.RelativeController.step`; the consumers (runner, nodes,
+report) read only these members.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any, ClassVar, Protocol
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 import numpy as np
 
 from dualarm_control.errors import ScenarioError
-from dualarm_control.kinematics import FloatArray
+from dualarm_control.kinematics import DualArmModel, FloatArray
+from dualarm_control.solvers import SolverResult
+from dualarm_control.tasks import TaskRows
+from dualarm_control.trajectory import MotionLimits
+
+if TYPE_CHECKING:
+    from dualarm_control.controller import ControllerParams
 
 PREFIX = "scenario."
 
 RELATIVE_TARGET = "/relative_target"
 JOINT_REFERENCE = "/joint_reference"
 WRENCH = "/wrench"
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """What a run adds to a scenario's source.
+
+    Attributes:
+        limits: the scenario's ruckig limits (relative motion).
+        settle_time: control time after a trajectory ends [s].
+        gain: task gain k [1/s] (tasks; None: the source's default).
+        force: the force variant (tasks, eq 9 of paper 001).
+        duration: run time [s] (tasks; None: the source's).
+    """
+
+    limits: MotionLimits
+    settle_time: float
+    gain: float | None = None
+    force: bool = False
+    duration: float | None = None
+
+
+@dataclass(slots=True)
+class Cycle:
+    """One control cycle of a follower: a row of the run record.
+
+    A per-cycle record: slotted, not frozen (cheaper to build); read-only by convention.
+
+    Attributes:
+        velocities: command [rad/s], (n,). result: the solver's record.
+        cycle_time: wall time of the cycle [s].
+        position_error, orientation_error: relative tracking errors [m, rad] (NaN for tasks).
+        rows: the evaluated tasks (tasks only, else empty).
+        measured_force: filtered normal force f_c [N] (NaN without force feedback).
+        normal_offset: f_F of eq (9) of paper 001 [m] (0 without force feedback).
+        stage: what is being followed (segment name, "circle", "execute"), for progress output.
+    """
+
+    velocities: FloatArray
+    result: SolverResult
+    cycle_time: float
+    position_error: float = float("nan")
+    orientation_error: float = float("nan")
+    rows: tuple[TaskRows, ...] = ()
+    measured_force: float = float("nan")
+    normal_offset: float = 0.0
+    stage: str = ""
+
+
+class Follower(Protocol):
+    """A reference source bound to a controller for one run.
+
+    Attributes:
+        label: run name (the solver for relative motion, "k=1 force" for tasks).
+        steps: control periods of the run.
+        uses_wrench: the cycle needs the F/T reading (force variant).
+    """
+
+    label: str
+    steps: int
+    uses_wrench: bool
+
+    def cycle(self, t: float, q: FloatArray, wrench: FloatArray | None) -> Cycle:
+        """One cycle at time t [s] since the start, measured joint positions q (n,) [rad] and,
+        when ``uses_wrench``, the raw F/T reading (6,)."""
+        ...
 
 
 class ReferenceSource(Protocol):
@@ -49,6 +130,12 @@ class ReferenceSource(Protocol):
 
     Methods:
         describe(): one line for logs ("3 segments", "6 tasks", "plan <file>").
+        initial_positions(default): the configuration the cell starts in [rad], (n,) (a plan's
+            first configuration, else the scenario's ``default``).
+        cell(options): extra :class:`~dualarm_sim.cell.CellConfig` fields of a run (tasks: the
+            table height, the contact pair of the force variant), plain data.
+        follower(model, params, q0, options): the source bound to a new controller from the
+            measured start configuration q0 (n,).
     """
 
     kind: ClassVar[str]
@@ -57,6 +144,13 @@ class ReferenceSource(Protocol):
     def streams(self) -> tuple[str, ...]: ...
 
     def describe(self) -> str: ...
+
+    def initial_positions(self, default: FloatArray) -> FloatArray: ...
+
+    def cell(self, options: RunOptions) -> dict[str, Any]: ...
+
+    def follower(self, model: DualArmModel, params: ControllerParams, q0: FloatArray,
+                 options: RunOptions) -> Follower: ...
 
 
 def get(flat: Mapping[str, Any], key: str, default: Any = None) -> Any:

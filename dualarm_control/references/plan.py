@@ -7,17 +7,19 @@ pose error against the reference's relative pose (eq 1-2 and 4-6 of paper 000 at
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
+from dualarm_control.controller import ControllerParams, RelativeController
 from dualarm_control.kinematics import DualArmModel, FloatArray
-from dualarm_control.planning.config import load_plan_config
+from dualarm_control.planning.config import PlanConfig, load_plan_config
 from dualarm_control.planning.joint_trajectory import plan_trajectory
 from dualarm_control.planning.plan_file import read_plan
-from dualarm_control.references.base import JOINT_REFERENCE
+from dualarm_control.references.base import JOINT_REFERENCE, Cycle, RunOptions
 
 
 @dataclass(frozen=True)
@@ -42,22 +44,43 @@ class PlanReference:
 
 
 class PlanSource:
-    """A plan.json turned into the executable joint trajectory of its scenario's path: a
-    :class:`~dualarm_control.references.base.ReferenceSource` (stream: /joint_reference)."""
+    """The executable joint trajectory of a plan along its scenario's path: a
+    :class:`~dualarm_control.references.base.ReferenceSource` (stream: /joint_reference).
+
+    The reference passes through the planned configurations and
+    ``execution.subdivisions - 1`` closure-projected knots between each pair
+    (:func:`~dualarm_control.planning.joint_trajectory.plan_trajectory`); the run starts at the
+    plan's first configuration.
+    """
 
     kind: ClassVar[str] = "plan"
 
-    def __init__(self, model: DualArmModel, plan_path: str | Path) -> None:
+    def __init__(self, model: DualArmModel, config: PlanConfig, configurations: FloatArray, path: str = "") -> None:
         self.model = model
-        self.path = Path(plan_path)
-        plan = read_plan(plan_path, model.joint_names)
-        self.config = load_plan_config(plan.scenario)
-        self.initial_positions = plan.configurations[0]
-        self.trajectory = plan_trajectory(model, self.config.corner.sample(), plan.configurations,
-                                          self.config.execution_subdivisions, self.config.execution_velocity_scale)
+        self.path = Path(path)
+        self.config = config
+        self.configurations = configurations
+        self.trajectory = plan_trajectory(model, config.corner.sample(), configurations,
+                                          config.execution_subdivisions, config.execution_velocity_scale)
         self.duration = self.trajectory.duration
-        self.settle_time = self.config.execution_settle
-        self.gain = self.config.execution_gain
+        self.settle_time = config.execution_settle
+        self.gain = config.execution_gain
+
+    @classmethod
+    def from_file(cls, model: DualArmModel, plan_path: str | Path) -> PlanSource:
+        """The source of a plan.json of ``dualarm plan``."""
+        plan = read_plan(plan_path, model.joint_names)
+        return cls(model, load_plan_config(plan.scenario), plan.configurations, str(plan_path))
+
+    def initial_positions(self, default: FloatArray) -> FloatArray:
+        return np.asarray(self.configurations[0])
+
+    def cell(self, options: RunOptions) -> dict[str, Any]:
+        return {}
+
+    def follower(self, model: DualArmModel, params: ControllerParams, q0: FloatArray,
+                 options: RunOptions) -> PlanFollower:
+        return PlanFollower(self, RelativeController(model, params))
 
     @property
     def streams(self) -> tuple[str, ...]:
@@ -74,3 +97,22 @@ class PlanSource:
         zero = np.zeros(3)
         return PlanReference(ref.positions, ref.velocities, state.position, state.rotation, twist[:3], twist[3:],
                              zero, zero)
+
+
+class PlanFollower:
+    """Joint-space tracking of the plan's trajectory (:meth:`RelativeController.track_joints`,
+    K = ``execution.gain``), the relative pose error measured against the reference's pose."""
+
+    uses_wrench = False
+    label = "plan"
+
+    def __init__(self, source: PlanSource, controller: RelativeController) -> None:
+        self.source = source
+        self.controller = controller
+        self.steps = math.ceil((source.duration + source.settle_time) / controller.params.period)
+
+    def cycle(self, t: float, q: FloatArray, wrench: FloatArray | None) -> Cycle:
+        ref = self.source.sample(t)
+        out = self.controller.track_joints(q, ref.joint_positions, ref.joint_velocities, ref, self.source.gain)
+        return Cycle(out.velocities, out.result, out.cycle_time, out.position_error, out.orientation_error,
+                     stage="execute")

@@ -15,9 +15,18 @@ from typing import Any, ClassVar
 import numpy as np
 import pinocchio as pin
 
+from dualarm_control.controller import ControllerParams, RelativeController
 from dualarm_control.errors import ScenarioError
-from dualarm_control.kinematics import FloatArray
-from dualarm_control.references.base import PREFIX, RELATIVE_TARGET, get, number, vector
+from dualarm_control.kinematics import DualArmModel, FloatArray
+from dualarm_control.references.base import (
+    PREFIX,
+    RELATIVE_TARGET,
+    Cycle,
+    RunOptions,
+    get,
+    number,
+    vector,
+)
 from dualarm_control.trajectory import MotionLimits, RelativeTrajectory, Segment
 
 
@@ -53,6 +62,17 @@ class SegmentsSource:
     def describe(self) -> str:
         return f"{len(self.segments)} segments"
 
+    def initial_positions(self, default: FloatArray) -> FloatArray:
+        return default
+
+    def cell(self, options: RunOptions) -> dict[str, Any]:
+        return {}
+
+    def follower(self, model: DualArmModel, params: ControllerParams, q0: FloatArray,
+                 options: RunOptions) -> SegmentsFollower:
+        return SegmentsFollower(RelativeController(model, params),
+                                self.trajectory(*model.relative_pose(q0), options.limits), options.settle_time)
+
     def trajectory(self, start_position: FloatArray, start_rotation: FloatArray,
                    limits: MotionLimits) -> RelativeTrajectory:
         """The ruckig relative trajectory from the measured start pose through all segments."""
@@ -69,6 +89,25 @@ class SegmentsSource:
             p = np.asarray(seg.position)
             r = pin.exp3(seg.axis * seg.angle) @ r
         return RelativeTrajectory(start_position, start_rotation, segments, limits)
+
+
+class SegmentsFollower:
+    """The segments' ruckig trajectory (from the measured start pose) followed by the relative
+    pose task: each cycle samples the target at t and runs :meth:`RelativeController.step`."""
+
+    uses_wrench = False
+
+    def __init__(self, controller: RelativeController, trajectory: RelativeTrajectory, settle_time: float) -> None:
+        self.controller = controller
+        self.trajectory = trajectory
+        self.label = controller.params.solver
+        self.steps = math.ceil((trajectory.duration + settle_time) / controller.params.period)
+
+    def cycle(self, t: float, q: FloatArray, wrench: FloatArray | None) -> Cycle:
+        target = self.trajectory.sample(t)
+        out = self.controller.step(q, target)
+        return Cycle(out.velocities, out.result, out.cycle_time, out.position_error, out.orientation_error,
+                     stage=target.segment_name)
 
 
 def parse_segments(flat: Mapping[str, Any]) -> SegmentsSource:

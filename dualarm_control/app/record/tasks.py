@@ -5,9 +5,9 @@ A task run's bag holds ``/joint_states``, ``/velocity_controller/commands``, ``/
 (``/wrench``, ``/clock``). The controller's per-cycle status names the scenario, the gain k,
 the force variant, and gives the cycle's joint-state stamp, task time, normal offset f_F,
 filtered force, solver status and cycle time. The task values f_i and bounds b_i are not
-recorded: :func:`~dualarm_control.app.run.tasks.task_run_log` recomputes them from the
+recorded: :func:`~dualarm_control.app.run.experiment.with_task_values` recomputes them from the
 joint state of each cycle's stamp and its task time -- the code the in-process runner uses --
-and :func:`~dualarm_control.app.run.tasks.summarize_task_run` gives the metrics. In
+and :func:`~dualarm_control.app.record.report.summarize_run` gives the metrics. In
 lockstep the joint states, times and offsets are bit-identical to the in-process run, so are
 the metrics (except the cycle times, which are wall-clock measurements).
 
@@ -33,7 +33,7 @@ from dualarm_control.app.record.bag import (
     BagError,
     open_reader,
 )
-from dualarm_control.app.run.tasks import TaskRunLog, task_run_log
+from dualarm_control.app.run.experiment import RunRecord, nan_column, with_task_values
 from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.ros.convert import stamp_ns
 from dualarm_control.scenario import Scenario, load_scenario
@@ -98,8 +98,8 @@ def _read(path: Path) -> _TaskBag:
     return out
 
 
-def read_task_run(path: Path) -> tuple[TaskRunLog, Scenario]:
-    """The :class:`TaskRunLog` of a task-scenario bag and its scenario; BagError if it is not one."""
+def read_task_run(path: Path) -> tuple[RunRecord, Scenario]:
+    """The :class:`RunRecord` of a task-scenario bag and its scenario; BagError if it is not one."""
     bag = _read(Path(path))
     if not bag.cycles:
         raise BagError(f"bag {path}: no controller task cycles on {DIAGNOSTICS_TOPIC} (key '{TASK_KEY}')")
@@ -142,29 +142,32 @@ def read_task_run(path: Path) -> tuple[TaskRunLog, Scenario]:
         for k, i in enumerate(after):
             if i < len(contact_stamps):
                 contact[k] = bag.contact[int(contact_stamps[i])]
-    log = task_run_log(
-        scenario, model, float(first["task_gain"]), first["force"] == "1", float(first["control_period_s"]),
-        time=column("task_time_s"), positions=positions, commands=commands,
-        status=[v["status"] for _, v in cycles], cycle_time=column("cycle_time_s"),
-        normal_offset=column("normal_offset_m"), measured_force=column("measured_force_n"),
-        contact_force=contact, table_contacts=table)
-    return log, scenario
+    n, gain, force = len(stamps), float(first["task_gain"]), first["force"] == "1"
+    label = f"k={gain:g}" + (" force" if force else "")
+    record = RunRecord(
+        label=label, kind=scenario.reference.kind, period=float(first["control_period_s"]), time=column("task_time_s"),
+        positions=positions, velocities=np.full(positions.shape, np.nan), commands=commands,
+        status=[v["status"] for _, v in cycles], solve_time=nan_column(n), cycle_time=column("cycle_time_s"),
+        position_error=nan_column(n), orientation_error=nan_column(n), final_positions=nan_column(model.nq),
+        contact_force=contact, measured_force=column("measured_force_n"), normal_offset=column("normal_offset_m"),
+        table_contacts=table)
+    return with_task_values(record, scenario, model, gain, force), scenario
 
 
 def task_report(path: Path, output: Path) -> dict[str, dict[str, Any]]:
     """``dualarm report`` on a task bag: ``output/metrics.json`` ({label: record}, the keys of
     ``dualarm experiment pan_cleaning``), the tool path, task values and joint velocity plots."""
-    from dualarm_control.app.record.figures_tasks import (
+    from dualarm_control.app.record.report import (
         plot_joint_velocities,
         plot_task_values,
         plot_tool_paths,
+        summarize_run,
+        write_metrics,
     )
-    from dualarm_control.app.record.report import write_metrics
-    from dualarm_control.app.run.tasks import summarize_task_run
     from dualarm_control.tasks import CircleTask
 
     log, scenario = read_task_run(path)
-    results = {log.label: summarize_task_run(log, scenario)}
+    results = {log.label: summarize_run(log, scenario, DualArmModel(scenario.urdf_path))}
     output = Path(output)
     write_metrics(output / "metrics.json", results)
     assert scenario.tasks is not None

@@ -1,40 +1,85 @@
-"""In-process lockstep run of a scenario: pybullet cell + controller + ruckig targets.
+"""In-process lockstep run of any scenario: pybullet cell + the reference source's follower, one loop.
 
-One control period per step: read joint states from the physics, sample the target at the
-step's time, solve, command, step the physics. Deterministic for a given scenario/solver.
+One control period per step: read the joint state (and, when the follower needs it, the F/T
+sensor) from the physics, run the follower's cycle at the step's time (relative segments:
+sample the ruckig target and solve; tasks: evaluate the tasks and solve the constraint-based
+QP), command, step the physics. Deterministic for a given scenario, solver, gain and seed.
+The result is one :class:`RunRecord`, whatever the reference source; the bag reader
+(:mod:`dualarm_control.app.record.bag`) turns a recorded run into the same record.
+
+Task scenarios (paper 001): without force feedback the brush and the pan do not collide (the
+paper's simulation, eq 8); with it (eq 9) they make real pybullet contact, the sensor reading
+is noisy and filtered (:class:`~dualarm_control.force.ForceSensorModel`), the pan's modelled
+surface is ``force.model_error`` above the real one, and a PI controller sets the circle
+task's normal offset. The table is in the cell in both variants.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from dualarm_control.controller import ControllerParams, RelativeController
-from dualarm_control.kinematics import DualArmModel, FloatArray
+from dualarm_control.controller import ControllerParams
+from dualarm_control.kinematics import Configuration, DualArmModel, FloatArray
+from dualarm_control.references.base import RunOptions
+from dualarm_control.references.tasks import TasksSource
 from dualarm_control.scenario import Scenario
+from dualarm_control.tasks import CircleTask, evaluate_tasks
 from dualarm_sim.cell import CellConfig, DualArmCell
 
 
 @dataclass(frozen=True)
-class RunLog:
-    """Per-cycle record of a run; arrays have N rows (one per control period).
+class TaskValues:
+    """The task part of a run record (scenarios with tasks).
 
     Attributes:
-        solver: solver name.
+        gain: task gain k [1/s]. force: force variant or not.
+        values, bounds: per task name, f (N, m) and b (m,). kinds: per task, its kind.
+        tip_in_pan: brush tip in the model's pan frame [m], (N, 3).
+        set_point: f_c^0 [N] (NaN without force feedback).
+    """
+
+    gain: float
+    force: bool
+    values: dict[str, FloatArray]
+    bounds: dict[str, FloatArray]
+    kinds: dict[str, str]
+    tip_in_pan: FloatArray
+    set_point: float
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """Per-cycle record of one run, in-process or from a bag; arrays have N rows (one per control period).
+
+    Plain arrays per field, so that any reader (report, viewer) takes what it needs. Fields a
+    source does not produce hold NaN (relative errors of a task run, forces without force
+    feedback, measured velocities and solve times a bag does not carry).
+
+    Attributes:
+        label: run name (the solver for relative motion, "k=1 force" for tasks).
+        kind: the reference source's kind ("segments", "tasks", "plan").
         period: control period [s].
-        time: cycle start times [s], (N,).
+        time: cycle times since the start [s], (N,).
         positions, velocities: measured joint state at each cycle [rad, rad/s], (N, 14).
         commands: commanded joint velocities [rad/s], (N, 14).
         status: solver status per cycle.
         solve_time, cycle_time: wall times [s], (N,).
-        position_error, orientation_error: tracking errors vs the current target [m, rad], (N,).
-        final_positions: joint positions after the last step [rad], (14,).
+        position_error, orientation_error: relative tracking errors vs the cycle's target [m, rad], (N,).
+        final_positions: joint positions after the last step [rad], (14,) (NaN when unknown).
+        contact_force: pybullet normal force of the contact pair [N], (N,) (0 without contact pair).
+        measured_force: filtered sensor f_c [N], (N,) (NaN without force feedback).
+        normal_offset: f_F of eq (9) [m], (N,).
+        table_contacts: contact points with the table, (N,).
+        tasks: task values and bounds where there are tasks, else None.
     """
 
-    solver: str
+    label: str
+    kind: str
     period: float
     time: FloatArray
     positions: FloatArray
@@ -46,6 +91,15 @@ class RunLog:
     position_error: FloatArray
     orientation_error: FloatArray
     final_positions: FloatArray
+    contact_force: FloatArray
+    measured_force: FloatArray
+    normal_offset: FloatArray
+    table_contacts: FloatArray
+    tasks: TaskValues | None = field(default=None)
+
+
+SCALARS = ("time", "solve_time", "cycle_time", "position_error", "orientation_error", "contact_force",
+           "measured_force", "normal_offset", "table_contacts")
 
 
 def run_scenario(
@@ -53,61 +107,101 @@ def run_scenario(
     params: ControllerParams,
     model: DualArmModel | None = None,
     progress: Callable[[float, str], None] | None = None,
-) -> RunLog:
-    """Run ``scenario`` with ``params`` in lockstep; ``progress(fraction, segment)`` ~ every 1 %."""
-    model = model or DualArmModel()
-    controller = RelativeController(model, params)
+    gain: float | None = None,
+    force: bool = False,
+    duration: float | None = None,
+) -> RunRecord:
+    """Run ``scenario`` with ``params`` in lockstep; ``progress(fraction, stage)`` ~ every 1 %.
+
+    ``gain``, ``force`` and ``duration`` are the run options of a task scenario
+    (:class:`~dualarm_control.references.base.RunOptions`).
+    """
+    source = scenario.reference
+    model = model or DualArmModel(scenario.urdf_path)
+    options = RunOptions(scenario.limits, scenario.settle_time, gain, force, duration)
     period = params.period
-    with DualArmCell(CellConfig(control_period=period), initial_positions=scenario.initial_positions) as cell:
+    cell_options = source.cell(options)
+    pairs: tuple[tuple[str, str], ...] = cell_options.get("contact_pairs", ())
+    config = CellConfig(urdf=scenario.urdf_path, control_period=period, **cell_options)
+    with DualArmCell(config, initial_positions=source.initial_positions(scenario.initial_positions)) as cell:
         state = cell.state()
-        trajectory = scenario.trajectory(*model.relative_pose(state.positions))
-        steps = math.ceil((trajectory.duration + scenario.settle_time) / period)
-        n = model.nq
+        follower = source.follower(model, params, state.positions, options)
+        steps, n = follower.steps, model.nq
         rec = {k: np.zeros((steps, n)) for k in ("positions", "velocities", "commands")}
-        scal = {k: np.zeros(steps) for k in ("time", "solve_time", "cycle_time", "position_error", "orientation_error")}
+        scal = {k: np.zeros(steps) for k in SCALARS}
         status: list[str] = []
         every = max(steps // 100, 1)
         for k in range(steps):
             t = k * period
-            target = trajectory.sample(t)
-            out = controller.step(state.positions, target)
+            out = follower.cycle(t, state.positions, cell.wrench() if follower.uses_wrench else None)
             cell.apply_command(out.velocities)
             rec["positions"][k], rec["velocities"][k], rec["commands"][k] = state.positions, state.velocities, out.velocities
             for key, value in (("time", t), ("solve_time", out.result.solve_time), ("cycle_time", out.cycle_time),
-                               ("position_error", out.position_error), ("orientation_error", out.orientation_error)):
+                               ("position_error", out.position_error), ("orientation_error", out.orientation_error),
+                               ("normal_offset", out.normal_offset), ("measured_force", out.measured_force)):
                 scal[key][k] = value
             status.append(out.result.status)
-            if progress is not None and (k % every == 0 or k == steps - 1):
-                progress((k + 1) / steps, target.segment_name)
             state = cell.step()
+            scal["contact_force"][k] = cell.contact_force(*pairs[0]) if pairs else 0.0
+            scal["table_contacts"][k] = cell.table_contacts()
+            if progress is not None and (k % every == 0 or k == steps - 1):
+                progress((k + 1) / steps, out.stage)
         final_q = state.positions.copy()
-    return RunLog(solver=params.solver, period=period, status=status, final_positions=final_q, **rec, **scal)
+    record = RunRecord(label=follower.label, kind=source.kind, period=period, time=scal["time"],
+                       positions=rec["positions"], velocities=rec["velocities"], commands=rec["commands"],
+                       status=status, solve_time=scal["solve_time"], cycle_time=scal["cycle_time"],
+                       position_error=scal["position_error"], orientation_error=scal["orientation_error"],
+                       final_positions=final_q, contact_force=scal["contact_force"],
+                       measured_force=scal["measured_force"], normal_offset=scal["normal_offset"],
+                       table_contacts=scal["table_contacts"])
+    return with_task_values(record, scenario, model, gain, force)
 
 
-def final_errors(log: RunLog, scenario: Scenario, model: DualArmModel) -> tuple[float, float]:
-    """Relative position [m] and orientation [rad] error of the final state vs the scenario's end pose."""
-    from dualarm_control.kinematics import rotation_angle
+def with_task_values(record: RunRecord, scenario: Scenario, model: DualArmModel, gain: float | None,
+                     force: bool) -> RunRecord:
+    """``record`` with its task values (a scenario with tasks; otherwise unchanged).
 
-    start = model.relative_pose(log.positions[0])
-    trajectory = scenario.trajectory(*start)
-    end = trajectory.sample(trajectory.duration)
-    p, r = model.relative_pose(log.final_positions)
-    return float(np.linalg.norm(p - end.position)), rotation_angle(r, end.rotation)
+    The task values f_i and bounds b_i and the tool path in the pan frame are evaluated here,
+    from the measured joint positions and the cycle times (the circle at the cycle's normal
+    offset f_F in the force variant): the same values the controller solved with, computed by
+    the one piece of code that serves the in-process runner and a recorded bag
+    (:mod:`dualarm_control.app.record.bag`).
+    """
+    spec = scenario.tasks
+    if spec is None:
+        return record
+    k_gain = spec.gain(RunOptions(scenario.limits, scenario.settle_time, gain, force))
+    tasks = spec.build_variant(k_gain, force)
+    circles = [(i, t) for i, t in enumerate(tasks) if isinstance(t, CircleTask)]
+    if not circles:
+        raise ValueError(f"scenario {scenario.name!r} has no circle task")
+    circle_index, circle = circles[0]
+    values: dict[str, list[FloatArray]] = {t.name: [] for t in tasks}
+    bounds: dict[str, FloatArray] = {}
+    tip = np.zeros((len(record.time), 3))
+    for k, (q, t) in enumerate(zip(record.positions, record.time, strict=True)):
+        cycle_tasks = tasks
+        if force:
+            cycle_tasks = list(tasks)
+            cycle_tasks[circle_index] = dataclasses.replace(circle, normal_offset=float(record.normal_offset[k]))
+        for rows in evaluate_tasks(cycle_tasks, Configuration(model, model.check_q(q)), float(t)):
+            values[rows.name].append(rows.value)
+            bounds.setdefault(rows.name, rows.bound)
+        o1, o2 = model.frame_poses(q, (circle.pan_frame, circle.tool_frame))
+        tip[k] = o1.rotation.T @ (o2.translation - o1.translation)
+    part = TaskValues(gain=k_gain, force=force, values={name: np.array(v) for name, v in values.items()},
+                      bounds=bounds, kinds={t.name: t.kind for t in tasks}, tip_in_pan=tip,
+                      set_point=spec.force.set_point if force else float("nan"))
+    return dataclasses.replace(record, tasks=part)
 
 
-def summarize_log(log: RunLog, scenario: Scenario, model: DualArmModel) -> dict[str, float | int]:
-    """The metrics.json record of an in-process run (see :func:`dualarm_control.app.record.report.summarize`)."""
-    from dualarm_control.app.record.report import summarize
+def tasks_source(scenario: Scenario) -> TasksSource:
+    """The scenario's tasks; ValueError for a scenario without (a segment scenario)."""
+    if scenario.tasks is None:
+        raise ValueError(f"scenario {scenario.name!r} has no tasks (a segment scenario: use 'dualarm experiment')")
+    return scenario.tasks
 
-    return summarize(
-        commands=log.commands,
-        positions=np.vstack((log.positions, log.final_positions)),
-        velocities=log.velocities,
-        period=log.period,
-        statuses=log.status,
-        cycle_times=log.cycle_time,
-        final_errors=final_errors(log, scenario, model),
-        q_limits=(model.q_min, model.q_max),
-        qd_max=model.qd_max,
-        tracking_errors=(log.position_error, log.orientation_error),
-    )
+
+def nan_column(n: int) -> FloatArray:
+    """(n,) NaN: a field a source or a bag does not give."""
+    return np.full(n, math.nan)
