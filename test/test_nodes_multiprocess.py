@@ -146,7 +146,7 @@ def test_table_one_means_from_the_bag_equal_in_process(lockstep_bags: dict[str, 
         assert got[key] == pytest.approx(expected[key], rel=1e-9, abs=1e-12), key
 
 
-def test_plan_executed_by_the_nodes(tmp_path: Path) -> None:
+def test_plan_run_by_the_nodes(tmp_path: Path) -> None:
     """``dualarm launch corner_path --plan``: the trajectory node streams the plan's joint trajectory,
     the controller tracks it; the executed relative pose stays within 1 mm / 5 mrad of the reference."""
     from dualarm_control.app.record.bag import report

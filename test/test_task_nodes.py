@@ -13,8 +13,12 @@ import signal
 import time
 from pathlib import Path
 
+from dualarm_control.app.record.bag import (
+    holds_task_cycles,
+    read_task_run,
+    report_tasks,
+)
 from dualarm_control.app.record.report import summarize_run
-from dualarm_control.app.record.tasks import is_task_bag, read_task_run, task_report
 from dualarm_control.app.run.experiment import run_scenario
 from dualarm_control.app.run.launcher import Launch, launch_scenario, node_command
 from dualarm_control.controller import controller_params
@@ -45,8 +49,8 @@ def test_lockstep_bag_metrics_equal_in_process(tmp_path: Path) -> None:
     bag = tmp_path / "bag"
     assert launch_scenario("pan_cleaning", [PARAMS], ["-p", f"duration:={DURATION!r}"], True, bag,
                            timeout=120.0) == 0
-    assert is_task_bag(bag)
-    results = task_report(bag, tmp_path / "report")
+    assert holds_task_cycles(bag)
+    results = report_tasks(bag, tmp_path / "report")
     assert (tmp_path / "report" / "metrics.json").is_file()
     assert (tmp_path / "report" / "tool_path.png").is_file()
     from_bag = results["k=1"]

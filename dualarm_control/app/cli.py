@@ -377,13 +377,12 @@ def cmd_bag_info(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Metrics of a recorded run: DIR/metrics.json, DIR/velocity_norms.png and the table."""
-    from dualarm_control.app.record.bag import report
+    from dualarm_control.app.record.bag import holds_task_cycles, report, report_tasks
     from dualarm_control.app.record.report import format_table, format_task_table
-    from dualarm_control.app.record.tasks import is_task_bag, task_report
 
     out = Path(args.output)
-    if is_task_bag(Path(args.bag)):  # a task scenario (pan_cleaning over ROS): the experiment's task metrics
-        task_results = task_report(Path(args.bag), out)
+    if holds_task_cycles(Path(args.bag)):  # a task scenario (pan_cleaning over ROS): the experiment's task metrics
+        task_results = report_tasks(Path(args.bag), out)
         print(format_task_table(task_results))
         print(f"\nwrote {out / 'metrics.json'}, {out / 'tool_path.png'}, {out / 'task_values.png'} and "
               f"{out / 'joint_velocities.png'}")
