@@ -66,7 +66,7 @@ from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
 from dualarm_control.controller import (
     CONTROLLER_PARAMETERS,
-    ControlOutput,
+    Cycle,
     RelativeController,
     controller_params,
 )
@@ -74,7 +74,6 @@ from dualarm_control.errors import DualArmError, ScenarioError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.metrics import percentiles
 from dualarm_control.params import ParamSpec, non_negative, positive
-from dualarm_control.references.base import Cycle
 from dualarm_control.references.tasks import TasksController
 from dualarm_control.ros import convert
 from dualarm_control.ros.inputs import StampGate, Throttle, subscribe_checked
@@ -572,7 +571,7 @@ class ControllerNode:
                 "watchdog_trips": self.trips, "missed_deadlines": self.missed, "solver_failures": self.failures,
                 "solver_fallbacks": self.fallbacks, "rejected_inputs": self.rejected}
 
-    def publish_diagnostics(self, stamp: int, out: ControlOutput, latency: float) -> None:
+    def publish_diagnostics(self, stamp: int, out: Cycle, latency: float) -> None:
         r = out.result
         level = 2 if r.failed else (1 if r.status != "solved" else 0)
         if self.cycles % STATS_EVERY == 1:  # percentiles once a second, not every cycle

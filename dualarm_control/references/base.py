@@ -15,7 +15,7 @@ follow. The kinds today:
 
 A source is parsed from the scenario file (frozen, no run state). For a run it makes a
 :class:`Follower` (:meth:`ReferenceSource.follower`): the source bound to a controller from
-the measured start configuration, giving one :class:`Cycle` per control period. The
+the measured start configuration, giving one :class:`~dualarm_control.controller.Cycle` per control period. The
 in-process runner (:mod:`dualarm_control.app.run.experiment`) is one loop over a follower,
 whatever the kind.
 
@@ -37,12 +37,10 @@ import numpy as np
 
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel, FloatArray
-from dualarm_control.solvers import SolverResult
-from dualarm_control.tasks import TaskRows
 from dualarm_control.trajectory import MotionLimits
 
 if TYPE_CHECKING:
-    from dualarm_control.controller import ControllerParams
+    from dualarm_control.controller import ControllerParams, Cycle
 
 PREFIX = "scenario."
 
@@ -68,33 +66,6 @@ class RunOptions:
     gain: float | None = None
     force: bool = False
     duration: float | None = None
-
-
-@dataclass(slots=True)
-class Cycle:
-    """One control cycle of a follower: a row of the run record.
-
-    A per-cycle record: slotted, not frozen (cheaper to build); read-only by convention.
-
-    Attributes:
-        velocities: command [rad/s], (n,). result: the solver's record.
-        cycle_time: wall time of the cycle [s].
-        position_error, orientation_error: relative tracking errors [m, rad] (NaN for tasks).
-        rows: the evaluated tasks (tasks only, else empty).
-        measured_force: filtered normal force f_c [N] (NaN without force feedback).
-        normal_offset: f_F of eq (9) of paper 001 [m] (0 without force feedback).
-        stage: what is being followed (segment name, "circle", "execute"), for progress output.
-    """
-
-    velocities: FloatArray
-    result: SolverResult
-    cycle_time: float
-    position_error: float = float("nan")
-    orientation_error: float = float("nan")
-    rows: tuple[TaskRows, ...] = ()
-    measured_force: float = float("nan")
-    normal_offset: float = 0.0
-    stage: str = ""
 
 
 class Follower(Protocol):

@@ -14,12 +14,12 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from dualarm_control.controller import ControllerParams, RelativeController
+from dualarm_control.controller import ControllerParams, Cycle, RelativeController
 from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.planning.config import PlanConfig, load_plan_config
 from dualarm_control.planning.joint_trajectory import plan_trajectory
 from dualarm_control.planning.plan_file import read_plan
-from dualarm_control.references.base import JOINT_REFERENCE, Cycle, RunOptions
+from dualarm_control.references.base import JOINT_REFERENCE, RunOptions
 
 
 @dataclass(frozen=True)
@@ -114,5 +114,5 @@ class PlanFollower:
     def cycle(self, t: float, q: FloatArray, wrench: FloatArray | None) -> Cycle:
         ref = self.source.sample(t)
         out = self.controller.track_joints(q, ref.joint_positions, ref.joint_velocities, ref, self.source.gain)
-        return Cycle(out.velocities, out.result, out.cycle_time, out.position_error, out.orientation_error,
-                     stage="execute")
+        out.stage = "execute"
+        return out

@@ -15,13 +15,12 @@ from typing import Any, ClassVar
 import numpy as np
 import pinocchio as pin
 
-from dualarm_control.controller import ControllerParams, RelativeController
+from dualarm_control.controller import ControllerParams, Cycle, RelativeController
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.references.base import (
     PREFIX,
     RELATIVE_TARGET,
-    Cycle,
     RunOptions,
     get,
     number,
@@ -106,8 +105,8 @@ class SegmentsFollower:
     def cycle(self, t: float, q: FloatArray, wrench: FloatArray | None) -> Cycle:
         target = self.trajectory.sample(t)
         out = self.controller.step(q, target)
-        return Cycle(out.velocities, out.result, out.cycle_time, out.position_error, out.orientation_error,
-                     stage=target.segment_name)
+        out.stage = target.segment_name
+        return out
 
 
 def parse_segments(flat: Mapping[str, Any]) -> SegmentsSource:

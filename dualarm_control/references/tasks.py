@@ -26,7 +26,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from dualarm_control.controller import ControllerParams, RelativeController
+from dualarm_control.controller import ControllerParams, Cycle, RelativeController
 from dualarm_control.errors import ScenarioError
 from dualarm_control.force import (
     ForceParams,
@@ -35,7 +35,7 @@ from dualarm_control.force import (
     contact_normal_force,
 )
 from dualarm_control.kinematics import Configuration, DualArmModel, FloatArray
-from dualarm_control.references.base import PREFIX, Cycle, RunOptions, get, number
+from dualarm_control.references.base import PREFIX, RunOptions, get, number
 from dualarm_control.tasks import (
     DEFAULT_EQUALITY_WEIGHT,
     DEFAULT_INEQUALITY_WEIGHT,
@@ -239,8 +239,8 @@ class TasksController:
             assert self._circle is not None
             tasks[self._circle_index] = dataclasses.replace(self._circle, normal_offset=self._offset)
         out = self.controller.solve_tasks(q, tasks, t)
-        return Cycle(out.velocities, out.result, out.cycle_time, rows=out.rows, measured_force=measured,
-                     normal_offset=self._offset, stage="circle")
+        out.measured_force, out.normal_offset, out.stage = measured, self._offset, "circle"
+        return out
 
 
 def parse_tasks(flat: Mapping[str, Any]) -> TasksSource:
