@@ -96,7 +96,7 @@ class ReferenceSource(Protocol):
             there is force).
         streams: the topics a controller cycle consumes besides /joint_states, in the node
             (the source decides what the controller node subscribes): segments
-            (/relative_target), plan (/joint_reference), tasks with force (/wrench), none
+            (/relative_target), plan (/joint_reference and /relative_target), tasks with force (/wrench), none
             for tasks without force.
 
     Methods:
@@ -110,9 +110,7 @@ class ReferenceSource(Protocol):
     """
 
     kind: ClassVar[str]
-
-    @property
-    def streams(self) -> tuple[str, ...]: ...
+    streams: ClassVar[tuple[str, ...]]
 
     def describe(self) -> str: ...
 
@@ -150,3 +148,13 @@ def number(flat: Mapping[str, Any], key: str, default: float | None = None) -> f
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise ScenarioError(f"scenario parameter '{PREFIX}{key}': got {value!r}, expected a number")
     return float(value)
+
+
+class SourceDefaults:
+    """What most sources share: the cell starts at the scenario's configuration, with no extra fields."""
+
+    def initial_positions(self, default: FloatArray) -> FloatArray:
+        return default
+
+    def cell(self, options: RunOptions) -> dict[str, Any]:
+        return {}

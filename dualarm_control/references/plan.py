@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
@@ -19,7 +19,12 @@ from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.planning.config import PlanConfig, load_plan_config
 from dualarm_control.planning.joint_trajectory import plan_trajectory
 from dualarm_control.planning.plan_file import read_plan
-from dualarm_control.references.base import JOINT_REFERENCE, RunOptions
+from dualarm_control.references.base import (
+    JOINT_REFERENCE,
+    RELATIVE_TARGET,
+    RunOptions,
+    SourceDefaults,
+)
 
 
 @dataclass(frozen=True)
@@ -43,9 +48,10 @@ class PlanReference:
     angular_acceleration: FloatArray
 
 
-class PlanSource:
+class PlanSource(SourceDefaults):
     """The executable joint trajectory of a plan along its scenario's path: a
-    :class:`~dualarm_control.references.base.ReferenceSource` (stream: /joint_reference).
+    :class:`~dualarm_control.references.base.ReferenceSource` (streams: /joint_reference, and
+    /relative_target for the pose error).
 
     The reference passes through the planned configurations and
     ``execution.subdivisions - 1`` closure-projected knots between each pair
@@ -54,6 +60,7 @@ class PlanSource:
     """
 
     kind: ClassVar[str] = "plan"
+    streams: ClassVar[tuple[str, ...]] = (JOINT_REFERENCE, RELATIVE_TARGET)
 
     def __init__(self, model: DualArmModel, config: PlanConfig, configurations: FloatArray, path: str = "") -> None:
         self.model = model
@@ -75,16 +82,9 @@ class PlanSource:
     def initial_positions(self, default: FloatArray) -> FloatArray:
         return np.asarray(self.configurations[0])
 
-    def cell(self, options: RunOptions) -> dict[str, Any]:
-        return {}
-
     def follower(self, model: DualArmModel, params: ControllerParams, q0: FloatArray,
                  options: RunOptions) -> PlanFollower:
         return PlanFollower(self, RelativeController(model, params))
-
-    @property
-    def streams(self) -> tuple[str, ...]:
-        return (JOINT_REFERENCE,)
 
     def describe(self) -> str:
         return f"plan {self.path}"

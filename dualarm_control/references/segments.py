@@ -22,6 +22,7 @@ from dualarm_control.references.base import (
     PREFIX,
     RELATIVE_TARGET,
     RunOptions,
+    SourceDefaults,
     get,
     number,
     vector,
@@ -44,7 +45,7 @@ class SegmentSpec:
 
 
 @dataclass(frozen=True)
-class SegmentsSource:
+class SegmentsSource(SourceDefaults):
     """Relative segments (paper 000): a :class:`~dualarm_control.references.base.ReferenceSource`.
 
     Attributes:
@@ -53,19 +54,10 @@ class SegmentsSource:
 
     segments: tuple[SegmentSpec, ...]
     kind: ClassVar[str] = "segments"
-
-    @property
-    def streams(self) -> tuple[str, ...]:
-        return (RELATIVE_TARGET,)
+    streams: ClassVar[tuple[str, ...]] = (RELATIVE_TARGET,)
 
     def describe(self) -> str:
         return f"{len(self.segments)} segments"
-
-    def initial_positions(self, default: FloatArray) -> FloatArray:
-        return default
-
-    def cell(self, options: RunOptions) -> dict[str, Any]:
-        return {}
 
     def follower(self, model: DualArmModel, params: ControllerParams, q0: FloatArray,
                  options: RunOptions) -> SegmentsFollower:

@@ -35,7 +35,13 @@ from dualarm_control.force import (
     contact_normal_force,
 )
 from dualarm_control.kinematics import Configuration, DualArmModel, FloatArray
-from dualarm_control.references.base import PREFIX, RunOptions, get, number
+from dualarm_control.references.base import (
+    PREFIX,
+    RunOptions,
+    SourceDefaults,
+    get,
+    number,
+)
 from dualarm_control.tasks import (
     DEFAULT_EQUALITY_WEIGHT,
     DEFAULT_INEQUALITY_WEIGHT,
@@ -60,7 +66,7 @@ class TaskSpec:
 
 
 @dataclass(frozen=True)
-class TasksSource:
+class TasksSource(SourceDefaults):
     """Tasks (paper 001): a :class:`~dualarm_control.references.base.ReferenceSource`.
 
     No stream besides /joint_states; the force variant (a run option) adds /wrench.
@@ -81,16 +87,10 @@ class TasksSource:
     force: ForceParams
     contact_links: tuple[str, str] = ("left_flange", "right_tool")
     kind: ClassVar[str] = "tasks"
-
-    @property
-    def streams(self) -> tuple[str, ...]:
-        return ()
+    streams: ClassVar[tuple[str, ...]] = ()
 
     def describe(self) -> str:
         return f"{len(self.tasks)} tasks"
-
-    def initial_positions(self, default: FloatArray) -> FloatArray:
-        return default
 
     def gain(self, options: RunOptions) -> float:
         """The run's task gain k [1/s]: the option's, else force.gain (force variant) or the first of ``gains``."""
