@@ -21,11 +21,12 @@ EXIT_INTERRUPTED = 130
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
-    """Run a scenario in-process (lockstep) for each solver; write metrics.json and plots."""
+    """Run a scenario in-process (lockstep): one run per solver, or for a task scenario one per
+    gain k (force variant with --force); write metrics.json and the figures of the scenario's kind."""
     from dualarm_control.app.record.report import (
-        format_table,
-        plot_velocity_norms,
+        format_results,
         summarize_run,
+        write_figures,
     )
     from dualarm_control.app.run.experiment import run_scenario
     from dualarm_control.controller import controller_params
@@ -34,32 +35,49 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     from dualarm_control.scenario import load_scenario
 
     scenario = load_scenario(args.scenario)
-    if scenario.tasks is not None:
-        return experiment_tasks(args, scenario)
-    if args.gains or args.force or args.duration:
-        raise DualArmError(f"--gains, --force and --duration apply to task scenarios (pan_cleaning), "
-                           f"not to {scenario.name!r}")
+    spec = scenario.tasks
     base = read_params_files(args.params, "controller_node")
-    solvers = [s.strip() for s in (args.solver or DEFAULT_SOLVERS).split(",") if s.strip()]
-    configs = {name: controller_params({**base, "solver": name}) for name in solvers}  # validates all first
     out = Path(args.output)
-    model = DualArmModel()
-    print(f"scenario {scenario.name!r} ({scenario.source}); solvers: {', '.join(solvers)}; output: {out}", file=sys.stderr)
+    if spec is None:
+        if args.gains or args.force or args.duration:
+            raise DualArmError(f"--gains, --force and --duration apply to task scenarios (pan_cleaning), "
+                               f"not to {scenario.name!r}")
+        solvers = [s.strip() for s in (args.solver or DEFAULT_SOLVERS).split(",") if s.strip()]
+        runs = [(name, controller_params({**base, "solver": name}), None) for name in solvers]  # validates all first
+        model: DualArmModel | None = DualArmModel()
+        print(f"scenario {scenario.name!r} ({scenario.source}); solvers: {', '.join(solvers)}; output: {out}",
+              file=sys.stderr)
+    else:
+        solver = args.solver or "constraint_based"
+        if "," in solver:
+            raise DualArmError("a task scenario runs one solver (constraint_based); got --solver " + solver)
+        params = controller_params({**base, "solver": solver})
+        try:
+            gains = [float(g) for g in args.gains.split(",") if g.strip()] if args.gains else (
+                [spec.force.gain] if args.force else list(spec.gains))
+        except ValueError:
+            raise DualArmError(f"--gains {args.gains!r}: expected comma-separated numbers > 0") from None
+        if not gains or any(not g > 0 for g in gains):
+            raise DualArmError(f"--gains {args.gains!r}: expected comma-separated numbers > 0")
+        runs = [(f"k={gain:g}" + (" force" if args.force else ""), params, gain) for gain in gains]
+        model = None  # each run builds the model of the scenario's URDF
+        print(f"scenario {scenario.name!r} ({scenario.source}); solver {solver}; gains {gains}"
+              f"{'; force feedback' if args.force else ''}; output: {out}", file=sys.stderr)
 
-    def job(name: str, params: Any) -> Callable[[Any], tuple[str, dict[str, Any], Any]]:
+    def job(params: Any, gain: float | None) -> Callable[[Any], tuple[str, dict[str, Any], Any]]:
         def run(progress: Any) -> tuple[str, dict[str, Any], Any]:
-            log = run_scenario(scenario, params, model, progress=progress)
-            return name, summarize_run(log, scenario, model), log
+            log = run_scenario(scenario, params, model, progress, gain=gain, force=args.force, duration=args.duration)
+            return log.label, summarize_run(log, scenario, model), log
         return run
 
-    done = run_all([(name, job(name, params)) for name, params in configs.items()], out)
+    done = run_all([(label, job(params, gain)) for label, params, gain in runs], out)
     if done is None:
         return EXIT_INTERRUPTED
     results, logs = done
-    runs = {log.label: (log.time, log.commands) for log in logs}
-    plot_velocity_norms(runs, out / "velocity_norms.png", title=f"{scenario.name}: |qd_i| and active joints")
-    print(format_table(results))
-    print(f"\nwrote {out / 'metrics.json'} and {out / 'velocity_norms.png'}")
+    files = ["metrics.json", *write_figures(scenario, logs, out, scenario.name)]
+    print(format_results(scenario, results))
+    paths = [str(out / f) for f in files]
+    print(f"\nwrote {' and '.join(paths) if len(paths) == 2 else ', '.join(paths)}")
     return 0
 
 
@@ -88,63 +106,6 @@ def run_all(jobs: list[tuple[str, Callable[[Any], tuple[str, dict[str, Any], Any
         return None
     write_metrics(out / "metrics.json", results)
     return results, logs
-
-
-def experiment_tasks(args: argparse.Namespace, scenario) -> int:
-    """Task scenario (paper 001): one run per gain k (force variant with --force); metrics.json, figures."""
-    from dualarm_control.app.record.report import (
-        format_task_table,
-        plot_contact_force,
-        plot_joint_velocities,
-        plot_task_values,
-        plot_tool_paths,
-        summarize_run,
-    )
-    from dualarm_control.app.run.experiment import run_scenario
-    from dualarm_control.controller import controller_params
-    from dualarm_control.kinematics import DualArmModel
-    from dualarm_control.params import read_params_files
-    from dualarm_control.tasks import CircleTask
-
-    spec = scenario.tasks
-    base = read_params_files(args.params, "controller_node")
-    solver = args.solver or "constraint_based"
-    if "," in solver:
-        raise DualArmError("a task scenario runs one solver (constraint_based); got --solver " + solver)
-    params = controller_params({**base, "solver": solver})
-    try:
-        gains = [float(g) for g in args.gains.split(",") if g.strip()] if args.gains else (
-            [spec.force.gain] if args.force else list(spec.gains))
-    except ValueError:
-        raise DualArmError(f"--gains {args.gains!r}: expected comma-separated numbers > 0") from None
-    if not gains or any(not g > 0 for g in gains):
-        raise DualArmError(f"--gains {args.gains!r}: expected comma-separated numbers > 0")
-    out = Path(args.output)
-    model = DualArmModel(scenario.urdf_path)
-    print(f"scenario {scenario.name!r} ({scenario.source}); solver {solver}; gains {gains}"
-          f"{'; force feedback' if args.force else ''}; output: {out}", file=sys.stderr)
-
-    def job(gain: float) -> Callable[[Any], tuple[str, dict[str, Any], Any]]:
-        def run(progress: Any) -> tuple[str, dict[str, Any], Any]:
-            log = run_scenario(scenario, params, None, progress, gain=gain, force=args.force, duration=args.duration)
-            return log.label, summarize_run(log, scenario, model), log
-        return run
-
-    done = run_all([(f"k={gain:g}" + (" force" if args.force else ""), job(gain)) for gain in gains], out)
-    if done is None:
-        return EXIT_INTERRUPTED
-    results, logs = done
-    circle = next(t for t in spec.build(1.0) if isinstance(t, CircleTask))
-    plot_tool_paths(logs, circle.radius, out / "tool_path.png")
-    plot_task_values(logs, out / "task_values.png")
-    plot_joint_velocities(logs[0], out / "joint_velocities.png")
-    files = ["metrics.json", "tool_path.png", "task_values.png", "joint_velocities.png"]
-    if args.force:
-        plot_contact_force(logs[0], out / "contact_force.png")
-        files.append("contact_force.png")
-    print(format_task_table(results))
-    print(f"\nwrote {', '.join(str(out / f) for f in files)}")
-    return 0
 
 
 def check_params_files(paths: list[str]) -> None:

@@ -558,21 +558,14 @@ def report_tasks(path: Path, output: Path) -> dict[str, dict[str, Any]]:
     """``dualarm report`` on a task bag: ``output/metrics.json`` ({label: record}, the keys of
     ``dualarm experiment pan_cleaning``), the tool path, task values and joint velocity plots."""
     from dualarm_control.app.record.report import (
-        plot_joint_velocities,
-        plot_task_values,
-        plot_tool_paths,
         summarize_run,
+        write_figures,
         write_metrics,
     )
-    from dualarm_control.tasks import CircleTask
 
     log, scenario = read_task_run(path)
     results = {log.label: summarize_run(log, scenario)}
     output = Path(output)
     write_metrics(output / "metrics.json", results)
-    assert scenario.tasks is not None
-    circle = next(t for t in scenario.tasks.build(1.0) if isinstance(t, CircleTask))
-    plot_tool_paths([log], circle.radius, output / "tool_path.png")
-    plot_task_values([log], output / "task_values.png")
-    plot_joint_velocities(log, output / "joint_velocities.png")
+    write_figures(scenario, [log], output, Path(path).name, contact=False)
     return results

@@ -28,7 +28,12 @@ from dualarm_control.metrics import (
 )
 from dualarm_control.scenario import Scenario
 from dualarm_control.solvers.base import ACTIVITY_THRESHOLD, FAILURE_STATUSES
-from dualarm_control.tasks import INEQUALITY, ManipulabilityTask, TablePlaneTask
+from dualarm_control.tasks import (
+    INEQUALITY,
+    CircleTask,
+    ManipulabilityTask,
+    TablePlaneTask,
+)
 
 POSITION_TOLERANCE = 1e-6
 """rad: a measured position beyond a limit by more than this counts as a violation."""
@@ -121,6 +126,35 @@ def final_errors(record: RunRecord, scenario: Scenario, model: DualArmModel) -> 
     end = trajectory.sample(trajectory.duration)
     p, r = model.relative_pose(record.final_positions)
     return float(np.linalg.norm(p - end.position)), rotation_angle(r, end.rotation)
+
+
+def write_figures(scenario: Scenario, logs: Sequence[RunRecord], out: Path, title: str,
+                  contact: bool = True) -> list[str]:
+    """The figures that fit the scenario's kind, in ``out``; returns their file names.
+
+    Relative motion: velocity_norms.png (Fig. 5 of paper 000) of every run. Tasks (paper 001):
+    tool_path.png and task_values.png of every run, joint_velocities.png of the first, and in the
+    force variant (with ``contact``) contact_force.png of the first.
+    """
+    spec = scenario.tasks
+    if spec is None:
+        plot_velocity_norms({log.label: (log.time, log.commands) for log in logs}, out / "velocity_norms.png",
+                            title=f"{title}: |qd_i| and active joints")
+        return ["velocity_norms.png"]
+    circle = next(t for t in spec.build(1.0) if isinstance(t, CircleTask))
+    plot_tool_paths(logs, circle.radius, out / "tool_path.png")
+    plot_task_values(logs, out / "task_values.png")
+    plot_joint_velocities(logs[0], out / "joint_velocities.png")
+    files = ["tool_path.png", "task_values.png", "joint_velocities.png"]
+    if contact and _tasks(logs[0]).force:
+        plot_contact_force(logs[0], out / "contact_force.png")
+        files.append("contact_force.png")
+    return files
+
+
+def format_results(scenario: Scenario, results: Mapping[str, Mapping[str, Any]]) -> str:
+    """The table of the scenario's kind: Table I (relative motion) or paper 001's metrics (tasks)."""
+    return format_table(results) if scenario.tasks is None else format_task_table(results)
 
 
 def write_metrics(path: Path, results: Mapping[str, Mapping[str, Any]]) -> None:
