@@ -29,7 +29,9 @@ one, a target beyond the cell's reach) is rejected with a throttled log line and
 /diagnostics entry, and the last valid input kept (a state then goes stale -> zero command);
 a time source that restarted is accepted after 3 consecutive monotonic samples ("time source
 restarted"); no target yet -> zero command; a solver failure gives the bounded least-squares
-fallback (status "fallback", counted as ``solver_fallbacks``).
+fallback (status "fallback", counted as ``solver_fallbacks``); a solver result beyond its
+velocity bounds by more than the solver's tolerance gets the same command with status
+"bounds_violated" (a failure: ERROR, counted as ``solver_failures`` and ``bounds_violations``).
 
 Task mode (paper 001, ``scenario:=pan_cleaning``, a scenario with ``tasks``): no
 ``/relative_target``; every joint state drives one cycle of
@@ -86,6 +88,7 @@ from dualarm_control.ros.node import (
 )
 from dualarm_control.ros.qos import QOS_PARAMETER, stream_qos
 from dualarm_control.scenario import load_scenario
+from dualarm_control.solvers.base import BOUNDS_VIOLATED
 
 NODE_PARAMETERS = (
     ParamSpec("lockstep", False, "compute one command per joint-state stamp (deterministic runs)", read_only=True),
@@ -171,7 +174,7 @@ class ControllerNode:
         self.targets: dict[int, convert.TargetValue] = {}  # lockstep: by stamp
         self.last_commanded_stamp: int | None = None
         self.cycles = self.missed = self.failures = self.switches = self.safe_commands = 0
-        self.fallbacks = self.rejected = 0
+        self.fallbacks = self.rejected = self.bound_violations = 0
         self.target_received: int | None = None  # monotonic ns of the last valid target / joint reference
         self.fault: tuple[str, int] | None = None  # watchdog reason and monotonic ns it started
         self.trips = 0
@@ -531,6 +534,7 @@ class ControllerNode:
         self.cycles += 1
         if result.failed:
             self.failures += 1
+            self.bound_violations += result.status == BOUNDS_VIOLATED
             self.warn(f"solver {result.status}: {result.detail}; safe command sent")
         elif result.fell_back:
             self.fallbacks += 1
@@ -569,7 +573,8 @@ class ControllerNode:
         ``unmatched_commands`` of them while no subscriber was matched."""
         return {"cycles": self.cycles, "safe_commands": self.safe_commands, "unmatched_commands": self.unmatched,
                 "watchdog_trips": self.trips, "missed_deadlines": self.missed, "solver_failures": self.failures,
-                "solver_fallbacks": self.fallbacks, "rejected_inputs": self.rejected}
+                "solver_fallbacks": self.fallbacks, "rejected_inputs": self.rejected,
+                "bounds_violations": self.bound_violations}
 
     def publish_diagnostics(self, stamp: int, out: Cycle, latency: float) -> None:
         r = out.result

@@ -212,7 +212,9 @@ def format_bench(record: dict[str, Any]) -> str:
                                   ("active_joints_p50", "active joints p50", "{:.0f}"),
                                   ("active_joints_max", "max", "{:d}"),
                                   ("share_at_most_6_active", "share <= 6", "{:.3f}"),
-                                  ("failures", "failures", "{:d}")], "solver | QP back-end")
+                                  ("failures", "failures", "{:d}"),
+                                  ("max_bound_excess", "max bound excess [rad/s]", "{:.1e}")],
+                       "solver | QP back-end")
     if rnd.get("pink_fastest"):
         lines += ["", f"pink's fastest set-up in this run: {rnd['pink_fastest']}."]
     if record["refused"]:

@@ -280,7 +280,7 @@ def task_metrics(log: RunRecord, part: TaskValues, scenario: Scenario) -> dict[s
         "table_contacts": int(log.table_contacts.sum()),
         "min_singularity_margin": margin,
         "min_manipulability_det": manip,
-        "solver_failures": int(sum(s in ("infeasible", "failed", "invalid_input") for s in log.status)),
+        "solver_failures": int(sum(s in FAILURE_STATUSES for s in log.status)),
         "cycle_time_p50_s": p50,
         "cycle_time_p99_s": p99,
     }
