@@ -8,104 +8,21 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
-from dualarm_control.app.run.progress import progress_bar
+from dualarm_control.app.run import DEFAULT_SOLVERS
 from dualarm_control.errors import DualArmError
 
 EXIT_USAGE = 2
-DEFAULT_SOLVERS = "standard_qp,sparse_qp,hierarchical_sparse_qp"
-EXIT_INTERRUPTED = 130
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
-    """Run a scenario in-process (lockstep): one run per solver, or for a task scenario one per
-    gain k (force variant with --force); write metrics.json and the figures of the scenario's kind."""
-    from dualarm_control.app.record.report import (
-        format_results,
-        summarize_run,
-        write_figures,
-    )
-    from dualarm_control.app.run.experiment import run_scenario
-    from dualarm_control.controller import controller_params
-    from dualarm_control.kinematics import DualArmModel
-    from dualarm_control.params import read_params_files
-    from dualarm_control.scenario import load_scenario
+    """Run a scenario in-process (lockstep): :func:`dualarm_control.app.run.experiment.experiment_command`."""
+    from dualarm_control.app.run.experiment import experiment_command
 
-    scenario = load_scenario(args.scenario)
-    spec = scenario.tasks
-    base = read_params_files(args.params, "controller_node")
-    out = Path(args.output)
-    if spec is None:
-        if args.gains or args.force or args.duration:
-            raise DualArmError(f"--gains, --force and --duration apply to task scenarios (pan_cleaning), "
-                               f"not to {scenario.name!r}")
-        solvers = [s.strip() for s in (args.solver or DEFAULT_SOLVERS).split(",") if s.strip()]
-        runs = [(name, controller_params({**base, "solver": name}), None) for name in solvers]  # validates all first
-        model: DualArmModel | None = DualArmModel()
-        print(f"scenario {scenario.name!r} ({scenario.source}); solvers: {', '.join(solvers)}; output: {out}",
-              file=sys.stderr)
-    else:
-        solver = args.solver or "constraint_based"
-        if "," in solver:
-            raise DualArmError("a task scenario runs one solver (constraint_based); got --solver " + solver)
-        params = controller_params({**base, "solver": solver})
-        try:
-            gains = [float(g) for g in args.gains.split(",") if g.strip()] if args.gains else (
-                [spec.force.gain] if args.force else list(spec.gains))
-        except ValueError:
-            raise DualArmError(f"--gains {args.gains!r}: expected comma-separated numbers > 0") from None
-        if not gains or any(not g > 0 for g in gains):
-            raise DualArmError(f"--gains {args.gains!r}: expected comma-separated numbers > 0")
-        runs = [(f"k={gain:g}" + (" force" if args.force else ""), params, gain) for gain in gains]
-        model = None  # each run builds the model of the scenario's URDF
-        print(f"scenario {scenario.name!r} ({scenario.source}); solver {solver}; gains {gains}"
-              f"{'; force feedback' if args.force else ''}; output: {out}", file=sys.stderr)
-
-    def job(params: Any, gain: float | None) -> Callable[[Any], tuple[str, dict[str, Any], Any]]:
-        def run(progress: Any) -> tuple[str, dict[str, Any], Any]:
-            log = run_scenario(scenario, params, model, progress, gain=gain, force=args.force, duration=args.duration)
-            return log.label, summarize_run(log, scenario, model), log
-        return run
-
-    done = run_all([(label, job(params, gain)) for label, params, gain in runs], out)
-    if done is None:
-        return EXIT_INTERRUPTED
-    results, logs = done
-    files = ["metrics.json", *write_figures(scenario, logs, out, scenario.name)]
-    print(format_results(scenario, results))
-    paths = [str(out / f) for f in files]
-    print(f"\nwrote {' and '.join(paths) if len(paths) == 2 else ', '.join(paths)}")
-    return 0
-
-
-def run_all(jobs: list[tuple[str, Callable[[Any], tuple[str, dict[str, Any], Any]]]],
-            out: Path) -> tuple[dict[str, dict[str, Any]], list[Any]] | None:
-    """Run each (label, run) in order; ``run(progress)`` returns (metrics key, metrics, log).
-
-    Prints a progress bar and the wall time per run and writes ``out/metrics.json``. On
-    Ctrl-C the metrics of the runs completed so far are written and None is returned.
-    """
-    from dualarm_control.app.record.report import write_metrics
-
-    results: dict[str, dict[str, Any]] = {}
-    logs: list[Any] = []
-    try:
-        for label, run in jobs:
-            start = time.perf_counter()
-            key, metrics, log = run(progress_bar(label))
-            results[key] = metrics
-            logs.append(log)
-            print(f"[{label}] done: {len(log.time)} cycles in {time.perf_counter() - start:.1f} s wall", file=sys.stderr)
-    except KeyboardInterrupt:
-        print("\ninterrupted: writing what is complete", file=sys.stderr)
-        if results:
-            write_metrics(out / "metrics.json", results)
-        return None
-    write_metrics(out / "metrics.json", results)
-    return results, logs
+    return experiment_command(args.scenario, args.solver, args.params, Path(args.output), args.gains, args.force,
+                              args.duration)
 
 
 def check_params_files(paths: list[str]) -> None:

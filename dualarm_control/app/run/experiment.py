@@ -18,12 +18,18 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from dualarm_control.app.run import DEFAULT_SOLVERS
 from dualarm_control.controller import ControllerParams
+from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import Configuration, DualArmModel, FloatArray
 from dualarm_control.references.base import RunOptions
 from dualarm_control.references.tasks import TasksSource
@@ -98,6 +104,7 @@ class RunRecord:
     tasks: TaskValues | None = field(default=None)
 
 
+EXIT_INTERRUPTED = 130
 SCALARS = ("time", "solve_time", "cycle_time", "position_error", "orientation_error", "contact_force",
            "measured_force", "normal_offset", "table_contacts")
 
@@ -205,3 +212,92 @@ def tasks_source(scenario: Scenario) -> TasksSource:
 def nan_column(n: int) -> FloatArray:
     """(n,) NaN: a field a source or a bag does not give."""
     return np.full(n, math.nan)
+
+
+def experiment_command(scenario_name: str, solver_names: str | None, params_files: list[str], out: Path,
+                       gain_values: str | None, force: bool, duration: float | None) -> int:
+    """``dualarm experiment``: one run per solver, or for a task scenario one per gain k (force
+    variant with ``force``); write ``out/metrics.json`` and the figures of the scenario's kind,
+    print the table. Returns the exit code (130 when interrupted)."""
+    from dualarm_control.app.record.report import (
+        format_results,
+        summarize_run,
+        write_figures,
+    )
+    from dualarm_control.controller import controller_params
+    from dualarm_control.params import read_params_files
+    from dualarm_control.scenario import load_scenario
+
+    scenario = load_scenario(scenario_name)
+    spec = scenario.tasks
+    base = read_params_files(params_files, "controller_node")
+    runs: list[tuple[str, ControllerParams, float | None]]
+    if spec is None:
+        if gain_values or force or duration:
+            raise DualArmError(f"--gains, --force and --duration apply to task scenarios (pan_cleaning), "
+                               f"not to {scenario.name!r}")
+        solvers = [s.strip() for s in (solver_names or DEFAULT_SOLVERS).split(",") if s.strip()]
+        runs = [(name, controller_params({**base, "solver": name}), None) for name in solvers]  # validates all first
+        model: DualArmModel | None = DualArmModel()
+        print(f"scenario {scenario.name!r} ({scenario.source}); solvers: {', '.join(solvers)}; output: {out}",
+              file=sys.stderr)
+    else:
+        solver = solver_names or "constraint_based"
+        if "," in solver:
+            raise DualArmError("a task scenario runs one solver (constraint_based); got --solver " + solver)
+        params = controller_params({**base, "solver": solver})
+        try:
+            gains = [float(g) for g in gain_values.split(",") if g.strip()] if gain_values else (
+                [spec.force.gain] if force else list(spec.gains))
+        except ValueError:
+            raise DualArmError(f"--gains {gain_values!r}: expected comma-separated numbers > 0") from None
+        if not gains or any(not g > 0 for g in gains):
+            raise DualArmError(f"--gains {gain_values!r}: expected comma-separated numbers > 0")
+        runs = [(f"k={gain:g}" + (" force" if force else ""), params, gain) for gain in gains]
+        model = None  # each run builds the model of the scenario's URDF
+        print(f"scenario {scenario.name!r} ({scenario.source}); solver {solver}; gains {gains}"
+              f"{'; force feedback' if force else ''}; output: {out}", file=sys.stderr)
+
+    def job(params: Any, gain: float | None) -> Callable[[Any], tuple[str, dict[str, Any], Any]]:
+        def run(progress: Any) -> tuple[str, dict[str, Any], Any]:
+            log = run_scenario(scenario, params, model, progress, gain=gain, force=force, duration=duration)
+            return log.label, summarize_run(log, scenario, model), log
+        return run
+
+    done = run_all([(label, job(params, gain)) for label, params, gain in runs], out)
+    if done is None:
+        return EXIT_INTERRUPTED
+    results, logs = done
+    files = ["metrics.json", *write_figures(scenario, logs, out, scenario.name)]
+    print(format_results(scenario, results))
+    paths = [str(out / f) for f in files]
+    print(f"\nwrote {' and '.join(paths) if len(paths) == 2 else ', '.join(paths)}")
+    return 0
+
+
+def run_all(jobs: list[tuple[str, Callable[[Any], tuple[str, dict[str, Any], Any]]]],
+            out: Path) -> tuple[dict[str, dict[str, Any]], list[Any]] | None:
+    """Run each (label, run) in order; ``run(progress)`` returns (metrics key, metrics, log).
+
+    Prints a progress bar and the wall time per run and writes ``out/metrics.json``. On
+    Ctrl-C the metrics of the runs completed so far are written and None is returned.
+    """
+    from dualarm_control.app.record.report import write_metrics
+    from dualarm_control.app.run.progress import progress_bar
+
+    results: dict[str, dict[str, Any]] = {}
+    logs: list[Any] = []
+    try:
+        for label, run in jobs:
+            start = time.perf_counter()
+            key, metrics, log = run(progress_bar(label))
+            results[key] = metrics
+            logs.append(log)
+            print(f"[{label}] done: {len(log.time)} cycles in {time.perf_counter() - start:.1f} s wall", file=sys.stderr)
+    except KeyboardInterrupt:
+        print("\ninterrupted: writing what is complete", file=sys.stderr)
+        if results:
+            write_metrics(out / "metrics.json", results)
+        return None
+    write_metrics(out / "metrics.json", results)
+    return results, logs
