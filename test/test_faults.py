@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from dualarm_control.app import faults
+from dualarm_control.app.faults import matrix as faults
 
 
 def test_quick_fault_rows_pass(tmp_path: Path) -> None:
