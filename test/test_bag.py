@@ -26,7 +26,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from dualarm_control.app import cli
-from dualarm_control.app.bag import nearest_labels, pose_error, quaternion_angle
+from dualarm_control.app.record.bag import nearest_labels, pose_error, quaternion_angle
 
 REPO = Path(__file__).resolve().parents[1]
 N_MSGS = 40

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from dualarm_control.app.bench import run_bench, solver_configs
+from dualarm_control.app.bench.suite import run_bench, solver_configs
 from dualarm_control.app.cli import main
 from dualarm_control.controller import ControllerParams
 from dualarm_control.solvers import make_solver

@@ -16,7 +16,7 @@ from pathlib import Path
 import yaml
 from bound_ignoring import NAME
 
-from dualarm_control.app.launcher import Launch, node_command
+from dualarm_control.app.run.launcher import Launch, node_command
 
 TEST_DIR = Path(__file__).resolve().parent
 SLOW = TEST_DIR / "data" / "slow.yaml"

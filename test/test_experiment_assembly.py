@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from dualarm_control.app.cli import main
-from dualarm_control.app.report import METRIC_KEYS, TRACKING_KEYS
+from dualarm_control.app.record.report import METRIC_KEYS, TRACKING_KEYS
 
 SOLVERS = ("standard_qp", "sparse_qp", "hierarchical_sparse_qp")
 FINAL_ERRORS = {"standard_qp": (1.6e-5, 5.3e-5), "sparse_qp": (2.1e-5, 6.6e-5), "hierarchical_sparse_qp": (2.2e-5, 6.9e-5)}

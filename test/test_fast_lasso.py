@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from dualarm_control.app.bench_random import (
+from dualarm_control.app.bench.random_set import (
     active_sets,
     control_problem,
     exactness,

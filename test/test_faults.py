@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from dualarm_control.app import faults
+from dualarm_control.app.faults import matrix as faults
 
 FAULT_MOVE = str(Path(__file__).parent / "data" / "fault_move.yaml")
 Runs = dict[str, tuple[Path, dict[str, faults.Row], list[str]]]

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dualarm_control.app.plan import PlanResult, distinct_best, optimise, plan
-from dualarm_control.app.plan_report import plan_record
+from dualarm_control.app.plan.optimise import PlanResult, distinct_best, optimise, plan
+from dualarm_control.app.plan.report import plan_record
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.planning.baseline import BaselineParams, run_baseline
@@ -294,7 +294,7 @@ def test_corner_scenario_has_the_paper_settings_and_a_start_on_the_path(model: D
     path = cfg.corner.sample()
     e_p, e_r = closure_errors(model, scenario.initial_positions, path.positions[0], path.rotation)
     assert e_p < 1e-6 and e_r < 1e-6  # degrees with 6 decimals in the file
-    ends = [s.position for s in scenario.segments]
+    ends = [s.position for s in scenario.reference.segments]
     on_path = [path.positions[i] for i in (0, 12, 13, 14, 15, 16, 17, 18, 30)]
     np.testing.assert_allclose(np.array(ends), np.array(on_path), atol=1e-6)
 
@@ -313,7 +313,7 @@ def small_plan() -> PlanResult:
 
 
 def test_plan_record_is_self_describing(small_plan: PlanResult, model: DualArmModel, tmp_path: Path) -> None:
-    from dualarm_control.app.plan_report import write_plan
+    from dualarm_control.app.plan.report import write_plan
 
     doc = plan_record(small_plan, model, None)
     path = write_plan(tmp_path, doc)
@@ -333,7 +333,7 @@ def test_plan_record_is_self_describing(small_plan: PlanResult, model: DualArmMo
 
 
 def test_executed_plan_stays_on_the_path(small_plan: PlanResult, model: DualArmModel) -> None:
-    from dualarm_control.app.plan_execute import execute_plan
+    from dualarm_control.app.plan.execute import execute_plan
 
     result = execute_plan(small_config(), small_plan.configurations, model)
     assert result.duration > 1.0

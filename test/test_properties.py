@@ -24,7 +24,7 @@ import pytest
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
-from dualarm_control.app.bench import solver_configs
+from dualarm_control.app.bench.suite import solver_configs
 from dualarm_control.controller import ControllerParams, RelativeController
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.limits import JointLimits, velocity_bounds

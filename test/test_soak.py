@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from dualarm_control.app.soak import NODES, format_soak, run_soak, write_soak
+from dualarm_control.app.faults.soak import NODES, format_soak, run_soak, write_soak
 
 SHORT = Path(__file__).parent / "data" / "short.yaml"
 SECONDS = 40.0

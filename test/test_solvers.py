@@ -25,7 +25,7 @@ import pytest
 import qpsolvers
 from scipy.optimize import linprog
 
-from dualarm_control.app.bench import solver_configs
+from dualarm_control.app.bench.suite import solver_configs
 from dualarm_control.controller import ControllerParams
 from dualarm_control.errors import ParameterError, UnknownSolverError
 from dualarm_control.kinematics import DualArmModel

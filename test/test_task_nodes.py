@@ -18,9 +18,14 @@ from typing import Any
 
 import numpy as np
 
-from dualarm_control.app.launcher import Launch, launch_scenario, node_command
-from dualarm_control.app.task_bag import is_task_bag, read_task_run, task_report
-from dualarm_control.app.task_experiment import run_task_scenario, summarize_task_run
+from dualarm_control.app.record.bag import (
+    holds_task_cycles,
+    read_task_run,
+    report_tasks,
+)
+from dualarm_control.app.record.report import summarize_run
+from dualarm_control.app.run.experiment import run_scenario
+from dualarm_control.app.run.launcher import Launch, launch_scenario, node_command
 from dualarm_control.controller import controller_params
 from dualarm_control.params import read_params_files
 from dualarm_control.scenario import load_scenario
@@ -42,8 +47,8 @@ def in_process(duration: float, force: bool = False) -> dict[str, float | int | 
     params = controller_params({**read_params_files([PARAMS], "controller_node"), "solver": "constraint_based"})
     assert scenario.tasks is not None
     gain = scenario.tasks.force.gain if force else scenario.tasks.gains[0]
-    log = run_task_scenario(scenario, params, gain, force, duration=duration)
-    return summarize_task_run(log, scenario)
+    log = run_scenario(scenario, params, gain=gain, force=force, duration=duration)
+    return summarize_run(log, scenario)
 
 
 def test_lockstep_bag_metrics_equal_in_process(tmp_path: Path) -> None:
@@ -56,8 +61,8 @@ def test_lockstep_bag_metrics_equal_in_process(tmp_path: Path) -> None:
     bag = tmp_path / "bag"
     assert launch_scenario("pan_cleaning", [PARAMS], ["-p", f"duration:={DURATION!r}"], True, bag,
                            timeout=120.0) == 0
-    assert is_task_bag(bag)
-    results = task_report(bag, tmp_path / "report")
+    assert holds_task_cycles(bag)
+    results = report_tasks(bag, tmp_path / "report")
     assert (tmp_path / "report" / "metrics.json").is_file()
     assert (tmp_path / "report" / "tool_path.png").is_file()
     from_bag = results["k=1"]
@@ -78,7 +83,7 @@ def test_realtime_200hz_reports_cycle_time_and_tracks_the_circle(tmp_path: Path)
     assert launch_scenario("pan_cleaning", [PARAMS], ["-p", f"duration:={DURATION!r}"], False, bag,
                            timeout=120.0, rate_hz=200.0) == 0
     log, scenario = read_task_run(bag)
-    metrics = summarize_task_run(log, scenario)
+    metrics = summarize_run(log, scenario)
     print({k: metrics[k] for k in ("cycle_time_p50_s", "cycle_time_p99_s", "circle_rms_error_m")})
     # The task starts once the recorder reads /diagnostics (task_start_readers): the bag holds the
     # run from t = 0 to the end (read_task_run checks every cycle's state is in it); in real time the
@@ -150,11 +155,11 @@ def test_force_variant_lockstep_bag_metrics_equal_in_process(tmp_path: Path) -> 
     assert launch_scenario("pan_cleaning", [PARAMS], ["-p", f"duration:={duration!r}"], True, bag,
                            timeout=120.0, force=True) == 0
     log, scenario = read_task_run(bag)
-    from_bag = summarize_task_run(log, scenario)
+    from_bag = summarize_run(log, scenario)
     expected = in_process(duration, force=True)
     assert set(from_bag) == set(expected)
     for key, value in expected.items():
         if key not in WALL_CLOCK:
             assert from_bag[key] == value, key
-    assert log.force and from_bag["contact_lost_cycles"] == 0
+    assert log.tasks.force and from_bag["contact_lost_cycles"] == 0
     assert float(from_bag["force_rms_error_n"]) < 1.0

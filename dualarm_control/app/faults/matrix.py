@@ -1,8 +1,8 @@
 """``dualarm faults``: the fault matrix, against real processes, on loopback and private namespaces.
 
 Each row injects one fault into a real-time run of the cell (the three nodes and a reference
-recorder as separate processes, :class:`~dualarm_control.app.fault_run.CellRun`) and judges
-the outcome from the run's bag (:mod:`~dualarm_control.app.fault_bag`) and the nodes' logs.
+recorder as separate processes, :class:`~dualarm_control.app.faults.cell_run.CellRun`) and judges
+the outcome from the run's bag (:mod:`~dualarm_control.app.faults.episodes`) and the nodes' logs.
 A row that cannot run here (no root, no ``ip``, no netem in the kernel) is *skipped* with the
 reason, never passed. Rows that share a run: the loopback faults (one run, in sequence, each
 while the target moves), the across-hosts run and its link cut.
@@ -21,15 +21,20 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from dualarm_control.app.fault_bag import (
+from dualarm_control.app.faults.cell_run import CellRun, RunError
+from dualarm_control.app.faults.episodes import (
     RunRecord,
     arm_stop,
     check_signalled_bag,
     completion,
     safe_episode,
 )
-from dualarm_control.app.fault_run import CellRun, RunError
-from dualarm_control.app.netns import Link, netem_unavailable, private_link, unavailable
+from dualarm_control.app.faults.netns import (
+    Link,
+    netem_unavailable,
+    private_link,
+    unavailable,
+)
 from dualarm_control.paths import config_path
 
 PERIOD = 0.005
@@ -291,7 +296,7 @@ def loss_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[str]
                 _run_whole(run)
             how = f"netem {' '.join(LOSS)} on lo"
         else:
-            relay = [sys.executable, "-u", "-m", "dualarm_control.app.lossy_relay", "--loss", str(relay_loss),
+            relay = [sys.executable, "-u", "-m", "dualarm_control.app.faults.lossy_relay", "--loss", str(relay_loss),
                      *RELAY_ROUTES]
             say(f"best_effort_loss: no netem ({why}); a relay process drops {relay_loss:.0%} of every stream")
             run = CellRun(out / "best_effort_loss", scenario, best_effort, node_extra=RELAY_REMAPS,
