@@ -666,6 +666,9 @@ def build_parser() -> argparse.ArgumentParser:
     from dualarm_control.app.plan_command import add_plan_parser
 
     add_plan_parser(sub, cmd_plan)
+    from dualarm_control.app.view.command import add_view_parser
+
+    add_view_parser(sub)
     return parser
 
 

@@ -1,0 +1,251 @@
+"""``dualarm view``: what goes to Rerun, read back from a saved .rrd, and the web viewer in a real browser.
+
+The run is a real one: the short scenario (test/data/short.yaml, 4 cm and 15 degrees)
+in-process in lockstep with sparse_qp, the same runner as ``dualarm experiment``. The
+browser test serves it with ``rerun --serve-web`` on 127.0.0.1 and opens the page in
+headless Chromium over the DevTools protocol (skipped, saying why, without /usr/bin/chromium).
+Set ``DUALARM_VIEW_SCREENSHOT=PATH.png`` to keep its screenshot (docs/visualization_web_viewer.png).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import sys
+import time
+import xml.etree.ElementTree as ET
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+rr = pytest.importorskip("rerun", reason="rerun-sdk not installed (the view extra)")
+
+from dualarm_control.app import cli  # noqa: E402
+from dualarm_control.app.experiment import RunLog, run_scenario  # noqa: E402
+from dualarm_control.app.view import rerun_view as rv  # noqa: E402
+from dualarm_control.app.view.from_bag import RunArrays, relative_run_arrays  # noqa: E402
+from dualarm_control.app.view.live import LiveLog  # noqa: E402
+from dualarm_control.controller import controller_params  # noqa: E402
+from dualarm_control.kinematics import DualArmModel  # noqa: E402
+from dualarm_control.ros.convert import quaternion_xyzw  # noqa: E402
+from dualarm_control.scenario import load_scenario  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+SHORT = REPO / "test" / "data" / "short.yaml"
+CHROMIUM = Path("/usr/bin/chromium")
+
+
+# ----------------------------------------------------------------------------- a real run, as arrays
+
+
+def in_process_arrays(log: RunLog, model: DualArmModel, target: np.ndarray) -> RunArrays:
+    """What ``log_run`` takes, from the in-process runner's record (target: (N, 7) relative target)."""
+    series = {**rv.velocity_norm_series(log.commands), rv.TRACKING_POSITION: log.position_error,
+              rv.TRACKING_ORIENTATION: log.orientation_error, rv.SOLVE_TIME: log.solve_time,
+              rv.CYCLE_TIME: log.cycle_time}
+    return RunArrays(model.urdf, log.time, log.positions, list(model.joint_names), series,
+                     {"relative_target": target}, list(log.status))
+
+
+@pytest.fixture(scope="module")
+def short_run() -> RunArrays:
+    scenario, model = load_scenario(str(SHORT)), DualArmModel()
+    log = run_scenario(scenario, controller_params({"solver": "sparse_qp"}), model)
+    trajectory = scenario.trajectory(*model.relative_pose(log.positions[0]))
+    target = np.array([[*s.position, *quaternion_xyzw(s.rotation)] for s in map(trajectory.sample, log.time)])
+    return in_process_arrays(log, model, target)
+
+
+def read_rrd(path: Path) -> tuple[Counter[str], dict[str, np.ndarray]]:
+    """Rows per entity on the ``time`` timeline (static entities: rows without it) and the scalars per entity."""
+    from rerun.chunk import RrdReader
+
+    rows: Counter[str] = Counter()
+    scalars: dict[str, list[float]] = {}
+    for chunk in RrdReader(str(path)).stream():
+        if chunk.is_static or rv.TIMELINE in chunk.timeline_names:
+            rows[chunk.entity_path] += chunk.num_rows
+        batch = chunk.to_record_batch()
+        if "Scalars:scalars" in batch.schema.names:
+            for cell in batch.column("Scalars:scalars").to_pylist():
+                scalars.setdefault(chunk.entity_path, []).extend(cell)
+    return rows, {k: np.array(v) for k, v in scalars.items()}
+
+
+def visual_links(urdf: Path) -> list[str]:
+    return [link.get("name", "") for link in ET.parse(urdf).getroot().iter("link") if link.find("visual") is not None]
+
+
+def save(arrays: RunArrays, path: Path) -> None:
+    rec = rr.RecordingStream(rv.APPLICATION_ID)
+    rec.save(str(path))
+    arrays.log(rec)
+    rec.flush()
+    rec.disconnect()
+
+
+# ----------------------------------------------------------------------------- the saved recording
+
+
+def test_saved_rrd_holds_every_link_and_one_value_per_cycle(short_run: RunArrays, tmp_path: Path) -> None:
+    path = tmp_path / "run.rrd"
+    save(short_run, path)
+    rows, scalars = read_rrd(path)
+    n = len(short_run.stamps)
+    robot = rv.robot_name(short_run.urdf)
+    links = visual_links(short_run.urdf)
+    assert len(links) == 19  # torso, and per arm link_0..7 and the flange
+    for link in links:
+        assert rows[f"/{robot}/visual_geometries/{link}/visual_0"] > 0, link
+    for joint in short_run.joint_names:
+        assert rows[f"/joint_tf/{joint}"] == n, joint
+    assert rows["/frames/relative_target/pose"] == n
+    for name, values in short_run.series.items():
+        np.testing.assert_allclose(scalars[f"/plot/{name}"], values, rtol=0, atol=0, err_msg=name)
+    # Fig. 5's ||qd||_0 is the count of |qd_i| > 1e-3 rad/s: the run moves, and not with every joint all the time
+    l0 = scalars[f"/plot/{rv.VELOCITY_L0}"]
+    assert l0.max() > 0 and set(np.unique(l0)) <= set(range(15))
+    changes = sum(a != b for a, b in zip(short_run.statuses, short_run.statuses[1:])) + 1  # type: ignore[arg-type]
+    assert rows[f"/{rv.STATUS_ENTITY}"] == changes
+
+
+def test_log_run_refuses_arrays_of_other_lengths(short_run: RunArrays) -> None:
+    rec = rr.RecordingStream(rv.APPLICATION_ID)
+    rec.memory_recording()
+    with pytest.raises(ValueError, match="stamps"):
+        rv.log_run(short_run.urdf, short_run.stamps[:-1], short_run.q, short_run.joint_names, {}, recording=rec)
+
+
+# ----------------------------------------------------------------------------- bags and the live view
+
+
+def test_bag_adapter_is_per_controller_cycle(tmp_path: Path) -> None:
+    sys.path.insert(0, str(REPO / "test"))
+    from test_bag import N_CYCLES, write_synthetic_bag
+
+    bag = tmp_path / "synthetic"
+    write_synthetic_bag(bag)
+    arrays = relative_run_arrays(bag, DualArmModel())
+    k = np.arange(N_CYCLES)
+    np.testing.assert_allclose(arrays.stamps, k * 0.01)  # the cycles' stamp_ns, 10 ms apart
+    np.testing.assert_array_equal(arrays.series[rv.VELOCITY_L0], k % 4 + 1)  # joint 13 at 5e-4 rad/s is inactive
+    np.testing.assert_allclose(arrays.series[rv.CYCLE_TIME], 0.001 * (k + 1))
+    np.testing.assert_allclose(arrays.frames["relative_target"][0, :3], [0.1, 0.2, 0.3])
+    assert arrays.q.shape == (N_CYCLES, 14) and arrays.statuses is not None and arrays.statuses[3] == "infeasible"
+    out = tmp_path / "bag.rrd"
+    assert cli.main(["view", str(bag), "--save", str(out)]) == 0
+    rows, _ = read_rrd(out)
+    assert rows["/joint_tf/left_joint_1"] == N_CYCLES
+
+
+def test_view_without_display_or_sink_says_what_to_do(monkeypatch: pytest.MonkeyPatch,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert cli.main(["view"]) == 2
+    assert "--web" in capsys.readouterr().err
+
+
+def test_live_log_batches_the_cells_messages(short_run: RunArrays, tmp_path: Path) -> None:
+    """The live view's decoding and batching, fed with the CDR bytes the nodes publish."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.serialization import deserialize_message
+
+    from dualarm_control.ros import convert
+
+    model = DualArmModel()
+    rec = rr.RecordingStream(rv.APPLICATION_ID)
+    path = tmp_path / "live.rrd"
+    rec.save(str(path))
+    live = LiveLog(model, rec)
+    states = convert.JointStateInput({name: i for i, name in enumerate(model.joint_names)})
+    commands = convert.CommandInput(model.nq)
+    n, t0 = 30, 5 * convert.NS
+    for k in range(n):
+        ns = t0 + k * 5_000_000
+        live.joint_state(states.from_bytes(convert.joint_state(model.joint_names, ns, short_run.q[k], np.zeros(14))))
+        live.command(commands.from_bytes(convert.float_array(np.full(14, 0.01 * (k % 3)))))
+        live.diagnostics(deserialize_message(convert.diagnostics(ns, "controller_node", 0, "ok", {
+            "status": "solved" if k < 20 else "infeasible", "stamp_ns": ns, "cycle_time_s": 1e-3,
+            "solve_time_s": 5e-4, "position_error_m": 1e-4, "orientation_error_rad": 1e-3}), DiagnosticArray))
+        if k % 10 == 9:
+            live.flush()
+    rec.flush()
+    rec.disconnect()
+    rows, scalars = read_rrd(path)
+    assert rows["/joint_tf/right_joint_7"] == n
+    np.testing.assert_array_equal(scalars[f"/plot/{rv.VELOCITY_L0}"], [14 * (k % 3 > 0) for k in range(n)])
+    np.testing.assert_allclose(scalars[f"/plot/{rv.SOLVE_TIME}"], 5e-4)
+    assert rows[f"/{rv.STATUS_ENTITY}"] == 2  # solved, then the change to infeasible
+
+
+# ----------------------------------------------------------------------------- a real browser
+
+
+VIEW_REGION = (slice(80, 480), slice(0, 740))
+"""Page pixels (rows, columns) inside the 3D view of the blueprint at 1280x800."""
+ARM_PIXELS = 300
+"""Orange pixels (the arms' links, URDF colour 0.9 0.5 0.1) the 3D view must show at least."""
+MOVED_PIXELS = 100
+"""Pixels of the 3D view that must change between the first and the last cycle."""
+POLL_S = 5.0
+LOAD_TIMEOUT_S = 300.0
+
+
+def image(png: bytes) -> np.ndarray:
+    import matplotlib.image
+
+    return np.asarray(matplotlib.image.imread(io.BytesIO(png), format="png"))[..., :3]
+
+
+def orange_pixels(img: np.ndarray) -> int:
+    view = img[VIEW_REGION]
+    r, g, b = view[..., 0], view[..., 1], view[..., 2]
+    return int(np.count_nonzero((r > 0.7) & (g > 0.3) & (g < 0.7) & (b < 0.35)))
+
+
+def changed_pixels(a: np.ndarray, b: np.ndarray) -> int:
+    return int(np.count_nonzero(np.abs(a[VIEW_REGION] - b[VIEW_REGION]).max(axis=-1) > 0.1))
+
+
+def test_web_viewer_shows_the_arms_in_chromium(short_run: RunArrays) -> None:
+    if not CHROMIUM.exists():
+        reason = f"{CHROMIUM} missing: apt-get install chromium (.ci/run does, as root)"
+        print(f"SKIP: {reason}")
+        pytest.skip(reason)
+    from dualarm_control.app.view.browser import Chromium, free_port
+    from dualarm_control.app.view.server import WebViewer
+
+    start = time.monotonic()
+    with WebViewer(free_port(), free_port()) as server, Chromium() as browser:
+        rec = rr.RecordingStream(rv.APPLICATION_ID)
+        rec.connect_grpc(server.grpc_url)
+        short_run.log(rec)
+        rec.flush()
+        browser.navigate(server.url)
+        browser.screenshot()  # warm-up: blocks while the page compiles and first draws (tens of seconds)
+        # The viewer opens at the latest time (it follows the recording): the last cycle.
+        deadline = time.monotonic() + LOAD_TIMEOUT_S
+        end = image(browser.screenshot())
+        while orange_pixels(end) < ARM_PIXELS and time.monotonic() < deadline:
+            time.sleep(POLL_S)
+            end = image(browser.screenshot())
+        png_end = browser.screenshot()
+        end = image(png_end)
+        assert orange_pixels(end) >= ARM_PIXELS, f"the 3D view shows {orange_pixels(end)} arm pixels"
+        # Click the time ruler at its left end (time 0): the first cycle's pose.
+        browser.click(203, 551)
+        first = image(browser.screenshot())
+        while changed_pixels(first, end) < MOVED_PIXELS and time.monotonic() < deadline:
+            time.sleep(POLL_S)
+            first = image(browser.screenshot())
+        moved = changed_pixels(first, end)
+        print(f"browser test: {orange_pixels(end)} arm pixels, {moved} pixels moved, "
+              f"{time.monotonic() - start:.0f} s")
+        assert orange_pixels(first) >= ARM_PIXELS
+        assert moved >= MOVED_PIXELS, f"only {moved} pixels differ between the first and the last cycle"
+        keep = os.environ.get("DUALARM_VIEW_SCREENSHOT")
+        if keep:
+            Path(keep).write_bytes(png_end)
