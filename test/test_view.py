@@ -22,15 +22,15 @@ import pytest
 
 rr = pytest.importorskip("rerun", reason="rerun-sdk not installed (the view extra)")
 
-from dualarm_control.app import cli  # noqa: E402
-from dualarm_control.app.experiment import RunLog, run_scenario  # noqa: E402
-from dualarm_control.app.view import rerun_view as rv  # noqa: E402
-from dualarm_control.app.view.from_bag import RunArrays, relative_run_arrays  # noqa: E402
-from dualarm_control.app.view.live import LiveLog  # noqa: E402
-from dualarm_control.controller import controller_params  # noqa: E402
-from dualarm_control.kinematics import DualArmModel  # noqa: E402
-from dualarm_control.ros.convert import quaternion_xyzw  # noqa: E402
-from dualarm_control.scenario import load_scenario  # noqa: E402
+from dualarm_control.app import cli
+from dualarm_control.app.experiment import RunLog, run_scenario
+from dualarm_control.app.view import rerun_view as rv
+from dualarm_control.app.view.from_bag import RunArrays, relative_run_arrays
+from dualarm_control.app.view.live import LiveLog
+from dualarm_control.controller import controller_params
+from dualarm_control.kinematics import DualArmModel
+from dualarm_control.ros.convert import quaternion_xyzw
+from dualarm_control.scenario import load_scenario
 
 REPO = Path(__file__).resolve().parents[1]
 SHORT = REPO / "test" / "data" / "short.yaml"
@@ -186,8 +186,11 @@ def test_live_log_batches_the_cells_messages(short_run: RunArrays, tmp_path: Pat
 
 VIEW_REGION = (slice(80, 480), slice(0, 740))
 """Page pixels (rows, columns) inside the 3D view of the blueprint at 1280x800."""
-ARM_PIXELS = 300
-"""Orange pixels (the arms' links, URDF colour 0.9 0.5 0.1) the 3D view must show at least."""
+DRAWN_PIXELS = 1000
+"""Pixels of the 3D view that must differ from its white background by more than 0.25 (the empty
+view's grid lines differ by less than 0.15: 0 such pixels; the cell: about 2700)."""
+ARM_PIXELS = 200
+"""Orange pixels (red - blue > 0.25: the arms' links, URDF colour 0.9 0.5 0.1) the 3D view must show."""
 MOVED_PIXELS = 100
 """Pixels of the 3D view that must change between the first and the last cycle."""
 POLL_S = 5.0
@@ -200,17 +203,24 @@ def image(png: bytes) -> np.ndarray:
     return np.asarray(matplotlib.image.imread(io.BytesIO(png), format="png"))[..., :3]
 
 
+def drawn_pixels(img: np.ndarray) -> int:
+    return int(np.count_nonzero(np.abs(img[VIEW_REGION] - 1.0).max(axis=-1) > 0.25))
+
+
 def orange_pixels(img: np.ndarray) -> int:
     view = img[VIEW_REGION]
-    r, g, b = view[..., 0], view[..., 1], view[..., 2]
-    return int(np.count_nonzero((r > 0.7) & (g > 0.3) & (g < 0.7) & (b < 0.35)))
+    return int(np.count_nonzero(view[..., 0] - view[..., 2] > 0.25))
+
+
+def shows_arms(img: np.ndarray) -> bool:
+    return drawn_pixels(img) >= DRAWN_PIXELS and orange_pixels(img) >= ARM_PIXELS
 
 
 def changed_pixels(a: np.ndarray, b: np.ndarray) -> int:
     return int(np.count_nonzero(np.abs(a[VIEW_REGION] - b[VIEW_REGION]).max(axis=-1) > 0.1))
 
 
-def test_web_viewer_shows_the_arms_in_chromium(short_run: RunArrays) -> None:
+def test_web_viewer_shows_the_arms_in_chromium(short_run: RunArrays, tmp_path: Path) -> None:
     if not CHROMIUM.exists():
         reason = f"{CHROMIUM} missing: apt-get install chromium (.ci/run does, as root)"
         print(f"SKIP: {reason}")
@@ -229,12 +239,14 @@ def test_web_viewer_shows_the_arms_in_chromium(short_run: RunArrays) -> None:
         # The viewer opens at the latest time (it follows the recording): the last cycle.
         deadline = time.monotonic() + LOAD_TIMEOUT_S
         end = image(browser.screenshot())
-        while orange_pixels(end) < ARM_PIXELS and time.monotonic() < deadline:
+        while not shows_arms(end) and time.monotonic() < deadline:
             time.sleep(POLL_S)
             end = image(browser.screenshot())
         png_end = browser.screenshot()
+        (tmp_path / "end.png").write_bytes(png_end)
         end = image(png_end)
-        assert orange_pixels(end) >= ARM_PIXELS, f"the 3D view shows {orange_pixels(end)} arm pixels"
+        assert shows_arms(end), (f"the 3D view shows {drawn_pixels(end)} drawn and {orange_pixels(end)} orange "
+                                 f"pixels; screenshot: {tmp_path / 'end.png'}")
         # Click the time ruler at its left end (time 0): the first cycle's pose.
         browser.click(203, 551)
         first = image(browser.screenshot())
@@ -242,9 +254,10 @@ def test_web_viewer_shows_the_arms_in_chromium(short_run: RunArrays) -> None:
             time.sleep(POLL_S)
             first = image(browser.screenshot())
         moved = changed_pixels(first, end)
-        print(f"browser test: {orange_pixels(end)} arm pixels, {moved} pixels moved, "
-              f"{time.monotonic() - start:.0f} s")
-        assert orange_pixels(first) >= ARM_PIXELS
+        (tmp_path / "start.png").write_bytes(browser.screenshot())
+        print(f"browser test: {drawn_pixels(end)} drawn, {orange_pixels(end)} orange pixels, {moved} pixels moved, "
+              f"{time.monotonic() - start:.0f} s; screenshots in {tmp_path}")
+        assert shows_arms(first)
         assert moved >= MOVED_PIXELS, f"only {moved} pixels differ between the first and the last cycle"
         keep = os.environ.get("DUALARM_VIEW_SCREENSHOT")
         if keep:

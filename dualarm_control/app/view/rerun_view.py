@@ -35,9 +35,9 @@ TOOL_FRAME = "left_tool"
 """Frame the relative poses are given in (URDF link of the left tool)."""
 TOOL_FRAMES = ("left_tool", "right_tool")
 AXIS_LENGTH_M = 0.08
-EYE_POSITION = (2.4, -1.8, 1.9)
+EYE_POSITION = (2.2, -1.3, 2.0)
 """Camera of the 3D view [m] (world frame): both arms in view (``../shared/viz-notes.md``)."""
-LOOK_TARGET = (0.5, 0.0, 0.8)
+LOOK_TARGET = (0.4, 0.0, 0.9)
 
 VELOCITY_L0 = "velocity/active_joints"
 VELOCITY_L1 = "velocity/l1_rad_per_s"
