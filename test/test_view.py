@@ -25,8 +25,10 @@ rr = pytest.importorskip("rerun", reason="rerun-sdk not installed (the view extr
 from dualarm_control.app import cli
 from dualarm_control.app.experiment import RunLog, run_scenario
 from dualarm_control.app.view import rerun_view as rv
+from dualarm_control.app.view.browser import Chromium, free_port
 from dualarm_control.app.view.from_bag import RunArrays, relative_run_arrays
 from dualarm_control.app.view.live import LiveLog
+from dualarm_control.app.view.server import WebViewer
 from dualarm_control.controller import controller_params
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.ros.convert import quaternion_xyzw
@@ -220,41 +222,49 @@ def changed_pixels(a: np.ndarray, b: np.ndarray) -> int:
     return int(np.count_nonzero(np.abs(a[VIEW_REGION] - b[VIEW_REGION]).max(axis=-1) > 0.1))
 
 
+def load(browser: Chromium, url: str, deadline: float) -> tuple[bytes, np.ndarray]:
+    """Open ``url``; poll screenshots until the 3D view shows the arms (or ``deadline``): the last PNG and image."""
+    browser.navigate(url)
+    browser.screenshot()  # warm-up: blocks while the page first draws (tens of seconds)
+    png = browser.screenshot()
+    while not shows_arms(image(png)) and time.monotonic() < deadline:
+        time.sleep(POLL_S)
+        png = browser.screenshot()
+    return png, image(png)
+
+
 def test_web_viewer_shows_the_arms_in_chromium(short_run: RunArrays, tmp_path: Path) -> None:
+    """The served viewer of the run shows the arms; at the first cycle they are elsewhere than at the last.
+
+    The viewer opens a recording at its latest time (it follows the data): the last cycle. Rerun
+    0.41 has no time-cursor field in the blueprint, and the Home key (tried) does not move it; so
+    the start is shown by serving the same run cut after its first cycle (latest time = 0 s), on
+    a second server, in the same browser.
+    """
     if not CHROMIUM.exists():
         reason = f"{CHROMIUM} missing: apt-get install chromium (.ci/run does, as root)"
         print(f"SKIP: {reason}")
         pytest.skip(reason)
-    from dualarm_control.app.view.browser import Chromium, free_port
-    from dualarm_control.app.view.server import WebViewer
-
+    first_cycle = RunArrays(short_run.urdf, short_run.stamps[:1], short_run.q[:1], short_run.joint_names,
+                            {k: v[:1] for k, v in short_run.series.items()},
+                            {k: v[:1] for k, v in short_run.frames.items()}, (short_run.statuses or [])[:1] or None)
     start = time.monotonic()
-    with WebViewer(free_port(), free_port()) as server, Chromium() as browser:
-        rec = rr.RecordingStream(rv.APPLICATION_ID)
-        rec.connect_grpc(server.grpc_url)
-        short_run.log(rec)
-        rec.flush()
-        browser.navigate(server.url)
-        browser.screenshot()  # warm-up: blocks while the page compiles and first draws (tens of seconds)
-        # The viewer opens at the latest time (it follows the recording): the last cycle.
-        deadline = time.monotonic() + LOAD_TIMEOUT_S
-        end = image(browser.screenshot())
-        while not shows_arms(end) and time.monotonic() < deadline:
-            time.sleep(POLL_S)
-            end = image(browser.screenshot())
-        png_end = browser.screenshot()
+    deadline = start + LOAD_TIMEOUT_S
+    with (WebViewer(free_port(), free_port()) as whole, WebViewer(free_port(), free_port()) as cut,
+          Chromium() as browser):
+        for server, run in ((whole, short_run), (cut, first_cycle)):
+            rec = rr.RecordingStream(rv.APPLICATION_ID)
+            rec.connect_grpc(server.grpc_url)
+            run.log(rec)
+            rec.flush()
+            rec.disconnect()  # the proxy keeps the data for the page
+        png_end, end = load(browser, whole.url, deadline)
         (tmp_path / "end.png").write_bytes(png_end)
-        end = image(png_end)
         assert shows_arms(end), (f"the 3D view shows {drawn_pixels(end)} drawn and {orange_pixels(end)} orange "
                                  f"pixels; screenshot: {tmp_path / 'end.png'}")
-        # Click the time ruler at its left end (time 0): the first cycle's pose.
-        browser.click(203, 551)
-        first = image(browser.screenshot())
-        while changed_pixels(first, end) < MOVED_PIXELS and time.monotonic() < deadline:
-            time.sleep(POLL_S)
-            first = image(browser.screenshot())
+        png_start, first = load(browser, cut.url, deadline)
+        (tmp_path / "start.png").write_bytes(png_start)
         moved = changed_pixels(first, end)
-        (tmp_path / "start.png").write_bytes(browser.screenshot())
         print(f"browser test: {drawn_pixels(end)} drawn, {orange_pixels(end)} orange pixels, {moved} pixels moved, "
               f"{time.monotonic() - start:.0f} s; screenshots in {tmp_path}")
         assert shows_arms(first)

@@ -122,17 +122,6 @@ class Chromium:
         data = self.send("Page.captureScreenshot", {"format": "png"}, timeout=timeout)["data"]
         return base64.b64decode(data)
 
-    def click(self, x: float, y: float) -> None:
-        """A left mouse click at page pixel (x, y)."""
-        for kind in ("mouseMoved", "mousePressed", "mouseReleased"):
-            self.send("Input.dispatchMouseEvent", {"type": kind, "x": x, "y": y, "button": "left", "clickCount": 1})
-
-    def key(self, key: str, code: int) -> None:
-        """Press and release a key (DOM ``key`` name and Windows virtual key ``code``, e.g. "Home", 36)."""
-        for kind in ("rawKeyDown", "keyUp"):
-            self.send("Input.dispatchKeyEvent", {"type": kind, "key": key, "code": key,
-                                                 "windowsVirtualKeyCode": code, "nativeVirtualKeyCode": code})
-
     def close(self) -> None:
         ws = getattr(self, "ws", None)
         if ws is not None:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -39,6 +40,11 @@ def add_view_parser(sub: Any) -> None:
     view.set_defaults(func=cmd_view)
 
 
+def _interrupt(signum: int, frame: object) -> None:
+    """SIGTERM ends ``dualarm view`` like Ctrl-C (the web viewer's server is then stopped)."""
+    raise KeyboardInterrupt
+
+
 def _has_display() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
@@ -62,6 +68,7 @@ def cmd_view(args: argparse.Namespace) -> int:
 
         arrays = bag_run_arrays(Path(args.bag))  # read first: a bad bag fails before any viewer starts
     rec = rr.RecordingStream(rv.APPLICATION_ID)
+    previous = signal.signal(signal.SIGTERM, _interrupt)  # SIGTERM stops like Ctrl-C: the server is closed
     server = WebViewer(args.grpc_port, args.web_port) if args.web else None
     try:
         sinks: list[Any] = []
@@ -78,7 +85,6 @@ def cmd_view(args: argparse.Namespace) -> int:
             print(f"dualarm view: web viewer at {server.url}", flush=True)
         if arrays is not None:
             arrays.log(rec)
-            rec.flush()
             print(f"dualarm view: logged {len(arrays.stamps)} cycles of {args.bag}", flush=True)
         else:
             from dualarm_control.app.view.live import live_groups, run_live
@@ -87,9 +93,9 @@ def cmd_view(args: argparse.Namespace) -> int:
             model = DualArmModel()
             rec.send_blueprint(rv.blueprint(rv.robot_name(Path(model.urdf)), live_groups()))
             run_live(model, rec, args.duration)
-            rec.flush()
+        rec.flush()
+        rec.disconnect()  # closes the file; the web viewer's proxy keeps what it received
         if args.save:
-            rec.disconnect()
             print(f"dualarm view: wrote {args.save}", flush=True)
         if server is not None and arrays is not None:
             print("dualarm view: serving until Ctrl-C", flush=True)
@@ -98,7 +104,10 @@ def cmd_view(args: argparse.Namespace) -> int:
                     time.sleep(0.5)
             except KeyboardInterrupt:
                 pass
+    except KeyboardInterrupt:
+        pass
     finally:
         if server is not None:
             server.close()
+        signal.signal(signal.SIGTERM, previous)
     return 0

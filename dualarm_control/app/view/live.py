@@ -24,6 +24,8 @@ from dualarm_control.app.view import rerun_view as rv
 from dualarm_control.kinematics import DualArmModel
 
 FLUSH_PERIOD_S = 0.1
+QUEUE_DEPTH = 1000
+"""Samples kept per subscription while the view is busy logging (5 s of one topic at 200 Hz)."""
 TOPICS = ("/joint_states", "/velocity_controller/commands", "/relative_target", "/diagnostics")
 
 
@@ -137,7 +139,7 @@ def run_live(model: DualArmModel, recording: Any, duration: float | None = None,
     log = LiveLog(model, recording)
     rv.log_model(Path(model.urdf), recording)
     order = {name: i for i, name in enumerate(model.joint_names)}
-    qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
+    qos = QoSProfile(depth=QUEUE_DEPTH, reliability=ReliabilityPolicy.BEST_EFFORT)
     with tool_node("dualarm_view") as (node, executor, stop):
         def malformed(text: str) -> None:
             log.rejected += 1
