@@ -32,7 +32,10 @@ ROS_REQUIRES = [
     "ros-jazzy-ament-index-python>=1.8,<2",
 ]
 TEST_REQUIRES = ["pytest>=8,<10", "hypothesis>=6.100,<7", "ruff>=0.5", "mypy>=1.10",
-                 "colcon-common-extensions>=0.3,<1"]
+                 "colcon-common-extensions>=0.3,<1",
+                 "websocket-client>=1.7,<2"]  # the browser test drives headless Chromium (DevTools protocol)
+# `dualarm view`: the Rerun viewer (its web viewer ships in the wheel and runs offline).
+VIEW_REQUIRES = ["rerun-sdk>=0.41,<0.42"]
 # `dualarm bench` compares with pink's solve_ik; not needed by the controller itself.
 BENCH_REQUIRES = ["pin-pink>=4.4,<5"]
 
@@ -50,7 +53,8 @@ setup(
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
     install_requires=INSTALL_REQUIRES,
-    extras_require={"ros": ROS_REQUIRES, "test": TEST_REQUIRES, "bench": BENCH_REQUIRES},
+    extras_require={"ros": ROS_REQUIRES, "test": TEST_REQUIRES, "bench": BENCH_REQUIRES,
+                    "view": VIEW_REQUIRES},
     python_requires=">=3.10",
     zip_safe=True,
     maintainer="dualarm_control developers",

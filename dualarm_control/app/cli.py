@@ -561,6 +561,9 @@ def build_parser() -> argparse.ArgumentParser:
     from dualarm_control.app.plan.command import add_plan_parser
 
     add_plan_parser(sub, cmd_plan)
+    from dualarm_control.app.view.command import add_view_parser
+
+    add_view_parser(sub)
     return parser
 
 
