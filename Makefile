@@ -11,7 +11,7 @@ OUT ?= out
 $(VENV)/.installed: setup.py
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[ros,test]'
+	$(PY) -m pip install --quiet -e '.[ros,test,view]'
 	touch $@
 
 demo: $(VENV)/.installed

@@ -123,6 +123,9 @@ def bag_info(path: Path) -> str:
         lines.append(f"{head:<19}Topic: {name} | Type: {typ} | Count: {n} | Serialization Format: {fmt}")
     if not topics:
         lines.append("Topic information:")
+    for key, value in sorted((meta.get("custom_data") or {}).items()):
+        if key.startswith("dualarm."):
+            lines.append(f"{'Note:':<19}{value}")
     return "\n".join(lines)
 
 

@@ -1,0 +1,180 @@
+"""Bags that open in a viewer: ``/robot_description`` from sim_node, ``/tf`` written by the recorder.
+
+Real processes over loopback DDS (this session's ROS_DOMAIN_ID): sim_node, a late-joining
+rclpy subscriber, ``dualarm bag record`` and a lockstep ``dualarm launch --record`` of the
+short scenario; the bag is read back with ``rosbags`` and every recorded link frame is checked
+against pinocchio's forward kinematics of the recorded joint state.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from dualarm_control.app.bag import bag_info
+from dualarm_control.app.launcher import launch_scenario
+from dualarm_control.kinematics import DualArmModel
+from dualarm_control.link_frames import urdf_joints
+from dualarm_control.paths import urdf_path
+from dualarm_control.ros.computed_tf import NOTE
+
+SHORT = Path(__file__).parent / "data" / "short.yaml"
+TOLERANCE = 1e-9
+
+
+def read_bag(bag: Path) -> dict[str, list[tuple[int, object]]]:
+    """topic -> [(receive time ns, message)] in log-time order."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    out: dict[str, list[tuple[int, object]]] = {}
+    with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        for conn, t, raw in reader.messages():
+            out.setdefault(conn.topic, []).append((t, reader.deserialize(raw, conn.msgtype)))
+    return out
+
+
+def se3(tf: object) -> pin.SE3:
+    t, r = tf.transform.translation, tf.transform.rotation  # type: ignore[attr-defined]
+    quat = pin.Quaternion(r.w, r.x, r.y, r.z)
+    return pin.SE3(quat.toRotationMatrix(), np.array([t.x, t.y, t.z]))
+
+
+@pytest.fixture(scope="module")
+def demo_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A recorded lockstep launch of the short scenario, as ``dualarm demo`` records each solver."""
+    bag = tmp_path_factory.mktemp("viewbag") / "bag"
+    assert launch_scenario(str(SHORT), [], [], True, bag, timeout=240.0) == 0
+    return bag
+
+
+def test_demo_bag_holds_robot_description_and_tf_of_pinocchio(demo_bag: Path) -> None:
+    """/robot_description is the cell's URDF; one /tf per /joint_states (same header stamp, same
+    receive time), one /tf_static; frame names are the URDF's links (parent -> child of each joint)
+    and every link's world pose, composed along the chain from /tf_static and /tf, equals
+    pinocchio's oMf of the recorded joint state to 1e-9."""
+    topics = read_bag(demo_bag)
+    urdf_text = urdf_path().read_text()
+    assert [m.data for _, m in topics["/robot_description"]] == [urdf_text]  # type: ignore[attr-defined]
+    joints = urdf_joints(urdf_text)
+    moving = {(j.parent, j.child) for j in joints if not j.fixed}
+    fixed = {(j.parent, j.child) for j in joints if j.fixed}
+    [(_, static)] = topics["/tf_static"]
+    assert {(t.header.frame_id, t.child_frame_id) for t in static.transforms} == fixed  # type: ignore[attr-defined]
+    states = topics["/joint_states"]
+    tfs = topics["/tf"]
+    assert len(tfs) == len(states) > 100
+    model = DualArmModel()
+    links = sorted({j.child for j in joints} | {j.parent for j in joints})
+    frame_ids = {link: model.frame_id(link) for link in links}
+    root = "world"
+    worst = 0.0
+    for (t_state, state), (t_tf, tf) in zip(states, tfs, strict=True):
+        assert t_tf == t_state
+        assert {(t.header.frame_id, t.child_frame_id) for t in tf.transforms} == moving  # type: ignore[attr-defined]
+        stamp = state.header.stamp  # type: ignore[attr-defined]
+        assert all(t.header.stamp.sec == stamp.sec and t.header.stamp.nanosec == stamp.nanosec
+                   for t in tf.transforms)  # type: ignore[attr-defined]
+        where = {n: i for i, n in enumerate(state.name)}  # type: ignore[attr-defined]
+        q = np.array([state.position[where[n]] for n in model.joint_names])  # type: ignore[attr-defined]
+        pin.framesForwardKinematics(model.model, model.data, q)
+        edges = {t.child_frame_id: (t.header.frame_id, se3(t))
+                 for t in [*static.transforms, *tf.transforms]}  # type: ignore[attr-defined]
+        for link in links:
+            pose, frame = pin.SE3.Identity(), link
+            while frame != root:
+                parent, rel = edges[frame]
+                pose, frame = rel * pose, parent
+            expected = model.data.oMf[frame_ids[link]]
+            worst = max(worst, float(np.max(np.abs(pose.homogeneous - expected.homogeneous))))
+    assert worst < TOLERANCE, worst
+
+
+def test_bag_info_says_tf_is_computed(demo_bag: Path) -> None:
+    info = bag_info(demo_bag)
+    assert NOTE in info
+    assert "Topic: /tf | Type: tf2_msgs/msg/TFMessage" in info
+    assert "Topic: /robot_description | Type: std_msgs/msg/String" in info
+
+
+@pytest.fixture
+def sim_node() -> Iterator[subprocess.Popen[str]]:
+    """sim_node in real time on the default scenario (no controller: it holds the arms)."""
+    proc = subprocess.Popen([sys.executable, "-m", "dualarm_control.app.cli", "run", "sim_node"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert proc.stdout is not None
+        for line in proc.stdout:  # started once it logs its scenario
+            if "scenario 'assembly'" in line:
+                break
+        yield proc
+    finally:
+        proc.send_signal(2)
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def late_description(wait_s: float) -> str | None:
+    """Subscribe /robot_description (transient local, as a viewer does) in a fresh rclpy context
+    and return what arrives within ``wait_s`` [s]."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import String
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    received: list[str] = []
+    try:
+        node = rclpy.create_node("late_viewer", context=context)
+        qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        node.create_subscription(String, "/robot_description", lambda m: received.append(m.data), qos)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        end = time.monotonic() + wait_s
+        while not received and time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.1)
+        node.destroy_node()
+    finally:
+        context.try_shutdown()
+    return received[0] if received else None
+
+
+def test_late_subscriber_gets_robot_description(sim_node: subprocess.Popen[str]) -> None:
+    """A subscriber created seconds after sim_node published /robot_description (once) gets it."""
+    time.sleep(2.0)
+    assert late_description(20.0) == urdf_path().read_text()
+
+
+def _record(bag: Path, *extra: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "dualarm_control.app.cli", "bag", "record", "-o", str(bag),
+                           "/joint_states", "-d", "4", *extra], check=False, capture_output=True, text=True,
+                          timeout=60)
+
+
+def test_late_recorder_keeps_description_and_no_tf_turns_tf_off(sim_node: subprocess.Popen[str],
+                                                                  tmp_path: Path) -> None:
+    """A recorder started after sim_node keeps /robot_description (not named) and writes /tf from
+    /joint_states; with --no-tf it writes no /tf and bag info says nothing about it."""
+    with_tf, without = tmp_path / "with_tf", tmp_path / "no_tf"
+    out = _record(with_tf)
+    assert out.returncode == 0, out.stderr
+    topics = read_bag(with_tf)
+    assert [m.data for _, m in topics["/robot_description"]] == [urdf_path().read_text()]  # type: ignore[attr-defined]
+    assert len(topics["/tf"]) == len(topics["/joint_states"]) > 10
+    out = _record(without, "--no-tf")
+    assert out.returncode == 0, out.stderr
+    topics = read_bag(without)
+    assert "/robot_description" in topics and len(topics["/joint_states"]) > 10
+    assert "/tf" not in topics and "/tf_static" not in topics
+    assert NOTE not in bag_info(without)
