@@ -12,6 +12,7 @@ typestore (tf2_msgs is not among the PyPI ROS wheels; no rclpy needed).
 
 from __future__ import annotations
 
+import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -66,24 +67,23 @@ class LinkTransform:
     quaternion: FloatArray
 
 
+def model_from_text(urdf_text: str) -> DualArmModel:
+    """The pinocchio model of a URDF given as text (e.g. a /robot_description)."""
+    with tempfile.TemporaryDirectory(prefix="dualarm_urdf_") as tmp:
+        path = Path(tmp) / "robot_description.urdf"
+        path.write_text(urdf_text)
+        return DualArmModel(urdf=path)
+
+
 class LinkFrames:
     """Parent -> child link transforms of every URDF joint at a joint configuration."""
 
-    def __init__(self, urdf: Path, urdf_text: str | None = None) -> None:
-        """``urdf``: the URDF file (pinocchio loads it); ``urdf_text``: its text, read if None."""
-        self.model = DualArmModel(urdf=Path(urdf))
-        text = urdf_text if urdf_text is not None else Path(urdf).read_text()
-        self.joints = urdf_joints(text)
+    def __init__(self, urdf_text: str) -> None:
+        self.model = model_from_text(urdf_text)
+        self.joints = urdf_joints(urdf_text)
         self.moving = [j for j in self.joints if not j.fixed]
         self.fixed = [j for j in self.joints if j.fixed]
         self._ids = {link: self.model.frame_id(link) for j in self.joints for link in (j.parent, j.child)}
-
-    @classmethod
-    def from_text(cls, urdf_text: str, directory: Path) -> LinkFrames:
-        """A LinkFrames of a URDF given as text (e.g. a /robot_description), written to ``directory``."""
-        path = Path(directory) / "robot_description.urdf"
-        path.write_text(urdf_text)
-        return cls(path, urdf_text)
 
     @property
     def joint_names(self) -> list[str]:

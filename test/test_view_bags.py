@@ -178,3 +178,99 @@ def test_late_recorder_keeps_description_and_no_tf_turns_tf_off(sim_node: subpro
     assert "/robot_description" in topics and len(topics["/joint_states"]) > 10
     assert "/tf" not in topics and "/tf_static" not in topics
     assert NOTE not in bag_info(without)
+
+
+# ----------------------------------------------------------------------------- video
+
+
+def _decoded_frames(path: Path) -> list[np.ndarray]:
+    import imageio_ffmpeg
+
+    reader = imageio_ffmpeg.read_frames(str(path))
+    meta = reader.__next__()
+    width, height = meta["size"]
+    return [np.frombuffer(f, dtype=np.uint8).reshape(height, width, 3) for f in reader]
+
+
+def _changed_pixels(a: np.ndarray, b: np.ndarray) -> int:
+    """Pixels whose colour differs by more than codec noise (any channel > 40 of 255)."""
+    return int(np.count_nonzero(np.abs(a.astype(int) - b.astype(int)).max(axis=2) > 40))
+
+
+def test_video_of_the_demo_bag(demo_bag: Path, tmp_path: Path) -> None:
+    """``render_video``: floor(duration x fps) + 1 frames (read back with ffmpeg); the first and
+    last frames differ where the arms moved, by far more pixels than a run that holds still."""
+    from dataclasses import replace
+
+    from dualarm_control.app.view.recording import read_joint_recording
+    from dualarm_control.app.view.video import render_recording, render_video
+
+    info = render_video(demo_bag, tmp_path / "run.mp4", fps=25.0, size=(320, 240), log=None)
+    recording = read_joint_recording(demo_bag)
+    assert info.duration_s == pytest.approx(recording.duration_s) and info.duration_s > 1.0
+    frames = _decoded_frames(tmp_path / "run.mp4")
+    assert len(frames) == info.frames == int(recording.duration_s * 25.0 + 1e-9) + 1
+    assert frames[0].shape == (240, 320, 3)
+    moved = _changed_pixels(frames[0], frames[-1])
+    still = replace(recording, positions=np.repeat(recording.positions[:1], len(recording.stamps_ns), axis=0))
+    render_recording(still, tmp_path / "still.mp4", fps=25.0, size=(320, 240), log=None)
+    held = _decoded_frames(tmp_path / "still.mp4")
+    noise = _changed_pixels(held[0], held[-1])  # H.264 key frame vs predicted frames of one picture
+    assert noise < 100 and moved > 10 * max(noise, 20), (moved, noise)
+    background = np.all(frames[0] > 250, axis=2).mean()
+    assert 0.3 < background < 0.99  # the cell is in the picture, not filling it
+
+
+# ----------------------------------------------------------------------------- foxglove
+
+
+def test_foxglove_server_sends_tf_and_robot_description(demo_bag: Path) -> None:
+    """A websocket client (subprotocol foxglove.sdk.v1) sees /tf and /robot_description advertised
+    as ROS 2 CDR channels, subscribes, and decodes the URDF and link frames named as the URDF's links."""
+    import json
+    import struct
+    import threading
+
+    import websocket
+    from rosbags.typesys import Stores, get_typestore
+
+    from dualarm_control.app.view.foxglove_view import serve_bag
+
+    stop, ports = threading.Event(), []
+    server = threading.Thread(target=serve_bag, args=(demo_bag, 0), kwargs={"stop": stop, "on_ready": ports.append},
+                              daemon=True)
+    server.start()
+    try:
+        end = time.monotonic() + 30.0
+        while not ports and time.monotonic() < end and server.is_alive():
+            time.sleep(0.05)
+        assert ports, "the server did not start"
+        ws = websocket.create_connection(f"ws://127.0.0.1:{ports[0]}", subprotocols=["foxglove.sdk.v1"], timeout=10)
+        channels: dict[str, dict[str, object]] = {}
+        while not {"/tf", "/robot_description"} <= channels.keys():
+            text = ws.recv()
+            if isinstance(text, str) and json.loads(text)["op"] == "advertise":
+                channels.update({c["topic"]: c for c in json.loads(text)["channels"]})
+        assert channels["/tf"]["schemaName"] == "tf2_msgs/msg/TFMessage"
+        assert channels["/robot_description"]["schemaName"] == "std_msgs/msg/String"
+        assert {c["encoding"] for c in channels.values()} == {"cdr"}
+        assert {"/joint_states", "/diagnostics", "/tf_static"} <= channels.keys()
+        ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+            {"id": 1, "channelId": channels["/robot_description"]["id"]}, {"id": 2, "channelId": channels["/tf"]["id"]}]}))
+        payloads: dict[int, bytes] = {}
+        while len(payloads) < 2:
+            data = ws.recv()
+            if isinstance(data, bytes):
+                opcode, subscription, _ = struct.unpack_from("<BIQ", data)
+                assert opcode == 1
+                payloads.setdefault(subscription, data[13:])
+        ws.close()
+    finally:
+        stop.set()
+        server.join(timeout=10)
+    store = get_typestore(Stores.ROS2_JAZZY)
+    urdf_text = urdf_path().read_text()
+    assert store.deserialize_cdr(payloads[1], "std_msgs/msg/String").data == urdf_text
+    tf = store.deserialize_cdr(payloads[2], "tf2_msgs/msg/TFMessage")
+    assert {(t.header.frame_id, t.child_frame_id) for t in tf.transforms} == {
+        (j.parent, j.child) for j in urdf_joints(urdf_text) if not j.fixed}

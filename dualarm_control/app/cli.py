@@ -198,6 +198,20 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0  # not reached
 
 
+DEMO_VIDEO_SIZE = (320, 240)
+"""Size of the demo's videos [px]: small, so that rendering adds little to the demo (docs/visualization.md)."""
+
+
+def demo_video(bag: Path, out: Path) -> None:
+    """The demo's video of one run (``dualarm view BAG --video``), skipped without the ``view`` extra."""
+    from dualarm_control.app.view.video import VideoError, render_video
+
+    try:
+        render_video(bag, out, size=DEMO_VIDEO_SIZE)
+    except VideoError as exc:
+        print(f"demo: no video of {bag}: {exc}", file=sys.stderr)
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     """The main job: for each solver, three processes over ROS in lockstep with a bag, then
     ``dualarm report`` on the bag, then the in-process experiment, and a comparison of both."""
@@ -224,6 +238,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         if code != 0:
             return code
         reports[name] = json.loads((out / name / "report" / "metrics.json").read_text())[name]
+        demo_video(bag, out / name / "run.mp4")
     print("=== in-process experiment (same scenario and solvers) for comparison", flush=True)
     code = main(["experiment", args.scenario, "--solver", ",".join(solvers), "--output", str(out / "experiment")])
     if code != 0:
@@ -239,7 +254,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
             comparison[name][key] = {"bag": a, "experiment": b, "relative_difference": diff}
             print(f"{name:<24}{key:<9}{a:>12.4f}{b:>12.4f}{diff:>10.2%}")
     (out / "comparison.json").write_text(json.dumps(comparison, indent=2) + "\n")
-    print(f"\nwrote {out}/<solver>/bag, {out}/<solver>/report/, {out}/experiment/ and {out}/comparison.json")
+    print(f"\nwrote {out}/<solver>/bag, {out}/<solver>/report/, {out}/<solver>/run.mp4, {out}/experiment/ and "
+          f"{out}/comparison.json")
     return 0
 
 

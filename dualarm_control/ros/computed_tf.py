@@ -12,9 +12,7 @@ See :mod:`dualarm_control.link_frames` for the frames.
 
 from __future__ import annotations
 
-import tempfile
 from collections.abc import Callable
-from pathlib import Path
 from typing import Final
 
 import numpy as np
@@ -98,9 +96,7 @@ class ComputedTf:
         the number of /tf messages. The URDF is the recorded /robot_description, else the cell's."""
         if not self.enabled or not self._joint_states:
             return 0
-        with tempfile.TemporaryDirectory(prefix="dualarm_tf_") as tmp:
-            frames = (LinkFrames.from_text(self._description, Path(tmp)) if self._description is not None
-                      else LinkFrames(urdf_path()))
+        frames = LinkFrames(self._description if self._description is not None else urdf_path().read_text())
         serializer = TfSerializer()
         reader = JointStateReader()
         order: tuple[tuple[str, ...], np.ndarray] | None = None
