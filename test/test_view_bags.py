@@ -13,6 +13,7 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -20,6 +21,7 @@ import pytest
 
 from dualarm_control.app.bag import bag_info
 from dualarm_control.app.launcher import launch_scenario
+from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.link_frames import urdf_joints
 from dualarm_control.paths import urdf_path
@@ -224,37 +226,37 @@ def test_video_of_the_demo_bag(demo_bag: Path, tmp_path: Path) -> None:
 # ----------------------------------------------------------------------------- foxglove
 
 
-def test_foxglove_server_sends_tf_and_robot_description(demo_bag: Path) -> None:
-    """A websocket client (subprotocol foxglove.sdk.v1) sees /tf and /robot_description advertised
-    as ROS 2 CDR channels, subscribes, and decodes the URDF and link frames named as the URDF's links."""
+def _foxglove_tf_and_description(serve: Any, **kwargs: Any) -> tuple[dict[str, dict[str, Any]], bytes, bytes]:
+    """Run ``serve(port=0, stop=..., on_ready=...)`` in a thread; as a websocket client (subprotocol
+    foxglove.sdk.v1) wait for /tf and /robot_description to be advertised, subscribe to both and
+    return (the advertised channels by topic, the first /robot_description payload, the first /tf payload)."""
     import json
     import struct
     import threading
 
     import websocket
-    from rosbags.typesys import Stores, get_typestore
 
-    from dualarm_control.app.view.foxglove_view import serve_bag
+    stop, ports, errors = threading.Event(), [], []
 
-    stop, ports = threading.Event(), []
-    server = threading.Thread(target=serve_bag, args=(demo_bag, 0), kwargs={"stop": stop, "on_ready": ports.append},
-                              daemon=True)
+    def run() -> None:
+        try:
+            serve(port=0, stop=stop, on_ready=ports.append, **kwargs)
+        except (DualArmError, OSError, RuntimeError) as exc:  # reported below
+            errors.append(exc)
+
+    server = threading.Thread(target=run, daemon=True)
     server.start()
     try:
         end = time.monotonic() + 30.0
         while not ports and time.monotonic() < end and server.is_alive():
             time.sleep(0.05)
-        assert ports, "the server did not start"
+        assert ports, f"the server did not start: {errors}"
         ws = websocket.create_connection(f"ws://127.0.0.1:{ports[0]}", subprotocols=["foxglove.sdk.v1"], timeout=10)
-        channels: dict[str, dict[str, object]] = {}
+        channels: dict[str, dict[str, Any]] = {}
         while not {"/tf", "/robot_description"} <= channels.keys():
             text = ws.recv()
             if isinstance(text, str) and json.loads(text)["op"] == "advertise":
                 channels.update({c["topic"]: c for c in json.loads(text)["channels"]})
-        assert channels["/tf"]["schemaName"] == "tf2_msgs/msg/TFMessage"
-        assert channels["/robot_description"]["schemaName"] == "std_msgs/msg/String"
-        assert {c["encoding"] for c in channels.values()} == {"cdr"}
-        assert {"/joint_states", "/diagnostics", "/tf_static"} <= channels.keys()
         ws.send(json.dumps({"op": "subscribe", "subscriptions": [
             {"id": 1, "channelId": channels["/robot_description"]["id"]}, {"id": 2, "channelId": channels["/tf"]["id"]}]}))
         payloads: dict[int, bytes] = {}
@@ -268,9 +270,38 @@ def test_foxglove_server_sends_tf_and_robot_description(demo_bag: Path) -> None:
     finally:
         stop.set()
         server.join(timeout=10)
+    return channels, payloads[1], payloads[2]
+
+
+def _check_description_and_tf(description: bytes, tf_payload: bytes) -> None:
+    from rosbags.typesys import Stores, get_typestore
+
     store = get_typestore(Stores.ROS2_JAZZY)
     urdf_text = urdf_path().read_text()
-    assert store.deserialize_cdr(payloads[1], "std_msgs/msg/String").data == urdf_text
-    tf = store.deserialize_cdr(payloads[2], "tf2_msgs/msg/TFMessage")
+    assert store.deserialize_cdr(description, "std_msgs/msg/String").data == urdf_text
+    tf = store.deserialize_cdr(tf_payload, "tf2_msgs/msg/TFMessage")
     assert {(t.header.frame_id, t.child_frame_id) for t in tf.transforms} == {
         (j.parent, j.child) for j in urdf_joints(urdf_text) if not j.fixed}
+
+
+def test_foxglove_server_sends_tf_and_robot_description(demo_bag: Path) -> None:
+    """A recorded run served over the Foxglove WebSocket protocol: /tf and /robot_description are
+    advertised as ROS 2 CDR channels beside the signals; a subscriber decodes the URDF and the link
+    frames named as the URDF's links."""
+    from dualarm_control.app.view.foxglove_view import serve_bag
+
+    channels, description, tf = _foxglove_tf_and_description(serve_bag, bag=demo_bag)
+    assert channels["/tf"]["schemaName"] == "tf2_msgs/msg/TFMessage"
+    assert channels["/robot_description"]["schemaName"] == "std_msgs/msg/String"
+    assert {c["encoding"] for c in channels.values()} == {"cdr"}
+    assert {c["schemaEncoding"] for c in channels.values()} == {"ros2msg"}
+    assert {"/joint_states", "/diagnostics", "/tf_static"} <= channels.keys()
+    _check_description_and_tf(description, tf)
+
+
+def test_foxglove_server_of_the_running_cell(sim_node: subprocess.Popen[str]) -> None:
+    """The live feed: the server reads the running sim_node's /robot_description and /joint_states."""
+    from dualarm_control.app.view.foxglove_view import serve_live
+
+    _, description, tf = _foxglove_tf_and_description(serve_live)
+    _check_description_and_tf(description, tf)

@@ -27,6 +27,7 @@ import numpy as np
 
 from dualarm_control.app.bag import open_reader
 from dualarm_control.app.view.recording import JointRecording, read_joint_recording
+from dualarm_control.errors import DualArmError
 from dualarm_control.link_frames import STRING_TYPE, TF_TYPE, LinkFrames, TfSerializer
 
 DEFAULT_PORT: Final = 8765
@@ -107,12 +108,16 @@ class FoxgloveScene:
                                                                    self.frames.transforms(q0, fixed=True)),
                                         log_time=time.time_ns())
 
+    def send_frames(self, stamp: int, q: np.ndarray) -> None:
+        """/tf at joint positions q [rad] (the URDF's joint order), stamped ``stamp`` [ns]."""
+        self.channels["/tf"].log(self.serializer.tf_message(stamp, self.frames.transforms(q)), log_time=time.time_ns())
+
     def send_state(self, k: int) -> None:
         """/tf and /joint_states of joint state ``k``."""
         stamp = int(self.recording.stamps_ns[k])
         q = self.recording.positions[k]
         now = time.time_ns()
-        self.channels["/tf"].log(self.serializer.tf_message(stamp, self.frames.transforms(q)), log_time=now)
+        self.send_frames(stamp, q)
         sec, nsec = divmod(stamp, 1_000_000_000)
         msg = self._joint_state(header=self._header(stamp=self._time(sec=sec, nanosec=nsec), frame_id=""),
                                 name=list(self.recording.joint_names), position=np.asarray(q, dtype=np.float64),
@@ -182,3 +187,123 @@ def serve_bag(bag: Path, port: int = DEFAULT_PORT, host: str = "127.0.0.1", **kw
     """:func:`serve_foxglove` of a recorded run (its joint states, URDF and signals)."""
     recording = read_joint_recording(Path(bag))
     serve_foxglove(recording, port, host, signals=bag_signals(Path(bag), recording), **kwargs)
+
+
+LIVE_SIGNALS: Final = {"/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+                        "/velocity_controller/commands": "std_msgs/msg/Float64MultiArray"}
+"""Topics of the running cell forwarded as received beside /joint_states and the frames."""
+
+
+def serve_live(port: int = DEFAULT_PORT, host: str = "127.0.0.1", *, stop: threading.Event | None = None,
+               on_ready: Callable[[int], None] | None = None, wait_s: float = 30.0) -> None:
+    """Serve the running cell (this ROS domain) over the Foxglove WebSocket protocol until ``stop``.
+
+    Subscribes /robot_description (transient local; waits up to ``wait_s`` for it), /joint_states
+    and :data:`LIVE_SIGNALS`; each joint state is forwarded with its /tf (the movable joints),
+    /robot_description and /tf_static are re-sent when a client subscribes to them.
+    No rclpy signal handlers: runs in any thread.
+    """
+    import foxglove
+    from rclpy.node import Node
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    from dualarm_control.ros.cdr import JointStateReader
+    from dualarm_control.ros.computed_tf import string_data
+    from dualarm_control.ros.graph import message_class
+    from dualarm_control.ros.node import init_rclpy
+
+    stop = stop or threading.Event()
+    context = init_rclpy([])
+    try:
+        node = Node("_dualarm_foxglove", context=context, start_parameter_services=False)
+        from rclpy.executors import SingleThreadedExecutor
+
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        description: list[str] = []
+
+        def on_description(data: Any) -> None:
+            description.append(string_data(bytes(data)))
+
+        node.create_subscription(message_class("std_msgs/msg/String"), "/robot_description", on_description, latched,
+                                 raw=True)
+        end = time.monotonic() + wait_s
+        while not description and not stop.is_set():
+            if time.monotonic() > end:
+                raise DualArmError(f"no /robot_description within {wait_s:.0f} s: is the cell (sim_node) running "
+                                   "in this ROS_DOMAIN_ID?")
+            executor.spin_once(timeout_sec=0.1)
+        if stop.is_set():
+            return
+        joint_names = tuple(LinkFrames(description[0]).joint_names)
+        empty = JointRecording(np.zeros(1, dtype=np.int64), np.zeros((1, len(joint_names))), joint_names,
+                               description[0])
+        resend = threading.Event()
+        server = foxglove.start_server(host=host, port=port, server_listener=_resend_listener(resend))
+        try:
+            scene = FoxgloveScene(empty, [RawTopic(t, n, (), ()) for t, n in LIVE_SIGNALS.items()])
+            reader = JointStateReader()
+            order: dict[tuple[str, ...], np.ndarray] = {}
+            started: list[bool] = []
+
+            def on_joint_state(data: bytes) -> None:
+                stamp, names, position, _ = reader(data)
+                index = order.get(names)
+                if index is None:
+                    where = {n: i for i, n in enumerate(names)}
+                    index = order[names] = np.array([where[n] for n in joint_names])
+                if not started:  # /tf_static at the first joint state
+                    started.append(True)
+                    scene.recording = JointRecording(np.array([stamp], dtype=np.int64), position[index][None, :],
+                                                     joint_names, description[0])
+                    scene.send_latched()
+                scene.send_frames(stamp, position[index])
+                scene.channels["/joint_states"].log(data, log_time=time.time_ns())
+
+            def forward(topic: str) -> Callable[[bytes], None]:
+                return lambda data: scene.channels[topic].log(data, log_time=time.time_ns())
+
+            node.create_subscription(message_class("sensor_msgs/msg/JointState"), "/joint_states", on_joint_state,
+                                     10, raw=True)
+            for topic, type_name in LIVE_SIGNALS.items():
+                node.create_subscription(message_class(type_name), topic, forward(topic), 10, raw=True)
+            if on_ready is not None:
+                on_ready(server.port)
+            while not stop.is_set():
+                if resend.is_set() and started:
+                    resend.clear()
+                    scene.send_latched()
+                executor.spin_once(timeout_sec=0.05)
+        finally:
+            server.stop()
+    finally:
+        context.try_shutdown()
+
+
+def add_foxglove_arguments(parser: Any) -> None:
+    """``--foxglove``, ``--foxglove-port`` and ``--speed`` on a verb taking a BAG (``dualarm view``)."""
+    parser.add_argument("--foxglove", action="store_true",
+                        help="serve the run over the Foxglove WebSocket protocol (Foxglove app: Open connection, "
+                        "Foxglove WebSocket, ws://127.0.0.1:PORT)")
+    parser.add_argument("--foxglove-port", type=int, default=DEFAULT_PORT, metavar="PORT",
+                        help="port of the Foxglove WebSocket server (default: %(default)s)")
+    parser.add_argument("--speed", type=float, default=1.0, help="replay speed of a bag (default: %(default)g)")
+
+
+def foxglove_from_args(bag: str | None, args: Any) -> int:
+    """Handle ``--foxglove`` (after :func:`add_foxglove_arguments`): serve ``bag``, or the running cell
+    when None, until Ctrl-C; 0."""
+    def ready(port: int) -> None:
+        what = f"replaying {bag} in a loop" if bag is not None else "the running cell"
+        print(f"Foxglove WebSocket server on ws://127.0.0.1:{port} (Foxglove: Open connection > Foxglove "
+              f"WebSocket); {what}; Ctrl-C stops", flush=True)
+
+    try:
+        if bag is None:
+            serve_live(args.foxglove_port, on_ready=ready)
+        else:
+            serve_bag(Path(bag), args.foxglove_port, speed=args.speed, on_ready=ready)
+    except KeyboardInterrupt:
+        pass
+    return 0
