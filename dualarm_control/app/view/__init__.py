@@ -1,1 +1,2 @@
-"""Seeing the cell: ``dualarm view`` (Rerun: live, from a bag, web or saved) and its helpers."""
+"""Seeing the cell: ``dualarm view`` (Rerun: live, from a bag, web or saved; a video of a bag; a Foxglove
+WebSocket server) and its helpers."""

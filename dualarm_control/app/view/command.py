@@ -1,4 +1,6 @@
-"""``dualarm view [BAG]``: the cell in Rerun, live from the running cell or replayed from a bag.
+"""``dualarm view [BAG]``: the cell in Rerun, live from the running cell or replayed from a bag; with
+``--video`` a video of a bag (``video.py``), with ``--foxglove`` a Foxglove WebSocket server
+(``foxglove_view.py``).
 
 Register with :func:`add_view_parser` (one call in ``cli.py``).
 """
@@ -20,23 +22,45 @@ NO_VIEWER = 2
 
 def add_view_parser(sub: Any) -> None:
     """The ``view`` verb on the ``dualarm`` sub-parsers."""
+    from dualarm_control.app.view.foxglove_view import add_foxglove_arguments
     from dualarm_control.app.view.server import DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT
+    from dualarm_control.app.view.video import add_video_arguments
 
     view = sub.add_parser(
-        "view", help="see the cell in Rerun: 3D (URDF posed by the joint states) and plots, live or from a bag",
-        description="Log a run of the cell to Rerun: the cell's URDF posed by the joint states, the relative target "
-        "as axes in the left tool frame, and plots on one time axis (||qd||_0 and ||qd||_1, tracking errors, solve "
-        "and cycle time, solver status changes; for task scenarios the task values with their bounds and the "
-        "contact force). With BAG, replay that recording; without, subscribe to the running cell (/joint_states, "
-        "/velocity_controller/commands, /relative_target, /diagnostics) until Ctrl-C. Needs the view extra "
-        "(pip install 'dualarm_control[view]').")
+        "view", help="see the cell: Rerun 3D and plots (live or from a bag), a video of a bag, or a Foxglove server",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="""See a run of the cell, live (no BAG: subscribe to the running cell until Ctrl-C) or from a bag.
+Needs the view extra (pip install 'dualarm_control[view]'). Runs in its own process.
+
+modes:
+  dualarm view [BAG] [--web] [--save FILE.rrd]
+      Rerun (default): the cell's URDF posed by the joint states, the relative target as axes in
+      the left tool frame, and plots on one time axis (||qd||_0 and ||qd||_1, tracking errors,
+      solve and cycle time, solver status changes; for task scenarios the task values with their
+      bounds and the contact force). Native viewer when there is a display; --web serves the web
+      viewer on 127.0.0.1 and prints its URL; --save writes a recording (open: rerun FILE.rrd).
+      Live: /joint_states, /velocity_controller/commands, /relative_target, /diagnostics.
+  dualarm view BAG --video run.mp4 [--fps F] [--size WxH]
+      a video of the recorded run without any viewer: pybullet's offscreen renderer, H.264 by
+      the ffmpeg of imageio-ffmpeg.
+  dualarm view [BAG] --foxglove [--foxglove-port PORT] [--speed S]
+      a Foxglove WebSocket server on 127.0.0.1 (Foxglove app: Open connection > Foxglove
+      WebSocket > ws://127.0.0.1:PORT): /robot_description, /tf_static, /tf, /joint_states and the
+      signals as ROS 2 messages; a bag is replayed in a loop, else the running cell is relayed.
+See docs/visualization.md.""")
     view.add_argument("bag", nargs="?", help="rosbag2 directory to replay (default: live)")
-    view.add_argument("--web", action="store_true",
-                      help="serve the web viewer on 127.0.0.1 and print its URL (serves until Ctrl-C)")
-    view.add_argument("--save", metavar="FILE.rrd", help="write a Rerun recording (open it with: rerun FILE.rrd)")
-    view.add_argument("--grpc-port", type=int, default=DEFAULT_GRPC_PORT, help="--web: gRPC port (default: %(default)s)")
-    view.add_argument("--web-port", type=int, default=DEFAULT_WEB_PORT, help="--web: page port (default: %(default)s)")
-    view.add_argument("--duration", type=float, metavar="S", help="live: stop after S seconds")
+    rerun_group = view.add_argument_group("Rerun (default mode)")
+    rerun_group.add_argument("--web", action="store_true",
+                             help="serve the web viewer on 127.0.0.1 and print its URL (serves until Ctrl-C)")
+    rerun_group.add_argument("--save", metavar="FILE.rrd",
+                             help="write a Rerun recording (open it with: rerun FILE.rrd)")
+    rerun_group.add_argument("--grpc-port", type=int, default=DEFAULT_GRPC_PORT,
+                             help="--web: gRPC port (default: %(default)s)")
+    rerun_group.add_argument("--web-port", type=int, default=DEFAULT_WEB_PORT,
+                             help="--web: page port (default: %(default)s)")
+    rerun_group.add_argument("--duration", type=float, metavar="S", help="live: stop after S seconds")
+    add_video_arguments(view.add_argument_group("video of a bag (--video)"))
+    add_foxglove_arguments(view.add_argument_group("Foxglove WebSocket server (--foxglove)"))
     view.set_defaults(func=cmd_view)
 
 
@@ -50,7 +74,27 @@ def _has_display() -> bool:
 
 
 def cmd_view(args: argparse.Namespace) -> int:
-    """``dualarm view``: log the bag or the live cell to the chosen sinks."""
+    """``dualarm view``: a video (``--video``), a Foxglove server (``--foxglove``), or else Rerun."""
+    if args.video and args.foxglove:
+        raise DualArmError("dualarm view: --video and --foxglove are separate modes: give one")
+    rerun_options = [name for name, given in (("--web", args.web), ("--save", args.save),
+                                              ("--duration", args.duration is not None)) if given]
+    if (args.video or args.foxglove) and rerun_options:
+        mode = "--video" if args.video else "--foxglove"
+        raise DualArmError(f"dualarm view: {', '.join(rerun_options)} belong to the Rerun mode, not to {mode}")
+    if args.video:
+        from dualarm_control.app.view.video import video_from_args
+
+        return video_from_args(args.bag, args)
+    if args.foxglove:
+        from dualarm_control.app.view.foxglove_view import foxglove_from_args
+
+        return foxglove_from_args(args.bag, args)
+    return _rerun_view(args)
+
+
+def _rerun_view(args: argparse.Namespace) -> int:
+    """The Rerun mode: log the bag or the live cell to the chosen sinks."""
     try:
         import rerun as rr
     except ImportError:
