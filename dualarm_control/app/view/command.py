@@ -18,6 +18,9 @@ from typing import Any
 from dualarm_control.errors import DualArmError
 
 NO_VIEWER = 2
+LIVE_VIEW_NICENESS = 19
+"""A live view lowers its own CPU priority to this niceness (the lowest): on a busy machine the
+control nodes come first (docs/visualization.md, what the view costs the control loop)."""
 
 
 def add_view_parser(sub: Any) -> None:
@@ -69,6 +72,12 @@ def _interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
 
+def yield_to_the_cell() -> None:
+    """Lower this process's priority to :data:`LIVE_VIEW_NICENESS` before any of its threads start
+    (Linux niceness is per thread and inherited by the threads and processes started later)."""
+    os.nice(max(0, LIVE_VIEW_NICENESS - os.nice(0)))
+
+
 def _has_display() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
@@ -89,6 +98,8 @@ def cmd_view(args: argparse.Namespace) -> int:
     if args.foxglove:
         from dualarm_control.app.view.foxglove_view import foxglove_from_args
 
+        if args.bag is None:
+            yield_to_the_cell()
         return foxglove_from_args(args.bag, args)
     return _rerun_view(args)
 
@@ -106,6 +117,8 @@ def _rerun_view(args: argparse.Namespace) -> int:
         print("dualarm view: no display for the native viewer. Use --web (open the printed URL in a browser) or "
               "--save FILE.rrd (then: rerun FILE.rrd on a machine with a display).", file=sys.stderr)
         return NO_VIEWER
+    if args.bag is None:
+        yield_to_the_cell()
     arrays = None
     if args.bag:
         from dualarm_control.app.view.from_bag import bag_run_arrays
