@@ -46,13 +46,15 @@ What is guaranteed for the angular motion (vmax, amax, jmax the angular limits):
   rest, or along the current motion's axis): ``s`` stays on a line through 0, ``J_l(s) s' = s'``
   and the curvature terms of (2) vanish: ``||alpha|| <= amax`` and ``||dalpha/dt|| <= jmax``
   exactly (up to rounding).
-* Otherwise (a preemption turning the rotation axis) the limits given to ruckig are
-  reduced by the curvature terms of (2) over one cycle, ``amax - vmax^3 T / 3`` and
-  ``jmax - vmax amax / 2 - vmax^3 / 3`` (from ``dalpha/dt = s''' + 1/2 s' x s'' +
-  1/3 s' x (s' x s')`` at ``s = 0``), so that ``||alpha|| <= amax`` and each cycle's change
-  ``||alpha_k+1 - alpha_k|| <= jmax T`` hold up to terms of order ``(vmax T)^2``. (If the
-  current state is outside every such box, e.g. it was produced under larger limits, ruckig
-  first brakes the excess within the limits.)
+* Otherwise (a preemption turning the rotation axis) the jerk given to ruckig is reduced
+  by the curvature terms, ``jmax - vmax amax / 2 - vmax^3 / 3`` (from ``dalpha/dt = s''' +
+  1/2 s' x s'' + 1/3 s' x (s' x s')`` at ``s = 0``), so each cycle's change
+  ``||alpha_k+1 - alpha_k|| <= jmax T`` up to terms of order ``(vmax T)^2``; and
+  ``||alpha|| <= amax + vmax^3 T / 3`` (the curvature term of (2) after one cycle,
+  ``||s|| <= vmax T``: 2e-4 rad/s^2 with the default limits at T = 5 ms). (A state outside
+  every box, e.g. produced under larger limits, is first braked back by ruckig within the
+  limits.) Coordinates without motion get a 1e-3 share, not 0 (ruckig refuses zero
+  limits): they only move by rounding.
 
 Position and orientation are each time-optimal and not synchronized with each other, so a
 goal from rest takes ``max(position time, rotation time)``, which is the duration of a
@@ -104,7 +106,9 @@ DEFAULT_PERIOD = 0.005  # s
 DEFAULT_JOG_TIMEOUT = 0.1  # s
 _SERIES_ANGLE = 1e-2  # rad: below it the Jacobian coefficients use their Taylor series
 _PARALLEL = 1e-9  # relative cross-product norm under which two directions count as parallel
-_MIN_SHARE = 1e-9  # smallest box share b_i given to ruckig (a zero limit is invalid input)
+_MIN_SHARE = 1e-9
+_SIDE_SHARE = 0.3  # least box share of a sideways coordinate that moves (its braking room)
+_SIDE_STATE = 1e-9  # sideways state (relative to the limits) below which it counts as rounding  # smallest box share b_i given to ruckig (a zero limit is invalid input)
 
 
 @dataclass(frozen=True)
@@ -201,8 +205,9 @@ def rotation_box(direction: FloatArray, x: FloatArray, y: FloatArray) -> tuple[F
 
     Returns:
         ``Q`` with first column along ``direction`` (else along ``x``, ``y``), and ``b >= 0``
-        with ``||b|| = 1`` and ``|Q^T x| <= b``, ``|Q^T y| <= b`` componentwise, ``b_1`` as
-        large as possible. When no box along ``direction`` contains both (``x`` and ``y`` large
+        with ``||b|| = 1`` and ``|Q^T x| <= b``, ``|Q^T y| <= b`` componentwise: a sideways
+        coordinate (2, 3) that moves gets at least a 0.3 share to brake in (without a floor its
+        box would shrink with its state and it would never stop), the rest goes to ``b_1``. When no box along ``direction`` contains both (``x`` and ``y`` large
         and apart), the basis bisects ``x`` and ``y`` instead: ``b = max(|x|, |y|) (cos(phi/2),
         sin(phi/2), 0)`` scaled to unit norm, which contains both while ``||x||, ||y|| <= 1``.
     """
@@ -214,9 +219,11 @@ def rotation_box(direction: FloatArray, x: FloatArray, y: FloatArray) -> tuple[F
     hint = x if float(np.linalg.norm(np.cross(first, x))) > float(np.linalg.norm(np.cross(first, y))) else y
     q = _basis(first, hint)
     c = np.maximum(np.abs(q.T @ x), np.abs(q.T @ y))
-    rest = float(c[1] ** 2 + c[2] ** 2)
-    if rest + float(c[0]) ** 2 <= 1.0:
-        return q, np.array([math.sqrt(1.0 - rest), c[1], c[2]])
+    side = np.where(c[1:] > _SIDE_STATE, np.maximum(c[1:], _SIDE_SHARE), c[1:])  # room to brake sideways
+    for sides in (side, c[1:]):
+        rest = float(sides @ sides)
+        if rest + float(c[0]) ** 2 <= 1.0:
+            return q, np.array([math.sqrt(1.0 - rest), *sides])
     ux, uy = _unit(x), _unit(y)
     assert ux is not None and uy is not None  # both nonzero, else the first box fits
     if ux @ uy < 0.0:
@@ -224,6 +231,12 @@ def rotation_box(direction: FloatArray, x: FloatArray, y: FloatArray) -> tuple[F
     q = _basis(_unit(ux + uy), ux - uy)  # type: ignore[arg-type]
     c = np.maximum(np.abs(q.T @ x), np.abs(q.T @ y))
     return q, c / float(np.linalg.norm(c))
+
+
+def _in_ball(v: FloatArray) -> FloatArray:
+    """``v`` scaled into the unit ball (a state beyond the limits by rounding, or by a limit change)."""
+    n = float(np.linalg.norm(v))
+    return v / n if n > 1.0 else v
 
 
 def _parallel(*vectors: FloatArray) -> bool:
@@ -415,9 +428,8 @@ class OnlineTrajectory:
             return
         straight = _parallel(direction, self.w, self.alpha)
         if not straight:  # curvature terms of (2): see the module docstring
-            amax = max(amax - vmax**3 * self.period / 3.0, 0.5 * amax)
-            jmax = max(jmax - vmax * lim.max_angular_acceleration / 2.0 - vmax**3 / 3.0, 0.5 * jmax)
-        q, b = rotation_box(direction, self.w / vmax, self.alpha / amax)
+            jmax = max(jmax - vmax * amax / 2.0 - vmax**3 / 3.0, 0.5 * jmax)
+        q, b = rotation_box(direction, _in_ball(self.w / vmax), _in_ball(self.alpha / amax))
         share = np.maximum(b, _MIN_SHARE)
         inp = self._rin
         inp.current_position = [0.0] * 3
