@@ -132,7 +132,7 @@ class ScriptDriver:
     Call :meth:`feed` once per cycle, before ``generator.step()``. A command at time ``t`` is
     given when ``generator.cycles == round(t / period)``, i.e. it shapes the sample of time
     ``(k + 1) * period``; its stamp is ``t`` (a twist's repeats: the cycle's time). A twist is
-    repeated every cycle in ``[t, t + duration)``.
+    repeated every cycle in ``[t, t + duration)`` unless a later command comes first.
 
     Attributes:
         results: ``(time [s], command, result)`` of every command given, in order.

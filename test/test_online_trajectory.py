@@ -8,11 +8,17 @@ import math
 import numpy as np
 import pinocchio as pin
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from dualarm_control.drive_commands import QUATERNION_NORM_TOLERANCE
-from dualarm_control.goal_script import ScriptError, TimedGoal, TimedTwist, parse_goals, run_script
+from dualarm_control.goal_script import (
+    ScriptError,
+    TimedGoal,
+    TimedTwist,
+    parse_goals,
+    run_script,
+)
 from dualarm_control.online_trajectory import (
     IDLE,
     JOGGING,
@@ -25,7 +31,12 @@ from dualarm_control.online_trajectory import (
     rotation_box,
     status_values,
 )
-from dualarm_control.trajectory import MotionLimits, RelativeTrajectory, Segment, TargetSample
+from dualarm_control.trajectory import (
+    MotionLimits,
+    RelativeTrajectory,
+    Segment,
+    TargetSample,
+)
 
 T = 0.005
 LIMITS = MotionLimits()
@@ -34,7 +45,7 @@ R0 = np.eye(3)
 REL = 1e-6  # relative rounding allowance on the limits
 ANGULAR_SPEED_GAP = 0.02  # known gap of preemptions turning the axis (docs/driving.md); 0 from rest
 
-SETTINGS = settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=False)
+SETTINGS = settings(max_examples=5, deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=False)
 
 
 def _vec(lo: float, hi: float) -> st.SearchStrategy[list[float]]:
@@ -121,7 +132,7 @@ def test_random_goals_and_twists_are_continuous_within_limits_and_end_at_rest(pl
 
 @pytest.mark.xfail(strict=False, reason="KNOWN GAP (docs/driving.md): some large rotations about a tilted axis "
                    "take up to ~5 cycles longer than the segment (the per-cycle box falls back near the end)")
-@SETTINGS
+@settings(max_examples=3, deadline=None, phases=[Phase.generate])  # no shrinking of the known gap
 @given(goals)
 def test_from_rest_a_goal_takes_no_longer_than_a_rest_to_rest_segment(goal) -> None:
     check_time_from_rest(goal)

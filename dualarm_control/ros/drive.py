@@ -26,7 +26,12 @@ from typing import Any, TextIO
 
 import yaml
 
-from dualarm_control.drive_commands import CommandError, finite_vector, rotation_from_quaternion, rotation_from_rpy
+from dualarm_control.drive_commands import (
+    CommandError,
+    finite_vector,
+    rotation_from_quaternion,
+    rotation_from_rpy,
+)
 from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import LEFT_TOOL
 from dualarm_control.online_trajectory import (
@@ -173,6 +178,7 @@ def topic_pub(topic: str, type_name: str, values: str = "{}", *, rate: float = 1
     cls = message_class(type_name)
     data = parse_values(values)
     wait = wait_matching if wait_matching is not None else int(times != 0)
+    set_message_fields(cls(), data)  # a bad field fails before any waiting (ros2cli checks after)
     with tool_node("_dualarm_topic_pub") as (node, executor, stop):
         pub = node.create_publisher(cls, fq_topic(topic), 10)
         if not wait_for_subscriptions(pub, executor, stop, wait, max_wait, out):
