@@ -384,3 +384,18 @@ def test_script_run_is_deterministic_continuous_and_ends_on_the_last_goal() -> N
     assert np.linalg.norm(runs[0][round(0.8 / T) - 1].twist) > 0.0
     # the twist ran: somewhere the relative y velocity is the commanded 0.02 m/s
     assert max(s.linear_velocity[1] for s in runs[0]) == pytest.approx(0.02, abs=1e-12)
+
+
+def test_the_demo_script_file_runs_to_its_last_goal() -> None:
+    from pathlib import Path
+
+    import yaml
+
+    data = yaml.safe_load((Path(__file__).parent / "data" / "interactive_demo.yaml").read_text())
+    commands = parse_goals(data["goals"])
+    gen = OnlineTrajectory(np.array([0.0, 0.0, 0.16]), np.eye(3), LIMITS, T)
+    start = gen.sample()
+    samples = run_script(commands, gen, 9.0)
+    check_limits_and_continuity(samples, start)
+    assert gen.state == REACHED
+    np.testing.assert_allclose(samples[-1].position, [0.0, 0.0, 0.16], atol=1e-12)
