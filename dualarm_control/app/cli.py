@@ -376,6 +376,7 @@ def _add_topic_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     inf.add_argument("topic")
     inf.add_argument("--spin-time", **spin)
     inf.set_defaults(func=cmd_topic_info)
+    __import__("dualarm_control.ros.drive").ros.drive.add_topic_pub_parser(verbs)
 
 
 def cmd_param(args: argparse.Namespace) -> int:
@@ -561,6 +562,7 @@ def build_parser() -> argparse.ArgumentParser:
     from dualarm_control.app.plan.command import add_plan_parser
 
     add_plan_parser(sub, cmd_plan)
+    __import__("dualarm_control.ros.drive").ros.drive.add_drive_parsers(sub)
     return parser
 
 
