@@ -144,6 +144,11 @@ class ScriptDriver:
     _next: int = 0
     _active: TimedTwist | None = None  # the twist being repeated (a later command ends it)
 
+    @property
+    def given(self) -> bool:
+        """Every command has been given (a twist's repeats may still follow)."""
+        return self._next >= len(self.commands)
+
     def feed(self) -> list[CommandResult]:
         """Give the commands due at the generator's current cycle; their results."""
         gen = self.generator
