@@ -372,6 +372,20 @@ class OnlineTrajectory:
         self._pos_done = self._rot_done = False
         return CommandResult(True, "clipped to the velocity limits" if clipped else "")
 
+    def hold(self, position: FloatArray, rotation: FloatArray) -> None:
+        """Stop at once at ``(position [m] (3,), rotation (3, 3))`` (where the arms are): a target at
+        rest, state :data:`IDLE`, the goal kept for reporting. For a node giving up on a goal the arms
+        cannot reach (stalled): a jump of the target to the measured pose, not a planned motion."""
+        self.p = np.array(_frozen_vector(position, "position"))
+        self.r = np.array(_check_rotation(rotation, "rotation"))
+        self.v, self.a = np.zeros(3), np.zeros(3)
+        self.w, self.alpha = np.zeros(3), np.zeros(3)
+        self.twist = None
+        self.state = IDLE
+        self._pos_done = self._rot_done = True
+        self._pos_left = self._rot_left = 0.0
+        self._reset_position_input()
+
     def _accept(self, stamp: float | None) -> None:
         self.commands += 1
         if stamp is not None:

@@ -70,7 +70,7 @@ class GoalsStream:
         """The target at ``t`` [s] (times must not decrease)."""
         self.advance(t)
         target = self.generator.sample()
-        return StreamSample(target, None, target.segment_name)
+        return StreamSample(target, None, f"{target.segment_name} {target.segment}")
 
 
 @dataclass(frozen=True)

@@ -121,7 +121,8 @@ class SegmentsStream:
 
     def sample(self, t: float) -> StreamSample:
         target = self.trajectory.sample(t)
-        return StreamSample(target, None, target.segment_name)
+        stage = f"segment {target.segment + 1}/{len(self.trajectory.segments)} '{target.segment_name}'"
+        return StreamSample(target, None, stage)
 
 
 def parse_segments(flat: Mapping[str, Any]) -> SegmentsSource:
