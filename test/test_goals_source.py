@@ -54,3 +54,46 @@ def test_bad_goals_entry_is_a_scenario_error_naming_it(tmp_path: Path) -> None:
     path.write_text(bad)
     with pytest.raises(ScenarioError, match=r"scenario.goals\[1\].rpy: expected 3 numbers"):
         load_scenario(str(path))
+
+
+def test_goal_monitor_reports_reached_and_stalled_with_the_joints_at_a_limit(demo: tuple) -> None:
+    from dualarm_control.drive_monitor import GoalMonitor
+    from dualarm_control.online_trajectory import STALLED, GoalProgress
+
+    scenario, model = demo
+    q = scenario.initial_positions.copy()
+    q[3] = model.q_max[3]  # left joint 4 at its upper limit
+    p, r = model.relative_pose(q)
+    monitor = GoalMonitor(model, stall_time=1.0)
+    arrived = GoalProgress(REACHED, 2.0, 0.0, 0.0, 0.0)
+    assert monitor.judge(arrived, (p, r), q, 0.0).state == REACHED  # the arms are on the goal
+    monitor.reset()
+    far = (p + np.array([0.0, 0.0, 0.01]), r)
+    assert monitor.judge(GoalProgress("moving", 2.0, 0.01, 0.0, 1.0), far, q, 0.0).state == "moving"
+    assert monitor.judge(arrived, far, q, 0.5).state == "moving"  # the target arrived: 1 s to follow
+    verdict = monitor.judge(arrived, far, q, 1.5)
+    assert verdict.state == STALLED and verdict.distance == pytest.approx(0.01)
+    assert "10.00 mm" in verdict.reason and model.joint_names[3] in verdict.reason
+    assert monitor.judge(arrived, far, q, 2.0).state == STALLED  # until the next goal
+
+
+@pytest.mark.slow
+def test_interactive_demo_lockstep_bag_metrics_equal_in_process(demo: tuple, tmp_path: Path) -> None:
+    """The scripted goals over ROS in lockstep (three processes, a bag) give the in-process metrics."""
+    from dualarm_control.app.record.bag import report
+    from dualarm_control.app.record.report import summarize_run
+    from dualarm_control.app.run.experiment import run_scenario
+    from dualarm_control.app.run.launcher import launch_scenario
+    from dualarm_control.controller import controller_params
+
+    scenario, model = demo
+    bag = tmp_path / "bag"
+    assert launch_scenario("interactive_demo", [], ["-p", "solver:=sparse_qp"], True, bag, timeout=400.0) == 0
+    from_bag = report(bag, tmp_path / "report")["sparse_qp"]
+    in_process = summarize_run(run_scenario(scenario, controller_params({"solver": "sparse_qp"}), model), scenario,
+                               model)
+    for key in ("l0_mean", "l1_mean", "l2_mean", "duration_s"):
+        assert from_bag[key] == pytest.approx(in_process[key], rel=1e-8), key
+    # the bag's joint states are the sim's at the command's cycle (measured 1e-6 relative apart here)
+    assert from_bag["max_joint_acceleration"] == pytest.approx(in_process["max_joint_acceleration"], rel=1e-5)
+    assert from_bag["final_position_error_m"] == pytest.approx(in_process["final_position_error_m"], abs=1e-9)
