@@ -399,3 +399,29 @@ def test_the_demo_script_file_runs_to_its_last_goal() -> None:
     check_limits_and_continuity(samples, start)
     assert gen.state == REACHED
     np.testing.assert_allclose(samples[-1].position, [0.0, 0.0, 0.16], atol=1e-12)
+
+
+def test_a_state_one_cycle_from_rest_on_the_goal_ends_there_where_ruckig_fails() -> None:
+    """Ruckig raises on this rotation state (seen live after a jog, then a goal at the same pose):
+    the generator snaps to rest on the goal instead (a change within the limits x T)."""
+    import ruckig
+
+    inp = ruckig.InputParameter(3)
+    inp.current_velocity = [1.786267844765675e-09, -1.067365291879152e-13, 2.072414497731408e-14]
+    inp.current_acceleration = [-4.226426200983338e-06, 2.156558680271576e-10, -3.08528824445894e-23]
+    inp.target_position = [5.033173289463024e-13, -5.998365192380274e-25, 4.439485934983622e-30]
+    inp.max_velocity, inp.max_acceleration, inp.max_jerk = [0.5, 5e-4, 5e-4], [1.0, 1e-3, 1e-3], [5.0, 5e-3, 5e-3]
+    with pytest.raises(ruckig.RuckigError):
+        ruckig.Ruckig(3, T).update(inp, ruckig.OutputParameter(3))
+    gen = OnlineTrajectory(np.zeros(3), np.eye(3), LIMITS, T)
+    gen.command_goal(np.zeros(3), pin.exp3(np.array(inp.target_position)))
+    gen.w, gen.alpha = np.array(inp.current_velocity), np.array(inp.current_acceleration)
+
+    class Failing:  # ruckig as it answered live (the exact state is not rebuilt here: its basis differs)
+        def update(self, *_: object) -> None:
+            raise ruckig.RuckigError("[ruckig] error in step 2 in dof: 0")
+
+    gen._rot = Failing()  # type: ignore[assignment]
+    sample = gen.step()
+    assert gen.state == REACHED and sample.done
+    assert not np.any(sample.angular_velocity) and not np.any(sample.angular_acceleration)

@@ -85,6 +85,13 @@ class Driver:
         self.spin_until(check)
         return max(d for d, _ in inside), max(a for _, a in inside)
 
+    def settled(self, xyz, quat, seconds=1.0):
+        """The errors after ``seconds`` more (the arms converging on the goal)."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+        return self.errors(xyz, quat)
+
 
 def stamp_s(stamp):
     return stamp.sec + 1e-9 * stamp.nanosec
@@ -92,12 +99,13 @@ def stamp_s(stamp):
 
 def goals(d):
     p0, q0 = d.pose
-    out = {"reached": []}
+    out = {"reached": [], "settled": []}
     plan = [((p0[0] + 0.03, p0[1], p0[2]), q0),
             ((p0[0] - 0.02, p0[1] + 0.03, p0[2] + 0.02), qmul(about_z(0.2), q0))]
     for xyz, quat in plan:
         d.send(xyz, quat)
         out["reached"].append(d.arrive(xyz, quat))
+        out["settled"].append(d.settled(xyz, quat))
     start, _ = d.pose
     far = (start[0], start[1] - 0.10, start[2])
     d.send(far, q0)
@@ -112,6 +120,7 @@ def goals(d):
 
     d.node.create_timer(0.01, track)
     out["reached"].append(d.arrive(final, q0))
+    out["settled"].append(d.settled(final, q0))
     out["preempted_at_m"] = math.dist(start, far) - nearest[0]
     out["nearest_to_far_m"] = nearest[0]
     return out
