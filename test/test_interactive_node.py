@@ -90,3 +90,19 @@ def test_live_limit_is_validated(cell: Launch) -> None:
                           timeout=120)
     assert good.returncode == 0, good.stdout + good.stderr
     cell.wait_for("limits changed: max_linear_velocity=0.08")
+
+
+def test_goal_out_of_the_joint_limits_ends_stalled_not_in_a_hang(cell: Launch) -> None:
+    """2.7 m apart is inside the reach bound (2.870 m) but not in the arms' workspace: stalled,
+    with the remaining error and the joints at a limit; `dualarm goal --wait` exits 1."""
+    cli = [sys.executable, "-m", "dualarm_control.app.cli"]
+    for name, value in (("max_linear_velocity", "0.25"), ("max_linear_acceleration", "1.0")):
+        done = subprocess.run([*cli, "param", "set", "/trajectory_node", f"limits.{name}", value], cwd=REPO,
+                              check=False, capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stdout + done.stderr
+    done = subprocess.run([*cli, "goal", "--xyz", "0", "0", "2.7", "--rpy", "0", "0", "0", "--wait", "--timeout", "200"],
+                          cwd=REPO, check=False, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 1, done.stdout + done.stderr
+    last = done.stdout.strip().splitlines()[-1]
+    assert last.startswith("stalled: ") and "remaining error" in last and "joints at a limit: left_joint" in last
+    cell.wait_for("goal stalled (stamp")
