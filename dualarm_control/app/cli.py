@@ -385,7 +385,9 @@ def _add_topic_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     inf.add_argument("topic")
     inf.add_argument("--spin-time", **spin)
     inf.set_defaults(func=cmd_topic_info)
-    __import__("dualarm_control.ros.drive").ros.drive.add_topic_pub_parser(verbs)
+    from dualarm_control.ros.drive import add_topic_pub_parser
+
+    add_topic_pub_parser(verbs)
 
 
 def cmd_param(args: argparse.Namespace) -> int:
@@ -572,7 +574,9 @@ def build_parser() -> argparse.ArgumentParser:
     from dualarm_control.app.plan.command import add_plan_parser
 
     add_plan_parser(sub, cmd_plan)
-    __import__("dualarm_control.ros.drive").ros.drive.add_drive_parsers(sub)
+    from dualarm_control.ros.drive import add_drive_parsers
+
+    add_drive_parsers(sub)
     return parser
 
 

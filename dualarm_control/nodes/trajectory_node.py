@@ -151,7 +151,8 @@ class TrajectoryNode:
             self.start_ns = stamp if self.lockstep else self.node.get_clock().now().nanoseconds
             if self.drive is not None and isinstance(self.stream, GoalsStream):
                 self.drive.start(self.stream.generator)
-            self.log.info(f"targets: {self.stream.end:.2f} s (with settle {self.scenario.settle_time:.2f} s)")
+            if self.drive is None:
+                self.log.info(f"targets: {self.stream.end:.2f} s (with settle {self.scenario.settle_time:.2f} s)")
         if self.lockstep:
             self.publish(stamp, stamp - self.start_ns)
 
