@@ -146,6 +146,17 @@ class InteractiveDrive:
         self.log.info(f"limits changed: {', '.join(f'{k}={v:g}' for k, v in changes.items())}")
         return SetParametersResult(successful=True)
 
+    def recover(self, exc: Exception) -> None:
+        """The generator failed (ruckig): hold where the arms are, report it, keep running."""
+        gen = self.generator
+        assert gen is not None and self.q is not None
+        self.log.error(f"online trajectory failed ({type(exc).__name__}: {str(exc).strip()[:200]}); "
+                       "holding the measured relative pose")
+        gen.hold(*self.model.relative_pose(self.q))
+        gen.goal = None
+        self.monitor.reset()
+        self.rejected = (None, f"trajectory failed: {type(exc).__name__}", gen.time)
+
     # ---------------------------------------------------------------- per cycle
     def cycle(self, stamp_ns: int) -> bytes | None:
         """After the cycle's step: apply new limits, judge the goal, the /diagnostics status (CDR)."""

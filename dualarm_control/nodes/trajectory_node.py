@@ -184,7 +184,13 @@ class TrajectoryNode:
             else:
                 self.finished = True  # run() stops spinning after this callback
             return
-        sample = self.stream.sample(t)
+        try:
+            sample = self.stream.sample(t)
+        except Exception as exc:  # a live command drove ruckig into a failure: hold, do not stop the cell
+            if self.drive is None:
+                raise
+            self.drive.recover(exc)
+            sample = self.stream.sample(t)
         self.pub.publish(convert.target_message(stamp, elapsed_ns, sample.relative))
         if self.pub_joint is not None and sample.joints is not None:
             self.pub_joint.publish(convert.joint_reference_message(stamp, elapsed_ns, self.model.joint_names,
