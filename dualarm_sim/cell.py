@@ -20,7 +20,7 @@ Physics choices (all measured on ``urdf/dualarm_cell.urdf``):
   obstacle). At zero command the arms hold their position under gravity: a 6e-7 rad offset
   and no drift over 60 s. With the bare velocity motors used before, every joint sagged at
   a constant velocity error of about 6e-4 rad/s (3.6e-2 rad in 60 s at zero command) and
-  lagged its integrated command by 1.5e-4 rad in a 0.5 rad/s step (now 1e-7 rad).
+  lagged its integrated command by 1.5e-4 rad 0.1 s into a 0.5 rad/s step (now 7e-7 rad).
 * Motor forces are ``motor_force_scale`` (default 10) times the URDF effort limits. The
   upstream controller is kinematic and expects FRI-like behaviour, where the robot's own
   high-gain joint controller makes joints follow the commanded velocity. With the bare

@@ -9,7 +9,7 @@ node joining a cell that is already running (no later newcomer makes the peer an
 itself again): here the trajectory node starts 10 times against one running sim_node, in
 real time, and must receive its first /joint_states within 0.5 s of being up each time.
 That is the suite's one timing assertion: a start-up property, 6x the normal 80 ms; before
-the profile, 7 of 11 such starts took 0.6-3.3 s (docs/bench.md, "Start-up").
+the profile, 21 of 30 such starts took over 0.5 s, up to 3.3 s (docs/bench.md, "Start-up").
 """
 
 from __future__ import annotations

@@ -8,12 +8,12 @@ so :func:`apply_localhost_default` must run before it.
 :func:`apply_discovery_profile` points Fast DDS at the package's participant profile
 (``config/fastdds_discovery.xml``) unless the user chose a Fast DDS profile: it makes every
 participant announce itself every 0.1 s instead of Fast DDS's 3 s. A participant that
-joins a running graph can lose the reply of a peer that discovered it first (Fast DDS
-2.14: the peer answers the newcomer's first announcement at once, the newcomer drops that
-answer, and the peer does not answer its later announcements). The two then know of each
-other only at the peer's next periodic announcement: up to 3 s without the matching
-topics (docs/bench.md, "Start-up"). Fast DDS reads the variable when rclpy creates the
-participant, so this too must run before the first node.
+joins a running graph can lose the reply of a peer that discovered it at once (Fast DDS
+2.14 sends its first announcement before it registers its receivers, and the peer does not
+answer its later announcements). The two then know of each other only at the peer's next
+periodic announcement: up to 3.3 s without the matching topics (docs/bench.md,
+"Start-up"). Fast DDS reads the variable when rclpy creates the participant, so this too
+must run before the first node.
 """
 
 from __future__ import annotations
