@@ -20,6 +20,7 @@ INSTALL_REQUIRES = [
     "quadprog>=0.1.11,<0.2",
     "matplotlib>=3.8,<4",
     "rosbags>=0.10,<0.12",
+    "tqdm>=4.66,<5",  # progress bars of long runs (rate, time left)
 ]
 # ROS 2 Jazzy from PyPI (rclpy, the message packages of the graph, Jazzy's default RMW).
 # An extra, so that on a machine with ROS 2 from apt (colcon workspace, sourced setup) the

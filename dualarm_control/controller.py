@@ -111,48 +111,37 @@ def acceleration_limit_problem(value: Sequence[float]) -> str:
 
 
 @dataclass(slots=True)
-class ControlOutput:
-    """Result of one cycle.
+class Cycle:
+    """Result of one control cycle, whatever the reference: a row of the run record.
 
-    A per-cycle record: slotted, not frozen (cheaper to build, docs/bench.md); read-only by convention.
+    A per-cycle record: slotted, not frozen (cheaper to build, docs/bench.md); read-only by
+    convention, except that a follower adds what it knows (force, offset, stage).
 
     Attributes:
         velocities: command [rad/s], (n,), finite and inside the eq (23) bounds.
         result: the solver's record (status, timings, active joints).
-        position: measured relative position p_r^1 [m], (3,) (NaN when the state was invalid).
-        rotation: measured relative rotation R_r^1, (3, 3).
-        position_error: ||p* - p|| [m].
-        orientation_error: geodesic angle between R* and R [rad].
         cycle_time: wall time of the whole cycle (kinematics + solve) [s].
+        position: measured relative position p_r^1 [m], (3,) (NaN when unknown: tasks, invalid state).
+        rotation: measured relative rotation R_r^1, (3, 3) (NaN when unknown).
+        position_error: ||p* - p|| [m] (NaN when unknown).
+        orientation_error: geodesic angle between R* and R [rad] (NaN when unknown).
+        rows: every task evaluated at the cycle's (q, t) (tasks only, else empty).
+        measured_force: filtered normal force f_c [N] of paper 001's force loop (NaN without).
+        normal_offset: f_F of eq (9) of paper 001 [m] (0 without force feedback).
+        stage: what is being followed (segment name, "circle", "execute"), for progress output.
     """
 
     velocities: FloatArray
     result: SolverResult
-    position: FloatArray
-    rotation: FloatArray
-    position_error: float
-    orientation_error: float
     cycle_time: float
-
-
-@dataclass(slots=True)
-class TaskOutput:
-    """Result of one cycle of :meth:`RelativeController.solve_tasks`.
-
-    A per-cycle record: slotted, not frozen (cheaper to build, docs/bench.md); read-only by convention.
-
-    Attributes:
-        velocities: command [rad/s], (n,), finite and inside the eq (23) bounds.
-        result: the solver's record.
-        rows: every task evaluated at the cycle's (q, t), in the order given (empty when the
-            input was invalid).
-        cycle_time: wall time of the whole cycle (kinematics + solve) [s].
-    """
-
-    velocities: FloatArray
-    result: SolverResult
-    rows: tuple[TaskRows, ...]
-    cycle_time: float
+    position: FloatArray = field(default_factory=lambda: np.full(3, np.nan))
+    rotation: FloatArray = field(default_factory=lambda: np.full((3, 3), np.nan))
+    position_error: float = math.nan
+    orientation_error: float = math.nan
+    rows: tuple[TaskRows, ...] = ()
+    measured_force: float = math.nan
+    normal_offset: float = 0.0
+    stage: str = ""
 
 
 class RelativeController:
@@ -181,7 +170,7 @@ class RelativeController:
         self.solver.reset()
         self._previous = np.zeros(self.model.nq)
 
-    def step(self, q: FloatArray, target: RelativeTarget) -> ControlOutput:
+    def step(self, q: FloatArray, target: RelativeTarget) -> Cycle:
         """Compute the joint velocity command for measured positions q (n,) and a target.
 
         Non-finite q or target never reach the solver (its input check rejects the problem
@@ -197,7 +186,7 @@ class RelativeController:
             return self._invalid(_culprit(q, target) or result.detail, start, q)
         state = conf.relative()
         ex, ey, ez = rows.value[:3].tolist()  # -e: the position rows are p - p*
-        return ControlOutput(
+        return Cycle(
             velocities=result.velocities,
             result=result,
             position=state.position,
@@ -207,7 +196,7 @@ class RelativeController:
             cycle_time=time.perf_counter() - start,
         )
 
-    def solve_tasks(self, q: FloatArray, tasks: Sequence[Task], t: float) -> TaskOutput:
+    def solve_tasks(self, q: FloatArray, tasks: Sequence[Task], t: float) -> Cycle:
         """One cycle on any set of tasks at time t [s] (paper 001, eq (12)-(14)).
 
         Inequality tasks need a solver that handles inequality rows (``constraint_based``);
@@ -218,11 +207,10 @@ class RelativeController:
         if any(task.kind == INEQUALITY for task in tasks) and not getattr(self.solver, "supports_inequalities", False):
             raise ParameterError("solver", self.solver.name, "a solver that handles inequality tasks: constraint_based")
         if not math.isfinite(q.sum()):
-            out = self._invalid("non-finite joint positions", start, q)
-            return TaskOutput(out.velocities, out.result, (), out.cycle_time)
+            return self._invalid("non-finite joint positions", start, q)
         rows = evaluate_tasks(tasks, Configuration(self.model, q), t)
         result = self._solve_rows(q, rows)
-        return TaskOutput(result.velocities, result, rows, time.perf_counter() - start)
+        return Cycle(result.velocities, result, time.perf_counter() - start, rows=rows)
 
     def _solve_rows(self, q: FloatArray, rows: Sequence[TaskRows]) -> SolverResult:
         """Bounds of eq (23) (and the acceleration bound), the problem of the rows, the solve."""
@@ -236,7 +224,7 @@ class RelativeController:
         return result
 
     def track_joints(self, q: FloatArray, q_ref: FloatArray, qd_ref: FloatArray, target: RelativeTarget,
-                     gain: float) -> ControlOutput:
+                     gain: float) -> Cycle:
         """Joint-space tracking of a planned trajectory (:func:`joint_tracking_velocity`) inside the
         eq (23) bounds; the relative pose error is measured against ``target`` (the reference's
         relative pose) for the report. Non-finite inputs give the zero command ("invalid_input")."""
@@ -255,11 +243,11 @@ class RelativeController:
         active = int(np.count_nonzero(np.abs(velocities) > ACTIVITY_THRESHOLD))
         elapsed = time.perf_counter() - start
         result = SolverResult(velocities, "solved", elapsed, 0, active, float("nan"), "joint tracking")
-        return ControlOutput(velocities=velocities, result=result, position=p, rotation=r,
-                             position_error=float(np.linalg.norm(p_des - p)),
-                             orientation_error=rotation_angle(r, r_des), cycle_time=elapsed)
+        return Cycle(velocities=velocities, result=result, position=p, rotation=r,
+                     position_error=float(np.linalg.norm(p_des - p)),
+                     orientation_error=rotation_angle(r, r_des), cycle_time=elapsed)
 
-    def _invalid(self, what: str, start: float, q: FloatArray) -> ControlOutput:
+    def _invalid(self, what: str, start: float, q: FloatArray) -> Cycle:
         """The safe command for an invalid input, with the reason in ``detail`` (status "invalid_input").
 
         Zero velocity, or, when q is finite, the command of the eq (23) bounds nearest to rest
@@ -273,8 +261,7 @@ class RelativeController:
                               int(np.count_nonzero(np.abs(velocities) > ACTIVITY_THRESHOLD)), float("nan"),
                               what)
         self._previous = velocities
-        p, r = np.full(3, np.nan), np.full((3, 3), np.nan)
-        return ControlOutput(velocities, result, p, r, float("nan"), float("nan"), time.perf_counter() - start)
+        return Cycle(velocities, result, time.perf_counter() - start)
 
 
 def _culprit(q: FloatArray, target: RelativeTarget) -> str:

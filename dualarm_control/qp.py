@@ -111,6 +111,13 @@ class QPBackend:
     def __init__(self, settings: QPSettings) -> None:
         self.settings = settings
 
+    @property
+    def bound_tolerance(self) -> float:
+        """How far a "solved" x may lie beyond a bound lb/ub [units of x]: the configured
+        ``eps_abs``, the primal feasibility tolerance the back-end is run with (daqp's
+        ``primal_tol``, proxsuite's ``eps_abs`` on the primal residual, box rows included)."""
+        return self.settings.eps_abs
+
     def solve(self, problem: QPProblem) -> QPSolution:
         raise NotImplementedError
 

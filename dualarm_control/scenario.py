@@ -1,4 +1,4 @@
-"""Scenarios: initial configuration + relative motion segments, read from ROS-style YAML.
+"""Scenarios: the cell (URDF, initial configuration), the motion limits and one reference source.
 
 A scenario file is a parameter file (``/**: ros__parameters: scenario: ...``) so the sim
 node (initial configuration), the trajectory node (segments) and the in-process experiment
@@ -6,12 +6,12 @@ read the same keys. Registry: every ``config/scenarios/<name>.yaml`` is scenario
 
 Keys under ``scenario.`` (flattened names):
   name, description, initial_positions_deg (14 doubles: left 1..7, right 1..7),
-  settle_time [s], limits.<MotionLimits field>, segments (ordered list of names), and per
-  segment ``<seg>.type``: ``pose`` (``position`` [m] and ``rpy_deg`` of the peg frame F2 in
-  the hole frame F1) or ``screw`` (``axis`` in F1, ``angle_deg``, ``advance`` [m]); ``<seg>.hold`` [s].
-  Optional ``urdf``: the cell URDF's file name in ``urdf/`` (default ``dualarm_cell.urdf``).
-  A task scenario (paper 001) has ``tasks`` instead of ``segments``: see
-  :mod:`dualarm_control.task_scenario`.
+  settle_time [s], limits.<MotionLimits field>; optional ``urdf``: the cell URDF's file name in
+  ``urdf/`` (default ``dualarm_cell.urdf``); and the keys of the reference source
+  (:mod:`dualarm_control.references`): ``tasks`` (paper 001,
+  :mod:`dualarm_control.references.tasks`) or else ``segments`` (paper 000,
+  :mod:`dualarm_control.references.segments`). A planned joint trajectory (paper 003) comes
+  from a plan file (:class:`~dualarm_control.references.plan.PlanSource`).
 """
 
 from __future__ import annotations
@@ -20,36 +20,20 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
-import pinocchio as pin
 
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import FloatArray
 from dualarm_control.params import ParameterError, read_params_file
 from dualarm_control.paths import config_path, share_dir
-from dualarm_control.trajectory import MotionLimits, RelativeTrajectory, Segment
+from dualarm_control.references.base import PREFIX, ReferenceSource, get, number, vector
+from dualarm_control.references.segments import SegmentsSource, parse_segments
+from dualarm_control.references.tasks import TasksSource, parse_tasks
+from dualarm_control.trajectory import MotionLimits, RelativeTrajectory
 
-if TYPE_CHECKING:
-    from dualarm_control.task_scenario import TaskScenario
-
-PREFIX = "scenario."
 DEFAULT_URDF = "dualarm_cell.urdf"
-
-
-@dataclass(frozen=True)
-class SegmentSpec:
-    """One segment as written in the file (resolved against the start pose later)."""
-
-    name: str
-    kind: str  # "pose" | "screw"
-    position: FloatArray | None = None
-    rotation: FloatArray | None = None
-    axis: FloatArray | None = None
-    angle: float = 0.0
-    advance: float = 0.0
-    hold: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -59,23 +43,26 @@ class Scenario:
     Attributes:
         name, description: labels.
         initial_positions: joint positions at start [rad], (14,).
-        segments: motion segments in order.
+        reference: what the controller follows (:mod:`dualarm_control.references`).
         limits: ruckig limits of the relative motion.
         settle_time: control time after the trajectory ends [s] (error convergence).
         source: file it came from.
         urdf: the cell URDF's file name in ``urdf/``.
-        tasks: the task part of a task scenario (paper 001), else None.
     """
 
     name: str
     description: str
     initial_positions: FloatArray
-    segments: tuple[SegmentSpec, ...]
+    reference: ReferenceSource
     limits: MotionLimits
     settle_time: float
     source: Path
     urdf: str = DEFAULT_URDF
-    tasks: TaskScenario | None = None
+
+    @property
+    def tasks(self) -> TasksSource | None:
+        """The tasks source of a task scenario (paper 001), else None."""
+        return self.reference if isinstance(self.reference, TasksSource) else None
 
     @property
     def urdf_path(self) -> Path:
@@ -83,23 +70,11 @@ class Scenario:
         return share_dir() / "urdf" / self.urdf
 
     def trajectory(self, start_position: FloatArray, start_rotation: FloatArray) -> RelativeTrajectory:
-        """The ruckig relative trajectory from the measured start pose through all segments."""
-        if not self.segments:
+        """The ruckig relative trajectory from the measured start pose through the scenario's segments."""
+        if not isinstance(self.reference, SegmentsSource):
             raise ScenarioError(f"scenario {self.name!r} is a task scenario (paper 001) without relative motion "
                                 "segments: run it with 'dualarm experiment' (constraint_based solver)")
-        segments: list[Segment] = []
-        p, r = np.asarray(start_position, float), np.asarray(start_rotation, float)
-        for spec in self.segments:
-            if spec.kind == "pose":
-                assert spec.position is not None and spec.rotation is not None
-                seg = Segment.to_pose(spec.name, r, spec.position, spec.rotation, hold=spec.hold)
-            else:
-                assert spec.axis is not None
-                seg = Segment.screw(spec.name, p, spec.axis, spec.angle, spec.advance, hold=spec.hold)
-            segments.append(seg)
-            p = np.asarray(seg.position)
-            r = pin.exp3(seg.axis * seg.angle) @ r
-        return RelativeTrajectory(start_position, start_rotation, segments, self.limits)
+        return self.reference.trajectory(start_position, start_rotation, self.limits)
 
 
 def scenario_names() -> list[str]:
@@ -130,31 +105,6 @@ def load_scenario(name_or_path: str) -> Scenario:
     return scenario_from_parameters(flat, path)
 
 
-def _get(flat: Mapping[str, Any], key: str, default: Any = None) -> Any:
-    full = PREFIX + key
-    if full in flat:
-        return flat[full]
-    if default is None:
-        raise ScenarioError(f"scenario parameter '{full}' is missing")
-    return default
-
-
-def _vector(flat: Mapping[str, Any], key: str, size: int) -> FloatArray:
-    value = _get(flat, key)
-    if not isinstance(value, list) or len(value) != size or not all(
-        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in value
-    ):
-        raise ScenarioError(f"scenario parameter '{PREFIX}{key}': got {value!r}, expected a list of {size} numbers")
-    return np.array(value, dtype=float)
-
-
-def _number(flat: Mapping[str, Any], key: str, default: float | None = None) -> float:
-    value = _get(flat, key, default)
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise ScenarioError(f"scenario parameter '{PREFIX}{key}': got {value!r}, expected a number")
-    return float(value)
-
-
 def _motion_limits(flat: Mapping[str, Any]) -> MotionLimits:
     """MotionLimits from the ``scenario.limits.*`` keys; ScenarioError naming the full key and value.
 
@@ -178,44 +128,22 @@ def _motion_limits(flat: Mapping[str, Any]) -> MotionLimits:
 
 def scenario_from_parameters(flat: Mapping[str, Any], source: Path) -> Scenario:
     """Build a Scenario from flattened parameters (as read from the file or declared in a node)."""
-    tasks = None
-    if PREFIX + "tasks" in flat:
-        from dualarm_control.task_scenario import parse_task_scenario
-
-        tasks = parse_task_scenario(flat)
-    names = _get(flat, "segments", [] if tasks is not None else None)
-    if not isinstance(names, list) or not all(isinstance(n, str) for n in names) or not (names or tasks):
-        raise ScenarioError(f"scenario parameter '{PREFIX}segments': got {names!r}, expected a list of segment names")
-    specs = []
-    for seg in names:
-        kind = _get(flat, f"{seg}.type")
-        hold = _number(flat, f"{seg}.hold", 0.0)
-        if kind == "pose":
-            rpy = np.radians(_vector(flat, f"{seg}.rpy_deg", 3))
-            specs.append(SegmentSpec(seg, "pose", position=_vector(flat, f"{seg}.position", 3),
-                                     rotation=pin.rpy.rpyToMatrix(*rpy), hold=hold))
-        elif kind == "screw":
-            specs.append(SegmentSpec(seg, "screw", axis=_vector(flat, f"{seg}.axis", 3),
-                                     angle=math.radians(_number(flat, f"{seg}.angle_deg", 0.0)),
-                                     advance=_number(flat, f"{seg}.advance", 0.0), hold=hold))
-        else:
-            raise ScenarioError(f"scenario parameter '{PREFIX}{seg}.type': got {kind!r}, expected one of: pose, screw")
+    reference = parse_tasks(flat) if PREFIX + "tasks" in flat else parse_segments(flat)
     limits = _motion_limits(flat)
-    settle = _number(flat, "settle_time", 1.0)
+    settle = number(flat, "settle_time", 1.0)
     if settle < 0:
         raise ScenarioError(f"scenario parameter '{PREFIX}settle_time': got {settle}, expected >= 0")
-    urdf = _get(flat, "urdf", DEFAULT_URDF)
+    urdf = get(flat, "urdf", DEFAULT_URDF)
     if not isinstance(urdf, str) or not (share_dir() / "urdf" / urdf).is_file():
         raise ScenarioError(f"scenario parameter '{PREFIX}urdf': got {urdf!r}, expected a file name in "
                             f"{share_dir() / 'urdf'}")
     return Scenario(
-        name=str(_get(flat, "name")),
-        description=str(_get(flat, "description", "")),
-        initial_positions=np.radians(_vector(flat, "initial_positions_deg", 14)),
-        segments=tuple(specs),
+        name=str(get(flat, "name")),
+        description=str(get(flat, "description", "")),
+        initial_positions=np.radians(vector(flat, "initial_positions_deg", 14)),
+        reference=reference,
         limits=limits,
         settle_time=settle,
         source=source,
         urdf=urdf,
-        tasks=tasks,
     )

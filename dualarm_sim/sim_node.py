@@ -49,7 +49,7 @@ from dualarm_control.ros.node import (
     thread_priority_spec,
     usage,
 )
-from dualarm_control.ros.qos import QOS_PARAMETER, stream_qos
+from dualarm_control.ros.qos import QOS_PARAMETER, publisher_depth, stream_qos
 from dualarm_control.scenario import load_scenario, scenario_names
 from dualarm_sim.cell import CellConfig, DualArmCell
 
@@ -110,11 +110,12 @@ class SimNode:
         self.readers_matched_at: float | None = None
         n = self.node
         qos = stream_qos(p["qos_reliability"])
-        self.pub_js = n.create_publisher(JointState, "/joint_states", qos)
-        self.pub_wrench = n.create_publisher(WrenchStamped, "/wrench", 10)
-        self.pub_clock = n.create_publisher(Clock, "/clock", 10)
+        depth = publisher_depth(self.lockstep)
+        self.pub_js = n.create_publisher(JointState, "/joint_states", stream_qos(p["qos_reliability"], depth))
+        self.pub_wrench = n.create_publisher(WrenchStamped, "/wrench", depth)
+        self.pub_clock = n.create_publisher(Clock, "/clock", depth)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.pub_contact = (n.create_publisher(Vector3Stamped, "/contact_force", 10) if self.contact is not None
+        self.pub_contact = (n.create_publisher(Vector3Stamped, "/contact_force", depth) if self.contact is not None
                             else None)
         subscribe_checked(n, Float64MultiArray, "/velocity_controller/commands", self.on_command, qos, self.reject,
                           convert.CommandInput(len(self.cell.joint_names)))

@@ -1,13 +1,30 @@
-"""Test session set-up: ROS traffic on localhost only, and a private ROS domain per test session."""
+"""Test session set-up: ROS traffic on localhost only, and a private ROS domain per test session;
+a deliberately wrong solver for the tests that show a bound check can fail."""
 
 from __future__ import annotations
 
 import os
 import random
+from collections.abc import Iterator
+
+import bound_ignoring
+import pytest
 
 from dualarm_control.ros.env import apply_localhost_default
+from dualarm_control.solvers import unregister
 
 apply_localhost_default()  # before rclpy.init; inherited by subprocesses
 # Always a private domain (not the user's interactive one), unless DUALARM_TEST_DOMAIN_ID says which.
 os.environ["ROS_DOMAIN_ID"] = os.environ.get("DUALARM_TEST_DOMAIN_ID") or str(random.SystemRandom().randint(1, 101))
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+@pytest.fixture
+def bound_ignoring_solver() -> Iterator[str]:
+    """The name of test/bound_ignoring.py's deliberately wrong solver, in the one solver registry
+    for one test."""
+    name = bound_ignoring.register_it()
+    try:
+        yield name
+    finally:
+        unregister(name)

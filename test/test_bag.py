@@ -26,7 +26,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from dualarm_control.app import cli
-from dualarm_control.app.bag import nearest_labels, pose_error, quaternion_angle
+from dualarm_control.app.record.bag import nearest_labels, pose_error, quaternion_angle
 
 REPO = Path(__file__).resolve().parents[1]
 N_MSGS = 40
@@ -133,7 +133,7 @@ def record_with_publisher(tmp_path: Path, name: str, sig: int, n: int = N_MSGS) 
             pub.kill()
 
 
-def wait_for_progress(rec: Proc, n: int, timeout: float = 10.0) -> None:
+def wait_for_progress(rec: Proc, n: int, timeout: float = 60.0) -> None:
     """Wait until the recorder's progress shows 3 * n messages (progress every 2 s)."""
     import time
 

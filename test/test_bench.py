@@ -7,9 +7,10 @@ from pathlib import Path
 
 import pytest
 
-from dualarm_control.app.bench import run_bench, solver_configs
+from dualarm_control.app.bench.suite import run_bench, solver_configs
 from dualarm_control.app.cli import main
 from dualarm_control.controller import ControllerParams
+from dualarm_control.solvers import make_solver
 
 
 def test_bench_writes_every_part(tmp_path: Path) -> None:
@@ -24,6 +25,7 @@ def test_bench_writes_every_part(tmp_path: Path) -> None:
     for name in ("standard_qp | daqp", "sparse_qp | daqp"):
         row = rows[name]
         assert row["failures"] == 0 and row["samples"] == 6
+        assert 0 <= row["max_bound_excess"] <= make_solver(name.split(" | ")[0]).bound_tolerance
         assert 0 < row["cycle_p50_ms"] <= row["cycle_p99_ms"]
         assert row[record["random"]["ratio_columns"][0]] > 0
     assert rows["sparse_qp | daqp"]["active_joints_max"] <= 6

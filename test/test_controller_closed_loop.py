@@ -30,6 +30,8 @@ class Run:
 
     positions: np.ndarray  # measured q before each command, (N, 14)
     commands: np.ndarray  # (N, 14)
+    raw: np.ndarray  # the solver's own result before the clip (SolverResult.raw_velocities), (N, 14)
+    tolerance: float  # the solver's bound tolerance [rad/s]
     lower: np.ndarray  # eq (23) bounds recomputed here from the measured q, (N, 14)
     upper: np.ndarray
     statuses: list[str]
@@ -63,7 +65,7 @@ def run_closed_loop(model: DualArmModel, q0: np.ndarray, solver: str) -> Run:
     steps = math.ceil((traj.duration + SETTLE) / PERIOD)
     assert steps * PERIOD <= 4.0, "keep the run short"
     qd_max = model.qd_max  # velocity_scale 1
-    rec: dict[str, list] = {k: [] for k in ("positions", "commands", "lower", "upper", "statuses", "active")}
+    rec: dict[str, list] = {k: [] for k in ("positions", "commands", "raw", "lower", "upper", "statuses", "active")}
     with DualArmCell(CellConfig(control_period=PERIOD), initial_positions=q0) as cell:
         state = cell.state()
         for k in range(steps):
@@ -72,6 +74,7 @@ def run_closed_loop(model: DualArmModel, q0: np.ndarray, solver: str) -> Run:
             cell.apply_command(out.velocities)
             rec["positions"].append(q)
             rec["commands"].append(out.velocities)
+            rec["raw"].append(out.result.raw_velocities)
             rec["lower"].append(np.maximum(-qd_max, (model.q_min - q) / PERIOD))  # eq (23), written here
             rec["upper"].append(np.minimum(qd_max, (model.q_max - q) / PERIOD))
             rec["statuses"].append(out.result.status)
@@ -80,7 +83,7 @@ def run_closed_loop(model: DualArmModel, q0: np.ndarray, solver: str) -> Run:
     end = traj.sample(traj.duration)
     arrays = {k: np.array(v) for k, v in rec.items() if k != "statuses"}
     return Run(statuses=rec["statuses"], final_q=np.array(state.positions), end_position=end.position,
-               end_rotation=end.rotation, **arrays)
+               end_rotation=end.rotation, tolerance=controller.solver.bound_tolerance, **arrays)
 
 
 @pytest.fixture(scope="module")
@@ -100,15 +103,32 @@ def test_closed_loop_reaches_the_target(solver: str, runs: dict[str, Run], model
     assert rotation_angle(r, r0) == pytest.approx(TURN, abs=1e-2)
 
 
-@pytest.mark.parametrize("solver", solver_names())
-def test_closed_loop_commands_are_safe(solver: str, runs: dict[str, Run], model: DualArmModel) -> None:
-    """No solver failure; every command inside the eq (23) bounds of its measured q; q inside the URDF limits."""
-    run = runs[solver]
-    assert set(run.statuses) == {"solved"}
-    assert np.all(np.isfinite(run.commands))
+def check_safe_run(run: Run, model: DualArmModel) -> None:
+    """No solver failure; the solver's own result (before the clip) within its bound tolerance of the eq (23)
+    bounds of the measured q, and every command inside them; q inside the URDF limits."""
+    assert set(run.statuses) == {"solved"}, sorted(set(run.statuses))
+    assert np.all(np.isfinite(run.raw)) and np.all(np.isfinite(run.commands))
+    assert np.all(run.raw >= run.lower - run.tolerance - 1e-12) and np.all(run.raw <= run.upper + run.tolerance + 1e-12)
     assert np.all(run.commands >= run.lower - 1e-12) and np.all(run.commands <= run.upper + 1e-12)
     assert np.all(run.positions >= model.q_min) and np.all(run.positions <= model.q_max)
     assert np.all(run.final_q >= model.q_min) and np.all(run.final_q <= model.q_max)
+
+
+@pytest.mark.parametrize("solver", solver_names())
+def test_closed_loop_commands_are_safe(solver: str, runs: dict[str, Run], model: DualArmModel) -> None:
+    """:func:`check_safe_run` on each solver's run."""
+    check_safe_run(runs[solver], model)
+
+
+def test_a_solver_ignoring_its_bounds_fails_the_safety_check(bound_ignoring_solver: str, model: DualArmModel,
+                                                             start_q: np.ndarray) -> None:
+    """The check above can fail: with test/bound_ignoring.py's solver every cycle is "bounds_violated" (the
+    fallback's commands keep the cell inside its limits, but its own results leave the bounds)."""
+    run = run_closed_loop(model, start_q, bound_ignoring_solver)
+    assert set(run.statuses) == {"bounds_violated"}
+    assert np.all(run.commands >= run.lower - 1e-12) and np.all(run.commands <= run.upper + 1e-12)
+    with pytest.raises(AssertionError, match="bounds_violated"):
+        check_safe_run(run, model)
 
 
 def test_sparse_methods_move_fewer_joints(runs: dict[str, Run]) -> None:

@@ -12,9 +12,19 @@ from pathlib import Path
 import pytest
 
 from dualarm_control.app.cli import main
-from dualarm_control.app.report import METRIC_KEYS, TRACKING_KEYS
+from dualarm_control.app.record.report import METRIC_KEYS, TRACKING_KEYS
 
 SOLVERS = ("standard_qp", "sparse_qp", "hierarchical_sparse_qp")
+FINAL_ERRORS = {"standard_qp": (1.6e-5, 5.3e-5), "sparse_qp": (2.1e-5, 6.6e-5), "hierarchical_sparse_qp": (2.2e-5, 6.9e-5)}
+"""docs/experiment.md: final position [m] / orientation [rad] error per solver before the cell held its integrated
+command (now 6e-12 to 1.6e-7 m); asserted within 2 x (the doc states this bound)."""
+PAPER_RATIOS = (0.357, 0.471)
+"""Paper 000, Table I: l0(sparse) / l0(standard), l0(hierarchical) / l0(standard)."""
+RATIOS = {"l0_sparse": 0.319, "l0_hierarchical": 0.431, "l1_sparse": 0.661, "l2_sparse": 1.22}
+"""docs/experiment.md, "ours": Table I ratios to the standard QP; asserted within RATIO_BAR."""
+RATIO_BAR = 0.02
+"""Allowed change of a documented ratio (absolute): the figures are deterministic (lockstep, seeded)
+to far better than this; the bar leaves room for changes of the simulated cell (docs say what moved)."""
 
 
 @pytest.fixture(scope="module")
@@ -34,21 +44,26 @@ def test_metrics_file_has_every_key(metrics: dict[str, dict[str, float]]) -> Non
 
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_task_is_tracked_within_limits(metrics: dict[str, dict[str, float]], solver: str) -> None:
-    """Final relative error < 1 mm and 0.01 rad; no limit violation; no solver failure."""
+    """Final relative error within 2 x the documented figures (FINAL_ERRORS, ~2e-5 m and ~6e-5 rad; the
+    core issue's done-when bound was 1 mm and 0.01 rad); no limit violation; no solver failure."""
     m = metrics[solver]
-    assert m["final_position_error_m"] < 1e-3
-    assert m["final_orientation_error_rad"] < 1e-2
+    assert m["final_position_error_m"] < 2 * FINAL_ERRORS[solver][0]
+    assert m["final_orientation_error_rad"] < 2 * FINAL_ERRORS[solver][1]
     assert m["joint_position_limit_violations"] == 0
     assert m["joint_velocity_limit_violations"] == 0
     assert m["solver_failures"] == 0
 
 
 def test_sparsity_at_least_as_strong_as_the_paper(metrics: dict[str, dict[str, float]]) -> None:
-    """Table I ratios: l0(sparse)/l0(std) <= 0.36, l0(hier)/l0(std) <= 0.47, l1(sparse) < l1(std)."""
+    """Table I ratios at most the paper's (0.357, 0.471) and equal to the documented ones (RATIOS: 0.319,
+    0.431, l1 0.661, l2 1.22) within RATIO_BAR (0.02)."""
     std, sparse, hier = (metrics[s] for s in SOLVERS)
-    assert sparse["l0_mean"] / std["l0_mean"] <= 0.36
-    assert hier["l0_mean"] / std["l0_mean"] <= 0.47
-    assert sparse["l1_mean"] < std["l1_mean"]
+    ratios = {"l0_sparse": sparse["l0_mean"] / std["l0_mean"], "l0_hierarchical": hier["l0_mean"] / std["l0_mean"],
+              "l1_sparse": sparse["l1_mean"] / std["l1_mean"], "l2_sparse": sparse["l2_mean"] / std["l2_mean"]}
+    assert ratios["l0_sparse"] <= PAPER_RATIOS[0] and ratios["l0_hierarchical"] <= PAPER_RATIOS[1]
+    assert ratios["l1_sparse"] < 1.0
+    for key, documented in RATIOS.items():
+        assert ratios[key] == pytest.approx(documented, abs=RATIO_BAR), (key, ratios)
     for m in (std, sparse, hier):
         assert m["l0_integral"] == pytest.approx(m["l0_mean"] * m["duration_s"])
 
@@ -79,10 +94,13 @@ def test_acceleration_bound_holds_with_tracking_and_limits_kept(
 
 
 def test_acceleration_bound_keeps_the_sparsity(bounded: dict[str, dict[str, float]]) -> None:
-    """Table I with the bound: l0(sparse)/l0(std) <= 0.40, l0(hier)/l0(std) <= 0.47."""
+    """Table I with the bound: l0 ratios 0.319 / 0.389 (docs/experiment.md) within RATIO_BAR, and at most
+    the paper's."""
     std, sparse, hier = (bounded[s] for s in SOLVERS)
-    assert sparse["l0_mean"] / std["l0_mean"] <= 0.40
-    assert hier["l0_mean"] / std["l0_mean"] <= 0.47
+    assert sparse["l0_mean"] / std["l0_mean"] == pytest.approx(0.319, abs=RATIO_BAR)
+    assert hier["l0_mean"] / std["l0_mean"] == pytest.approx(0.389, abs=RATIO_BAR)
+    assert sparse["l0_mean"] / std["l0_mean"] <= PAPER_RATIOS[0]
+    assert hier["l0_mean"] / std["l0_mean"] <= PAPER_RATIOS[1]
 
 
 def test_sparse_commands_do_not_chatter(metrics: dict[str, dict[str, float]]) -> None:
@@ -91,10 +109,11 @@ def test_sparse_commands_do_not_chatter(metrics: dict[str, dict[str, float]]) ->
     Before issue 8 (proxsuite, no tie-break): 2.6 (sparse) and 2.7 (hierarchical) active-set
     switches per s and 34 rad/s^2; the exact lasso alone (daqp): 34.6 and 21.0 switches per s.
     Most switches left are joints starting and stopping through the 1e-3 rad/s threshold.
+    Documented (docs/experiment.md): 1.46 / 1.92 switches per s, 1.31 / 1.00 rad/s^2.
     """
-    for solver, switches in (("sparse_qp", 1.6), ("hierarchical_sparse_qp", 2.1)):
+    for solver, switches, acceleration in (("sparse_qp", 1.6, 1.31), ("hierarchical_sparse_qp", 2.1, 1.00)):
         assert metrics[solver]["active_set_switches_per_s"] <= switches
-        assert metrics[solver]["max_joint_acceleration"] <= 5.0
+        assert metrics[solver]["max_joint_acceleration"] <= 2 * acceleration
 
 
 def test_bad_solver_name_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from dualarm_control.app.bench_random import (
+from dualarm_control.app.bench.random_set import (
     active_sets,
     control_problem,
     exactness,
@@ -32,7 +32,7 @@ from dualarm_control.qp import (
     available_backends,
     make_backend,
 )
-from dualarm_control.solvers import ControlProblem, SolverParams, make_solver
+from dualarm_control.solvers import ControlProblem, Solver, SolverParams, make_solver
 from dualarm_control.solvers.methods import (
     damped_least_squares,
     lasso_box,
@@ -112,12 +112,36 @@ def test_basic_solution_has_at_most_six_active_joints(problems: list[ControlProb
         assert solver.solve(p).active_joints <= 6
 
 
+def tight(p: ControlProblem) -> ControlProblem:
+    """The problem with a 20 x reference and bounds within +-0.05 rad/s: bounds active, the QP really solved."""
+    return ControlProblem(p.jacobian, p.reference * 20, np.maximum(p.lower, -0.05), np.minimum(p.upper, 0.05),
+                          p.repulsive)
+
+
+def check_backend_solutions(under_test: Solver, exact: Solver, problems: list[ControlProblem]) -> None:
+    """Status "solved", a non-zero command; the solver's own result (before the clip) within its bound
+    tolerance of the bounds; the objective of the first QP (eq 14 or eq 17) within 2 % of ``exact``'s
+    (proxsuite at eps 1e-9 stops up to ~1 % above the lasso optimum; daqp is exact)."""
+    for p in map(tight, problems):
+        res, ref = under_test.solve(p), exact.solve(p)
+        assert res.status == "solved", res
+        assert np.any(np.abs(res.velocities) > 1e-3)
+        assert res.raw_velocities is not None and res.bound_excess <= under_test.bound_tolerance
+        assert np.all(res.raw_velocities >= p.lower - under_test.bound_tolerance)
+        assert np.all(res.raw_velocities <= p.upper + under_test.bound_tolerance)
+        lasso = exact.name != "standard_qp"
+        f = lasso_objective(p, res.velocities, LAMBDA) if lasso else res.task_residual
+        f_ref = lasso_objective(p, ref.velocities, LAMBDA) if lasso else ref.task_residual
+        assert f <= f_ref * 1.02 + 1e-12
+
+
 @pytest.mark.parametrize("backend", available_backends())
 @pytest.mark.parametrize("solver", QP_SOLVERS)
 def test_every_backend_solves_or_refuses_every_solver(
     backend: str, solver: str, problems: list[ControlProblem]
 ) -> None:
-    """Each back-end is refused at construction (definite H needed) or solves with bounds active, never a zero command."""
+    """Each back-end is refused at construction (definite H needed) or solves with bounds active, never a
+    zero command, its own result within its bound tolerance (:func:`check_backend_solutions`)."""
     params = replace(EXACT, qp_backend=backend)
     try:
         under_test = make_solver(solver, params)
@@ -125,19 +149,14 @@ def test_every_backend_solves_or_refuses_every_solver(
         assert isinstance(make_backend(backend), QpsolversBackend) and make_backend(backend).needs_positive_definite
         assert "semi-definite" in str(exc) and "daqp" in str(exc)
         return
-    exact = make_solver(solver, EXACT)
-    for p in problems[:5]:
-        tight = ControlProblem(p.jacobian, p.reference * 20, np.maximum(p.lower, -0.05), np.minimum(p.upper, 0.05),
-                               p.repulsive)  # bounds active: the QP is really solved
-        res, ref = under_test.solve(tight), exact.solve(tight)
-        assert res.status == "solved", res.detail
-        assert np.any(np.abs(res.velocities) > 1e-3)
-        assert np.all(res.velocities >= tight.lower) and np.all(res.velocities <= tight.upper)
-        # objective of the first QP (eq 14 or eq 17) within 2 % of the exact one (proxsuite at
-        # eps 1e-9 stops up to ~1 % above the lasso optimum; daqp is exact)
-        f = lasso_objective(tight, res.velocities, LAMBDA) if solver != "standard_qp" else res.task_residual
-        f_ref = lasso_objective(tight, ref.velocities, LAMBDA) if solver != "standard_qp" else ref.task_residual
-        assert f <= f_ref * 1.02 + 1e-12
+    check_backend_solutions(under_test, make_solver(solver, EXACT), problems[:5])
+
+
+def test_a_solver_ignoring_its_bounds_fails_the_backend_check(bound_ignoring_solver: str,
+                                                              problems: list[ControlProblem]) -> None:
+    """The check above can fail: test/bound_ignoring.py's solver gives "bounds_violated"."""
+    with pytest.raises(AssertionError, match="bounds_violated"):
+        check_backend_solutions(make_solver(bound_ignoring_solver), make_solver("sparse_qp", EXACT), problems[:5])
 
 
 def test_quadprog_refusal_names_the_key_and_the_alternatives() -> None:
@@ -258,18 +277,17 @@ def test_dual_equals_the_box_qp_of_eq19(problems: list[ControlProblem]) -> None:
 
 
 def test_a_dual_solution_outside_the_bounds_falls_back_to_the_box_qp(problems: list[ControlProblem]) -> None:
-    """Bounds that cut the unbounded lasso: sparse_qp returns eq (19)'s box-QP optimum, inside the bounds."""
+    """Bounds that cut the unbounded lasso: sparse_qp returns eq (19)'s box-QP optimum, its own result
+    within its bound tolerance of the bounds."""
     solver, box = make_solver("sparse_qp", EXACT), _box_qp_only()
-    for p in problems[:10]:
-        tight = ControlProblem(p.jacobian, p.reference * 20, np.maximum(p.lower, -0.05), np.minimum(p.upper, 0.05),
-                               p.repulsive)
+    for p in map(tight, problems[:10]):
         solver.reset()
-        qd_dual = solver._dual.solve(tight.jacobian, tight.reference, LAMBDA)[0]  # type: ignore[attr-defined]
-        assert qd_dual is not None and (np.any(qd_dual < tight.lower) or np.any(qd_dual > tight.upper))
+        qd_dual = solver._dual.solve(p.jacobian, p.reference, LAMBDA)[0]  # type: ignore[attr-defined]
+        assert qd_dual is not None and (np.any(qd_dual < p.lower) or np.any(qd_dual > p.upper))
         solver.reset()
         box.reset()
-        res, ref = solver.solve(tight), box.solve(tight)
-        assert res.status == "solved"
+        res, ref = solver.solve(p), box.solve(p)
+        assert res.status == "solved" and res.bound_excess <= solver.bound_tolerance
         np.testing.assert_allclose(res.velocities, ref.velocities, atol=1e-12)
 
 

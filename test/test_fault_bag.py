@@ -1,10 +1,10 @@
-"""How the fault matrix judges a run (dualarm_control/app/fault_bag.py), on synthetic records."""
+"""How the fault matrix judges a run (dualarm_control/app/faults/episodes.py), on synthetic records."""
 
 from __future__ import annotations
 
 import math
 
-from dualarm_control.app.fault_bag import (
+from dualarm_control.app.faults.episodes import (
     RunRecord,
     Status,
     arm_stop,

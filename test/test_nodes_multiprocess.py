@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dualarm_control.app.experiment import run_scenario
-from dualarm_control.app.launcher import launch_scenario
+from dualarm_control.app.run.experiment import run_scenario
+from dualarm_control.app.run.launcher import launch_scenario
 from dualarm_control.controller import controller_params
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import read_params_files
@@ -134,22 +134,22 @@ def test_bag_has_the_graph_with_standard_types(lockstep_bags: dict[str, Path]) -
 def test_table_one_means_from_the_bag_equal_in_process(lockstep_bags: dict[str, Path], solver: str,
                                                        tmp_path: Path) -> None:
     """``dualarm report`` on the lockstep bag gives the in-process experiment's Table I means."""
-    from dualarm_control.app.bag import report
-    from dualarm_control.app.experiment import summarize_log
+    from dualarm_control.app.record.bag import report
+    from dualarm_control.app.record.report import summarize_run
 
     scenario = load_scenario(str(SHORT))
     model = DualArmModel()
     log = run_scenario(scenario, controller_params({"solver": solver}), model)
-    expected = summarize_log(log, scenario, model)
+    expected = summarize_run(log, scenario, model)
     got = report(lockstep_bags[solver], tmp_path)[solver]
     for key in ("l0_mean", "l1_mean", "l2_mean"):
         assert got[key] == pytest.approx(expected[key], rel=1e-9, abs=1e-12), key
 
 
-def test_plan_executed_by_the_nodes(tmp_path: Path) -> None:
+def test_plan_run_by_the_nodes(tmp_path: Path) -> None:
     """``dualarm launch corner_path --plan``: the trajectory node streams the plan's joint trajectory,
     the controller tracks it; the executed relative pose stays within 1 mm / 5 mrad of the reference."""
-    from dualarm_control.app.bag import report
+    from dualarm_control.app.record.bag import report
 
     plan = run_cli("plan", "corner_path", "--starts", "4", "--output", str(tmp_path / "plan"), timeout=300)
     assert plan.returncode == 0, plan.stderr

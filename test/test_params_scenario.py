@@ -194,10 +194,10 @@ def test_assembly_scenario_loads_with_the_file_values() -> None:
     assert sc.name == "assembly" and sc.settle_time == 1.0
     deg = [19.0, -31.0, -54.0, 16.0, 98.0, -56.0, 100.0, -12.0, -27.0, 55.0, 19.0, -90.0, -70.0, 105.0]
     np.testing.assert_allclose(sc.initial_positions, np.radians(deg), atol=1e-15)
-    assert [s.name for s in sc.segments] == ["approach", "insert", "screw"]
-    assert [s.kind for s in sc.segments] == ["pose", "pose", "screw"]
-    np.testing.assert_allclose(sc.segments[0].rotation, rot_x(math.pi), atol=1e-12)
-    assert sc.segments[2].angle == pytest.approx(2 * math.pi) and sc.segments[2].advance == -0.01
+    assert [s.name for s in sc.reference.segments] == ["approach", "insert", "screw"]
+    assert [s.kind for s in sc.reference.segments] == ["pose", "pose", "screw"]
+    np.testing.assert_allclose(sc.reference.segments[0].rotation, rot_x(math.pi), atol=1e-12)
+    assert sc.reference.segments[2].angle == pytest.approx(2 * math.pi) and sc.reference.segments[2].advance == -0.01
     assert sc.limits.max_linear_velocity == 0.05 and sc.limits.max_angular_jerk == 5.0
 
 
@@ -246,7 +246,7 @@ def scenario_text(approach_type: str = "pose", initial: str = "[0.0, 0.0, 0.0, 0
 def test_scenario_file_by_path_loads(tmp_path: Path) -> None:
     """A valid scenario file given by path; defaults: settle 1 s, default limits, hold 0."""
     sc = load_scenario(str(write(tmp_path, scenario_text(), "tiny.yaml")))
-    assert sc.name == "tiny" and sc.settle_time == 1.0 and sc.segments[0].hold == 0.0
+    assert sc.name == "tiny" and sc.settle_time == 1.0 and sc.reference.segments[0].hold == 0.0
     np.testing.assert_array_equal(sc.initial_positions, np.zeros(14))
 
 

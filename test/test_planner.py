@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dualarm_control.app.plan import PlanResult, distinct_best, optimise, plan
-from dualarm_control.app.plan_report import plan_record
+from dualarm_control.app.plan.optimise import PlanResult, distinct_best, optimise, plan
+from dualarm_control.app.plan.report import plan_record
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.planning.baseline import BaselineParams, run_baseline
@@ -294,7 +294,7 @@ def test_corner_scenario_has_the_paper_settings_and_a_start_on_the_path(model: D
     path = cfg.corner.sample()
     e_p, e_r = closure_errors(model, scenario.initial_positions, path.positions[0], path.rotation)
     assert e_p < 1e-6 and e_r < 1e-6  # degrees with 6 decimals in the file
-    ends = [s.position for s in scenario.segments]
+    ends = [s.position for s in scenario.reference.segments]
     on_path = [path.positions[i] for i in (0, 12, 13, 14, 15, 16, 17, 18, 30)]
     np.testing.assert_allclose(np.array(ends), np.array(on_path), atol=1e-6)
 
@@ -313,7 +313,7 @@ def small_plan() -> PlanResult:
 
 
 def test_plan_record_is_self_describing(small_plan: PlanResult, model: DualArmModel, tmp_path: Path) -> None:
-    from dualarm_control.app.plan_report import write_plan
+    from dualarm_control.app.plan.report import write_plan
 
     doc = plan_record(small_plan, model, None)
     path = write_plan(tmp_path, doc)
@@ -333,7 +333,7 @@ def test_plan_record_is_self_describing(small_plan: PlanResult, model: DualArmMo
 
 
 def test_executed_plan_stays_on_the_path(small_plan: PlanResult, model: DualArmModel) -> None:
-    from dualarm_control.app.plan_execute import execute_plan
+    from dualarm_control.app.plan.execute import execute_plan
 
     result = execute_plan(small_config(), small_plan.configurations, model)
     assert result.duration > 1.0
@@ -356,11 +356,33 @@ def test_cli_plan_writes_plan_json_and_figures(tmp_path: Path) -> None:
     assert main(["plan", "assembly", "--output", str(out)]) == 2  # no corner path: usage error
 
 
+INDEX_RATIO_TARGET = 0.77
+"""The documented margin (docs/planner.md): average index of the plan / baseline's <= 0.77, the
+paper's 1.17 / 1.52."""
+
+
+def test_reduced_multistart_plan_beats_the_baseline_by_the_documented_margin() -> None:
+    """The default scenario settings with 10 key-point starts instead of 100 and 2 inner starts
+    instead of 10 (the inner NLPs are unimodal: 10 inner starts give the same plan here), seed 0,
+    one worker: ratio <= 0.77 against the baseline from the plan's q_1, closure and joint limits as
+    for the full plan. Deterministic (bit-identical for a seed); measured ratio 0.494 (index 0.2008
+    vs 0.4061), 14-17 s on the loaded 2-core machine."""
+    config = dataclasses.replace(load_plan_config("corner_path"), starts=10, inner_starts=2, seed=0)
+    result = plan(config, workers=1)
+    ratio = result.average_index / result.baseline_average_index
+    print(f"index {result.average_index:.4f} vs baseline {result.baseline_average_index:.4f}: ratio {ratio:.3f}")
+    assert config.candidates == 4 and config.lambda_key == 1.5 and config.lambda_inner == 3.0  # the defaults
+    assert ratio <= INDEX_RATIO_TARGET
+    assert np.max(result.closure_position_errors) <= 1e-5
+    assert np.max(result.closure_rotation_errors) <= 1e-4
+    assert result.joint_limit_violations == 0
+
+
 @pytest.mark.slow
 def test_full_plan_meets_the_issue_targets() -> None:
     """100 starts on every core: index ratio <= 0.77 (paper 1.17 / 1.52), closure, limits."""
     result = plan(load_plan_config("corner_path"))
-    assert result.average_index / result.baseline_average_index <= 0.77
+    assert result.average_index / result.baseline_average_index <= INDEX_RATIO_TARGET
     assert np.max(result.closure_position_errors) <= 1e-5
     assert np.max(result.closure_rotation_errors) <= 1e-4
     assert result.joint_limit_violations == 0

@@ -3,31 +3,51 @@
 Random configurations (inside, at and beyond the joint limits), random targets (unreachable,
 very fast, sometimes NaN), with and without the acceleration bound, through
 :meth:`RelativeController.step`; and random problems (singular, rank-deficient Jacobians,
-huge references) through each solver's ``solve`` directly. The registry is iterated, so a
-solver added later is covered without editing this file.
+huge references) through each solver's ``solve`` directly. The registry is iterated, with
+every QP back-end each solver accepts, so a solver added later is covered without editing
+this file.
+
+Two things are checked (issue 20): what the solver itself returned
+(``SolverResult.raw_velocities``, before ``Solver.solve`` clips it into the bounds) lies
+within the solver's ``bound_tolerance`` of the bounds, and the command sent is inside them.
+The clip only absorbs that tolerance: a result beyond it is status "bounds_violated", which
+these checks refuse; the last tests show that a solver ignoring its bounds makes them fail.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
+from dualarm_control.app.bench.suite import solver_configs
 from dualarm_control.controller import ControllerParams, RelativeController
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.limits import JointLimits, velocity_bounds
-from dualarm_control.solvers import ControlProblem, make_solver, solver_names
-from dualarm_control.solvers.base import FALLBACK_DAMPING, rest_command
+from dualarm_control.qp import available_backends
+from dualarm_control.solvers import (
+    ControlProblem,
+    Solver,
+    SolverResult,
+    make_solver,
+    solver_names,
+)
+from dualarm_control.solvers.base import FALLBACK_DAMPING, ROUND_OFF, rest_command
 
 PERIOD = 0.005
-TOL = 1e-9  # rad/s: floating-point slack on the bounds
+OWN_RESULT = ("solved", "scaled")
+"""Statuses whose command is the solver's own result (clipped by at most its bound tolerance)."""
+CONFIGS = solver_configs(ControllerParams(period=PERIOD), solver_names(), available_backends())[0]
+"""Every registered solver with every QP back-end it accepts, as "solver | back-end"."""
 FINITE = {"allow_nan": False, "allow_infinity": False}
 PROPERTY = settings(max_examples=100, deadline=None, derandomize=True,
                     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+FIRST_FAILURE = settings(PROPERTY, phases=(Phase.generate,))
+"""The same examples, stopping at the first failure (no shrinking): for the checks expected to fail."""
 
 
 @dataclass(frozen=True)
@@ -78,39 +98,59 @@ def targets(draw: st.DrawFn) -> Target:
     return Target(position, rotation, linear, angular)
 
 
-def assert_inside_eq21_23(qd: np.ndarray, q: np.ndarray, limits: JointLimits) -> None:
+def assert_inside_eq21_23(qd: np.ndarray, q: np.ndarray, limits: JointLimits, tolerance: float = ROUND_OFF) -> None:
     """Finite; inside the velocity bounds of eq (23) (as :func:`velocity_bounds` extends them beyond a
     limit); |qd| <= qd_max (eq 20); one step keeps q in [q_min, q_max] (eq 21), or, for a joint already
-    beyond a limit by d, brings it back by min(d, qd_max T) (the distance to the range never grows)."""
+    beyond a limit by d, brings it back by min(d, qd_max T) (the distance to the range never grows);
+    each to ``tolerance`` [rad/s]."""
     assert np.all(np.isfinite(qd)), qd
     lower, upper = velocity_bounds(q, limits, PERIOD)
-    assert np.all(qd >= lower - TOL) and np.all(qd <= upper + TOL), (qd, lower, upper)
-    assert np.all(np.abs(qd) <= limits.qd_max + TOL)
+    assert np.all(qd >= lower - tolerance) and np.all(qd <= upper + tolerance), (qd, lower, upper)
+    assert np.all(np.abs(qd) <= limits.qd_max + tolerance)
     q_next = q + qd * PERIOD
     beyond = np.maximum(limits.q_min - q, 0.0) + np.maximum(q - limits.q_max, 0.0)
     beyond_next = np.maximum(limits.q_min - q_next, 0.0) + np.maximum(q_next - limits.q_max, 0.0)
     allowed = np.maximum(beyond - limits.qd_max * PERIOD, 0.0)
-    assert np.all(beyond_next <= allowed + TOL * PERIOD + 1e-15), (q, qd)
+    assert np.all(beyond_next <= allowed + tolerance * PERIOD + 1e-15), (q, qd)
 
 
-@pytest.mark.parametrize("name", solver_names())
-@pytest.mark.parametrize("acceleration", [(), (10.0,)], ids=["no_acc_bound", "acc_bound"])
-def test_controller_command_is_finite_and_inside_eq21_23(name: str, acceleration: tuple[float, ...],
-                                                         model: DualArmModel) -> None:
-    """RelativeController.step: for any configuration and target, the command satisfies eq (21)-(23)."""
-    controller = RelativeController(model, ControllerParams(solver=name, period=PERIOD,
-                                                            acceleration_limit=acceleration))
+def assert_solver_kept_eq21_23(result: SolverResult, command: np.ndarray, q: np.ndarray, limits: JointLimits,
+                               tolerance: float, allowed: tuple[str, ...] = OWN_RESULT + ("fallback",)) -> None:
+    """The solver's own result, before the clip, within ``tolerance`` of eq (21)-(23) (when it is what
+    was commanded: "solved", "scaled"), the status one of ``allowed`` (no failure, so no
+    "bounds_violated"), and the command itself inside eq (21)-(23) to round-off."""
+    assert result.status in allowed, result
+    if result.status in OWN_RESULT:
+        assert result.raw_velocities is not None and result.bound_excess <= tolerance, result
+        assert_inside_eq21_23(result.raw_velocities, q, limits, tolerance)
+    assert_inside_eq21_23(command, q, limits)
 
-    @PROPERTY
-    @given(configurations(model.q_min, model.q_max), targets(), st.integers(1, 3))
+
+def controller_property(controller: RelativeController, examples: settings = PROPERTY) -> None:
+    """RelativeController.step on random configurations and targets, 1-3 cycles each: every cycle
+    passes :func:`assert_solver_kept_eq21_23` (NaN targets: "invalid_input" and its safe command)."""
+
+    @examples
+    @given(configurations(controller.model.q_min, controller.model.q_max), targets(), st.integers(1, 3))
     def check(q: np.ndarray, target: Target, cycles: int) -> None:
         controller.reset()
         for _ in range(cycles):  # later cycles use the warm start and the acceleration bound's memory
             out = controller.step(q, target)
-            assert_inside_eq21_23(out.velocities, q, controller.limits)
-            assert not out.result.failed or out.result.status == "invalid_input", out.result  # NaN targets only
+            assert_solver_kept_eq21_23(out.result, out.velocities, q, controller.limits,
+                                       controller.solver.bound_tolerance,
+                                       OWN_RESULT + ("fallback", "invalid_input"))  # invalid: NaN targets only
 
     check()
+
+
+@pytest.mark.parametrize("config", list(CONFIGS))
+@pytest.mark.parametrize("acceleration", [(), (10.0,)], ids=["no_acc_bound", "acc_bound"])
+def test_controller_command_is_finite_and_inside_eq21_23(config: str, acceleration: tuple[float, ...],
+                                                         model: DualArmModel) -> None:
+    """RelativeController.step, every solver and back-end: for any configuration and target, the solver's
+    own result (before the clip) and the command satisfy eq (21)-(23)."""
+    params = replace(CONFIGS[config], acceleration_limit=acceleration)
+    controller_property(RelativeController(model, params))
 
 
 @st.composite
@@ -134,21 +174,26 @@ def problems(draw: st.DrawFn, q_min: np.ndarray, q_max: np.ndarray, qd_max: np.n
     return ControlProblem(jac, reference, lower, upper, repulsive), q
 
 
-@pytest.mark.parametrize("name", solver_names())
-def test_solver_command_is_finite_and_inside_the_bounds(name: str, model: DualArmModel) -> None:
-    """Solver.solve on random problems: finite, inside [lower, upper] and eq (21), never a failure status."""
-    solver = make_solver(name)
+def solver_property(solver: Solver, model: DualArmModel, examples: settings = PROPERTY) -> None:
+    """Solver.solve on random problems: every result passes :func:`assert_solver_kept_eq21_23` (the
+    solver's own result within its bound tolerance, never a failure status, the command inside)."""
     limits = JointLimits(model.q_min, model.q_max, model.qd_max)
 
-    @PROPERTY
+    @examples
     @given(problems(model.q_min, model.q_max, model.qd_max))
     def check(case: tuple[ControlProblem, np.ndarray]) -> None:
         problem, q = case
         result = solver.solve(problem)
-        assert_inside_eq21_23(result.velocities, q, limits)
-        assert not result.failed, result  # a solver's own degraded statuses are allowed; failures fall back
+        assert_solver_kept_eq21_23(result, result.velocities, q, limits, solver.bound_tolerance)
 
     check()
+
+
+@pytest.mark.parametrize("config", list(CONFIGS))
+def test_solver_command_is_finite_and_inside_the_bounds(config: str, model: DualArmModel) -> None:
+    """Solver.solve on random problems, every solver and back-end: its own result within its bound
+    tolerance of [lower, upper] and eq (21), the command inside, never a failure status."""
+    solver_property(make_solver(CONFIGS[config].solver, CONFIGS[config].solver_params), model)
 
 
 @pytest.mark.parametrize("name", solver_names())
@@ -172,3 +217,58 @@ def test_fallback_command_is_finite_and_inside_the_bounds(name: str, model: Dual
         assert result.task_residual <= np.sqrt(bound) + 1e-9
 
     check()
+
+
+# ---- the checks above can fail: a solver that ignores its bounds (registered for the test) ------------
+
+
+def test_a_solver_ignoring_its_bounds_fails_the_property_checks(bound_ignoring_solver: str,
+                                                               model: DualArmModel) -> None:
+    """test/bound_ignoring.py's solver commands 1.5 x its upper bounds with status "solved": both property
+    checks above flag it, through Solver.solve and through RelativeController.step, although every command
+    sent is still inside the bounds (the failure policy replaced it)."""
+    with pytest.raises(AssertionError, match="bounds_violated"):
+        solver_property(make_solver(bound_ignoring_solver), model, FIRST_FAILURE)
+    controller = RelativeController(model, ControllerParams(solver=bound_ignoring_solver, period=PERIOD))
+    with pytest.raises(AssertionError, match="bounds_violated"):
+        controller_property(controller, FIRST_FAILURE)
+
+
+def test_the_own_result_check_flags_an_overshoot_beyond_the_tolerance(model: DualArmModel) -> None:
+    """The check on the solver's own result, without the status check: a "solved" result 10 x the
+    tolerance beyond a bound fails it, one within the tolerance passes."""
+    solver = make_solver("sparse_qp")
+    limits = JointLimits(model.q_min, model.q_max, model.qd_max)
+    q = 0.5 * (model.q_min + model.q_max)
+    upper = velocity_bounds(q, limits, PERIOD)[1]
+    for overshoot, fails in ((10.0, True), (0.5, False)):
+        raw = upper.copy()
+        raw[3] += overshoot * solver.bound_tolerance
+        result = SolverResult(np.minimum(raw, upper), "solved", 0.0, 0, 14, 0.0, "", raw,
+                              overshoot * solver.bound_tolerance)
+        if fails:
+            with pytest.raises(AssertionError):
+                assert_solver_kept_eq21_23(result, result.velocities, q, limits, solver.bound_tolerance)
+        else:
+            assert_solver_kept_eq21_23(result, result.velocities, q, limits, solver.bound_tolerance)
+
+
+def test_a_bound_violation_in_the_control_cycle_gives_its_status_and_the_fallback(
+        bound_ignoring_solver: str, model: DualArmModel, monkeypatch: pytest.MonkeyPatch) -> None:
+    """One RelativeController cycle with the bound-ignoring solver: status "bounds_violated" (a failure,
+    the excess and the joint in detail) and the failure policy's command: the bounded least-squares step
+    that the same cycle gets from a solver whose QP is infeasible."""
+    target = Target(np.array([0.3, 0.1, 0.2]), np.eye(3), np.full(3, 0.5), np.zeros(3))
+    q = 0.5 * (model.q_min + model.q_max)
+    wrong = RelativeController(model, ControllerParams(solver=bound_ignoring_solver, period=PERIOD))
+    infeasible = RelativeController(model, ControllerParams(solver="standard_qp", period=PERIOD))
+    monkeypatch.setattr(infeasible.solver, "_solve", lambda problem: (None, "infeasible", 0, "QP infeasible"))
+    out, reference = wrong.step(q, target), infeasible.step(q, target)
+    assert out.result.status == "bounds_violated" and out.result.failed, out.result
+    assert out.result.bound_excess > 1e-3 > wrong.solver.bound_tolerance
+    assert "beyond its upper bound" in out.result.detail and "bounded least-squares step used" in out.result.detail
+    assert reference.result.status == "fallback"
+    np.testing.assert_array_equal(out.velocities, reference.velocities)
+    assert_inside_eq21_23(out.velocities, q, wrong.limits)
+    upper = velocity_bounds(q, wrong.limits, PERIOD)[1]
+    np.testing.assert_array_equal(out.result.raw_velocities, 1.5 * upper)  # what the solver returned, kept

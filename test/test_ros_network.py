@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from dualarm_control.app.netns import (
+from dualarm_control.app.faults.netns import (
     LINK_DEVICE,
     Link,
     exec_prefix,

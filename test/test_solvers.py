@@ -25,13 +25,16 @@ import pytest
 import qpsolvers
 from scipy.optimize import linprog
 
+from dualarm_control.app.bench.suite import solver_configs
+from dualarm_control.controller import ControllerParams
 from dualarm_control.errors import ParameterError, UnknownSolverError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.limits import JointLimits, repulsive_velocity, velocity_bounds
-from dualarm_control.qp import QPSettings, QPSolution
+from dualarm_control.qp import QPSettings, QPSolution, available_backends
 from dualarm_control.solvers import (
     ACTIVITY_THRESHOLD,
     ControlProblem,
+    Solver,
     SolverParams,
     make_solver,
     methods,
@@ -43,6 +46,8 @@ EPS = 1e-6  # default standard-QP regularization
 ACCURATE = SolverParams(qp=QPSettings(eps_abs=1e-12))  # for checks of the formulation itself
 EXACT = SolverParams(proximal_weight=0.0)  # the lasso of eq (19) at every call, no tie-break toward the last solution
 PERIOD = 0.005
+CONFIGS = solver_configs(ControllerParams(period=PERIOD), solver_names(), available_backends())[0]
+"""Every registered solver with every QP back-end it accepts, as "solver | back-end"."""
 
 Problem = ControlProblem
 
@@ -204,11 +209,11 @@ def test_unknown_qp_backend_raises_with_valid_names() -> None:
 # ---- per-solver contract (one test factory, parametrized over the registry) --------------------
 
 
-@pytest.mark.parametrize("name", solver_names())
-def test_result_record_is_consistent(name: str, model: DualArmModel, limits: JointLimits) -> None:
-    """solve_time > 0, iterations >= 0, active_joints == count(|qd| > 1e-3), residual == ||J qd - r||, qd in bounds."""
-    solver = make_solver(name)
-    for p in mixed_problems(model, limits, 8, seed=21):
+def check_result_records(solver: Solver, problems: list[Problem]) -> None:
+    """solve_time > 0, iterations >= 0, active_joints == count(|qd| > 1e-3), residual == ||J qd - r||, no
+    failure; the solver's own result (before the clip) within its bound tolerance of the bounds, and the
+    command inside them."""
+    for p in problems:
         res = solver.solve(p)
         assert not res.failed, res.detail
         assert res.solve_time > 0 and res.iterations >= 0
@@ -216,7 +221,119 @@ def test_result_record_is_consistent(name: str, model: DualArmModel, limits: Joi
         assert ACTIVITY_THRESHOLD == 1e-3
         assert res.task_residual == pytest.approx(np.linalg.norm(p.jacobian @ res.velocities - p.reference), abs=1e-12)
         assert np.all(np.isfinite(res.velocities))
+        assert res.raw_velocities is not None
+        assert np.all(res.raw_velocities >= p.lower - solver.bound_tolerance), res.raw_velocities - p.lower
+        assert np.all(res.raw_velocities <= p.upper + solver.bound_tolerance), res.raw_velocities - p.upper
+        assert res.bound_excess == max(0.0, float(np.max(np.maximum(p.lower - res.raw_velocities,
+                                                                    res.raw_velocities - p.upper))))
         assert np.all(res.velocities >= p.lower) and np.all(res.velocities <= p.upper)
+
+
+@pytest.mark.parametrize("config", list(CONFIGS))
+def test_result_record_is_consistent(config: str, model: DualArmModel, limits: JointLimits) -> None:
+    """Every solver and back-end: the record of :func:`check_result_records` on 8 mixed problems."""
+    check_result_records(make_solver(CONFIGS[config].solver, CONFIGS[config].solver_params),
+                         mixed_problems(model, limits, 8, seed=21))
+
+
+def test_a_solver_ignoring_its_bounds_fails_the_record_check(bound_ignoring_solver: str, model: DualArmModel,
+                                                            limits: JointLimits) -> None:
+    """The check above can fail: test/bound_ignoring.py's solver is a failure ("bounds_violated")."""
+    with pytest.raises(AssertionError, match="bounds_violated"):
+        check_result_records(make_solver(bound_ignoring_solver), mixed_problems(model, limits, 8, seed=21))
+
+
+# ---- the clip absorbs the back-end's tolerance, nothing more (issue 20) ---------------------------------
+
+
+@pytest.mark.parametrize(("config", "tolerance"), [
+    ("pseudo_inverse | -", 1e-12), ("standard_qp | daqp", 1e-9 + 1e-12), ("standard_qp | proxsuite", 1e-9 + 1e-12),
+    ("standard_qp | quadprog", 1e-9 + 1e-12), ("constraint_based | daqp", 1e-9 + 1e-12),
+    ("constraint_based | quadprog", 1e-9 + 1e-12), ("sparse_qp | daqp", 2e-9 + 1e-12),
+    ("sparse_qp | proxsuite", 2e-9 + 1e-12), ("hierarchical_sparse_qp | daqp", 2e-9 + 1e-12)])
+def test_bound_tolerances_are_the_documented_figures(config: str, tolerance: float) -> None:
+    """docs/safety.md G1: round-off 1e-12 rad/s, plus eps_abs = 1e-9 for a QP's x, twice for the lasso's
+    qd = qd+ - qd-; it follows eps_abs."""
+    params = CONFIGS[config].solver_params
+    assert make_solver(CONFIGS[config].solver, params).bound_tolerance == pytest.approx(tolerance, rel=1e-12)
+    if CONFIGS[config].solver != "pseudo_inverse":
+        coarse = SolverParams(qp_backend=params.qp_backend, qp=QPSettings(eps_abs=1e-6))
+        assert make_solver(CONFIGS[config].solver, coarse).bound_tolerance == pytest.approx(
+            1e-12 + (tolerance - 1e-12) * 1e3, rel=1e-9)
+
+
+def overshooting(problem: Problem, joint: int, excess: float) -> np.ndarray:
+    """A result inside the bounds except joint ``joint``, ``excess`` rad/s above its upper bound."""
+    qd = 0.5 * (problem.lower + problem.upper)
+    qd[joint] = problem.upper[joint] + excess
+    return qd
+
+
+@pytest.mark.parametrize("name", solver_names())
+def test_an_overshoot_within_the_tolerance_is_clipped(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """_solve returns a result 0.9 x the solver's tolerance above a bound: status "solved", the command is
+    the result clipped into the bounds, the raw result and its excess are in the record."""
+    solver = make_solver(name)
+    p = random_problem(np.random.default_rng(29), 1.0)
+    raw = overshooting(p, 5, 0.9 * solver.bound_tolerance)
+    monkeypatch.setattr(solver, "_solve", lambda problem: (raw.copy(), "solved", 3, ""))
+    res = solver.solve(p)
+    assert res.status == "solved" and not res.failed and res.iterations == 3
+    np.testing.assert_array_equal(res.raw_velocities, raw)
+    assert res.bound_excess == pytest.approx(0.9 * solver.bound_tolerance, rel=1e-3)
+    np.testing.assert_array_equal(res.velocities, np.minimum(raw, p.upper))
+
+
+@pytest.mark.parametrize("name", solver_names())
+def test_an_overshoot_beyond_the_tolerance_is_a_failure_with_the_fallback_command(
+        name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """_solve returns a result 1.1 x the solver's tolerance above a bound (status "solved"): status
+    "bounds_violated" (a failure), the bounded least-squares step as command (as for an infeasible QP),
+    the joint and the excess in detail; warm-start memory reset."""
+    solver = make_solver(name)
+    p = random_problem(np.random.default_rng(29), 1.0)
+    raw = overshooting(p, 5, 1.1 * solver.bound_tolerance)
+    monkeypatch.setattr(solver, "_solve", lambda problem: (raw.copy(), "solved", 3, ""))
+    resets = []
+    monkeypatch.setattr(solver, "reset", lambda: resets.append(1))
+    res = solver.solve(p)
+    assert res.status == "bounds_violated" and res.failed and not res.fell_back
+    assert res.detail.startswith("bounds_violated: joint 5 at") and "beyond its upper bound" in res.detail
+    assert "bounded least-squares step used" in res.detail and resets == [1]
+    np.testing.assert_array_equal(res.raw_velocities, raw)
+    monkeypatch.setattr(solver, "_solve", return_nothing)
+    np.testing.assert_array_equal(res.velocities, solver.solve(p).velocities)  # the fallback command
+
+
+def test_a_bound_violation_whose_fallback_fails_gives_the_command_nearest_to_rest(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """If the bounded least squares fails too: status "bounds_violated" and clip(0, lower, upper)."""
+    from dualarm_control.solvers import base
+
+    solver = make_solver("standard_qp")
+    p = random_problem(np.random.default_rng(29), 1.0)
+    monkeypatch.setattr(solver, "_solve", lambda problem: (overshooting(p, 2, 0.1), "solved", 0, ""))
+    monkeypatch.setattr(base, "bounded_least_squares", lambda *args: None)
+    res = solver.solve(p)
+    assert res.status == "bounds_violated" and "nearest-to-rest" in res.detail
+    np.testing.assert_array_equal(res.velocities, np.zeros(14))
+
+
+def test_hierarchical_does_not_hide_a_primary_beyond_its_bounds(model: DualArmModel, limits: JointLimits,
+                                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """QP2 starts from qd1 clipped into the bounds; a qd1 beyond them by more than QP1's tolerance is not
+    clipped there but reported: status "bounds_violated"; within the tolerance QP2 runs as usual."""
+    p, _ = near_limit_problem(model, limits, 3, seed=74)
+    for excess, status in ((1e-6, "bounds_violated"), (0.5e-9, "solved")):
+        solver = make_solver("hierarchical_sparse_qp")
+        qd1 = make_solver("sparse_qp").solve(p).velocities
+        qd1[9] = p.upper[9] + excess
+        monkeypatch.setattr(solver._primary, "_solve", lambda problem, qd1=qd1: (qd1.copy(), "solved", 1, ""))
+        res = solver.solve(p)
+        assert res.status == status, res.detail
+        if status == "solved":
+            assert np.all(res.raw_velocities <= p.upper + solver.bound_tolerance)
+            assert np.any(res.raw_velocities != qd1)  # the secondary motion was added
 
 
 @pytest.mark.parametrize("name", solver_names())
@@ -302,12 +419,16 @@ def return_max_iter(problem: Problem) -> tuple:
     return np.full(problem.jacobian.shape[1], 1e3), "max_iter", 10000, "QP max_iter"
 
 
+def return_wrong_shape(problem: Problem) -> tuple:
+    return np.zeros(problem.jacobian.shape[1] - 1), "solved", 1, ""
+
+
 @pytest.mark.parametrize("name", solver_names())
 @pytest.mark.parametrize("failure", [raise_linalg_error, raise_runtime_error, return_infinite, return_nothing,
-                                     return_max_iter])
+                                     return_max_iter, return_wrong_shape])
 def test_numerical_failures_give_the_bounded_least_squares_fallback(name: str, failure: Callable,
                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
-    """Whatever _solve does (raise, inf, no solution, iteration cap), solve() returns status "fallback" with
+    """Whatever _solve does (raise, inf, no solution, iteration cap, a wrong shape), solve() returns status "fallback" with
     the reason in detail and the bounded least-squares step: inside the bounds, and its residual no worse
     than any other point of the box sampled here (it is the box's least-squares optimum)."""
     solver = make_solver(name)

@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 from xml.etree import ElementTree
 
-from dualarm_control.app.launcher import Launch, Process, node_command
+from dualarm_control.app.run.launcher import Launch, Process, node_command
 from dualarm_control.paths import config_path
 from dualarm_control.ros.env import (
     FASTDDS_PROFILE_VARIABLE,

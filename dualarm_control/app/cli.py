@@ -8,142 +8,21 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
-from dualarm_control.app.progress import progress_bar
+from dualarm_control.app.run import DEFAULT_SOLVERS
 from dualarm_control.errors import DualArmError
 
 EXIT_USAGE = 2
-DEFAULT_SOLVERS = "standard_qp,sparse_qp,hierarchical_sparse_qp"
-EXIT_INTERRUPTED = 130
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
-    """Run a scenario in-process (lockstep) for each solver; write metrics.json and plots."""
-    from dualarm_control.app.experiment import run_scenario, summarize_log
-    from dualarm_control.app.report import (
-        format_table,
-        plot_velocity_norms,
-    )
-    from dualarm_control.controller import controller_params
-    from dualarm_control.kinematics import DualArmModel
-    from dualarm_control.params import read_params_files
-    from dualarm_control.scenario import load_scenario
+    """Run a scenario in-process (lockstep): :func:`dualarm_control.app.run.experiment.experiment_command`."""
+    from dualarm_control.app.run.experiment import experiment_command
 
-    scenario = load_scenario(args.scenario)
-    if scenario.tasks is not None:
-        return cmd_task_experiment(args, scenario)
-    if args.gains or args.force or args.duration:
-        raise DualArmError(f"--gains, --force and --duration apply to task scenarios (pan_cleaning), "
-                           f"not to {scenario.name!r}")
-    base = read_params_files(args.params, "controller_node")
-    solvers = [s.strip() for s in (args.solver or DEFAULT_SOLVERS).split(",") if s.strip()]
-    configs = {name: controller_params({**base, "solver": name}) for name in solvers}  # validates all first
-    out = Path(args.output)
-    model = DualArmModel()
-    print(f"scenario {scenario.name!r} ({scenario.source}); solvers: {', '.join(solvers)}; output: {out}", file=sys.stderr)
-
-    def job(name: str, params: Any) -> Callable[[Any], tuple[str, dict[str, Any], Any]]:
-        def run(progress: Any) -> tuple[str, dict[str, Any], Any]:
-            log = run_scenario(scenario, params, model, progress=progress)
-            return name, summarize_log(log, scenario, model), log
-        return run
-
-    done = run_all([(name, job(name, params)) for name, params in configs.items()], out)
-    if done is None:
-        return EXIT_INTERRUPTED
-    results, logs = done
-    runs = {log.solver: (log.time, log.commands) for log in logs}
-    plot_velocity_norms(runs, out / "velocity_norms.png", title=f"{scenario.name}: |qd_i| and active joints")
-    print(format_table(results))
-    print(f"\nwrote {out / 'metrics.json'} and {out / 'velocity_norms.png'}")
-    return 0
-
-
-def run_all(jobs: list[tuple[str, Callable[[Any], tuple[str, dict[str, Any], Any]]]],
-            out: Path) -> tuple[dict[str, dict[str, Any]], list[Any]] | None:
-    """Run each (label, run) in order; ``run(progress)`` returns (metrics key, metrics, log).
-
-    Prints a progress bar and the wall time per run and writes ``out/metrics.json``. On
-    Ctrl-C the metrics of the runs completed so far are written and None is returned.
-    """
-    from dualarm_control.app.report import write_metrics
-
-    results: dict[str, dict[str, Any]] = {}
-    logs: list[Any] = []
-    try:
-        for label, run in jobs:
-            start = time.perf_counter()
-            key, metrics, log = run(progress_bar(label))
-            results[key] = metrics
-            logs.append(log)
-            print(f"[{label}] done: {len(log.time)} cycles in {time.perf_counter() - start:.1f} s wall", file=sys.stderr)
-    except KeyboardInterrupt:
-        print("\ninterrupted: writing what is complete", file=sys.stderr)
-        if results:
-            write_metrics(out / "metrics.json", results)
-        return None
-    write_metrics(out / "metrics.json", results)
-    return results, logs
-
-
-def cmd_task_experiment(args: argparse.Namespace, scenario) -> int:
-    """Task scenario (paper 001): one run per gain k (force variant with --force); metrics.json, figures."""
-    from dualarm_control.app.task_experiment import (
-        run_task_scenario,
-        summarize_task_run,
-    )
-    from dualarm_control.app.task_report import (
-        format_task_table,
-        plot_contact_force,
-        plot_joint_velocities,
-        plot_task_values,
-        plot_tool_paths,
-    )
-    from dualarm_control.controller import controller_params
-    from dualarm_control.params import read_params_files
-    from dualarm_control.tasks import CircleTask
-
-    spec = scenario.tasks
-    base = read_params_files(args.params, "controller_node")
-    solver = args.solver or "constraint_based"
-    if "," in solver:
-        raise DualArmError("a task scenario runs one solver (constraint_based); got --solver " + solver)
-    params = controller_params({**base, "solver": solver})
-    try:
-        gains = [float(g) for g in args.gains.split(",") if g.strip()] if args.gains else (
-            [spec.force.gain] if args.force else list(spec.gains))
-    except ValueError:
-        raise DualArmError(f"--gains {args.gains!r}: expected comma-separated numbers > 0") from None
-    if not gains or any(not g > 0 for g in gains):
-        raise DualArmError(f"--gains {args.gains!r}: expected comma-separated numbers > 0")
-    out = Path(args.output)
-    print(f"scenario {scenario.name!r} ({scenario.source}); solver {solver}; gains {gains}"
-          f"{'; force feedback' if args.force else ''}; output: {out}", file=sys.stderr)
-
-    def job(gain: float) -> Callable[[Any], tuple[str, dict[str, Any], Any]]:
-        def run(progress: Any) -> tuple[str, dict[str, Any], Any]:
-            log = run_task_scenario(scenario, params, gain, args.force, duration=args.duration, progress=progress)
-            return log.label, summarize_task_run(log, scenario), log
-        return run
-
-    done = run_all([(f"k={gain:g}" + (" force" if args.force else ""), job(gain)) for gain in gains], out)
-    if done is None:
-        return EXIT_INTERRUPTED
-    results, logs = done
-    circle = next(t for t in spec.build(1.0) if isinstance(t, CircleTask))
-    plot_tool_paths(logs, circle.radius, out / "tool_path.png")
-    plot_task_values(logs, out / "task_values.png")
-    plot_joint_velocities(logs[0], out / "joint_velocities.png")
-    files = ["metrics.json", "tool_path.png", "task_values.png", "joint_velocities.png"]
-    if args.force:
-        plot_contact_force(logs[0], out / "contact_force.png")
-        files.append("contact_force.png")
-    print(format_task_table(results))
-    print(f"\nwrote {', '.join(str(out / f) for f in files)}")
-    return 0
+    return experiment_command(args.scenario, args.solver, args.params, Path(args.output), args.gains, args.force,
+                              args.duration)
 
 
 def check_params_files(paths: list[str]) -> None:
@@ -157,7 +36,7 @@ def check_params_files(paths: list[str]) -> None:
 
 def cmd_launch(args: argparse.Namespace) -> int:
     """Start the three nodes as processes on a scenario; optionally record a bag."""
-    from dualarm_control.app.launcher import launch_scenario
+    from dualarm_control.app.run.launcher import launch_scenario
     from dualarm_control.scenario import load_scenario, scenario_file
 
     scenario_file(args.scenario)  # fail early (exit 2) on an unknown scenario
@@ -189,7 +68,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     """Run one node in the foreground (like ``ros2 run dualarm_control NODE``)."""
     import os
 
-    from dualarm_control.app.launcher import NODES, node_command
+    from dualarm_control.app.run.launcher import NODES, node_command
 
     if args.node not in NODES:
         raise DualArmError(f"unknown node {args.node!r}; valid choices: {', '.join(NODES)}")
@@ -203,7 +82,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     ``dualarm report`` on the bag, then the in-process experiment, and a comparison of both."""
     import json
 
-    from dualarm_control.app.launcher import launch_scenario
+    from dualarm_control.app.run.launcher import launch_scenario
 
     out = Path(args.output)
     solvers = [s.strip() for s in args.solver.split(",") if s.strip()]
@@ -245,7 +124,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def cmd_bench_realtime(args: argparse.Namespace) -> int:
     """Real-time runs over ROS per solver and rate; write DIR/realtime.md and DIR/realtime.json."""
-    from dualarm_control.app.realtime_bench import (
+    from dualarm_control.app.bench.realtime import (
         format_realtime,
         run_realtime,
         write_realtime,
@@ -289,7 +168,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         return cmd_bench_realtime(args)
     if args.messages:
         return cmd_bench_messages(args)
-    from dualarm_control.app.bench import format_bench, run_bench, write_bench
+    from dualarm_control.app.bench.suite import format_bench, run_bench, write_bench
     from dualarm_control.qp import make_backend
     from dualarm_control.scenario import load_scenario
     from dualarm_control.solvers import make_solver
@@ -311,7 +190,12 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 def cmd_faults(args: argparse.Namespace) -> int:
     """The fault matrix against real processes: DIR/faults.md and faults.json; exit 1 if a row failed."""
-    from dualarm_control.app.faults import ROWS, format_table, run_matrix, write_results
+    from dualarm_control.app.faults.matrix import (
+        ROWS,
+        format_table,
+        run_matrix,
+        write_results,
+    )
     from dualarm_control.scenario import scenario_file
 
     scenario_file(args.scenario)
@@ -333,7 +217,7 @@ def cmd_faults(args: argparse.Namespace) -> int:
 
 def cmd_soak(args: argparse.Namespace) -> int:
     """The scenario on repeat over ROS: RSS growth, missed-deadline bursts, accounting (soak.md/json)."""
-    from dualarm_control.app.soak import format_soak, run_soak, write_soak
+    from dualarm_control.app.faults.soak import format_soak, run_soak, write_soak
     from dualarm_control.scenario import scenario_file
 
     scenario_file(args.scenario)
@@ -346,8 +230,8 @@ def cmd_soak(args: argparse.Namespace) -> int:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    """Global manipulability plan of a relative path (paper 003); logic in app/plan_command.py."""
-    from dualarm_control.app.plan_command import run_plan_command
+    """Global manipulability plan of a relative path (paper 003); logic in app/plan/command.py."""
+    from dualarm_control.app.plan.command import run_plan_command
 
     return run_plan_command(args)
 
@@ -363,7 +247,7 @@ def cmd_bag_record(args: argparse.Namespace) -> int:
 
 def cmd_bag_info(args: argparse.Namespace) -> int:
     """Print a ``ros2 bag info``-style summary."""
-    from dualarm_control.app.bag import bag_info
+    from dualarm_control.app.record.bag import bag_info
 
     print(bag_info(Path(args.bag)))
     return 0
@@ -371,14 +255,12 @@ def cmd_bag_info(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Metrics of a recorded run: DIR/metrics.json, DIR/velocity_norms.png and the table."""
-    from dualarm_control.app.bag import report
-    from dualarm_control.app.report import format_table
-    from dualarm_control.app.task_bag import is_task_bag, task_report
-    from dualarm_control.app.task_report import format_task_table
+    from dualarm_control.app.record.bag import holds_task_cycles, report, report_tasks
+    from dualarm_control.app.record.report import format_table, format_task_table
 
     out = Path(args.output)
-    if is_task_bag(Path(args.bag)):  # a task scenario (pan_cleaning over ROS): the experiment's task metrics
-        task_results = task_report(Path(args.bag), out)
+    if holds_task_cycles(Path(args.bag)):  # a task scenario (pan_cleaning over ROS): the experiment's task metrics
+        task_results = report_tasks(Path(args.bag), out)
         print(format_task_table(task_results))
         print(f"\nwrote {out / 'metrics.json'}, {out / 'tool_path.png'}, {out / 'task_values.png'} and "
               f"{out / 'joint_velocities.png'}")
@@ -466,11 +348,15 @@ def _add_topic_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
                            "unless ROS_AUTOMATIC_DISCOVERY_RANGE / ROS_STATIC_PEERS / a DDS profile is set.")
     verbs = topic.add_subparsers(dest="topic_verb", metavar="TOPIC_VERB")
     verbs.required = True
-    spin = {"type": float, "default": 3.0, "metavar": "S",
-            "help": "discovery wait; echo, hz and info answer as soon as the topic is found (default: %(default)s s)"}
+    from dualarm_control.ros.graph import DEFAULT_SPIN_TIME
+    from dualarm_control.ros.node import DISCOVERY_TIMEOUT_S
+
+    spin = {"type": float, "default": DISCOVERY_TIMEOUT_S, "metavar": "S",
+            "help": "wait up to S s for the topic's discovery; answers as soon as it is found (default: %(default)s)"}
     lst = verbs.add_parser("list", help="topics with publishers or subscriptions")
     lst.add_argument("-t", "--show-types", action="store_true", help="also print each topic's type")
-    lst.add_argument("--spin-time", **spin)
+    lst.add_argument("--spin-time", type=float, default=DEFAULT_SPIN_TIME, metavar="S",
+                     help="collect what discovery finds for S s (default: %(default)s)")
     lst.set_defaults(func=cmd_topic_list)
     ech = verbs.add_parser("echo", help="print messages as YAML")
     ech.add_argument("topic")
@@ -498,15 +384,15 @@ def cmd_param(args: argparse.Namespace) -> int:
 
     node = args.node if args.node.startswith("/") else "/" + args.node
     if args.param_verb == "list":
-        print("\n".join(f"  {name}" for name in pc.list_parameters(node)))
+        print("\n".join(f"  {name}" for name in pc.list_parameters(node, args.timeout)))
     elif args.param_verb == "get":
-        value = pc.get_parameter(node, args.name)
+        value = pc.get_parameter(node, args.name, args.timeout)
         kind = {bool: "Boolean", int: "Integer", float: "Double", str: "String"}.get(type(value), "Value")
         print(f"{kind} value is: {value}")
     elif args.param_verb == "describe":
-        print(pc.describe_parameter(node, args.name))
+        print(pc.describe_parameter(node, args.name, args.timeout))
     else:
-        print(pc.set_parameter(node, args.name, pc.yaml_value(args.value)))
+        print(pc.set_parameter(node, args.name, pc.yaml_value(args.value), args.timeout))
     return 0
 
 
@@ -517,15 +403,24 @@ def _add_param_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
                          "the controller applies accepted changes at the next cycle boundary.")
     verbs = par.add_subparsers(dest="param_verb", metavar="PARAM_VERB")
     verbs.required = True
-    verbs.add_parser("list", help="parameter names").add_argument("node", help="node name, e.g. /controller_node")
+    from dualarm_control.ros.node import DISCOVERY_TIMEOUT_S
+
+    timeout = {"type": float, "default": DISCOVERY_TIMEOUT_S, "metavar": "S",
+               "help": "wait up to S s for the node's parameter services, and as long for its answer "
+               "(default: %(default)s)"}
+    lst = verbs.add_parser("list", help="parameter names")
+    lst.add_argument("node", help="node name, e.g. /controller_node")
+    lst.add_argument("--timeout", **timeout)
     for verb, helptext in (("get", "a parameter's value"), ("describe", "type, description, constraints")):
         v = verbs.add_parser(verb, help=helptext)
         v.add_argument("node")
         v.add_argument("name")
+        v.add_argument("--timeout", **timeout)
     st = verbs.add_parser("set", help="set a parameter (value read as YAML: 10.0 double, 10 integer)")
     st.add_argument("node")
     st.add_argument("name")
     st.add_argument("value")
+    st.add_argument("--timeout", **timeout)
     par.set_defaults(func=cmd_param)
 
 
@@ -646,7 +541,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "cannot run here are reported as skipped, with the reason.")
     fau.add_argument("--output", default="out/faults", metavar="DIR", help="output directory (default: %(default)s)")
     fau.add_argument("--scenario", default="assembly", help="scenario of the runs (default: %(default)s)")
-    from dualarm_control.app.faults import ROWS
+    from dualarm_control.app.faults.matrix import ROWS
 
     fau.add_argument("--only", metavar="ROW,...", help=f"run only these rows (default: all): {', '.join(ROWS)}")
     fau.set_defaults(func=cmd_faults)
@@ -663,7 +558,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_topic_parser(sub)
     _add_param_parser(sub)
     _add_report_parser(sub)
-    from dualarm_control.app.plan_command import add_plan_parser
+    from dualarm_control.app.plan.command import add_plan_parser
 
     add_plan_parser(sub, cmd_plan)
     return parser

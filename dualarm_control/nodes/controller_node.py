@@ -29,11 +29,13 @@ one, a target beyond the cell's reach) is rejected with a throttled log line and
 /diagnostics entry, and the last valid input kept (a state then goes stale -> zero command);
 a time source that restarted is accepted after 3 consecutive monotonic samples ("time source
 restarted"); no target yet -> zero command; a solver failure gives the bounded least-squares
-fallback (status "fallback", counted as ``solver_fallbacks``).
+fallback (status "fallback", counted as ``solver_fallbacks``); a solver result beyond its
+velocity bounds by more than the solver's tolerance gets the same command with status
+"bounds_violated" (a failure: ERROR, counted as ``solver_failures`` and ``bounds_violations``).
 
 Task mode (paper 001, ``scenario:=pan_cleaning``, a scenario with ``tasks``): no
 ``/relative_target``; every joint state drives one cycle of
-:class:`~dualarm_control.task_control.TaskScenarioController` (the tasks at gain
+:class:`~dualarm_control.references.tasks.TasksController` (the tasks at gain
 ``task_gain``, with ``force:=true`` the force loop of eq (9) on the latest ``/wrench``) at task
 time t = joint-state stamp - first joint-state stamp (lockstep: t = k T, k the step count of
 the stamps, as the in-process runner counts). /diagnostics carries per cycle the task time,
@@ -66,7 +68,7 @@ from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
 from dualarm_control.controller import (
     CONTROLLER_PARAMETERS,
-    ControlOutput,
+    Cycle,
     RelativeController,
     controller_params,
 )
@@ -74,6 +76,7 @@ from dualarm_control.errors import DualArmError, ScenarioError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.metrics import percentiles
 from dualarm_control.params import ParamSpec, non_negative, positive
+from dualarm_control.references.tasks import TasksController
 from dualarm_control.ros import convert
 from dualarm_control.ros.inputs import StampGate, Throttle, subscribe_checked
 from dualarm_control.ros.node import (
@@ -83,9 +86,9 @@ from dualarm_control.ros.node import (
     run,
     usage,
 )
-from dualarm_control.ros.qos import QOS_PARAMETER, stream_qos
+from dualarm_control.ros.qos import QOS_PARAMETER, publisher_depth, stream_qos
 from dualarm_control.scenario import load_scenario
-from dualarm_control.task_control import TaskCycle, TaskScenarioController
+from dualarm_control.solvers.base import BOUNDS_VIOLATED
 
 NODE_PARAMETERS = (
     ParamSpec("lockstep", False, "compute one command per joint-state stamp (deterministic runs)", read_only=True),
@@ -132,7 +135,7 @@ class ControllerNode:
         self.lockstep = bool(self.values["lockstep"])
         self.stale_ns = int(self.values["stale_timeout"] * 1e9)
         self.target_ns = int(self.values["target_timeout"] * 1e9)
-        self.task: TaskScenarioController | None = None
+        self.task: TasksController | None = None
         self.task_gain = float("nan")
         self.task_steps = 0  # task mode: cycles to run (duration / period, rounded up)
         if self.values["scenario"]:
@@ -146,9 +149,11 @@ class ControllerNode:
         self.order = {name: i for i, name in enumerate(self.model.joint_names)}
         n = self.node
         qos = stream_qos(self.values["qos_reliability"])
-        self.pub_cmd = n.create_publisher(Float64MultiArray, "/velocity_controller/commands", qos)
-        self.pub_pose = n.create_publisher(PoseStamped, "/relative_pose", 10)
-        self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        depth = publisher_depth(self.lockstep)
+        self.pub_cmd = n.create_publisher(Float64MultiArray, "/velocity_controller/commands",
+                                          stream_qos(self.values["qos_reliability"], depth))
+        self.pub_pose = n.create_publisher(PoseStamped, "/relative_pose", depth)
+        self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", depth)
         self.reach = self.model.relative_reach()
         subscribe_checked(n, JointState, "/joint_states", self.on_joint_state, qos, self.on_malformed,
                           convert.JointStateInput(self.order))
@@ -171,7 +176,7 @@ class ControllerNode:
         self.targets: dict[int, convert.TargetValue] = {}  # lockstep: by stamp
         self.last_commanded_stamp: int | None = None
         self.cycles = self.missed = self.failures = self.switches = self.safe_commands = 0
-        self.fallbacks = self.rejected = 0
+        self.fallbacks = self.rejected = self.bound_violations = 0
         self.target_received: int | None = None  # monotonic ns of the last valid target / joint reference
         self.fault: tuple[str, int] | None = None  # watchdog reason and monotonic ns it started
         self.trips = 0
@@ -199,7 +204,7 @@ class ControllerNode:
         elif not priority_note:
             self.log.info(f"running under SCHED_FIFO priority {self.values['thread_priority']}")
 
-    def make_task_controller(self) -> TaskScenarioController:
+    def make_task_controller(self) -> TasksController:
         """Task mode: the scenario's tasks on its URDF at gain ``task_gain`` (ScenarioError -> exit 2)."""
         scenario = load_scenario(self.values["scenario"])
         if scenario.tasks is None:
@@ -209,7 +214,7 @@ class ControllerNode:
         self.task_gain = float(self.values["task_gain"]) or (spec.force.gain if force else spec.gains[0])
         duration = float(self.values["duration"]) or spec.duration
         self.task_steps = int(np.ceil(duration / self.params.period - 1e-9))
-        return TaskScenarioController(DualArmModel(scenario.urdf_path), self.params, spec, self.task_gain, force)
+        return TasksController(DualArmModel(scenario.urdf_path), self.params, spec, self.task_gain, force)
 
     def close(self) -> None:
         jp = percentiles(np.array(self.jitter)) if self.jitter else NAN2
@@ -383,7 +388,7 @@ class ControllerNode:
             self.leave_safe_state()
         self.apply_pending()
         cycle = self.task.step(self.state[1], t, wrench)
-        self.finish_cycle(stamp, cycle.output.velocities, cycle.output.result, self.state[2])
+        self.finish_cycle(stamp, cycle.velocities, cycle.result, self.state[2])
         self.publish_task_diagnostics(stamp, t, cycle)
 
     def complete(self, stamp: int) -> None:
@@ -400,10 +405,10 @@ class ControllerNode:
         lockstep commands) after the task completed."""
         return self.completed_at is not None and time.monotonic() - self.completed_at > END_DELAY_S
 
-    def publish_task_diagnostics(self, stamp: int, t: float, cycle: TaskCycle) -> None:
+    def publish_task_diagnostics(self, stamp: int, t: float, cycle: Cycle) -> None:
         """Per task cycle: status and timing, plus the cycle's task time, normal offset and filtered
         force at full precision (repr) -- with /joint_states what the report recomputes the task values from."""
-        out, r = cycle.output, cycle.output.result
+        out, r = cycle, cycle.result
         level = 2 if r.failed else (1 if r.status != "solved" else 0)
         circle = next((rows for rows in out.rows if self.task is not None and self.task.circle is not None
                        and rows.name == self.task.circle.name), None)
@@ -416,7 +421,7 @@ class ControllerNode:
             "active_joints": r.active_joints,
             "control_period_s": self.params.period,
             "stamp_ns": stamp,
-            "task_scenario": self.values["scenario"],
+            "scenario": self.values["scenario"],
             "task_gain": repr(self.task_gain),
             "force": int(self.task is not None and self.task.force),
             "task_time_s": repr(t),
@@ -531,6 +536,7 @@ class ControllerNode:
         self.cycles += 1
         if result.failed:
             self.failures += 1
+            self.bound_violations += result.status == BOUNDS_VIOLATED
             self.warn(f"solver {result.status}: {result.detail}; safe command sent")
         elif result.fell_back:
             self.fallbacks += 1
@@ -569,9 +575,10 @@ class ControllerNode:
         ``unmatched_commands`` of them while no subscriber was matched."""
         return {"cycles": self.cycles, "safe_commands": self.safe_commands, "unmatched_commands": self.unmatched,
                 "watchdog_trips": self.trips, "missed_deadlines": self.missed, "solver_failures": self.failures,
-                "solver_fallbacks": self.fallbacks, "rejected_inputs": self.rejected}
+                "solver_fallbacks": self.fallbacks, "rejected_inputs": self.rejected,
+                "bounds_violations": self.bound_violations}
 
-    def publish_diagnostics(self, stamp: int, out: ControlOutput, latency: float) -> None:
+    def publish_diagnostics(self, stamp: int, out: Cycle, latency: float) -> None:
         r = out.result
         level = 2 if r.failed else (1 if r.status != "solved" else 0)
         if self.cycles % STATS_EVERY == 1:  # percentiles once a second, not every cycle

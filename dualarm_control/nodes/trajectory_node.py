@@ -26,7 +26,7 @@ from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import ParamSpec, positive
-from dualarm_control.planning.execution import PlanExecution
+from dualarm_control.references.plan import PlanSource
 from dualarm_control.ros import convert
 from dualarm_control.ros.inputs import StampGate, Throttle, subscribe_checked
 from dualarm_control.ros.node import (
@@ -37,7 +37,7 @@ from dualarm_control.ros.node import (
     thread_priority_spec,
     usage,
 )
-from dualarm_control.ros.qos import QOS_PARAMETER, stream_qos
+from dualarm_control.ros.qos import QOS_PARAMETER, publisher_depth, stream_qos
 from dualarm_control.scenario import load_scenario
 from dualarm_control.trajectory import RelativeTrajectory
 
@@ -66,13 +66,14 @@ class TrajectoryNode:
         self.repeat = bool(p["repeat"])
         self.repetitions = 0
         self.model = DualArmModel()
-        self.plan = PlanExecution(self.model, p["plan"]) if p["plan"] else None
+        self.plan = PlanSource.from_file(self.model, p["plan"]) if p["plan"] else None
         self.order = {name: i for i, name in enumerate(self.model.joint_names)}
         n = self.node
         qos = stream_qos(p["qos_reliability"])
-        self.pub = n.create_publisher(MultiDOFJointTrajectory, "/relative_target", qos)
+        depth = publisher_depth(self.lockstep)
+        self.pub = n.create_publisher(MultiDOFJointTrajectory, "/relative_target", stream_qos(p["qos_reliability"], depth))
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.pub_joint = n.create_publisher(JointTrajectory, "/joint_reference", qos)
+        self.pub_joint = n.create_publisher(JointTrajectory, "/joint_reference", stream_qos(p["qos_reliability"], depth))
         self.qos = qos
         self.states: Any = None  # the /joint_states subscription while one is needed
         self.subscribe_states()
@@ -86,7 +87,7 @@ class TrajectoryNode:
         self.finished = False
         if not self.lockstep:
             n.create_timer(p["control_period"], self.on_tick)
-        what = f"plan {p['plan']}" if self.plan else f"{len(self.scenario.segments)} segments"
+        what = (self.plan or self.scenario.reference).describe()
         self.log.info(f"scenario '{self.scenario.name}': {what}, "
                       f"{'lockstep' if self.lockstep else 'real-time'}; waiting for /joint_states")
         if priority_note and priority_note != "disabled":

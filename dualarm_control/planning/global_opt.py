@@ -10,7 +10,7 @@ subject to the joint limits (eq 16) and the closure constraint T_e1e2(q_i) = T_d
 written as ``h_i(q_i) = [p(q_i) - p_d,i; log3(R_d^T R(q_i))] = 0`` (6 per point). ``c`` is
 the index of eq (14) with u_i = [t_i; 0]. Each block is one NLP solved by scipy's SLSQP with
 analytic gradients (:mod:`dualarm_control.planning.index`), from one start; the multi-start
-loop and its reduction are in :mod:`dualarm_control.app.plan`.
+loop and its reduction are in :mod:`dualarm_control.app.plan.optimise`.
 
 Units: q [rad], c [m^2/rad^2], lambda [m^2/rad^6] (so that lambda ||dq||^4 is an index).
 """

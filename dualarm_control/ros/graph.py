@@ -22,12 +22,12 @@ from typing import Any, TextIO
 import yaml
 
 from dualarm_control.errors import DualArmError
-from dualarm_control.ros.node import tool_node
+from dualarm_control.ros.node import DISCOVERY_TIMEOUT_S, tool_node
 
 DEFAULT_SPIN_TIME = 3.0
-"""Seconds to wait for discovery before answering (``ros2 topic --spin-time``): on a loaded
-machine Fast DDS discovery of a new participant took up to 2.5 s here. Verbs that look for
-one topic answer as soon as it is found."""
+"""Seconds ``list`` collects what discovery finds before answering (``ros2 topic --spin-time``).
+The verbs that look for one topic (echo, hz, info) wait up to
+:data:`~dualarm_control.ros.node.DISCOVERY_TIMEOUT_S` instead and answer as soon as it is found."""
 
 
 class GraphToolError(DualArmError):
@@ -92,7 +92,7 @@ def format_topic_list(topics: Iterable[TopicEndpoints], show_types: bool = False
     return "\n".join(f"{t.name} [{', '.join(t.types)}]" if show_types else t.name for t in topics)
 
 
-def topic_info(topic: str, spin_time: float = DEFAULT_SPIN_TIME) -> TopicEndpoints:
+def topic_info(topic: str, spin_time: float = DISCOVERY_TIMEOUT_S) -> TopicEndpoints:
     """Type and endpoint counts of ``topic`` (zero counts when nobody uses it)."""
     name = fq_topic(topic)
     with tool_node("_dualarm_topic_info") as (node, executor, stop):
@@ -173,7 +173,7 @@ def _stdout_closed_ok() -> Iterator[None]:
 
 
 def echo(topic: str, *, count: int | None = None, timeout: float | None = None,
-         spin_time: float = DEFAULT_SPIN_TIME, out: TextIO = sys.stdout) -> int:
+         spin_time: float = DISCOVERY_TIMEOUT_S, out: TextIO = sys.stdout) -> int:
     """Print messages of ``topic`` as YAML documents separated by ``---`` (``ros2 topic echo``).
 
     Stops after ``count`` messages (None: until Ctrl-C) or, with ``timeout``, when no message
@@ -242,7 +242,7 @@ def format_rate(stats: RateStats) -> str:
 
 
 def hz(topic: str, *, window: int = 10_000, duration: float | None = None,
-       spin_time: float = DEFAULT_SPIN_TIME, out: TextIO = sys.stdout) -> int:
+       spin_time: float = DISCOVERY_TIMEOUT_S, out: TextIO = sys.stdout) -> int:
     """Print the receive rate of ``topic`` every second until Ctrl-C or ``duration`` [s].
 
     Subscribes raw (no deserialisation). Returns 0, or 1 if fewer than two messages came.

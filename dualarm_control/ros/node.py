@@ -220,6 +220,14 @@ def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text
     return EXIT_OK
 
 
+DISCOVERY_TIMEOUT_S = 20.0
+"""How long a tool waits for the one node or topic it looks for (``dualarm param``, ``dualarm
+topic echo|hz|info``); it answers as soon as it is found. Each tool is a new DDS participant:
+Fast DDS discovered a running node's parameter services 0.15-4.1 s after such a start here
+(40 starts on the loaded 2-core machine, 28 of them 2.2-4.1 s: a missed initial announcement
+waits for the next one, 3 s later), so a 5 s wait answered "not found" for a node that was there."""
+
+
 @contextmanager
 def tool_node(name: str) -> Iterator[tuple[Any, Any, _StopOnSignal]]:
     """A node, its executor and a stop flag for a tool verb; torn down in the right order."""

@@ -14,6 +14,12 @@ from dualarm_control.params import ParamSpec
 
 RELIABILITIES = ("reliable", "best_effort")
 STREAM_DEPTH = 10
+LOCKSTEP_DEPTH = 1000
+"""History of every per-cycle publisher in lockstep mode. A keep-last writer drops its oldest
+sample when its history is full, acknowledged or not, and in lockstep the cell runs as fast as
+the simulator and controller answer each other: a recorder starved for more than 10 samples
+(about 25 ms of a lockstep run on a loaded machine) lost joint states (test_task_nodes under
+``stress-ng --cpu 1``). 1000 samples, as the recorder's own depth, is seconds of a run."""
 
 QOS_PARAMETER = ParamSpec(
     "qos_reliability", "reliable",
@@ -21,9 +27,15 @@ QOS_PARAMETER = ParamSpec(
     choices=lambda: list(RELIABILITIES), read_only=True)
 
 
-def stream_qos(reliability: str) -> Any:
-    """The rclpy QoSProfile of a periodic stream: keep-last 10, volatile, ``reliability``."""
+def publisher_depth(lockstep: bool) -> int:
+    """Keep-last depth of a node's per-cycle publishers: :data:`LOCKSTEP_DEPTH` in lockstep mode,
+    else :data:`STREAM_DEPTH` (in real time the newest sample is what counts)."""
+    return LOCKSTEP_DEPTH if lockstep else STREAM_DEPTH
+
+
+def stream_qos(reliability: str, depth: int = STREAM_DEPTH) -> Any:
+    """The rclpy QoSProfile of a periodic stream: keep-last ``depth``, volatile, ``reliability``."""
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
     policy = ReliabilityPolicy.BEST_EFFORT if reliability == "best_effort" else ReliabilityPolicy.RELIABLE
-    return QoSProfile(depth=STREAM_DEPTH, reliability=policy)
+    return QoSProfile(depth=depth, reliability=policy)

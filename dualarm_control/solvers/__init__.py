@@ -6,12 +6,18 @@ from dualarm_control.solvers import constraint_based as _constraint_based  # noq
 from dualarm_control.solvers import methods as _methods  # noqa: F401 - fills the registry
 from dualarm_control.solvers.base import (
     ACTIVITY_THRESHOLD,
+    BOUNDS_VIOLATED,
     ControlProblem,
     Solver,
     SolverParams,
     SolverResult,
 )
-from dualarm_control.solvers.registry import register, solver_class, solver_names
+from dualarm_control.solvers.registry import (
+    register,
+    solver_class,
+    solver_names,
+    unregister,
+)
 
 
 def make_solver(name: str, params: SolverParams | None = None) -> Solver:
@@ -22,11 +28,14 @@ def make_solver(name: str, params: SolverParams | None = None) -> Solver:
 
 __all__ = [
     "ACTIVITY_THRESHOLD",
+    "BOUNDS_VIOLATED",
     "ControlProblem",
     "Solver",
     "SolverParams",
     "SolverResult",
     "make_solver",
     "register",
+    "solver_class",
     "solver_names",
+    "unregister",
 ]

@@ -8,8 +8,11 @@ Failure policy (docs/safety.md, "Input validation and solver failure"): when a s
 is infeasible, stops at its iteration cap, fails numerically, raises, or returns a
 non-finite vector, the command is the best bounded least-squares step
 (:func:`bounded_least_squares`), status "fallback" with the reason in ``detail``; if that
-fails too, the bounded command nearest to rest (:func:`rest_command`). Every command is
-finite and inside the velocity bounds of eq (23).
+fails too, the bounded command nearest to rest (:func:`rest_command`). A result beyond a
+velocity bound by more than the solver's ``bound_tolerance`` (its QP back-end's tolerance,
+:attr:`Solver.bound_tolerance`) is a failure of its own, status "bounds_violated", with the
+same command; within that tolerance the clip into the bounds absorbs the overshoot. Every
+command is finite and inside the velocity bounds of eq (23).
 """
 
 from __future__ import annotations
@@ -31,7 +34,13 @@ FloatArray = npt.NDArray[np.float64]
 ACTIVITY_THRESHOLD = 1e-3
 """A joint is active when |qd_i| > 1e-3 rad/s (paper 000, Fig. 5 and Table I)."""
 
-FAILURE_STATUSES = frozenset({"infeasible", "failed", "invalid_input"})
+ROUND_OFF = 1e-12
+"""Bound tolerance of a closed form [rad/s]: floating-point round-off only (a pseudo-inverse
+shrunk onto a bound, a sum of two bounded parts); bounds are at most a few rad/s, so this is
+some 1e3 ulp of them."""
+BOUNDS_VIOLATED = "bounds_violated"
+"""Status of a solver result beyond a velocity bound by more than the solver's ``bound_tolerance``."""
+FAILURE_STATUSES = frozenset({"infeasible", "failed", "invalid_input", BOUNDS_VIOLATED})
 FALLBACK_TRIGGERS = frozenset({"infeasible", "failed", "max_iter"})
 """Solver statuses whose result is replaced by the bounded least-squares step."""
 FALLBACK_STATUS = "fallback"
@@ -135,13 +144,23 @@ class SolverResult:
             the bounds (the safe command on failure).
         status: "solved", "scaled" (pseudo-inverse shrunk into the bounds), "fallback"
             (the solver failed; the bounded least-squares step is used, the reason in
-            ``detail``), or a failure: "infeasible", "failed" (the fallback failed too:
-            velocities is :func:`rest_command`), "invalid_input" (zero velocities).
+            ``detail``), or a failure: "bounds_violated" (the solver's result lies beyond
+            a bound by more than its ``bound_tolerance``; velocities is the fallback's
+            command, ``detail`` says which and where), "infeasible", "failed" (the
+            fallback failed too: velocities is :func:`rest_command`), "invalid_input"
+            (zero velocities).
         solve_time: wall time of the whole call [s].
         iterations: QP iterations summed over the QPs solved (0 for closed forms).
         active_joints: count of |qd_i| > 1e-3 rad/s.
         task_residual: ||J qd - reference||_2 [m/s, rad/s mixed].
         detail: human-readable reason for a fallback or a degraded result, else ''.
+        raw_velocities: what the solver itself returned [rad/s], (n,), before the clip into
+            the bounds or the failure policy; None when it returned nothing (no solution,
+            an exception, invalid input, or a record not made by :meth:`Solver.solve`).
+        bound_excess: how far ``raw_velocities`` lies beyond [lower, upper] at its worst
+            joint, max(lower - qd, qd - upper, 0) [rad/s] (:func:`bound_excess`); NaN when
+            there is no raw result, NaN or inf when it is not finite. "solved"/"scaled" results have
+            ``bound_excess <= solver.bound_tolerance``.
     """
 
     velocities: FloatArray
@@ -151,6 +170,8 @@ class SolverResult:
     active_joints: int
     task_residual: float
     detail: str = ""
+    raw_velocities: FloatArray | None = None
+    bound_excess: float = math.nan
 
     @property
     def failed(self) -> bool:
@@ -197,14 +218,23 @@ class Solver:
     """Base class: validation, timing, clipping and the failure policy around ``_solve``.
 
     Failure policy: a result with status in ``FALLBACK_TRIGGERS`` ("infeasible", "max_iter",
-    "failed"), an exception (ValueError, LinAlgError, RuntimeError) or a non-finite vector is
-    replaced by :func:`bounded_least_squares` (status "fallback", ``detail`` names the
-    original failure), else by :func:`rest_command` (the original failure status). Invalid
-    input (NaN, wrong shapes, crossing bounds) gives zero velocity, status "invalid_input".
-    Warm-start memory is reset after any failure.
+    "failed"), an exception (ValueError, LinAlgError, RuntimeError) or a non-finite vector
+    (or one of the wrong shape) is replaced by :func:`bounded_least_squares` (status
+    "fallback", ``detail`` names the original failure), else by :func:`rest_command` (the
+    original failure status). A result beyond a bound by more than ``bound_tolerance`` gets
+    the same command and status "bounds_violated" (a failure: the solver broke its
+    constraints); within ``bound_tolerance`` it is clipped into the bounds. Invalid input
+    (NaN, wrong shapes, crossing bounds) gives zero velocity, status "invalid_input".
+    Warm-start memory is reset after any failure. The solver's own result is kept in
+    ``SolverResult.raw_velocities``.
     """
 
     name = "base"
+    bound_tolerance = ROUND_OFF
+    """How far beyond a velocity bound the result of ``_solve`` may lie and still count as inside
+    [rad/s]: :data:`ROUND_OFF` for a closed form; a QP solver adds its back-end's tolerance
+    (:attr:`dualarm_control.qp.QPBackend.bound_tolerance`), twice for the lasso's split
+    qd = qd+ - qd-. Set at construction."""
     uses_repulsive = False
     """Whether ``_solve`` reads ``ControlProblem.repulsive`` (callers may pass zeros otherwise)."""
     uses_qp = False
@@ -228,11 +258,13 @@ class Solver:
         start = time.perf_counter()
         n = problem.jacobian.shape[1] if problem.jacobian.ndim == 2 else problem.lower.shape[0]
         invalid = problem.problem_with_invalid_input()
+        raw: FloatArray | None = None
+        excess = math.nan
         if invalid:
             qd: FloatArray = np.zeros(max(n, 0))
             status, iters, detail, residual = "invalid_input", 0, invalid, float("nan")
         else:
-            qd, status, iters, detail = self._solve_or_fall_back(problem)
+            qd, raw, excess, status, iters, detail = self._solve_or_fall_back(problem)
             d = problem.jacobian @ qd - problem.reference
             residual = math.sqrt(float(d @ d))
         return SolverResult(
@@ -243,36 +275,74 @@ class Solver:
             active_joints=int(np.count_nonzero(np.abs(qd) > ACTIVITY_THRESHOLD)),
             task_residual=residual,
             detail=detail,
+            raw_velocities=raw,
+            bound_excess=excess,
         )
 
-    def _solve_or_fall_back(self, problem: ControlProblem) -> tuple[FloatArray, str, int, str]:
-        """``_solve`` on a valid problem, its result clipped to the bounds, or the failure policy's command."""
+    def _solve_or_fall_back(self, problem: ControlProblem
+                            ) -> tuple[FloatArray, FloatArray | None, float, str, int, str]:
+        """``_solve`` on a valid problem, then the clip or the failure policy.
+
+        Returns (command, the solver's own result or None, its bound excess [rad/s], status,
+        iterations, detail).
+        """
         try:
             qd, status, iters, detail = self._solve(problem)
         except (ValueError, np.linalg.LinAlgError, RuntimeError) as exc:
             qd, status, iters, detail = None, "failed", 0, f"{type(exc).__name__}: {exc}"
-        if qd is None or status in FALLBACK_TRIGGERS or not math.isfinite(qd.sum()):
+        excess = math.nan if qd is None else bound_excess(qd, problem.lower, problem.upper)
+        if qd is None or status in FALLBACK_TRIGGERS or not math.isfinite(excess):
             self.reset()
             velocities, status, detail = fallback(problem, qd, status, detail)
-            return velocities, status, iters, detail
-        return np.minimum(np.maximum(qd, problem.lower), problem.upper), status, iters, detail  # tolerance overshoot
+        elif excess > self.bound_tolerance:
+            self.reset()
+            velocities, status, detail = fallback(problem, qd, BOUNDS_VIOLATED,
+                                                  violation_text(qd, problem.lower, problem.upper, self.bound_tolerance))
+        else:
+            velocities = np.minimum(np.maximum(qd, problem.lower), problem.upper)  # absorbs <= bound_tolerance
+        return velocities, qd, excess, status, iters, detail
 
 
 def fallback(problem: ControlProblem, qd: FloatArray | None, status: str, detail: str) -> tuple[FloatArray, str, str]:
     """The failure policy for a valid problem whose solver gave no usable result.
 
     Returns (velocities, status, detail): the bounded least-squares step with status
-    "fallback", or :func:`rest_command` with the original failure status ("failed" for a
-    "max_iter" or non-finite result) when the least-squares step fails too.
+    "fallback" ("bounds_violated" for a result beyond its bounds), or :func:`rest_command`
+    with the original failure status ("failed" for a "max_iter", non-finite or wrongly shaped
+    result) when the least-squares step fails too.
     """
-    if qd is not None and status not in FALLBACK_TRIGGERS:
-        status, detail = "failed", detail or "solver returned non-finite velocities"
+    if qd is not None and status not in FALLBACK_TRIGGERS and status != BOUNDS_VIOLATED:
+        status, detail = "failed", detail or f"solver returned non-finite velocities or shape {qd.shape}"
     reason = f"{status}: {detail or 'no solution'}"
     step = bounded_least_squares(problem.jacobian, problem.reference, problem.lower, problem.upper)
     if step is not None:
-        return step, FALLBACK_STATUS, f"{reason}; bounded least-squares step used"
+        return step, (status if status == BOUNDS_VIOLATED else FALLBACK_STATUS), f"{reason}; bounded least-squares step used"
     final = "failed" if status == "max_iter" else status
     return rest_command(problem.lower, problem.upper), final, f"{reason}; bounded least squares failed, nearest-to-rest command"
+
+
+def bound_excess(x: FloatArray, lower: FloatArray, upper: FloatArray) -> float:
+    """How far x lies beyond [lower, upper] at its worst entry: max(lower - x, x - upper, 0).
+
+    Args:
+        x, lower, upper: (n,) [rad/s].
+
+    Returns:
+        The excess [rad/s], 0 when x is inside; NaN or inf when x is not finite, NaN when its
+        shape is not (n,).
+    """
+    if x.shape != lower.shape:
+        return math.nan
+    return float(np.maximum(lower - x, x - upper).max(initial=0.0))
+
+
+def violation_text(x: FloatArray, lower: FloatArray, upper: FloatArray, tolerance: float) -> str:
+    """The worst bound violation of x, for a "bounds_violated" detail (shapes (n,), rad/s)."""
+    below, above = lower - x, x - upper
+    i = int(np.argmax(np.maximum(below, above)))
+    side, bound = ("lower", lower[i]) if below[i] >= above[i] else ("upper", upper[i])
+    return (f"joint {i} at {x[i]:.6g} rad/s beyond its {side} bound {bound:.6g} by {max(below[i], above[i]):.3g} "
+            f"(tolerance {tolerance:.3g} rad/s)")
 
 
 def inside(x: FloatArray, lower: FloatArray, upper: FloatArray) -> bool:

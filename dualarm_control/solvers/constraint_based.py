@@ -34,6 +34,7 @@ import numpy as np
 
 from dualarm_control.qp import QPProblem, check_backend
 from dualarm_control.solvers.base import (
+    ROUND_OFF,
     ControlProblem,
     FloatArray,
     Solver,
@@ -106,6 +107,7 @@ class ConstraintBased(Solver):
         super().__init__(params)
         self._qp = self._backend()
         check_backend(self._qp, self.params.regularization > 0, f"{self.name}'s QP (eq 12-14)")
+        self.bound_tolerance = ROUND_OFF + self._qp.bound_tolerance  # u = x[:n], within the box to eps_abs
 
     def reset(self) -> None:
         self._qp.reset()

@@ -11,10 +11,12 @@ from scipy.linalg import lapack
 
 from dualarm_control.qp import QPBackend, QPProblem, check_backend
 from dualarm_control.solvers.base import (
+    ROUND_OFF,
     ControlProblem,
     FloatArray,
     Solver,
     SolverParams,
+    bound_excess,
     from_qp,
     inside,
 )
@@ -27,6 +29,9 @@ class PseudoInverse(Solver):
 
     Eq (13) has no constraints; to never command beyond eq (23) the result is shrunk
     uniformly (direction kept) until it fits the bounds, and the status is then "scaled".
+    Shrinking toward 0 cannot reach the bounds of a joint beyond a position limit (its bounds
+    exclude 0, :func:`dualarm_control.limits.velocity_bounds`): such a joint's velocity is
+    set to the nearest bound (status "scaled", ``detail`` names the joints).
     """
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
@@ -37,8 +42,20 @@ class PseudoInverse(Solver):
                 scale = min(scale, max(hi, 0.0) / value)
             elif value < lo and value < 0:
                 scale = min(scale, min(lo, 0.0) / value)
+        notes = []
         if scale < 1.0:
-            return qd * scale, "scaled", 0, f"scaled by {scale:.3g} into the joint bounds"
+            qd = qd * scale
+            notes.append(f"scaled by {scale:.3g} into the joint bounds")
+        beyond = (problem.lower > 0.0) | (problem.upper < 0.0)  # joints beyond a position limit
+        if beyond.any():
+            lo, hi = problem.lower[beyond], problem.upper[beyond]
+            moved = (qd[beyond] < lo) | (qd[beyond] > hi)
+            if moved.any():
+                qd[beyond] = np.minimum(np.maximum(qd[beyond], lo), hi)
+                notes.append(f"joints {np.flatnonzero(beyond)[moved].tolist()} (beyond a position limit) "
+                             "set to their nearest bound")
+        if notes:
+            return qd, "scaled", 0, "; ".join(notes)
         return qd, "solved", 0, ""
 
 
@@ -53,16 +70,20 @@ class _QPSolver(Solver):
 
     ``positive_definite`` tells whether the solver's H is positive definite; a back-end
     that needs a definite H is refused here, at start-up (see :func:`check_backend`).
+    ``bound_tolerance`` is round-off plus ``tolerance_factor`` times the back-end's.
     """
 
     positive_definite = True
     qp_description = "QP"
     uses_qp = True
+    tolerance_factor = 1.0
+    """Back-end tolerances in the bound tolerance: 1 when qd is the QP's x, 2 when qd = qd+ - qd-."""
 
     def __init__(self, params: SolverParams | None = None) -> None:
         super().__init__(params)
         self._qp = self._backend()
         check_backend(self._qp, self.positive_definite, f"{self.name}'s {self.qp_description}")
+        self.bound_tolerance = ROUND_OFF + self.tolerance_factor * self._qp.bound_tolerance
 
     def reset(self) -> None:
         self._qp.reset()
@@ -165,6 +186,7 @@ class SparseQP(_QPSolver):
 
     positive_definite = False
     qp_description = "lasso QP, eq (19)"
+    tolerance_factor = 2.0  # qd = qd+ - qd-: each part within the back-end's tolerance of its box
 
     def __init__(self, params: SolverParams | None = None) -> None:
         super().__init__(params)
@@ -264,7 +286,10 @@ class HierarchicalSparseQP(Solver):
     joint inside its activation thresholds) qd2 = 0 is the exact optimum and QP2 is skipped.
     If QP2 fails, qd1 alone is commanded (the primary task is kept) and ``detail`` says so.
     QP2 is solved only when its unbounded minimiser (:func:`null_space_projection`) leaves
-    the bounds.
+    the bounds. QP2 starts from qd1 clipped into the bounds; a qd1 beyond them by more than
+    QP1's tolerance is returned as it is, so that :meth:`Solver.solve` reports it
+    ("bounds_violated") instead of the clip hiding it. Bound tolerance: QP1's (twice the
+    back-end's); qd1 clipped + qd2 lies within one back-end tolerance of the bounds.
     """
 
     uses_repulsive = True
@@ -274,6 +299,7 @@ class HierarchicalSparseQP(Solver):
         super().__init__(params)
         self._primary = SparseQP(self.params)  # refuses a back-end needing a definite H
         self._secondary = self._backend()
+        self.bound_tolerance = self._primary.bound_tolerance
         self._identity = np.eye(0)  # H of eq (27), rebuilt only when n changes
 
     def reset(self) -> None:
@@ -287,9 +313,10 @@ class HierarchicalSparseQP(Solver):
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
         qd1, status, iters, detail = self._primary._solve(problem)
-        if qd1 is None or not np.any(problem.repulsive):
-            return qd1, status, iters, detail
-        qd1 = np.minimum(np.maximum(qd1, problem.lower), problem.upper)
+        if qd1 is None or not np.any(problem.repulsive) \
+                or not bound_excess(qd1, problem.lower, problem.upper) <= self.bound_tolerance:
+            return qd1, status, iters, detail  # no secondary motion, or a failure for solve() to handle
+        qd1 = np.minimum(np.maximum(qd1, problem.lower), problem.upper)  # absorbs QP1's tolerance
         lower2, upper2 = problem.lower - qd1, problem.upper - qd1
         qd2 = null_space_projection(problem.jacobian, problem.repulsive)
         if qd2 is not None and inside(qd2, lower2, upper2):

@@ -24,6 +24,14 @@ def register(name: str) -> Callable[[type[T]], type[T]]:
     return add
 
 
+def unregister(name: str) -> type:
+    """Remove the class registered under ``name`` and return it (UnknownSolverError otherwise):
+    for a solver registered for a while only, e.g. a test's deliberately wrong one."""
+    cls = solver_class(name)
+    del _REGISTRY[name]
+    return cls
+
+
 def solver_names() -> list[str]:
     """Registered solver names, sorted."""
     return sorted(_REGISTRY)

@@ -23,7 +23,7 @@ from dualarm_control.metrics import percentiles
 
 def controller_cycles(bag: Path) -> dict[str, np.ndarray]:
     """Per-cycle controller figures from a bag's /diagnostics (status ``controller_node`` with a solver status)."""
-    from dualarm_control.app.bag import open_reader
+    from dualarm_control.app.record.bag import open_reader
 
     rows: dict[str, list[float]] = {"interval": [], "latency": [], "missed": [], "cycles": [], "failures": []}
     reader = open_reader(bag)
@@ -70,7 +70,7 @@ def summarize_cycles(cycles: dict[str, np.ndarray], period: float) -> dict[str, 
 def run_realtime(scenario: str, solvers: Sequence[str], rates: Sequence[float],
                  timeout: float = 300.0, params: Sequence[str] = ()) -> list[dict[str, Any]]:
     """One real-time launch per (solver, rate), ``params`` files passed to every node; the rows of the table."""
-    from dualarm_control.app.launcher import launch_scenario
+    from dualarm_control.app.run.launcher import launch_scenario
 
     rows = []
     for solver in solvers:

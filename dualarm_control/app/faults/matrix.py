@@ -1,8 +1,8 @@
 """``dualarm faults``: the fault matrix, against real processes, on loopback and private namespaces.
 
 Each row injects one fault into a real-time run of the cell (the three nodes and a reference
-recorder as separate processes, :class:`~dualarm_control.app.fault_run.CellRun`) and judges
-the outcome from the run's bag (:mod:`~dualarm_control.app.fault_bag`) and the nodes' logs.
+recorder as separate processes, :class:`~dualarm_control.app.faults.cell_run.CellRun`) and judges
+the outcome from the run's bag (:mod:`~dualarm_control.app.faults.episodes`) and the nodes' logs.
 A row that cannot run here (no root, no ``ip``, no netem in the kernel) is *skipped* with the
 reason, never passed. Rows that share a run: the loopback faults (one run, in sequence, each
 while the target moves), the across-hosts run and its link cut.
@@ -11,7 +11,9 @@ while the target moves), the across-hosts run and its link cut.
 from __future__ import annotations
 
 import json
+import re
 import signal
+import subprocess
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -19,15 +21,20 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from dualarm_control.app.fault_bag import (
+from dualarm_control.app.faults.cell_run import CellRun, RunError
+from dualarm_control.app.faults.episodes import (
     RunRecord,
     arm_stop,
     check_signalled_bag,
     completion,
     safe_episode,
 )
-from dualarm_control.app.fault_run import CellRun, RunError
-from dualarm_control.app.netns import Link, netem_unavailable, private_link, unavailable
+from dualarm_control.app.faults.netns import (
+    Link,
+    netem_unavailable,
+    private_link,
+    unavailable,
+)
 from dualarm_control.paths import config_path
 
 PERIOD = 0.005
@@ -47,10 +54,10 @@ LINK_NETEM = ("delay", "2ms", "1ms", "loss", "2%")
 LOOPBACK_ROWS = ("stale_states", "target_stopped", "kill_sim", "kill_controller", "recorder_sigint",
                  "recorder_sigterm")
 ROWS = (*LOOPBACK_ROWS, "best_effort_loss", "across_hosts", "link_cut", "link_netem")
+RECORDER_EXIT_S = 30.0
+"""How long a signalled recorder may take to close its bag and exit before the run is stopped."""
 KILL_INTO_MOTION_S = 0.6
 """kill_controller: seconds into a window of at least 1.5 s of motion (a segment starts from rest)."""
-QUICK = ("stale_states", "kill_controller", "recorder_sigterm")
-"""The default test suite's subset (test/test_faults.py)."""
 
 EXPECTED = {
     "stale_states": f"sim_node SIGSTOP {PAUSE_S:g} s mid-motion: zero commands + /diagnostics ERROR once joint states "
@@ -128,6 +135,18 @@ def _episode_row(name: str, rec: RunRecord, ep: _Episode, reason: str, limit_ms:
                 other_commands=e.other_commands, recovered_ms=e.recovered_ms)
 
 
+def _recently_safe(run: CellRun, seconds: float) -> bool:
+    """Whether the controller is in the safe state, or left it less than ``seconds`` ago (from the
+    wall-clock stamp of its last 'recovered after' log line)."""
+    for line in reversed(run.process("controller_node").lines):
+        if "safe state:" in line:
+            return True
+        if "recovered after" in line:
+            stamp = re.search(r"\[(\d+\.\d+)\]", line)
+            return stamp is None or time.time() - float(stamp[1]) < seconds
+    return False
+
+
 def loopback_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[str], None]) -> list[Row]:
     """The process faults on one loopback run, in sequence, each while the target moves."""
     names = [n for n in LOOPBACK_ROWS if n in only]
@@ -165,8 +184,15 @@ def loopback_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[
             run.start_node("sim_node")
             episodes["kill_sim"] = _Episode(start, resume, _recovered(run, line, RESTART_RECOVER_WITHIN_MS / 1e3))
         if "kill_controller" in names:
-            run.wait_moving(1.5, earliest=run.elapsed() + 0.5)
-            time.sleep(KILL_INTO_MOTION_S)  # past the segment's jerk-limited start: the arms move at speed
+            earliest = run.elapsed() + 0.5
+            while True:
+                run.wait_moving(1.5, earliest=earliest)
+                time.sleep(KILL_INTO_MOTION_S)  # past the segment's jerk-limited start: the arms move at speed
+                if not _recently_safe(run, KILL_INTO_MOTION_S):
+                    break
+                # a watchdog episode of a loaded machine just now: the arms may be at rest; the next window
+                say(f"kill_controller: the controller was in the safe state within {KILL_INTO_MOTION_S:g} s; waiting")
+                earliest = run.elapsed() + 0.5
             say(f"kill_controller: SIGKILL controller_node at t={run.elapsed():.2f} s")
             run.send("controller_node", signal.SIGKILL)
             killed_controller = True
@@ -174,6 +200,11 @@ def loopback_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[
     except RunError as exc:
         run.stop()
         return _failed(names, str(exc))
+    for name in signalled:  # it closes its bag and exits by itself (seconds on a loaded machine): not stopped early
+        try:
+            run.process(name).popen.wait(timeout=RECORDER_EXIT_S)
+        except subprocess.TimeoutExpired:
+            pass  # stopped with the others; its exit code says so
     codes = run.stop()
     rec = run.record()
     rows = []
@@ -222,9 +253,19 @@ def _completion_row(name: str, rec: RunRecord, extra: str = "", ok: bool = True,
                 latency_p99_ms=c.latency_p99_ms, **figures)
 
 
+DELIVERY_S = 1.0
+"""After the trajectory node's exit: time for its last messages (the 'complete' status) to reach
+the recorder before everything is stopped (the node logs 'complete at' before it publishes it)."""
+
+
 def _run_to_completion(run: CellRun) -> None:
     end = run.times[-1] + 30.0
     run.wait_line("trajectory_node", "complete at", timeout=max(1.0, end - run.elapsed()))
+    try:
+        run.process("trajectory_node").popen.wait(timeout=10.0)  # it stops by itself once complete
+    except subprocess.TimeoutExpired:
+        pass  # stopped with the others
+    time.sleep(DELIVERY_S)
 
 
 RELAY_ROUTES = ("/raw/joint_states:/joint_states:sensor_msgs/msg/JointState",
@@ -255,7 +296,7 @@ def loss_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[str]
                 _run_whole(run)
             how = f"netem {' '.join(LOSS)} on lo"
         else:
-            relay = [sys.executable, "-u", "-m", "dualarm_control.app.lossy_relay", "--loss", str(relay_loss),
+            relay = [sys.executable, "-u", "-m", "dualarm_control.app.faults.lossy_relay", "--loss", str(relay_loss),
                      *RELAY_ROUTES]
             say(f"best_effort_loss: no netem ({why}); a relay process drops {relay_loss:.0%} of every stream")
             run = CellRun(out / "best_effort_loss", scenario, best_effort, node_extra=RELAY_REMAPS,

@@ -100,13 +100,16 @@ def time_random_set(
 
     Returns:
         {name: {cycle_p50_ms, cycle_p99_ms, solve_p50_ms, solve_p99_ms, active_joints_p50,
-        active_joints_max, share_at_most_6_active, failures}}.
+        active_joints_max, share_at_most_6_active, failures, max_bound_excess}}; max_bound_excess
+        [rad/s] is the largest ``SolverResult.bound_excess`` of a result commanded as the solver
+        returned it ("solved", "scaled"), to set beside the solver's ``bound_tolerance``.
     """
     controllers = {name: RelativeController(model, p) for name, p in configs.items()}
     cycle: dict[str, list[float]] = {name: [] for name in [*controllers, *(extra or {})]}
     solve: dict[str, list[float]] = {name: [] for name in controllers}
     active: dict[str, list[int]] = {name: [] for name in controllers}
     failures = dict.fromkeys(controllers, 0)
+    excess = dict.fromkeys(controllers, 0.0)
     names = list(cycle)
     shuffle = np.random.default_rng(0)
     for _ in range(repeats):
@@ -121,6 +124,8 @@ def time_random_set(
                     solve[name].append(out.result.solve_time)
                     active[name].append(out.result.active_joints)
                     failures[name] += int(out.result.failed)
+                    if out.result.status in ("solved", "scaled"):
+                        excess[name] = max(excess[name], out.result.bound_excess)
                 else:
                     start = time.perf_counter()
                     (extra or {})[name](case)
@@ -134,7 +139,8 @@ def time_random_set(
             counts = np.asarray(active[name])
             row.update(solve_p50_ms=s50 * 1e3, solve_p99_ms=s99 * 1e3,
                        active_joints_p50=float(np.median(counts)), active_joints_max=int(counts.max()),
-                       share_at_most_6_active=float(np.mean(counts <= 6)), failures=failures[name])
+                       share_at_most_6_active=float(np.mean(counts <= 6)), failures=failures[name],
+                       max_bound_excess=excess[name])
         rows[name] = row
     return rows
 

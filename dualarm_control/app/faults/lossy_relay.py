@@ -5,7 +5,7 @@ streams are remapped through this process (``FROM`` -> ``TO``, serialized bytes 
 they are), which forwards a message with probability ``1 - loss`` (seeded, independent per
 message). It runs until SIGINT/SIGTERM and prints, per topic, how many it forwarded and dropped.
 
-    python -m dualarm_control.app.lossy_relay --loss 0.1 FROM:TO:TYPE [FROM:TO:TYPE ...]
+    python -m dualarm_control.app.faults.lossy_relay --loss 0.1 FROM:TO:TYPE [FROM:TO:TYPE ...]
 """
 
 from __future__ import annotations

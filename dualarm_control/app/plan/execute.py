@@ -15,18 +15,19 @@ the reference itself (q_ref, no physics) separate interpolation from tracking.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from dualarm_control.joint_tracking import joint_tracking_velocity
+from dualarm_control.app.run.experiment import run_scenario
+from dualarm_control.controller import ControllerParams
 from dualarm_control.kinematics import DualArmModel, FloatArray, rotation_angle
-from dualarm_control.limits import JointLimits, velocity_bounds
 from dualarm_control.planning.config import PlanConfig
-from dualarm_control.planning.joint_trajectory import plan_trajectory
-from dualarm_sim.cell import CellConfig, DualArmCell
+from dualarm_control.references.plan import PlanSource
+from dualarm_control.scenario import Scenario
+from dualarm_control.trajectory import MotionLimits
 
 CONTROL_PERIOD = 0.005  # s, as the controller node
 
@@ -65,43 +66,35 @@ def execute_plan(
     model: DualArmModel | None = None,
     progress: Callable[[float, str], None] | None = None,
 ) -> ExecutionResult:
-    """Track the plan's joint trajectory in the simulated cell and measure the relative path error."""
+    """Track the plan's joint trajectory in the simulated cell (the one runner,
+    :func:`~dualarm_control.app.run.experiment.run_scenario`, on a
+    :class:`~dualarm_control.references.plan.PlanSource`) and measure the relative path error."""
     model = model or DualArmModel()
+    source = PlanSource(model, config, configurations)
+    scenario = Scenario(name=config.name, description="plan execution", initial_positions=configurations[0],
+                        reference=source, limits=MotionLimits(), settle_time=config.execution_settle,
+                        source=Path(config.name))
+    record = run_scenario(scenario, ControllerParams(period=CONTROL_PERIOD), model, progress)
     path = config.corner.sample()
     sub = config.execution_subdivisions
-    traj = plan_trajectory(model, path, configurations, sub, config.execution_velocity_scale)
-    steps = math.ceil((traj.duration + config.execution_settle) / CONTROL_PERIOD)
+    traj = source.trajectory
     sample_steps = {round(t / CONTROL_PERIOD): i // sub for i, t in enumerate(traj.sample_times) if i % sub == 0}
     r_d = path.rotation
-    limits = JointLimits(model.q_min, model.q_max, model.qd_max)
     pos_err, rot_err, ref_pos, ref_rot, track = [], [], [], [], []
     sample_pos, sample_rot = [], []
-    every = max(steps // 100, 1)
-    with DualArmCell(CellConfig(control_period=CONTROL_PERIOD), initial_positions=configurations[0]) as cell:
-        state = cell.state()
-        for k in range(steps + 1):
-            t = k * CONTROL_PERIOD
-            ref = traj.sample(t)
-            q = np.asarray(state.positions)
-            p, r = model.relative_pose(q)
-            pos_err.append(config.corner.distance(p))
-            rot_err.append(rotation_angle(r, r_d))
-            p_ref, r_ref = model.relative_pose(ref.positions)
-            ref_pos.append(config.corner.distance(p_ref))
-            ref_rot.append(rotation_angle(r_ref, r_d))
-            track.append(float(np.max(np.abs(ref.positions - q))))
-            if k in sample_steps:
-                i = sample_steps[k]
-                sample_pos.append(float(np.linalg.norm(p - path.positions[i])))
-                sample_rot.append(rotation_angle(r, r_d))
-            if k == steps:
-                break
-            lower, upper = velocity_bounds(q, limits, CONTROL_PERIOD)
-            cell.apply_command(joint_tracking_velocity(q, ref.positions, ref.velocities, config.execution_gain,
-                                                       lower, upper))
-            state = cell.step()
-            if progress is not None and (k % every == 0 or k == steps - 1):
-                progress((k + 1) / steps, "execute")
+    for k, q in enumerate(np.vstack((record.positions, record.final_positions))):
+        ref = traj.sample(k * CONTROL_PERIOD)
+        p, r = model.relative_pose(q)
+        pos_err.append(config.corner.distance(p))
+        rot_err.append(rotation_angle(r, r_d))
+        p_ref, r_ref = model.relative_pose(ref.positions)
+        ref_pos.append(config.corner.distance(p_ref))
+        ref_rot.append(rotation_angle(r_ref, r_d))
+        track.append(float(np.max(np.abs(ref.positions - q))))
+        if k in sample_steps:
+            i = sample_steps[k]
+            sample_pos.append(float(np.linalg.norm(p - path.positions[i])))
+            sample_rot.append(rotation_angle(r, r_d))
     pe, re_ = np.array(pos_err), np.array(rot_err)
     return ExecutionResult(
         duration=traj.duration,
@@ -114,5 +107,5 @@ def execute_plan(
         sample_max_error_m=float(max(sample_pos)),
         sample_max_error_rad=float(max(sample_rot)),
         max_joint_tracking_error=float(max(track)),
-        steps=steps,
+        steps=len(record.time),
     )

@@ -11,7 +11,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from dualarm_control.app.progress import progress_bar
+from dualarm_control.app.run.progress import progress_bar
 from dualarm_control.errors import DualArmError
 
 ProgressFactory = Callable[[str], Callable[[float, str], None]]
@@ -39,8 +39,8 @@ def add_plan_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser],
 
 def run_plan_command(args: argparse.Namespace, progress: ProgressFactory = progress_bar) -> int:
     """Body of ``dualarm plan`` (see :func:`add_plan_parser`)."""
-    from dualarm_control.app.plan import default_workers, plan
-    from dualarm_control.app.plan_report import (
+    from dualarm_control.app.plan.optimise import default_workers, plan
+    from dualarm_control.app.plan.report import (
         plan_record,
         plot_indices,
         plot_initial_configurations,
@@ -71,7 +71,7 @@ def run_plan_command(args: argparse.Namespace, progress: ProgressFactory = progr
     model = DualArmModel()
     execution = None
     if not args.no_execute:
-        from dualarm_control.app.plan_execute import execute_plan
+        from dualarm_control.app.plan.execute import execute_plan
 
         execution = execute_plan(config, result.configurations, model, progress("execute"))
     doc = plan_record(result, model, execution)

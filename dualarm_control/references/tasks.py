@@ -1,4 +1,4 @@
-"""Task scenarios (paper 001): a set of tasks instead of relative motion segments.
+"""Reference source of paper 001: a set of tasks with gains and bounds instead of relative segments.
 
 Keys under ``scenario.`` (flattened, see :mod:`dualarm_control.scenario`):
   ``duration`` [s]; ``table_height`` [m, world z of the table top];
@@ -18,17 +18,29 @@ Keys under ``scenario.`` (flattened, see :mod:`dualarm_control.scenario`):
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, ClassVar
 
+import numpy as np
+
+from dualarm_control.controller import ControllerParams, Cycle, RelativeController
 from dualarm_control.errors import ScenarioError
-from dualarm_control.force import ForceParams
-from dualarm_control.scenario import (  # the scenario file's readers and messages
+from dualarm_control.force import (
+    ForceParams,
+    ForcePI,
+    ForceSensorModel,
+    contact_normal_force,
+)
+from dualarm_control.kinematics import Configuration, DualArmModel, FloatArray
+from dualarm_control.references.base import (
     PREFIX,
-    _get,
-    _number,
+    RunOptions,
+    SourceDefaults,
+    get,
+    number,
 )
 from dualarm_control.tasks import (
     DEFAULT_EQUALITY_WEIGHT,
@@ -54,8 +66,10 @@ class TaskSpec:
 
 
 @dataclass(frozen=True)
-class TaskScenario:
-    """The task part of a scenario.
+class TasksSource(SourceDefaults):
+    """Tasks (paper 001): a :class:`~dualarm_control.references.base.ReferenceSource`.
+
+    No stream besides /joint_states; the force variant (a run option) adds /wrench.
 
     Attributes:
         duration: run time [s]. table_height: table top, world z [m].
@@ -72,6 +86,23 @@ class TaskScenario:
     tasks: tuple[TaskSpec, ...]
     force: ForceParams
     contact_links: tuple[str, str] = ("left_flange", "right_tool")
+    kind: ClassVar[str] = "tasks"
+    streams: ClassVar[tuple[str, ...]] = ()
+
+    def describe(self) -> str:
+        return f"{len(self.tasks)} tasks"
+
+    def gain(self, options: RunOptions) -> float:
+        """The run's task gain k [1/s]: the option's, else force.gain (force variant) or the first of ``gains``."""
+        return options.gain if options.gain is not None else (self.force.gain if options.force else self.gains[0])
+
+    def cell(self, options: RunOptions) -> dict[str, Any]:
+        return {"table_height": self.table_height, "contact_pairs": (self.contact_links,) if options.force else ()}
+
+    def follower(self, model: DualArmModel, params: ControllerParams, q0: FloatArray,
+                 options: RunOptions) -> TasksController:
+        duration = options.duration if options.duration is not None else self.duration
+        return TasksController(model, params, self, self.gain(options), options.force, duration)
 
     def build(self, gain: float, height_offset: float = 0.0) -> list[Task]:
         """Task objects with gain k for every task; ``height_offset`` [m] is added to the circle
@@ -89,8 +120,8 @@ def _value(spec: TaskSpec, key: str, kind: type, default: Any = None) -> Any:
     """``scenario.<task>.<key>`` as a number, a string or a list; ScenarioError naming the key."""
     full = f"{spec.name}.{key}"
     if kind is float:
-        return _number(spec.values, full, default)
-    value = _get(spec.values, full, default)
+        return number(spec.values, full, default)
+    value = get(spec.values, full, default)
     if not isinstance(value, kind):
         raise ScenarioError(f"scenario parameter '{PREFIX}{full}': got {value!r}, expected a {kind.__name__}")
     return value
@@ -123,10 +154,99 @@ def _build(spec: TaskSpec, gain: float, table_height: float, height_offset: floa
         raise ScenarioError(f"scenario task {spec.name!r}: {exc}") from None
 
 
-def parse_task_scenario(flat: Mapping[str, Any]) -> TaskScenario:
+def _check_frames(model: DualArmModel, tasks: list[Task]) -> None:
+    """Evaluate every task once at q = 0 so that a frame missing from the URDF is reported
+    now, naming the task (ScenarioError), not at the first control cycle."""
+    conf = Configuration(model, np.zeros(model.nq))
+    for task in tasks:
+        try:
+            task.evaluate(conf, 0.0)
+        except KeyError as exc:
+            raise ScenarioError(f"scenario task {task.name!r}: {exc.args[0]}") from None
+
+
+class TasksController:
+    """The tasks of a task scenario at gain k and, with ``force``, the force loop of eq (9):
+    F/T reading -> noise and low-pass (:class:`ForceSensorModel`, the simulated sensor chain)
+    -> f_c = N^T F (N and R_2 from the controller's own kinematics) -> PI -> circle offset.
+
+    With ``force`` the circle's height includes the scenario's pan modelling error
+    (``force.model_error``), which the force loop has to absorb.
+    """
+
+    def __init__(self, model: DualArmModel, params: ControllerParams, spec: TasksSource, gain: float,
+                 force: bool = False, duration: float | None = None) -> None:
+        self.model = model
+        self.gain = gain
+        self.label = f"k={gain:g}" + (" force" if force else "")
+        self.uses_wrench = force
+        self.steps = math.ceil((duration if duration is not None else spec.duration) / params.period)
+        self.spec = spec
+        self.force = force
+        self.period = params.period
+        self.controller = RelativeController(model, params)
+        self.tasks: list[Task] = spec.build_variant(gain, force)
+        _check_frames(model, self.tasks)
+        index = [i for i, t in enumerate(self.tasks) if isinstance(t, CircleTask)]
+        if force and len(index) != 1:
+            raise ValueError(f"the force variant needs exactly one circle task, the scenario has {len(index)}")
+        self._circle_index = index[0] if index else -1
+        self.reset()
+
+    @property
+    def circle(self) -> CircleTask | None:
+        """The circle task as built (normal offset 0), or None."""
+        return self._circle
+
+    def reset(self) -> None:
+        """Forget the solver's warm start, the filter state and the force integral."""
+        self.controller.reset()
+        circle = self.tasks[self._circle_index] if self._circle_index >= 0 else None
+        self._circle: CircleTask | None = circle if isinstance(circle, CircleTask) else None
+        self._sensor = ForceSensorModel(self.spec.force, self.period)
+        self._pi = ForcePI(self.spec.force)
+        self._offset = 0.0
+
+    def cycle(self, t: float, q: FloatArray, wrench: FloatArray | None) -> Cycle:
+        """:meth:`step` in the :class:`~dualarm_control.references.base.Follower` order of arguments."""
+        return self.step(q, t, wrench)
+
+    def step(self, q: FloatArray, t: float, wrench: FloatArray | None = None) -> Cycle:
+        """One cycle at joint positions q (n,) [rad] and task time t [s]; the cycle's rows, the
+        filtered normal force f_c [N] the PI used (NaN without force feedback or when the reading
+        was not finite) and the offset f_F [m] in the circle task.
+
+        Args:
+            wrench: force variant only: raw sensor reading [N, N m] (6,) in the tool frame
+                (the wrench the flange exerts on the tool). A non-finite reading keeps the
+                previous offset (the force loop holds) and gives measured_force NaN.
+        """
+        measured = math.nan
+        tasks = self.tasks
+        if self.force:
+            if wrench is None:
+                raise ValueError("the force variant needs the F/T reading every cycle")
+            wrench = np.asarray(wrench, dtype=float)
+            q = self.model.check_q(q)
+            if wrench.shape == (6,) and math.isfinite(wrench.sum()) and math.isfinite(q.sum()):
+                circle = self._circle
+                assert circle is not None
+                pan, tool = self.model.frame_poses(q, (circle.pan_frame, circle.tool_frame))
+                measured = contact_normal_force(self._sensor.filter(wrench), tool.rotation, pan.rotation[:, 2],
+                                                self.spec.force.tool_mass)
+                self._offset = self._pi.step(measured, self.period)
+            tasks = list(self.tasks)
+            assert self._circle is not None
+            tasks[self._circle_index] = dataclasses.replace(self._circle, normal_offset=self._offset)
+        out = self.controller.solve_tasks(q, tasks, t)
+        out.measured_force, out.normal_offset, out.stage = measured, self._offset, "circle"
+        return out
+
+
+def parse_tasks(flat: Mapping[str, Any]) -> TasksSource:
     """Read the task keys (module docstring) from flattened parameters; ScenarioError on a bad value."""
 
-    names = _get(flat, "tasks")
+    names = get(flat, "tasks")
     if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
         raise ScenarioError(f"scenario parameter '{PREFIX}tasks': got {names!r}, expected a list of task names")
     specs = []
@@ -138,7 +258,7 @@ def parse_task_scenario(flat: Mapping[str, Any]) -> TaskScenario:
             raise ScenarioError(f"scenario parameter '{sub}type': got {kind!r}, expected one of: "
                                 f"{', '.join(TASK_TYPES)}")
         specs.append(TaskSpec(name, str(kind), values))
-    gains = _get(flat, "gains", [1.0])
+    gains = get(flat, "gains", [1.0])
     if not isinstance(gains, list) or not gains or not all(
             isinstance(g, int | float) and not isinstance(g, bool) and g > 0 for g in gains):
         raise ScenarioError(f"scenario parameter '{PREFIX}gains': got {gains!r}, expected numbers > 0")
@@ -152,12 +272,12 @@ def parse_task_scenario(flat: Mapping[str, Any]) -> TaskScenario:
         force = ForceParams(**force_values)
     except (TypeError, ValueError) as exc:
         raise ScenarioError(f"scenario force parameters: {exc}") from None
-    links = _get(flat, "contact_links", ["left_flange", "right_tool"])
+    links = get(flat, "contact_links", ["left_flange", "right_tool"])
     if not isinstance(links, list) or len(links) != 2 or not all(isinstance(n, str) for n in links):
         raise ScenarioError(f"scenario parameter '{PREFIX}contact_links': got {links!r}, expected two link names")
-    out = TaskScenario(duration=_number(flat, "duration"), table_height=_number(flat, "table_height"),
-                       convergence_time=_number(flat, "convergence_time", 5.0), gains=tuple(float(g) for g in gains),
-                       tasks=tuple(specs), force=force, contact_links=(links[0], links[1]))
+    out = TasksSource(duration=number(flat, "duration"), table_height=number(flat, "table_height"),
+                      convergence_time=number(flat, "convergence_time", 5.0), gains=tuple(float(g) for g in gains),
+                      tasks=tuple(specs), force=force, contact_links=(links[0], links[1]))
     if out.duration <= out.convergence_time:
         raise ScenarioError(f"scenario parameter '{PREFIX}duration' must exceed convergence_time "
                             f"({out.convergence_time} s), got {out.duration}")

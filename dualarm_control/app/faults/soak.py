@@ -1,6 +1,6 @@
 """``dualarm soak``: the scenario on repeat at 200 Hz over ROS for minutes; memory, deadlines, accounting.
 
-The three nodes run as processes (:class:`~dualarm_control.app.launcher.Launch`), the trajectory
+The three nodes run as processes (:class:`~dualarm_control.app.run.launcher.Launch`), the trajectory
 node with ``repeat:=true``. Once a second this process samples each node's resident set size
 (``/proc/<pid>/status`` VmRSS) and the latest counters on ``/diagnostics`` (a monitor node of
 its own). At the end the controller and trajectory node are stopped first, then the simulator,
@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from dualarm_control.app.launcher import Launch, Process, node_command
+from dualarm_control.app.run.launcher import Launch, Process, node_command
 from dualarm_control.ros.convert import stamp_ns
 
 NODES = ("sim_node", "controller_node", "trajectory_node")

@@ -54,7 +54,7 @@ class RunRecord:
 
 def read_record(bag: Path) -> RunRecord:
     """Decode the graph topics of a fault run's bag."""
-    from dualarm_control.app.bag import open_reader
+    from dualarm_control.app.record.bag import open_reader
 
     rec = RunRecord()
     statuses = {"controller_node": rec.controller, "sim_node": rec.sim, "trajectory_node": rec.trajectory}
@@ -210,7 +210,7 @@ SIGNAL_MARGIN_NS = 1_000_000
 
 def check_signalled_bag(bag: Path, reference: RunRecord, signal_ns: int) -> BagCheck:
     """Every /joint_states of the reference stamped from the bag's first to 1 ms before the signal is in the bag."""
-    from dualarm_control.app.bag import BagError, open_reader
+    from dualarm_control.app.record.bag import BagError, open_reader
 
     try:
         reader = open_reader(bag)

@@ -3,9 +3,9 @@
 Machines are shared and noisy, so every table reports percentiles (p50/p99) and ratios
 measured in the same run, never a single absolute figure on its own. Parts:
 
-- random set (:mod:`dualarm_control.app.bench_random`): RelativeController.step per solver
+- random set (:mod:`dualarm_control.app.bench.random_set`): RelativeController.step per solver
   and QP back-end on seeded random configurations and targets, interleaved with pink's
-  ``solve_ik`` on the same cases (:mod:`dualarm_control.app.bench_pink`), ratios of each
+  ``solve_ik`` on the same cases (:mod:`dualarm_control.app.bench.pink`), ratios of each
   p50 to pink's fastest and default set-ups, active joints per cycle;
 - the scenario (assembly) run in-process per solver and back-end, and pink replaying the
   recorded states and targets of one run;
@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from dualarm_control.app.bench_pink import pink_cycle, pink_version
-from dualarm_control.app.bench_random import (
+from dualarm_control.app.bench.pink import pink_cycle, pink_version
+from dualarm_control.app.bench.random_set import (
     Case,
     exactness,
     random_cases,
@@ -33,7 +33,7 @@ from dualarm_control.app.bench_random import (
     time_scaling,
     with_backend,
 )
-from dualarm_control.app.experiment import run_scenario
+from dualarm_control.app.run.experiment import run_scenario
 from dualarm_control.controller import ControllerParams
 from dualarm_control.errors import ParameterError
 from dualarm_control.kinematics import DualArmModel
@@ -212,7 +212,9 @@ def format_bench(record: dict[str, Any]) -> str:
                                   ("active_joints_p50", "active joints p50", "{:.0f}"),
                                   ("active_joints_max", "max", "{:d}"),
                                   ("share_at_most_6_active", "share <= 6", "{:.3f}"),
-                                  ("failures", "failures", "{:d}")], "solver | QP back-end")
+                                  ("failures", "failures", "{:d}"),
+                                  ("max_bound_excess", "max bound excess [rad/s]", "{:.1e}")],
+                       "solver | QP back-end")
     if rnd.get("pink_fastest"):
         lines += ["", f"pink's fastest set-up in this run: {rnd['pink_fastest']}."]
     if record["refused"]:

@@ -1,5 +1,5 @@
 """One real-time run of the cell for fault injection: the three nodes and a reference recorder as
-real processes (:class:`~dualarm_control.app.launcher.Launch`), optionally in network namespaces.
+real processes (:class:`~dualarm_control.app.run.launcher.Launch`), optionally in network namespaces.
 
 The run knows the scenario's trajectory, so faults "mid-motion" are injected when the relative
 target is moving (its twist is non-zero), timed from the trajectory node's start.
@@ -15,9 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from dualarm_control.app.fault_bag import RunRecord, read_record
-from dualarm_control.app.launcher import Launch, Process, node_command, recorder_command
-from dualarm_control.app.netns import exec_prefix
+from dualarm_control.app.faults.episodes import RunRecord, read_record
+from dualarm_control.app.faults.netns import exec_prefix
+from dualarm_control.app.run.launcher import (
+    Launch,
+    Process,
+    node_command,
+    recorder_command,
+)
 
 RECORDED = ("/diagnostics", "/joint_states", "/velocity_controller/commands", "/relative_pose")
 START_TIMEOUT_S = 60.0

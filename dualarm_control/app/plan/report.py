@@ -16,12 +16,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from dualarm_control.app.plan import PlanResult
+from dualarm_control.app.plan.optimise import PlanResult
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.planning.plan_file import PLAN_FORMAT
 
 if TYPE_CHECKING:  # the simulator (pybullet) is only imported when a plan is executed
-    from dualarm_control.app.plan_execute import ExecutionResult
+    from dualarm_control.app.plan.execute import ExecutionResult
 
 
 

@@ -1,0 +1,160 @@
+"""The reference-source interface of a scenario, and the readers of the scenario file's keys.
+
+A scenario (:class:`dualarm_control.scenario.Scenario`) is the cell (URDF, initial
+configuration), the motion limits and ONE reference source: what the controller is asked to
+follow. The kinds today:
+
+* ``segments`` (paper 000, :class:`~dualarm_control.references.segments.SegmentsSource`):
+  relative pose/screw segments, timed by ruckig from the measured start pose and streamed as
+  relative targets (/relative_target) to the relative pose task;
+* ``tasks`` (paper 001, :class:`~dualarm_control.references.tasks.TasksSource`): a set of
+  tasks with gains and bounds evaluated at the cycle's time, optionally closed over a force
+  sensor (/wrench); no target stream;
+* ``plan`` (paper 003, :class:`~dualarm_control.references.plan.PlanSource`): a planned
+  joint trajectory (/joint_reference) tracked in joint space.
+
+A source is parsed from the scenario file (frozen, no run state). For a run it makes a
+:class:`Follower` (:meth:`ReferenceSource.follower`): the source bound to a controller from
+the measured start configuration, giving one :class:`~dualarm_control.controller.Cycle` per control period. The
+in-process runner (:mod:`dualarm_control.app.run.experiment`) is one loop over a follower,
+whatever the kind.
+
+A fourth source, e.g. timed relative goals and twists replanned online by ruckig (issue 18),
+is one more class with these members (``kind``, ``streams``, ``describe``, ``cell``,
+``follower``) and a follower whose ``cycle`` samples its generator at t and calls
+:meth:`~dualarm_control.controller.RelativeController.step`; the consumers (runner, nodes,
+report) read only these members.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
+
+import numpy as np
+
+from dualarm_control.errors import ScenarioError
+from dualarm_control.kinematics import DualArmModel, FloatArray
+from dualarm_control.trajectory import MotionLimits
+
+if TYPE_CHECKING:
+    from dualarm_control.controller import ControllerParams, Cycle
+
+PREFIX = "scenario."
+
+RELATIVE_TARGET = "/relative_target"
+JOINT_REFERENCE = "/joint_reference"
+WRENCH = "/wrench"
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """What a run adds to a scenario's source.
+
+    Attributes:
+        limits: the scenario's ruckig limits (relative motion).
+        settle_time: control time after a trajectory ends [s].
+        gain: task gain k [1/s] (tasks; None: the source's default).
+        force: the force variant (tasks, eq 9 of paper 001).
+        duration: run time [s] (tasks; None: the source's).
+    """
+
+    limits: MotionLimits
+    settle_time: float
+    gain: float | None = None
+    force: bool = False
+    duration: float | None = None
+
+
+class Follower(Protocol):
+    """A reference source bound to a controller for one run.
+
+    Attributes:
+        label: run name (the solver for relative motion, "k=1 force" for tasks).
+        steps: control periods of the run.
+        uses_wrench: the cycle needs the F/T reading (force variant).
+    """
+
+    label: str
+    steps: int
+    uses_wrench: bool
+
+    def cycle(self, t: float, q: FloatArray, wrench: FloatArray | None) -> Cycle:
+        """One cycle at time t [s] since the start, measured joint positions q (n,) [rad] and,
+        when ``uses_wrench``, the raw F/T reading (6,)."""
+        ...
+
+
+class ReferenceSource(Protocol):
+    """What a scenario's controller follows (module docstring).
+
+    Attributes:
+        kind: "segments", "tasks", "plan" (issue 18: "goals"): names the report's figures and
+            the run record's optional fields (task values where there are tasks, force where
+            there is force).
+        streams: the topics a controller cycle consumes besides /joint_states, in the node
+            (the source decides what the controller node subscribes): segments
+            (/relative_target), plan (/joint_reference and /relative_target), tasks with force (/wrench), none
+            for tasks without force.
+
+    Methods:
+        describe(): one line for logs ("3 segments", "6 tasks", "plan <file>").
+        initial_positions(default): the configuration the cell starts in [rad], (n,) (a plan's
+            first configuration, else the scenario's ``default``).
+        cell(options): extra :class:`~dualarm_sim.cell.CellConfig` fields of a run (tasks: the
+            table height, the contact pair of the force variant), plain data.
+        follower(model, params, q0, options): the source bound to a new controller from the
+            measured start configuration q0 (n,).
+    """
+
+    kind: ClassVar[str]
+    streams: ClassVar[tuple[str, ...]]
+
+    def describe(self) -> str: ...
+
+    def initial_positions(self, default: FloatArray) -> FloatArray: ...
+
+    def cell(self, options: RunOptions) -> dict[str, Any]: ...
+
+    def follower(self, model: DualArmModel, params: ControllerParams, q0: FloatArray,
+                 options: RunOptions) -> Follower: ...
+
+
+def get(flat: Mapping[str, Any], key: str, default: Any = None) -> Any:
+    """``scenario.<key>`` of flattened parameters; ScenarioError naming the full key when missing without default."""
+    full = PREFIX + key
+    if full in flat:
+        return flat[full]
+    if default is None:
+        raise ScenarioError(f"scenario parameter '{full}' is missing")
+    return default
+
+
+def vector(flat: Mapping[str, Any], key: str, size: int) -> FloatArray:
+    """``scenario.<key>`` as ``size`` finite numbers; ScenarioError naming the key and value otherwise."""
+    value = get(flat, key)
+    if not isinstance(value, list) or len(value) != size or not all(
+        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in value
+    ):
+        raise ScenarioError(f"scenario parameter '{PREFIX}{key}': got {value!r}, expected a list of {size} numbers")
+    return np.array(value, dtype=float)
+
+
+def number(flat: Mapping[str, Any], key: str, default: float | None = None) -> float:
+    """``scenario.<key>`` as a finite number; ScenarioError naming the key and value otherwise."""
+    value = get(flat, key, default)
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ScenarioError(f"scenario parameter '{PREFIX}{key}': got {value!r}, expected a number")
+    return float(value)
+
+
+class SourceDefaults:
+    """What most sources share: the cell starts at the scenario's configuration, with no extra fields."""
+
+    def initial_positions(self, default: FloatArray) -> FloatArray:
+        return default
+
+    def cell(self, options: RunOptions) -> dict[str, Any]:
+        return {}

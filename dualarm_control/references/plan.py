@@ -1,0 +1,118 @@
+"""Reference source of paper 003: a plan's joint trajectory sample + its relative pose and twist.
+
+The trajectory node streams it; the controller tracks the joint reference
+(:func:`~dualarm_control.joint_tracking.joint_tracking_velocity`) and measures the relative
+pose error against the reference's relative pose (eq 1-2 and 4-6 of paper 000 at q_ref).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+
+from dualarm_control.controller import ControllerParams, Cycle, RelativeController
+from dualarm_control.kinematics import DualArmModel, FloatArray
+from dualarm_control.planning.config import PlanConfig, load_plan_config
+from dualarm_control.planning.joint_trajectory import plan_trajectory
+from dualarm_control.planning.plan_file import read_plan
+from dualarm_control.references.base import (
+    JOINT_REFERENCE,
+    RELATIVE_TARGET,
+    RunOptions,
+    SourceDefaults,
+)
+
+
+@dataclass(frozen=True)
+class PlanReference:
+    """One reference sample at time t.
+
+    Attributes:
+        joint_positions, joint_velocities: q_ref [rad], qd_ref [rad/s], (14,).
+        position, rotation: relative pose of q_ref (right tool in F1) [m], (3,), (3, 3).
+        linear_velocity, angular_velocity: relative twist J_r(q_ref) qd_ref [m/s, rad/s], (3,) each.
+        linear_acceleration, angular_acceleration: zeros (not used by the controller).
+    """
+
+    joint_positions: FloatArray
+    joint_velocities: FloatArray
+    position: FloatArray
+    rotation: FloatArray
+    linear_velocity: FloatArray
+    angular_velocity: FloatArray
+    linear_acceleration: FloatArray
+    angular_acceleration: FloatArray
+
+
+class PlanSource(SourceDefaults):
+    """The executable joint trajectory of a plan along its scenario's path: a
+    :class:`~dualarm_control.references.base.ReferenceSource` (streams: /joint_reference, and
+    /relative_target for the pose error).
+
+    The reference passes through the planned configurations and
+    ``execution.subdivisions - 1`` closure-projected knots between each pair
+    (:func:`~dualarm_control.planning.joint_trajectory.plan_trajectory`); the run starts at the
+    plan's first configuration.
+    """
+
+    kind: ClassVar[str] = "plan"
+    streams: ClassVar[tuple[str, ...]] = (JOINT_REFERENCE, RELATIVE_TARGET)
+
+    def __init__(self, model: DualArmModel, config: PlanConfig, configurations: FloatArray, path: str = "") -> None:
+        self.model = model
+        self.path = Path(path)
+        self.config = config
+        self.configurations = configurations
+        self.trajectory = plan_trajectory(model, config.corner.sample(), configurations,
+                                          config.execution_subdivisions, config.execution_velocity_scale)
+        self.duration = self.trajectory.duration
+        self.settle_time = config.execution_settle
+        self.gain = config.execution_gain
+
+    @classmethod
+    def from_file(cls, model: DualArmModel, plan_path: str | Path) -> PlanSource:
+        """The source of a plan.json of ``dualarm plan``."""
+        plan = read_plan(plan_path, model.joint_names)
+        return cls(model, load_plan_config(plan.scenario), plan.configurations, str(plan_path))
+
+    def initial_positions(self, default: FloatArray) -> FloatArray:
+        return np.asarray(self.configurations[0])
+
+    def follower(self, model: DualArmModel, params: ControllerParams, q0: FloatArray,
+                 options: RunOptions) -> PlanFollower:
+        return PlanFollower(self, RelativeController(model, params))
+
+    def describe(self) -> str:
+        return f"plan {self.path}"
+
+    def sample(self, t: float) -> PlanReference:
+        """The reference at ``t`` [s] (held at the last configuration after the end)."""
+        ref = self.trajectory.sample(t)
+        state = self.model.relative_state(ref.positions)
+        twist = state.jacobian @ ref.velocities
+        zero = np.zeros(3)
+        return PlanReference(ref.positions, ref.velocities, state.position, state.rotation, twist[:3], twist[3:],
+                             zero, zero)
+
+
+class PlanFollower:
+    """Joint-space tracking of the plan's trajectory (:meth:`RelativeController.track_joints`,
+    K = ``execution.gain``), the relative pose error measured against the reference's pose."""
+
+    uses_wrench = False
+    label = "plan"
+
+    def __init__(self, source: PlanSource, controller: RelativeController) -> None:
+        self.source = source
+        self.controller = controller
+        self.steps = math.ceil((source.duration + source.settle_time) / controller.params.period)
+
+    def cycle(self, t: float, q: FloatArray, wrench: FloatArray | None) -> Cycle:
+        ref = self.source.sample(t)
+        out = self.controller.track_joints(q, ref.joint_positions, ref.joint_velocities, ref, self.source.gain)
+        out.stage = "execute"
+        return out

@@ -1,0 +1,123 @@
+"""Reference source of paper 000: relative motion segments, timed by ruckig from the start pose.
+
+Keys under ``scenario.``: ``segments`` (ordered list of names) and per segment
+``<seg>.type``: ``pose`` (``position`` [m] and ``rpy_deg`` of the peg frame F2 in the hole
+frame F1) or ``screw`` (``axis`` in F1, ``angle_deg``, ``advance`` [m]); ``<seg>.hold`` [s].
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+import pinocchio as pin
+
+from dualarm_control.controller import ControllerParams, Cycle, RelativeController
+from dualarm_control.errors import ScenarioError
+from dualarm_control.kinematics import DualArmModel, FloatArray
+from dualarm_control.references.base import (
+    PREFIX,
+    RELATIVE_TARGET,
+    RunOptions,
+    SourceDefaults,
+    get,
+    number,
+    vector,
+)
+from dualarm_control.trajectory import MotionLimits, RelativeTrajectory, Segment
+
+
+@dataclass(frozen=True)
+class SegmentSpec:
+    """One segment as written in the file (resolved against the start pose later)."""
+
+    name: str
+    kind: str  # "pose" | "screw"
+    position: FloatArray | None = None
+    rotation: FloatArray | None = None
+    axis: FloatArray | None = None
+    angle: float = 0.0
+    advance: float = 0.0
+    hold: float = 0.0
+
+
+@dataclass(frozen=True)
+class SegmentsSource(SourceDefaults):
+    """Relative segments (paper 000): a :class:`~dualarm_control.references.base.ReferenceSource`.
+
+    Attributes:
+        segments: the segments in order.
+    """
+
+    segments: tuple[SegmentSpec, ...]
+    kind: ClassVar[str] = "segments"
+    streams: ClassVar[tuple[str, ...]] = (RELATIVE_TARGET,)
+
+    def describe(self) -> str:
+        return f"{len(self.segments)} segments"
+
+    def follower(self, model: DualArmModel, params: ControllerParams, q0: FloatArray,
+                 options: RunOptions) -> SegmentsFollower:
+        return SegmentsFollower(RelativeController(model, params),
+                                self.trajectory(*model.relative_pose(q0), options.limits), options.settle_time)
+
+    def trajectory(self, start_position: FloatArray, start_rotation: FloatArray,
+                   limits: MotionLimits) -> RelativeTrajectory:
+        """The ruckig relative trajectory from the measured start pose through all segments."""
+        segments: list[Segment] = []
+        p, r = np.asarray(start_position, float), np.asarray(start_rotation, float)
+        for spec in self.segments:
+            if spec.kind == "pose":
+                assert spec.position is not None and spec.rotation is not None
+                seg = Segment.to_pose(spec.name, r, spec.position, spec.rotation, hold=spec.hold)
+            else:
+                assert spec.axis is not None
+                seg = Segment.screw(spec.name, p, spec.axis, spec.angle, spec.advance, hold=spec.hold)
+            segments.append(seg)
+            p = np.asarray(seg.position)
+            r = pin.exp3(seg.axis * seg.angle) @ r
+        return RelativeTrajectory(start_position, start_rotation, segments, limits)
+
+
+class SegmentsFollower:
+    """The segments' ruckig trajectory (from the measured start pose) followed by the relative
+    pose task: each cycle samples the target at t and runs :meth:`RelativeController.step`."""
+
+    uses_wrench = False
+
+    def __init__(self, controller: RelativeController, trajectory: RelativeTrajectory, settle_time: float) -> None:
+        self.controller = controller
+        self.trajectory = trajectory
+        self.label = controller.params.solver
+        self.steps = math.ceil((trajectory.duration + settle_time) / controller.params.period)
+
+    def cycle(self, t: float, q: FloatArray, wrench: FloatArray | None) -> Cycle:
+        target = self.trajectory.sample(t)
+        out = self.controller.step(q, target)
+        out.stage = target.segment_name
+        return out
+
+
+def parse_segments(flat: Mapping[str, Any]) -> SegmentsSource:
+    """Read the segment keys (module docstring) from flattened parameters; ScenarioError on a bad value."""
+    names = get(flat, "segments")
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names) or not names:
+        raise ScenarioError(f"scenario parameter '{PREFIX}segments': got {names!r}, expected a list of segment names")
+    specs = []
+    for seg in names:
+        kind = get(flat, f"{seg}.type")
+        hold = number(flat, f"{seg}.hold", 0.0)
+        if kind == "pose":
+            rpy = np.radians(vector(flat, f"{seg}.rpy_deg", 3))
+            specs.append(SegmentSpec(seg, "pose", position=vector(flat, f"{seg}.position", 3),
+                                     rotation=pin.rpy.rpyToMatrix(*rpy), hold=hold))
+        elif kind == "screw":
+            specs.append(SegmentSpec(seg, "screw", axis=vector(flat, f"{seg}.axis", 3),
+                                     angle=math.radians(number(flat, f"{seg}.angle_deg", 0.0)),
+                                     advance=number(flat, f"{seg}.advance", 0.0), hold=hold))
+        else:
+            raise ScenarioError(f"scenario parameter '{PREFIX}{seg}.type': got {kind!r}, expected one of: pose, screw")
+    return SegmentsSource(tuple(specs))
