@@ -3,9 +3,10 @@
 One :meth:`DualArmCell.step` advances exactly one control period (default 5 ms) made of
 ``physics_rate_hz * control_period`` physics substeps. The arms follow joint velocity
 commands as a KUKA FRI robot does: the command is integrated into a joint position
-reference, which the robot's own joint position controller holds (see below); the state returned is read back from the physics (``getJointStates``),
-never taken from the reference. Real-time pacing is left to the caller (the ROS node), so
-the class also runs in lockstep in tests.
+reference, which the robot's own joint position controller holds (see below). The state
+returned is read back from the physics (``getJointStates``), never taken from the
+reference. Real-time pacing is left to the caller (the ROS node), so the class also runs
+in lockstep in tests.
 
 Physics choices (all measured on ``urdf/dualarm_cell.urdf``):
 
