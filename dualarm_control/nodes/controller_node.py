@@ -618,7 +618,7 @@ class ControllerNode:
 
 def main(args: list[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
-    # Before any middleware thread exists, so they inherit the scheduling.
+    # Applied to every thread (the middleware's too) once the node is built (ros/node.py).
     why_not = request_realtime_priority(priority_from_args(argv, DEFAULT_PRIORITY, "controller_node"))
     help_text = usage("controller_node", __doc__ or "", CONTROLLER_PARAMETERS + NODE_PARAMETERS)
     return run(lambda context: ControllerNode(context, why_not), argv, help_text)

@@ -216,7 +216,7 @@ class TrajectoryNode:
 
 def main(args: list[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
-    # Before any middleware thread exists, so they inherit the scheduling: a starved target stream
+    # Applied to every thread (the middleware's too) once the node is built: a starved target stream
     # stops the controller (target_timeout), as `dualarm soak` showed on a loaded machine.
     why_not = request_realtime_priority(priority_from_args(argv, DEFAULT_PRIORITY, "trajectory_node"))
     return run(lambda context: TrajectoryNode(context, why_not), argv,
