@@ -97,3 +97,42 @@ def test_interactive_demo_lockstep_bag_metrics_equal_in_process(demo: tuple, tmp
     # the bag's joint states are the sim's at the command's cycle (measured 1e-6 relative apart here)
     assert from_bag["max_joint_acceleration"] == pytest.approx(in_process["max_joint_acceleration"], rel=1e-5)
     assert from_bag["final_position_error_m"] == pytest.approx(in_process["final_position_error_m"], abs=1e-9)
+
+
+@pytest.mark.slow
+def test_interactive_demo_sparse_peak_is_one_lasso_switch_and_the_acceleration_bound_caps_it(demo: tuple) -> None:
+    """sparse_qp on interactive_demo: without a bound the largest joint acceleration (27.2 rad/s^2) is
+    the two cycles of one active-set switch at t = 7.155-7.16 s (the two wrist joints 7, tied in l1 cost,
+    hand the rotation over: q7 leaves, q14 enters), while the target is smooth there (its acceleration
+    changes by at most the jerk limit x T); with config/acceleration_limit.yaml (10 rad/s^2) it is capped
+    and tracking is kept (docs/driving.md)."""
+    from dualarm_control.app.record.report import summarize_run
+    from dualarm_control.app.run.experiment import run_scenario
+    from dualarm_control.controller import DEFAULT_ACCELERATION_LIMIT, controller_params
+
+    scenario, model = demo
+    free = run_scenario(scenario, controller_params({"solver": "sparse_qp"}), model)
+    acc = np.abs(np.diff(free.commands, axis=0)) / free.period  # (N-1, 14) [rad/s^2]
+    peaks = acc.max(axis=1)
+    over = np.nonzero(peaks > DEFAULT_ACCELERATION_LIMIT)[0] + 1  # cycles whose command jumps
+    assert free.time[over] == pytest.approx([7.155, 7.16])
+    k = int(over[0])
+    assert abs(free.commands[k - 1, 13]) < 1e-3 < abs(free.commands[k + 1, 13])  # q14 enters ...
+    assert abs(free.commands[k - 1, 6]) > 0.2 and abs(free.commands[k + 1, 6]) < 1e-3  # ... q7 leaves
+    assert float(np.percentile(peaks, 99)) < 2.0
+
+    stream = scenario.reference.stream(model, free.positions[0], RunOptions(scenario.limits, scenario.settle_time),
+                                      free.period)
+    alphas = [np.concatenate((s.relative.linear_acceleration, s.relative.angular_acceleration))
+              for s in (stream.sample(t) for t in free.time[k - 20:k + 20])]
+    jerk = np.linalg.norm(np.diff(alphas, axis=0), axis=1) / free.period
+    assert jerk.max() <= 1.06 * max(scenario.limits.max_linear_jerk, scenario.limits.max_angular_jerk)
+
+    bounded = summarize_run(run_scenario(scenario, controller_params(
+        {"solver": "sparse_qp", "acceleration_limit": [DEFAULT_ACCELERATION_LIMIT]}), model), scenario, model)
+    unbounded = summarize_run(free, scenario, model)
+    assert unbounded["max_joint_acceleration"] > 2.0 * DEFAULT_ACCELERATION_LIMIT
+    assert bounded["max_joint_acceleration"] <= DEFAULT_ACCELERATION_LIMIT + 1e-6
+    assert bounded["final_position_error_m"] <= 1.1 * unbounded["final_position_error_m"]
+    assert bounded["max_tracking_error_m"] <= 1.1 * unbounded["max_tracking_error_m"]
+    assert bounded["joint_position_limit_violations"] == bounded["joint_velocity_limit_violations"] == 0
