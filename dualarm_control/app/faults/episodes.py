@@ -57,31 +57,21 @@ class GraphStreams:
 
 
 def read_record(bag: Path) -> GraphStreams:
-    """Decode the graph topics of a fault run's bag."""
-    from dualarm_control.app.record.bag import open_reader
+    """The graph streams of a fault run's bag, from the one bag reader (:func:`~dualarm_control.app.record.bag.read_bag`)."""
+    from dualarm_control.app.record.bag import COMMANDS_TOPIC, read_bag
 
-    rec = GraphStreams()
+    data, rec = read_bag(bag), GraphStreams()
     statuses = {"controller_node": rec.controller, "sim_node": rec.sim, "trajectory_node": rec.trajectory}
-    reader = open_reader(bag)
-    try:
-        for conn, t, raw in reader.messages():
-            msg: Any = reader.deserialize(raw, conn.msgtype)
-            if conn.topic == "/diagnostics":
-                for s in msg.status:
-                    if s.name in statuses:
-                        level = s.level[0] if isinstance(s.level, (bytes, bytearray)) else int(s.level)
-                        statuses[s.name].append(Status(t, int(level), s.message,
-                                                       {kv.key: kv.value for kv in s.values}))
-            elif conn.topic == "/velocity_controller/commands":
-                rec.command_t.append(t)
-                rec.command_max.append(float(np.max(np.abs(msg.data))) if len(msg.data) else 0.0)
-            elif conn.topic == "/joint_states":
-                rec.state_stamp.append(stamp_ns(msg.header.stamp))
-                rec.state_speed.append(float(np.max(np.abs(msg.velocity))) if len(msg.velocity) else 0.0)
-            elif conn.topic == "/relative_pose":
-                rec.pose_stamp.append(stamp_ns(msg.header.stamp))
-    finally:
-        reader.close()
+    for s in data.statuses:
+        if s.name in statuses:
+            statuses[s.name].append(Status(s.t, s.level, s.message, s.values))
+    for t, command in data.rows[COMMANDS_TOPIC]:
+        rec.command_t.append(t)
+        rec.command_max.append(float(np.max(np.abs(command))) if len(command) else 0.0)
+    for _, stamp, _, msg in data.states:
+        rec.state_stamp.append(stamp)
+        rec.state_speed.append(float(np.max(np.abs(msg.velocity))) if len(msg.velocity) else 0.0)
+    rec.pose_stamp = list(data.pose_stamps)
     return rec
 
 

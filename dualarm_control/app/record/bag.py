@@ -189,15 +189,27 @@ def _pose_vector(translation: Any, rotation: Any) -> list[float]:
             float(rotation.x), float(rotation.y), float(rotation.z), float(rotation.w)]
 
 
+@dataclass(frozen=True)
+class Status:
+    """One /diagnostics status: receive time [ns], node name, level, message and values."""
+
+    t: int
+    name: str
+    level: int
+    message: str
+    values: dict[str, str]
+
+
 @dataclass
-class _Bag:
-    """The messages of one pass over a bag: what a run record of either kind is built from."""
+class Bag:
+    """The messages of one pass over a bag (:func:`read_bag`): what a run record of either kind,
+    and the fault matrix's graph streams (:mod:`dualarm_control.app.faults.episodes`), are built from."""
 
     rows: dict[str, list[tuple[int, Any]]] = field(  # (receive ns, values) of commands, poses, targets
         default_factory=lambda: {t: [] for t in (COMMANDS_TOPIC, POSE_TOPIC, TARGET_TOPIC)})
     states: list[tuple[int, int, list[str], Any]] = field(default_factory=list)  # (receive ns, stamp, names, msg)
-    cycles: list[tuple[int, dict[str, str]]] = field(default_factory=list)  # (receive ns, controller status values)
-    table_contacts: int = 0
+    statuses: list[Status] = field(default_factory=list)  # every node's, in receive order
+    pose_stamps: list[int] = field(default_factory=list)  # /relative_pose header stamps
     contact: dict[int, float] = field(default_factory=dict)  # /contact_force by header stamp
     missing: list[str] = field(default_factory=list)  # the relative report's topics the bag lacks
 
@@ -210,17 +222,26 @@ class _Bag:
             self.rows[topic].append((t, np.asarray(msg.data, dtype=float)))
         elif topic == POSE_TOPIC:
             self.rows[topic].append((t, _pose_vector(msg.pose.position, msg.pose.orientation)))
+            self.pose_stamps.append(stamp_ns(msg.header.stamp))
         elif topic == TARGET_TOPIC:
             if msg.points and msg.points[0].transforms:
                 tf = msg.points[0].transforms[0]
                 self.rows[topic].append((t, _pose_vector(tf.translation, tf.rotation)))
         else:
-            for status in msg.status:
-                values = {kv.key: kv.value for kv in status.values}
-                if status.name == CONTROLLER_STATUS:
-                    self.cycles.append((t, values))
-                elif status.name == SIM_STATUS and "table_contacts" in values:
-                    self.table_contacts = max(self.table_contacts, int(values["table_contacts"]))
+            for s in msg.status:
+                level = s.level[0] if isinstance(s.level, (bytes, bytearray)) else int(s.level)
+                self.statuses.append(Status(t, s.name, int(level), s.message, {kv.key: kv.value for kv in s.values}))
+
+    @property
+    def cycles(self) -> list[tuple[int, dict[str, str]]]:
+        """(receive ns, values) of the controller's statuses."""
+        return [(s.t, s.values) for s in self.statuses if s.name == CONTROLLER_STATUS]
+
+    @property
+    def table_contacts(self) -> int:
+        """The simulator's running total of table contacts (its last 1 Hz status)."""
+        return max((int(s.values["table_contacts"]) for s in self.statuses
+                    if s.name == SIM_STATUS and "table_contacts" in s.values), default=0)
 
     @property
     def task_cycles(self) -> list[tuple[int, dict[str, str]]]:
@@ -234,9 +255,10 @@ class _Bag:
         return TimedSeries(t, values)
 
 
-def _read(path: Path) -> _Bag:
+def read_bag(path: Path) -> Bag:
+    """Every message a report or a fault analysis reads, in one pass."""
     reader = open_reader(path)
-    bag = _Bag(missing=missing_topics(reader))
+    bag = Bag(missing=missing_topics(reader))
     try:
         connections = [c for c in reader.connections if c.topic in (*REPORT_TOPICS, CONTACT_TOPIC)]
         for conn, t, raw in reader.messages(connections=connections):
@@ -256,7 +278,7 @@ def read_run(path: Path) -> tuple[list[RunRecord], Scenario | None]:
     """The run records of a bag and, for a task run, its scenario: one record per solver of a
     relative-motion run (:func:`_relative_records`), the one record of a task run
     (:func:`_task_record`); BagError naming what the bag lacks."""
-    bag = _read(Path(path))
+    bag = read_bag(Path(path))
     if bag.task_cycles:
         return _task_record(Path(path), bag)
     if bag.missing:
@@ -274,7 +296,7 @@ def _joint_order(names: Sequence[str], joint_names: Sequence[str], cache: dict[t
     return cache[key]
 
 
-def _relative_records(bag: _Bag) -> list[RunRecord]:
+def _relative_records(bag: Bag) -> list[RunRecord]:
     """One :class:`RunRecord` per solver of the controller's statuses (a bag normally holds one).
 
     Messages are attributed to the solver of the nearest controller status in receive time.
@@ -379,7 +401,7 @@ def _time_axis(stamps: Sequence[int | None], n: int, period: float) -> FloatArra
     return np.arange(n, dtype=float) * period
 
 
-def _task_record(path: Path, bag: _Bag) -> tuple[list[RunRecord], Scenario]:
+def _task_record(path: Path, bag: Bag) -> tuple[list[RunRecord], Scenario]:
     """The :class:`RunRecord` of a task-scenario bag (see the module docstring) and its scenario."""
     from dualarm_control.app.run.experiment import (
         RunRecord,
