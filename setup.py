@@ -32,9 +32,14 @@ ROS_REQUIRES = [
     "ros-jazzy-ament-index-python>=1.8,<2",
 ]
 TEST_REQUIRES = ["pytest>=8,<10", "hypothesis>=6.100,<7", "ruff>=0.5", "mypy>=1.10",
-                 "colcon-common-extensions>=0.3,<1"]
+                 "colcon-common-extensions>=0.3,<1",
+                 "websocket-client>=1.7,<2"]  # the browser test drives headless Chromium (DevTools protocol)
 # `dualarm bench` compares with pink's solve_ik; not needed by the controller itself.
 BENCH_REQUIRES = ["pin-pink>=4.4,<5"]
+# Seeing the cell: `dualarm view` (the Rerun viewer, whose web viewer ships in the wheel and runs
+# offline; video via imageio-ffmpeg, whose ffmpeg ships in the wheel; the Foxglove WebSocket server
+# via foxglove-sdk).
+VIEW_REQUIRES = ["rerun-sdk>=0.41,<0.42", "imageio-ffmpeg>=0.5,<0.9", "foxglove-sdk>=0.30,<0.31"]
 
 setup(
     name=PACKAGE,
@@ -50,7 +55,8 @@ setup(
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
     install_requires=INSTALL_REQUIRES,
-    extras_require={"ros": ROS_REQUIRES, "test": TEST_REQUIRES, "bench": BENCH_REQUIRES},
+    extras_require={"ros": ROS_REQUIRES, "test": TEST_REQUIRES, "bench": BENCH_REQUIRES,
+                    "view": VIEW_REQUIRES},
     python_requires=">=3.10",
     zip_safe=True,
     maintainer="dualarm_control developers",

@@ -18,6 +18,9 @@ runner (the pan's modelling error is the controller's, not the simulator's), and
 force brush-pan [N], stamped like the joint state after the step) gives the physics' ground
 truth for the report's force metrics.
 
+``/robot_description`` (std_msgs/String, keep-last 1, reliable, transient local, as
+robot_state_publisher offers it) carries the text of the URDF the cell loaded, published once.
+
 Real-time mode: a drift-free timer steps the physics one control period per tick, stamps
 are the wall clock. Lockstep mode (``lockstep:=true``): the state of step k (stamped with
 sim time k*T) is published, and the physics advances only when the command for it arrives;
@@ -28,6 +31,7 @@ from __future__ import annotations
 
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -36,7 +40,7 @@ from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, String
 
 from dualarm_control.params import ParamSpec, non_negative, positive
 from dualarm_control.ros import convert
@@ -49,7 +53,12 @@ from dualarm_control.ros.node import (
     thread_priority_spec,
     usage,
 )
-from dualarm_control.ros.qos import QOS_PARAMETER, publisher_depth, stream_qos
+from dualarm_control.ros.qos import (
+    QOS_PARAMETER,
+    latched_qos,
+    publisher_depth,
+    stream_qos,
+)
 from dualarm_control.scenario import load_scenario, scenario_names
 from dualarm_sim.cell import CellConfig, DualArmCell
 
@@ -115,6 +124,8 @@ class SimNode:
         self.pub_wrench = n.create_publisher(WrenchStamped, "/wrench", depth)
         self.pub_clock = n.create_publisher(Clock, "/clock", depth)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.pub_description = n.create_publisher(String, "/robot_description", latched_qos())
+        self.pub_description.publish(String(data=Path(scenario.urdf_path).read_text()))
         self.pub_contact = (n.create_publisher(Vector3Stamped, "/contact_force", depth) if self.contact is not None
                             else None)
         subscribe_checked(n, Float64MultiArray, "/velocity_controller/commands", self.on_command, qos, self.reject,

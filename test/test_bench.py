@@ -94,3 +94,23 @@ def test_message_bench_times_both_paths(tmp_path: Path) -> None:
 def test_realtime_and_messages_are_separate(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["bench", "--realtime", "--messages", "--output", str(tmp_path)]) == 2
     assert "choose one" in capsys.readouterr().err
+
+
+def test_with_view_belongs_to_realtime(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench", "--with-view", "--output", str(tmp_path)]) == 2
+    assert "--with-view belongs to --realtime" in capsys.readouterr().err
+
+
+def test_realtime_table_has_a_view_column_only_with_view() -> None:
+    """`dualarm bench --realtime --with-view` rows carry "view"; the table then says which run had it."""
+    from dualarm_control.app.bench.realtime import format_realtime
+
+    row = {"solver": "sparse_qp", "rate_hz": 500.0, "exit": 0, "cycles": 100, "missed_deadlines": 2,
+           "missed_share": 0.02, "jitter_p50_ms": 0.1, "jitter_p99_ms": 1.0, "latency_p50_ms": 0.5,
+           "latency_p99_ms": 2.0, "solver_failures": 0}
+    plain = format_realtime([row])
+    assert "view" not in plain and "| sparse_qp | 500 | 100 | 2 (2.00%) |" in plain
+    table = format_realtime([{**row, "view": "none"}, {**row, "view": "rerun", "missed_deadlines": 5}])
+    assert "| view |" in table.splitlines()[0]
+    assert "| sparse_qp | 500 | none | 100 | 2 (2.00%) |" in table
+    assert "| sparse_qp | 500 | rerun | 100 | 5 (2.00%) |" in table

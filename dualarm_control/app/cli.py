@@ -77,6 +77,20 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0  # not reached
 
 
+DEMO_VIDEO_SIZE = (320, 240)
+"""Size of the demo's videos [px]: small, so that rendering adds little to the demo (docs/visualization.md)."""
+
+
+def demo_video(bag: Path, out: Path) -> None:
+    """The demo's video of one run (``dualarm view BAG --video``), skipped without the ``view`` extra."""
+    from dualarm_control.app.view.video import VideoError, render_video
+
+    try:
+        render_video(bag, out, size=DEMO_VIDEO_SIZE, log=sys.stderr)
+    except VideoError as exc:
+        print(f"demo: no video of {bag}: {exc}", file=sys.stderr)
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     """The main job: for each solver, three processes over ROS in lockstep with a bag, then
     ``dualarm report`` on the bag, then the in-process experiment, and a comparison of both."""
@@ -103,6 +117,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         if code != 0:
             return code
         reports[name] = json.loads((out / name / "report" / "metrics.json").read_text())[name]
+        demo_video(bag, out / name / "run.mp4")
     print("=== in-process experiment (same scenario and solvers) for comparison", flush=True)
     code = main(["experiment", args.scenario, "--solver", ",".join(solvers), "--output", str(out / "experiment")])
     if code != 0:
@@ -118,7 +133,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
             comparison[name][key] = {"bag": a, "experiment": b, "relative_difference": diff}
             print(f"{name:<24}{key:<9}{a:>12.4f}{b:>12.4f}{diff:>10.2%}")
     (out / "comparison.json").write_text(json.dumps(comparison, indent=2) + "\n")
-    print(f"\nwrote {out}/<solver>/bag, {out}/<solver>/report/, {out}/experiment/ and {out}/comparison.json")
+    print(f"\nwrote {out}/<solver>/bag, {out}/<solver>/report/, {out}/<solver>/run.mp4, {out}/experiment/ and "
+          f"{out}/comparison.json")
     return 0
 
 
@@ -138,7 +154,7 @@ def cmd_bench_realtime(args: argparse.Namespace) -> int:
         make_solver(name)
     rates = [float(r) for r in args.rates.split(",") if r.strip()]
     check_params_files(args.params)
-    rows = run_realtime(args.scenario, solvers, rates, params=args.params)
+    rows = run_realtime(args.scenario, solvers, rates, params=args.params, with_view=args.with_view)
     write_realtime(Path(args.output), rows, args.scenario)
     print(format_realtime(rows))
     print(f"\nwrote {Path(args.output) / 'realtime.md'} and realtime.json")
@@ -164,6 +180,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
     """Solver x QP back-end timings (random set, scenario), pink, exactness, scaling: DIR/bench.md and bench.json."""
     if args.realtime and args.messages:
         raise DualArmError("--realtime and --messages are separate benchmarks: choose one")
+    if args.with_view and not args.realtime:
+        raise DualArmError("--with-view belongs to --realtime")
     if args.realtime:
         return cmd_bench_realtime(args)
     if args.messages:
@@ -242,14 +260,18 @@ def cmd_bag_record(args: argparse.Namespace) -> int:
 
     path = Path(args.output) if args.output else default_bag_path()
     return record(path, args.topics, record_all=args.all, duration=args.duration, use_sim_time=args.use_sim_time,
-                  after_data=args.after_data)
+                  after_data=args.after_data, compute_tf=not args.no_tf)
 
 
 def cmd_bag_info(args: argparse.Namespace) -> int:
     """Print a ``ros2 bag info``-style summary."""
     from dualarm_control.app.record.bag import bag_info
+    from dualarm_control.app.record.notes import format_notes
 
     print(bag_info(Path(args.bag)))
+    notes = format_notes(Path(args.bag))
+    if notes:
+        print(notes)
     return 0
 
 
@@ -331,6 +353,9 @@ def _add_bag_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     rec.add_argument("--after-data", action="append", default=[], metavar="TOPIC",
                      help="subscribe this named topic only once every other named topic has delivered a message "
                      "(repeatable): a node that waits for a reader on TOPIC then starts with the others recorded")
+    rec.add_argument("--no-tf", action="store_true",
+                     help="do not write /tf and /tf_static computed from /joint_states (by default they are, "
+                     "when no node publishes /tf: one transform per URDF joint, as robot_state_publisher)")
     rec.set_defaults(func=cmd_bag_record)
     info = verbs.add_parser("info", help="summary of a bag (like ros2 bag info)")
     info.add_argument("bag", help="rosbag2 directory")
@@ -496,6 +521,9 @@ def build_parser() -> argparse.ArgumentParser:
     ben.add_argument("--params", action="append", default=[], metavar="FILE",
                      help="--realtime: ROS-style parameter file passed to every node (repeatable), e.g. "
                      "config/realtime_1khz.yaml")
+    ben.add_argument("--with-view", action="store_true",
+                     help="--realtime: run each launch twice, without and with 'dualarm view --save' (the live "
+                     "Rerun view, its own process) beside it (needs the view extra)")
     ben.set_defaults(func=cmd_bench)
 
     run = sub.add_parser("run", help="run one node (like ros2 run dualarm_control NODE)",
@@ -556,6 +584,9 @@ def build_parser() -> argparse.ArgumentParser:
     from dualarm_control.app.plan.command import add_plan_parser
 
     add_plan_parser(sub, cmd_plan)
+    from dualarm_control.app.view.command import add_view_parser
+
+    add_view_parser(sub)
     return parser
 
 

@@ -39,3 +39,11 @@ def stream_qos(reliability: str, depth: int = STREAM_DEPTH) -> Any:
 
     policy = ReliabilityPolicy.BEST_EFFORT if reliability == "best_effort" else ReliabilityPolicy.RELIABLE
     return QoSProfile(depth=depth, reliability=policy)
+
+
+def latched_qos() -> Any:
+    """The QoS of ``/robot_description`` as robot_state_publisher offers it: keep-last 1, reliable,
+    transient local (a reader that joins later still gets the last message)."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    return QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)

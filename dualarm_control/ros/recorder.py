@@ -7,6 +7,12 @@ description hash and the offered QoS of its publishers, all from the graph; the 
 are stored as received (``raw=True``). Receive times come from the recorder node's clock,
 so with ``use_sim_time`` a bag of a lockstep run is on the simulation clock.
 Ctrl-C, SIGTERM or ``--duration`` close the bag with everything received so far.
+
+For the viewers (Foxglove, Lichtblick, Rerun) a bag also keeps ``/robot_description`` whenever
+a node publishes it (subscribed transient local, so a recorder started later still gets it)
+and, unless ``--no-tf`` or a node publishes ``/tf``, the link frames computed from each
+``/joint_states`` (:mod:`dualarm_control.ros.computed_tf`); ``metadata.yaml`` says so in its
+``custom_data``.
 """
 
 from __future__ import annotations
@@ -32,6 +38,15 @@ from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from dualarm_control.errors import DualArmError
+from dualarm_control.ros.computed_tf import (
+    DESCRIPTION_TOPIC,
+    JOINT_STATES_TOPIC,
+    NOTE,
+    NOTE_KEY,
+    TF_STATIC_TOPIC,
+    TF_TOPIC,
+    ComputedTf,
+)
 from dualarm_control.ros.graph import adapted_qos, fq_topic, message_class
 from dualarm_control.ros.node import tool_node
 
@@ -143,6 +158,10 @@ class BagWriter:
         self._writer.write(self._connections[topic], stamp_ns, data)
         self.counts[topic] += 1
 
+    def note(self, key: str, value: str) -> None:
+        """A ``custom_data`` entry of metadata.yaml."""
+        self._writer.set_custom_data(key, value)
+
     @property
     def total(self) -> int:
         return sum(self.counts.values())
@@ -176,8 +195,11 @@ class Recorder:
     """Subscribes topics as discovery finds them and writes every message to a :class:`BagWriter`."""
 
     def __init__(self, node: Any, bag: BagWriter, topics: Sequence[str], record_all: bool,
-                 after_data: Sequence[str] = ()) -> None:
+                 after_data: Sequence[str] = (), compute_tf: bool = True, log: TextIO = sys.stderr) -> None:
         self.node, self.bag = node, bag
+        self.log = log
+        self.tf = ComputedTf(self._write_computed, self._say) if compute_tf else None
+        """Writes /tf and /tf_static from /joint_states (None: ``--no-tf``)."""
         self.named = [fq_topic(t) for t in topics]
         self.later = [fq_topic(t) for t in after_data]
         """Named topics subscribed only once every other named topic has delivered a message."""
@@ -187,19 +209,52 @@ class Recorder:
         self.record_all = record_all
         self.subscriptions: dict[str, Any] = {}
 
+    def _say(self, text: str) -> None:
+        print(text, file=self.log, flush=True)
+
+    def _write_computed(self, topic: str, type_name: str, qos: Qos, data: bytes, stamp_ns: int) -> None:
+        if topic not in self.bag.counts:
+            self.bag.add_connection(topic, type_name, "", [qos])
+            self.bag.note(NOTE_KEY, NOTE)
+        self.bag.write(topic, data, stamp_ns)
+
     def _callback(self, topic: str) -> Callable[[bytes], None]:
         clock = self.node.get_clock()
+        tf = self.tf
+
+        if tf is not None and topic == JOINT_STATES_TOPIC:
+            def on_joint_state(data: bytes) -> None:
+                now = clock.now().nanoseconds
+                self.bag.write(topic, data, now)
+                tf.on_joint_state(data, now)
+
+            return on_joint_state
+        if tf is not None and topic == DESCRIPTION_TOPIC:
+            def on_description(data: bytes) -> None:
+                self.bag.write(topic, data, clock.now().nanoseconds)
+                tf.on_description(data)
+
+            return on_description
 
         def on_message(data: bytes) -> None:
             self.bag.write(topic, data, clock.now().nanoseconds)
 
         return on_message
 
+    def _tf_poll(self, known: dict[str, list[str]]) -> None:
+        """/robot_description kept whenever published; /tf computed only while no node publishes it."""
+        if DESCRIPTION_TOPIC not in self.subscriptions and DESCRIPTION_TOPIC in known \
+                and self.node.count_publishers(DESCRIPTION_TOPIC):
+            self._subscribe(DESCRIPTION_TOPIC, known[DESCRIPTION_TOPIC][0])
+        if self.tf is not None and self.tf.enabled and self.node.count_publishers(TF_TOPIC):
+            self.tf.disable("a node publishes it")
+
     def poll(self) -> None:
         """Subscribe the wanted topics that have a publisher now (named ones all at once; the
         ``after_data`` ones once each of the others has delivered a message: a node waiting for a
         reader on such a topic then starts with the others already flowing into the bag)."""
         known = dict(self.node.get_topic_names_and_types())
+        self._tf_poll(known)
         first = [t for t in self.named if t not in self.later]
         self._subscribe_all(known, first)
         if all(self.bag.counts.get(t, 0) for t in first):
@@ -207,6 +262,7 @@ class Recorder:
         if self.record_all:
             for topic, types in known.items():
                 if (topic not in self.subscriptions and topic not in EXCLUDED_BY_ALL
+                        and not (self.tf is not None and self.tf.enabled and topic in (TF_TOPIC, TF_STATIC_TOPIC))
                         and self.node.count_publishers(topic) and not topic.startswith("/_")):
                     self._subscribe(topic, types[0])
 
@@ -248,25 +304,28 @@ def drain(executor: Any, bag: BagWriter) -> None:
 
 
 def record(path: Path, topics: Sequence[str], *, record_all: bool = False, duration: float | None = None,
-           use_sim_time: bool = False, after_data: Sequence[str] = (), log: TextIO = sys.stderr) -> int:
+           use_sim_time: bool = False, after_data: Sequence[str] = (), compute_tf: bool = True,
+           log: TextIO = sys.stderr) -> int:
     """Record into the bag directory ``path`` until SIGINT/SIGTERM or ``duration`` [s]; return 0.
 
     ``topics`` are recorded as soon as all of them have a publisher; ``record_all`` adds every
     topic discovery finds (but /rosout and /parameter_events); ``after_data`` topics (among
     ``topics``) are subscribed once every other named topic has delivered a message. Prints :data:`READY_LINE` on
-    stdout once the named topics are subscribed, progress on stderr.
+    stdout once the named topics are subscribed, progress on stderr. ``compute_tf``: write /tf and
+    /tf_static computed from /joint_states where no node publishes /tf (module docstring).
     """
     if not topics and not record_all:
         raise BagError("name the topics to record, or use -a/--all")
     from rclpy.parameter import Parameter
 
     bag = BagWriter(path)
+    recorder: Recorder | None = None
     stopped_by = ""
     try:
         with tool_node("_dualarm_bag_recorder") as (node, executor, stop):
             if use_sim_time:
                 node.set_parameters([Parameter("use_sim_time", value=True)])
-            recorder = Recorder(node, bag, topics, record_all, after_data)
+            recorder = Recorder(node, bag, topics, record_all, after_data, compute_tf, log)
             print(f"recording to {path} ({', '.join(recorder.named) or 'all topics'})", file=log, flush=True)
             start = time.monotonic()
             next_poll = next_progress = start
@@ -287,6 +346,11 @@ def record(path: Path, topics: Sequence[str], *, record_all: bool = False, durat
             if stop.signal is not None:
                 stopped_by = f" (signal {signal.Signals(stop.signal).name})"
                 drain(executor, bag)
+        if recorder is not None and recorder.tf is not None and recorder.tf.enabled:
+            start = time.monotonic()
+            count = recorder.tf.finish()
+            print(f"{TF_TOPIC}: {count} messages computed from {JOINT_STATES_TOPIC} in "
+                  f"{time.monotonic() - start:.2f} s", file=log, flush=True)
     finally:
         bag.close()
     print(f"bag closed{stopped_by}: {path}, {bag.total} messages", file=log, flush=True)

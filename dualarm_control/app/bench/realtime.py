@@ -6,11 +6,18 @@ of the run (not a window): the controller publishes, per cycle, the joint-state 
 time and the state-to-command latency (state stamp to command publication, wall clock,
 transport included), and its cumulative missed-deadline count. Percentiles only: the machine
 is shared and noisy.
+
+With ``--with-view`` each (solver, rate) runs twice in a row, without and then with ``dualarm view
+--save`` (the Rerun live view, its own process) subscribed to the running cell: what the view costs
+the control loop.
 """
 
 from __future__ import annotations
 
 import json
+import signal
+import subprocess
+import sys
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
@@ -67,34 +74,68 @@ def summarize_cycles(cycles: dict[str, np.ndarray], period: float) -> dict[str, 
     }
 
 
+VIEW_STOP_TIMEOUT_S = 60.0
+"""How long the live view gets to flush and close its recording after SIGTERM [s]."""
+
+
+def start_live_view(rrd: Path) -> subprocess.Popen[bytes]:
+    """``dualarm view --save rrd`` on the running cell, in its own process (stop with :func:`stop_live_view`)."""
+    return subprocess.Popen([sys.executable, "-m", "dualarm_control.app.cli", "view", "--save", str(rrd)],
+                            stdout=subprocess.DEVNULL)
+
+
+def stop_live_view(view: subprocess.Popen[bytes]) -> int:
+    """SIGTERM (the view ends as on Ctrl-C, closing its recording); its exit code (killed after a timeout)."""
+    view.send_signal(signal.SIGTERM)
+    try:
+        return view.wait(VIEW_STOP_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        view.kill()
+        return view.wait()
+
+
 def run_realtime(scenario: str, solvers: Sequence[str], rates: Sequence[float],
-                 timeout: float = 300.0, params: Sequence[str] = ()) -> list[dict[str, Any]]:
-    """One real-time launch per (solver, rate), ``params`` files passed to every node; the rows of the table."""
+                 timeout: float = 300.0, params: Sequence[str] = (), with_view: bool = False) -> list[dict[str, Any]]:
+    """One real-time launch per (solver, rate), ``params`` files passed to every node; the rows of the table.
+    ``with_view``: each launch twice in a row, without and with the live Rerun view beside it (row key "view")."""
     from dualarm_control.app.run.launcher import launch_scenario
 
     rows = []
     for solver in solvers:
         for rate in rates:
-            with tempfile.TemporaryDirectory() as tmp:
-                bag = Path(tmp) / "diagnostics"
-                print(f"=== {solver} at {rate:g} Hz, real time", flush=True)
-                code = launch_scenario(scenario, list(params), ["-p", f"solver:={solver}"], False, bag, timeout,
-                                       rate_hz=rate, record_topics=("/diagnostics",))
-                row = {"solver": solver, "rate_hz": rate, "exit": code,
-                       **summarize_cycles(controller_cycles(bag), 1.0 / rate)}
-            rows.append(row)
+            for view_on in ((False, True) if with_view else (False,)):
+                with tempfile.TemporaryDirectory() as tmp:
+                    bag = Path(tmp) / "diagnostics"
+                    label = " with dualarm view --save" if view_on else ""
+                    print(f"=== {solver} at {rate:g} Hz, real time{label}", flush=True)
+                    view = start_live_view(Path(tmp) / "view.rrd") if view_on else None
+                    try:
+                        code = launch_scenario(scenario, list(params), ["-p", f"solver:={solver}"], False, bag,
+                                               timeout, rate_hz=rate, record_topics=("/diagnostics",))
+                    finally:
+                        view_exit = stop_live_view(view) if view is not None else None
+                    row = {"solver": solver, "rate_hz": rate, "exit": code,
+                           **summarize_cycles(controller_cycles(bag), 1.0 / rate)}
+                    if with_view:
+                        rrd = Path(tmp) / "view.rrd"
+                        row.update(view="rerun" if view_on else "none", view_exit=view_exit,
+                                   view_rrd_bytes=rrd.stat().st_size if view_on and rrd.exists() else None)
+                rows.append(row)
     return rows
 
 
 def format_realtime(rows: Sequence[dict[str, Any]]) -> str:
-    """Markdown table of :func:`run_realtime` rows."""
-    lines = [("| solver | rate [Hz] | cycles | missed deadlines | jitter p50 / p99 [ms] | "
-             "state-to-command latency p50 / p99 [ms] | solver failures |"), "|" + "---|" * 7]
+    """Markdown table of :func:`run_realtime` rows (a "view" column when they were run ``with_view``)."""
+    view = any("view" in r for r in rows)
+    lines = [("| solver | rate [Hz] | " + ("view | " if view else "") + "cycles | missed deadlines | "
+              "jitter p50 / p99 [ms] | state-to-command latency p50 / p99 [ms] | solver failures |"),
+             "|" + "---|" * (8 if view else 7)]
     for r in rows:
+        head = f"| {r['solver']} | {r['rate_hz']:g} | " + (f"{r.get('view', '')} | " if view else "")
         if not r.get("cycles"):
-            lines.append(f"| {r['solver']} | {r['rate_hz']:g} | 0 (exit {r['exit']}) | | | | |")
+            lines.append(f"{head}0 (exit {r['exit']}) | | | | |")
             continue
-        lines.append(f"| {r['solver']} | {r['rate_hz']:g} | {r['cycles']} | {r['missed_deadlines']} "
+        lines.append(f"{head}{r['cycles']} | {r['missed_deadlines']} "
                      f"({r['missed_share']:.2%}) | {r['jitter_p50_ms']:.3f} / {r['jitter_p99_ms']:.3f} | "
                      f"{r['latency_p50_ms']:.3f} / {r['latency_p99_ms']:.3f} | {r['solver_failures']} |")
     return "\n".join(lines)

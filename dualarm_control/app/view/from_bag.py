@@ -1,0 +1,111 @@
+"""Adapter: a recorded run (today's bag readers) -> the arrays :func:`.rerun_view.log_run` takes.
+
+Kept apart and small on purpose: when the per-cycle run record exists, this is the only
+file to re-point. A relative-pose bag (``app.record.bag.read_run``) is cut into controller cycles,
+one per controller status on ``/diagnostics``; each cycle takes the joint state, command and
+target received nearest to its status. A task-scenario bag (``app.record.bag.read_task_run``)
+is already per cycle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from dualarm_control.app.view import rerun_view as rv
+from dualarm_control.kinematics import DualArmModel, FloatArray
+
+if TYPE_CHECKING:
+    from dualarm_control.app.run.experiment import RunRecord
+
+
+@dataclass
+class RunArrays:
+    """The arguments of :func:`.rerun_view.log_run` for one run (N cycles)."""
+
+    urdf: Path
+    stamps: FloatArray
+    q: FloatArray
+    joint_names: list[str]
+    series: dict[str, FloatArray]
+    frames: dict[str, FloatArray] = field(default_factory=dict)
+    statuses: list[str] | None = None
+
+    def log(self, recording: object = None) -> None:
+        rv.log_run(self.urdf, self.stamps, self.q, self.joint_names, self.series, frames=self.frames,
+                   statuses=self.statuses, recording=recording)
+
+
+def _nearest(t: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """For each time in ``ref``, the index of the nearest time in the sorted, non-empty ``t``."""
+    right = np.clip(np.searchsorted(t, ref), 0, len(t) - 1)
+    left = np.clip(right - 1, 0, len(t) - 1)
+    return np.where(np.abs(ref - t[left]) <= np.abs(t[right] - ref), left, right)
+
+
+def _seconds(ns: np.ndarray) -> FloatArray:
+    return (ns - ns[0]).astype(float) * 1e-9
+
+
+def relative_run_arrays(path: Path, model: DualArmModel) -> RunArrays:
+    """A relative-pose run's bag, per controller cycle (time: the cycles' joint-state stamps)."""
+    from dualarm_control.app.record.bag import read_run
+
+    run = read_run(Path(path), model.joint_names)
+    diag = run.diagnostics
+    stamps = diag.stamp_ns
+    by_stamp = all(s is not None for s in stamps) and bool(np.all(np.diff(np.array(stamps, dtype=float)) >= 0))
+    t = _seconds(np.array(stamps, dtype=np.int64) if by_stamp else diag.t)
+    commands = run.commands.values[_nearest(run.commands.t, diag.t)]
+    series = {
+        **rv.velocity_norm_series(commands),
+        rv.TRACKING_POSITION: np.array(diag.position_error, dtype=float),
+        rv.TRACKING_ORIENTATION: np.array(diag.orientation_error, dtype=float),
+        rv.CYCLE_TIME: np.array(diag.cycle_time, dtype=float),
+    }
+    return RunArrays(model.urdf, t, run.positions.values[_nearest(run.positions.t, diag.t)], list(model.joint_names),
+                     series, {"relative_target": run.targets.values[_nearest(run.targets.t, diag.t)]},
+                     list(diag.status))
+
+
+def record_arrays(record: RunRecord, model: DualArmModel,
+                  frames: dict[str, FloatArray] | None = None) -> RunArrays:
+    """Any run's :class:`RunRecord` (in-process or from a bag): the norms of the commands, tracking
+    errors, solve and cycle time, and where there are tasks the task values f_i with their bounds
+    b_i and the contact force [N]. Series that are all NaN (not produced by the source) are left out."""
+    n = len(record.time)
+    series: dict[str, FloatArray] = {
+        **rv.velocity_norm_series(record.commands), rv.TRACKING_POSITION: record.position_error,
+        rv.TRACKING_ORIENTATION: record.orientation_error, rv.SOLVE_TIME: record.solve_time,
+        rv.CYCLE_TIME: record.cycle_time}
+    if record.tasks is not None:
+        series["force/contact_force_n"] = record.contact_force
+        series["force/measured_force_n"] = record.measured_force
+        for name, values in record.tasks.values.items():
+            values = values.reshape(n, -1)
+            bounds = np.broadcast_to(np.asarray(record.tasks.bounds[name], dtype=float).reshape(-1), (values.shape[1],))
+            for j in range(values.shape[1]):
+                suffix = f"_{j}" if values.shape[1] > 1 else ""
+                series[f"task/{name}{suffix}"] = values[:, j]
+                series[f"task/{name}{suffix}_bound"] = np.full(n, bounds[j])
+    series = {k: np.asarray(v, dtype=float) for k, v in series.items() if not np.all(np.isnan(np.asarray(v, dtype=float)))}
+    return RunArrays(model.urdf, record.time - record.time[0], record.positions, list(model.joint_names), series,
+                     frames or {}, list(record.status))
+
+
+def task_run_arrays(path: Path) -> RunArrays:
+    """A task-scenario run's bag, through the same :class:`RunRecord` the report reads."""
+    from dualarm_control.app.record.bag import read_task_run
+
+    record, scenario = read_task_run(Path(path))
+    return record_arrays(record, DualArmModel(scenario.urdf_path))
+
+
+def bag_run_arrays(path: Path) -> RunArrays:
+    """Either kind of bag the cell records (task scenario or relative pose)."""
+    from dualarm_control.app.record.bag import holds_task_cycles
+
+    return task_run_arrays(path) if holds_task_cycles(Path(path)) else relative_run_arrays(path, DualArmModel())

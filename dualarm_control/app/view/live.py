@@ -1,0 +1,164 @@
+"""``dualarm view`` on the running cell: subscribe, buffer, log to Rerun in batches.
+
+Runs in its own process (never in a control node). Subscriptions are best effort (they match
+reliable and best-effort publishers; a viewer may drop a sample rather than slow anyone
+down) and read the CDR bytes with the nodes' own readers (:mod:`dualarm_control.ros.convert`);
+``/diagnostics`` is deserialized by rclpy. Every ``FLUSH_PERIOD_S`` the buffered samples go
+to Rerun through the parts of :func:`.rerun_view.log_run` (one ``send_columns`` per joint and
+series: at 200 Hz one ``rr.log`` per joint and sample would not keep up). Time is the
+joint-state stamp [s] since the first one seen; a command takes the stamp of the last joint
+state (the one it answers), a controller status its ``stamp_ns``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dualarm_control.app.record.bag import CONTROLLER_STATUS
+from dualarm_control.app.view import rerun_view as rv
+from dualarm_control.kinematics import DualArmModel
+
+FLUSH_PERIOD_S = 0.1
+QUEUE_DEPTH = 1000
+"""Samples kept per subscription while the view is busy logging (5 s of one topic at 200 Hz)."""
+TOPICS = ("/joint_states", "/velocity_controller/commands", "/relative_target", "/diagnostics")
+
+
+def _float(text: str | None) -> float:
+    try:
+        return float(text) if text is not None else float("nan")
+    except ValueError:
+        return float("nan")
+
+
+class LiveLog:
+    """Buffers decoded samples of the cell's topics and logs them in batches to a recording."""
+
+    def __init__(self, model: DualArmModel, recording: Any = None) -> None:
+        self.model = model
+        self.recording = recording
+        self.t0: int | None = None
+        self.last_state_ns: int | None = None
+        self.states: list[tuple[float, np.ndarray]] = []
+        self.commands: list[tuple[float, np.ndarray]] = []
+        self.targets: list[tuple[float, np.ndarray]] = []
+        self.cycles: list[tuple[float, dict[str, str]]] = []
+        self.status: str | None = None
+        self.counts = dict.fromkeys(TOPICS, 0)
+        self.rejected = 0
+
+    def seconds(self, ns: int) -> float:
+        if self.t0 is None:
+            self.t0 = ns
+        return (ns - self.t0) * 1e-9
+
+    def joint_state(self, value: tuple[int, tuple[np.ndarray, np.ndarray] | str]) -> None:
+        stamp, vectors = value
+        if isinstance(vectors, str):
+            self.rejected += 1
+            return
+        self.counts["/joint_states"] += 1
+        self.last_state_ns = stamp
+        self.states.append((self.seconds(stamp), vectors[0]))
+
+    def command(self, value: np.ndarray | str) -> None:
+        if isinstance(value, str) or self.last_state_ns is None:
+            self.rejected += isinstance(value, str)
+            return
+        self.counts["/velocity_controller/commands"] += 1
+        self.commands.append((self.seconds(self.last_state_ns), value))
+
+    def target(self, value: tuple[int, Any]) -> None:
+        from dualarm_control.ros.convert import quaternion_xyzw
+
+        stamp, target = value
+        if isinstance(target, str):
+            self.rejected += 1
+            return
+        self.counts["/relative_target"] += 1
+        self.targets.append((self.seconds(stamp), np.array([*target.position, *quaternion_xyzw(target.rotation)])))
+
+    def diagnostics(self, msg: Any) -> None:
+        for status in msg.status:
+            if status.name != CONTROLLER_STATUS:
+                continue
+            values = {kv.key: kv.value for kv in status.values}
+            if "stamp_ns" not in values or "status" not in values:
+                continue  # the final "complete" status has no cycle
+            self.counts["/diagnostics"] += 1
+            self.cycles.append((self.seconds(int(values["stamp_ns"])), values))
+
+    def flush(self) -> None:
+        """Log what arrived since the last flush."""
+        rec = self.recording
+        if self.states:
+            t, q = zip(*self.states, strict=True)
+            rv.log_joints(self.model.urdf, np.array(t), np.array(q), self.model.joint_names, rec)
+        if self.commands:
+            t, qd = zip(*self.commands, strict=True)
+            rv.log_series(np.array(t), rv.velocity_norm_series(np.array(qd)), rec)
+        if self.targets:
+            t, poses = zip(*self.targets, strict=True)
+            rv.log_frames(np.array(t), {"relative_target": np.array(poses)}, recording=rec)
+        if self.cycles:
+            t, values = zip(*self.cycles, strict=True)
+            stamps = np.array(t)
+            rv.log_series(stamps, {
+                rv.TRACKING_POSITION: np.array([_float(v.get("position_error_m")) for v in values]),
+                rv.TRACKING_ORIENTATION: np.array([_float(v.get("orientation_error_rad")) for v in values]),
+                rv.SOLVE_TIME: np.array([_float(v.get("solve_time_s")) for v in values]),
+                rv.CYCLE_TIME: np.array([_float(v.get("cycle_time_s")) for v in values]),
+            }, rec)
+            self.status = rv.log_statuses(stamps, [v["status"] for v in values], self.status, rec)
+        self.states, self.commands, self.targets, self.cycles = [], [], [], []
+
+
+def live_groups() -> list[str]:
+    """The plot groups of the live view."""
+    return rv.series_groups([rv.VELOCITY_L0, rv.TRACKING_POSITION, rv.SOLVE_TIME])
+
+
+def run_live(model: DualArmModel, recording: Any, duration: float | None = None,
+             report: Callable[[str], None] = print) -> int:
+    """Subscribe to the cell and log until Ctrl-C/SIGTERM (or ``duration`` [s]); returns 0."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+    from trajectory_msgs.msg import MultiDOFJointTrajectory
+
+    from dualarm_control.ros import convert
+    from dualarm_control.ros.inputs import subscribe_checked
+    from dualarm_control.ros.node import tool_node
+
+    log = LiveLog(model, recording)
+    rv.log_model(Path(model.urdf), recording)
+    order = {name: i for i, name in enumerate(model.joint_names)}
+    qos = QoSProfile(depth=QUEUE_DEPTH, reliability=ReliabilityPolicy.BEST_EFFORT)
+    with tool_node("dualarm_view") as (node, executor, stop):
+        def malformed(text: str) -> None:
+            log.rejected += 1
+
+        subscribe_checked(node, JointState, "/joint_states", log.joint_state, qos, malformed,
+                          convert.JointStateInput(order))
+        subscribe_checked(node, Float64MultiArray, "/velocity_controller/commands", log.command, qos, malformed,
+                          convert.CommandInput(model.nq))
+        subscribe_checked(node, MultiDOFJointTrajectory, "/relative_target", log.target, qos, malformed,
+                          convert.TargetInput())
+        subscribe_checked(node, DiagnosticArray, "/diagnostics", log.diagnostics, qos, malformed)
+        report(f"dualarm view: logging {', '.join(TOPICS)} (Ctrl-C to stop)")
+        start = last = time.monotonic()
+        while stop.signal is None and (duration is None or time.monotonic() - start < duration):
+            executor.spin_once(timeout_sec=FLUSH_PERIOD_S / 2)
+            if time.monotonic() - last >= FLUSH_PERIOD_S:
+                log.flush()
+                last = time.monotonic()
+        log.flush()
+    counts = ", ".join(f"{topic} {n}" for topic, n in log.counts.items())
+    report(f"dualarm view: logged {counts}; {log.rejected} samples rejected")
+    return 0
