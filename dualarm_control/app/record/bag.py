@@ -170,14 +170,14 @@ class TimedSeries:
     values: FloatArray
 
 
-def _float(text: str | None, default: float = float("nan")) -> float:
+def parse_float(text: str | None, default: float = float("nan")) -> float:
     try:
         return float(text) if text is not None else default
     except ValueError:
         return default
 
 
-def _int_or_none(text: str | None) -> int | None:
+def parse_int(text: str | None) -> int | None:
     try:
         return int(text) if text is not None else None
     except ValueError:
@@ -248,6 +248,26 @@ class Bag:
         """The controller's task cycles (none in a bag with relative targets)."""
         return [] if self.rows[TARGET_TOPIC] else [(t, v) for t, v in self.cycles if TASK_KEY in v]
 
+    def require_report_topics(self, path: Path) -> None:
+        """BagError naming the topics a relative-motion report needs and the bag lacks."""
+        if self.missing:
+            raise BagError(f"bag {path} lacks {', '.join(self.missing)} (the report needs {', '.join(REPORT_TOPICS)})")
+
+    def joint_states(self, joint_names: Sequence[str]) -> tuple[TimedSeries, FloatArray]:
+        """/joint_states in the order of ``joint_names``: positions by receive time, and the
+        velocities (as many rows as states carry them)."""
+        order: dict[tuple[str, ...], list[int]] = {}
+        q_rows, qd_rows = [], []
+        for _, _, names, msg in self.states:
+            idx = _joint_order(names, joint_names, order)
+            q_rows.append(np.asarray(msg.position, dtype=float)[idx])
+            if len(msg.velocity) == len(names):
+                qd_rows.append(np.asarray(msg.velocity, dtype=float)[idx])
+        n = len(joint_names)
+        return (TimedSeries(np.array([s[0] for s in self.states], dtype=np.int64),
+                            np.array(q_rows, dtype=float).reshape(len(q_rows), n)),
+                np.array(qd_rows, dtype=float).reshape(len(qd_rows), n))
+
     def series(self, topic: str, width: int) -> TimedSeries:
         rows = self.rows[topic]
         t = np.array([r[0] for r in rows], dtype=np.int64)
@@ -274,15 +294,14 @@ def missing_topics(reader: AnyReader, needed: Iterable[str] = REPORT_TOPICS) -> 
     return [t for t in needed if t not in topics or topics[t].msgcount == 0]
 
 
-def read_run(path: Path) -> tuple[list[RunRecord], Scenario | None]:
-    """The run records of a bag and, for a task run, its scenario: one record per solver of a
-    relative-motion run (:func:`_relative_records`), the one record of a task run
-    (:func:`_task_record`); BagError naming what the bag lacks."""
-    bag = read_bag(Path(path))
+def read_run(path: Path, bag: Bag | None = None) -> tuple[list[RunRecord], Scenario | None]:
+    """The run records of a bag (``bag``: its messages if already read) and, for a task run, its
+    scenario: one record per solver of a relative-motion run (:func:`_relative_records`), the one
+    record of a task run (:func:`_task_record`); BagError naming what the bag lacks."""
+    bag = bag or read_bag(Path(path))
     if bag.task_cycles:
         return _task_record(Path(path), bag)
-    if bag.missing:
-        raise BagError(f"bag {path} lacks {', '.join(bag.missing)} (the report needs {', '.join(REPORT_TOPICS)})")
+    bag.require_report_topics(path)
     return _relative_records(bag), None
 
 
@@ -312,16 +331,7 @@ def _relative_records(bag: Bag) -> list[RunRecord]:
         raise BagError(f"{COMMANDS_TOPIC} data must have {n} values (one per joint), got lengths {sorted(widths)}")
     if not bag.cycles:
         raise BagError(f"{DIAGNOSTICS_TOPIC} has no status named '{CONTROLLER_STATUS}'")
-    order: dict[tuple[str, ...], list[int]] = {}
-    q_rows, qd_rows = [], []
-    for _, _, names, msg in bag.states:
-        idx = _joint_order(names, joint_names, order)
-        q_rows.append(np.asarray(msg.position, dtype=float)[idx])
-        if len(msg.velocity) == len(names):
-            qd_rows.append(np.asarray(msg.velocity, dtype=float)[idx])
-    states = TimedSeries(np.array([s[0] for s in bag.states], dtype=np.int64),
-                         np.array(q_rows, dtype=float).reshape(len(q_rows), n))
-    velocities = np.array(qd_rows, dtype=float).reshape(len(qd_rows), n)
+    states, velocities = bag.joint_states(joint_names)
     diag_t = np.array([t for t, _ in bag.cycles], dtype=np.int64)
     solvers = [v.get("solver", "unknown") for _, v in bag.cycles]
     series = {JOINT_STATES_TOPIC: states, COMMANDS_TOPIC: bag.series(COMMANDS_TOPIC, n),
@@ -337,7 +347,7 @@ def _relative_records(bag: Bag) -> list[RunRecord]:
         cycles = [v for (_, v), s in zip(bag.cycles, solvers, strict=True) if s == solver]
 
         def column(key: str, cycles: list[dict[str, str]] = cycles) -> FloatArray:
-            return np.array([_float(v.get(key)) for v in cycles])
+            return np.array([parse_float(v.get(key)) for v in cycles])
 
         periods = column("control_period_s")
         period = float(np.median(periods[np.isfinite(periods)])) if np.isfinite(periods).any() else DEFAULT_PERIOD_S
@@ -345,7 +355,7 @@ def _relative_records(bag: Bag) -> list[RunRecord]:
         k = commands.shape[0]
         out.append(RunRecord(
             label=solver, kind="segments", period=period,
-            time=_time_axis([_int_or_none(v.get("stamp_ns")) for v in cycles], k, period),
+            time=_time_axis([parse_int(v.get("stamp_ns")) for v in cycles], k, period),
             positions=q[:-1], velocities=velocities[mine[JOINT_STATES_TOPIC]] if by_state else np.zeros((0, n)),
             commands=commands, status=[v.get("status", "") for v in cycles], solve_time=nan_column(k),
             cycle_time=column("cycle_time_s"), position_error=column("position_error_m"),
