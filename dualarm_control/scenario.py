@@ -10,7 +10,8 @@ Keys under ``scenario.`` (flattened names):
   ``urdf/`` (default ``dualarm_cell.urdf``); and the keys of the reference source
   (:mod:`dualarm_control.references`): ``tasks`` (paper 001,
   :mod:`dualarm_control.references.tasks`) or else ``segments`` (paper 000,
-  :mod:`dualarm_control.references.segments`). A planned joint trajectory (paper 003) comes
+  :mod:`dualarm_control.references.segments`) or ``goals`` (issue 18: timed relative goals and
+  twists, :mod:`dualarm_control.references.goals`). A planned joint trajectory (paper 003) comes
   from a plan file (:class:`~dualarm_control.references.plan.PlanSource`).
 """
 
@@ -29,6 +30,7 @@ from dualarm_control.kinematics import FloatArray
 from dualarm_control.params import ParameterError, read_params_file
 from dualarm_control.paths import config_path, share_dir
 from dualarm_control.references.base import PREFIX, ReferenceSource, get, number, vector
+from dualarm_control.references.goals import GoalsSource, parse_goals_source
 from dualarm_control.references.segments import SegmentsSource, parse_segments
 from dualarm_control.references.tasks import TasksSource, parse_tasks
 from dualarm_control.trajectory import MotionLimits, RelativeTrajectory
@@ -68,6 +70,14 @@ class Scenario:
     def urdf_path(self) -> Path:
         """Path of the scenario's cell URDF."""
         return share_dir() / "urdf" / self.urdf
+
+    def end_pose(self, start: FloatArray, model: Any, period: float) -> tuple[FloatArray, FloatArray]:
+        """The relative pose (position [m] (3,), rotation (3, 3)) the reference ends at, from the
+        start configuration ``start`` (n,) [rad]: the last segment's end, the script's last goal
+        or jog at rest (ScenarioError for a source without an end pose: tasks)."""
+        if not isinstance(self.reference, SegmentsSource | GoalsSource):
+            raise ScenarioError(f"scenario {self.name!r} has no relative end pose ({self.reference.kind})")
+        return self.reference.end_pose(model, start, self.limits, period)
 
     def trajectory(self, start_position: FloatArray, start_rotation: FloatArray) -> RelativeTrajectory:
         """The ruckig relative trajectory from the measured start pose through the scenario's segments."""
@@ -128,7 +138,13 @@ def _motion_limits(flat: Mapping[str, Any]) -> MotionLimits:
 
 def scenario_from_parameters(flat: Mapping[str, Any], source: Path) -> Scenario:
     """Build a Scenario from flattened parameters (as read from the file or declared in a node)."""
-    reference = parse_tasks(flat) if PREFIX + "tasks" in flat else parse_segments(flat)
+    reference: ReferenceSource
+    if PREFIX + "tasks" in flat:
+        reference = parse_tasks(flat)
+    elif PREFIX + "goals" in flat:
+        reference = parse_goals_source(flat[PREFIX + "goals"])
+    else:
+        reference = parse_segments(flat)
     limits = _motion_limits(flat)
     settle = number(flat, "settle_time", 1.0)
     if settle < 0:

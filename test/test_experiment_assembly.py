@@ -16,10 +16,11 @@ from dualarm_control.app.record.report import METRIC_KEYS, TRACKING_KEYS
 
 SOLVERS = ("standard_qp", "sparse_qp", "hierarchical_sparse_qp")
 FINAL_ERRORS = {"standard_qp": (1.6e-5, 5.3e-5), "sparse_qp": (2.1e-5, 6.6e-5), "hierarchical_sparse_qp": (2.2e-5, 6.9e-5)}
-"""docs/experiment.md: final position [m] / orientation [rad] error per solver; asserted within 2 x."""
+"""docs/experiment.md: final position [m] / orientation [rad] error per solver before the cell held its integrated
+command (now 6e-12 to 1.6e-7 m); asserted within 2 x (the doc states this bound)."""
 PAPER_RATIOS = (0.357, 0.471)
 """Paper 000, Table I: l0(sparse) / l0(standard), l0(hierarchical) / l0(standard)."""
-RATIOS = {"l0_sparse": 0.281, "l0_hierarchical": 0.362, "l1_sparse": 0.661, "l2_sparse": 1.24}
+RATIOS = {"l0_sparse": 0.319, "l0_hierarchical": 0.431, "l1_sparse": 0.661, "l2_sparse": 1.22}
 """docs/experiment.md, "ours": Table I ratios to the standard QP; asserted within RATIO_BAR."""
 RATIO_BAR = 0.02
 """Allowed change of a documented ratio (absolute): the figures are deterministic (lockstep, seeded)
@@ -54,8 +55,8 @@ def test_task_is_tracked_within_limits(metrics: dict[str, dict[str, float]], sol
 
 
 def test_sparsity_at_least_as_strong_as_the_paper(metrics: dict[str, dict[str, float]]) -> None:
-    """Table I ratios at most the paper's (0.357, 0.471) and equal to the documented ones (RATIOS: 0.281,
-    0.362, l1 0.661, l2 1.24) within RATIO_BAR (0.02)."""
+    """Table I ratios at most the paper's (0.357, 0.471) and equal to the documented ones (RATIOS: 0.319,
+    0.431, l1 0.661, l2 1.22) within RATIO_BAR (0.02)."""
     std, sparse, hier = (metrics[s] for s in SOLVERS)
     ratios = {"l0_sparse": sparse["l0_mean"] / std["l0_mean"], "l0_hierarchical": hier["l0_mean"] / std["l0_mean"],
               "l1_sparse": sparse["l1_mean"] / std["l1_mean"], "l2_sparse": sparse["l2_mean"] / std["l2_mean"]}
@@ -93,11 +94,11 @@ def test_acceleration_bound_holds_with_tracking_and_limits_kept(
 
 
 def test_acceleration_bound_keeps_the_sparsity(bounded: dict[str, dict[str, float]]) -> None:
-    """Table I with the bound: l0 ratios 0.281 / 0.352 (docs/experiment.md) within RATIO_BAR, and at most
+    """Table I with the bound: l0 ratios 0.319 / 0.389 (docs/experiment.md) within RATIO_BAR, and at most
     the paper's."""
     std, sparse, hier = (bounded[s] for s in SOLVERS)
-    assert sparse["l0_mean"] / std["l0_mean"] == pytest.approx(0.281, abs=RATIO_BAR)
-    assert hier["l0_mean"] / std["l0_mean"] == pytest.approx(0.352, abs=RATIO_BAR)
+    assert sparse["l0_mean"] / std["l0_mean"] == pytest.approx(0.319, abs=RATIO_BAR)
+    assert hier["l0_mean"] / std["l0_mean"] == pytest.approx(0.389, abs=RATIO_BAR)
     assert sparse["l0_mean"] / std["l0_mean"] <= PAPER_RATIOS[0]
     assert hier["l0_mean"] / std["l0_mean"] <= PAPER_RATIOS[1]
 

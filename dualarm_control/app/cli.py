@@ -36,9 +36,18 @@ def check_params_files(paths: list[str]) -> None:
 
 def cmd_launch(args: argparse.Namespace) -> int:
     """Start the three nodes as processes on a scenario; optionally record a bag."""
-    from dualarm_control.app.run.launcher import launch_scenario
+    from dualarm_control.app.run.launcher import (
+        INTERACTIVE,
+        INTERACTIVE_CELL,
+        launch_scenario,
+    )
     from dualarm_control.scenario import load_scenario, scenario_file
 
+    interactive = args.scenario == INTERACTIVE
+    if interactive:  # the cell and limits of the interactive demo, driven live
+        args.scenario = INTERACTIVE_CELL
+        if args.lockstep or args.plan:
+            raise DualArmError("'dualarm launch interactive' runs in real time (no --lockstep, no --plan)")
     scenario_file(args.scenario)  # fail early (exit 2) on an unknown scenario
     check_params_files(args.params)
     extra = []
@@ -61,7 +70,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         if planned != args.scenario:
             raise DualArmError(f"--plan {plan} was planned on scenario {planned!r}, not {args.scenario!r}")
     return launch_scenario(args.scenario, args.params, extra, args.lockstep, record, args.timeout, args.rate,
-                           plan=plan, force=args.force)
+                           plan=plan, force=args.force, interactive=interactive)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -396,6 +405,9 @@ def _add_topic_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     inf.add_argument("topic")
     inf.add_argument("--spin-time", **spin)
     inf.set_defaults(func=cmd_topic_info)
+    from dualarm_control.ros.drive import add_topic_pub_parser
+
+    add_topic_pub_parser(verbs)
 
 
 def cmd_param(args: argparse.Namespace) -> int:
@@ -537,7 +549,8 @@ def build_parser() -> argparse.ArgumentParser:
                          description="Start sim_node, controller_node and trajectory_node as separate processes "
                          "over ROS (localhost discovery by default), prefix their output, and stop everything when the "
                          "scenario is complete or on Ctrl-C. Exit status is non-zero if a node failed.")
-    lau.add_argument("scenario", help="scenario name or YAML path")
+    lau.add_argument("scenario", help="scenario name or YAML path; 'interactive': the cell of interactive_demo "
+                     "driven live by /relative_goal and /relative_twist (dualarm goal, dualarm jog, any ROS 2 tool)")
     lau.add_argument("--params", action="append", default=[], metavar="FILE",
                      help="ROS-style parameter file passed to every node (repeatable)")
     lau.add_argument("--solver", help="shortcut for -p solver:=NAME on the controller")
@@ -587,6 +600,9 @@ def build_parser() -> argparse.ArgumentParser:
     from dualarm_control.app.view.command import add_view_parser
 
     add_view_parser(sub)
+    from dualarm_control.ros.drive import add_drive_parsers
+
+    add_drive_parsers(sub)
     return parser
 
 

@@ -337,7 +337,7 @@ class ControllerNode:
 
 def main(args: list[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
-    # Before any middleware thread exists, so they inherit the scheduling.
+    # Applied to every thread (the middleware's too) once the node is built (ros/node.py).
     why_not = shell.request_realtime_priority(shell.priority_from_args(argv, DEFAULT_PRIORITY, "controller_node"))
     help_text = shell.usage("controller_node", __doc__ or "", ALL_PARAMETERS)
     return shell.run(lambda context: ControllerNode(context, why_not), argv, help_text)

@@ -1,16 +1,26 @@
-"""trajectory_node: streams the ruckig relative targets of a scenario on ``/relative_target``.
+"""trajectory_node: streams the targets of the scenario's reference source (/relative_target, ...).
 
-The trajectory starts from the relative pose of the first ``/joint_states`` (forward
-kinematics). Real-time mode: one target per control period on a timer, timed from the first
-joint state on the node's clock (simulation time with ``use_sim_time``). Lockstep mode: one
-target per joint state, stamped with the joint state's stamp, so the controller can pair them. When the trajectory plus the
-scenario's settle time has elapsed the node logs completion, publishes a final
-``/diagnostics`` status "complete" and exits 0; with ``repeat:=true`` (soak runs) it starts the
-scenario again from the pose of the next joint state instead, forever. A malformed or unusable
-joint state (bad CDR, wrong or missing joint names, NaN; in lockstep a stamp older than the
-last one) is rejected with a throttled log line and not used. In real-time mode the node
-subscribes to ``/joint_states`` only until the trajectory starts (and again for the next run
-with ``repeat``): at 1 kHz a state it does not use costs a wake-up and a decode every period.
+What it publishes is the reference source's (:meth:`ReferenceSource.stream
+<dualarm_control.references.base.ReferenceSource>`): the relative targets of a segments or
+goals scenario on ``/relative_target``; with ``plan:=FILE`` a plan's joint reference on
+``/joint_reference`` and its relative pose on ``/relative_target``. The stream starts from the
+first ``/joint_states`` (measured start configuration). Real-time mode: one target per control
+period on a timer, timed from the first joint state on the node's clock (simulation time with
+``use_sim_time``). Lockstep mode: one target per joint state, stamped with the joint state's
+stamp, so the controller can pair them. When the stream's end (trajectory plus the scenario's
+settle time) has come the node logs completion, publishes a final ``/diagnostics`` status
+"complete" and exits 0; with ``repeat:=true`` (soak runs) it starts the scenario again from the
+pose of the next joint state instead, forever. A malformed or unusable joint state (bad CDR,
+wrong or missing joint names, NaN; in lockstep a stamp older than the last one) is rejected with
+a throttled log line and not used. In real-time mode the node subscribes to ``/joint_states``
+only until the stream starts (and again for the next run with ``repeat``): at 1 kHz a state it
+does not use costs a wake-up and a decode every period.
+
+``mode:=interactive`` (issue 18): the source is live goals and twists
+(:class:`~dualarm_control.references.goals.GoalsSource` without a script): the node holds the
+measured relative pose, follows ``/relative_goal`` and ``/relative_twist``, reports on
+``/diagnostics`` every cycle and never completes (:mod:`dualarm_control.nodes.interactive`);
+it keeps ``/joint_states`` to judge the arms' arrival and stalls.
 """
 
 from __future__ import annotations
@@ -26,6 +36,13 @@ from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import ParamSpec, positive
+from dualarm_control.references.base import (
+    JOINT_REFERENCE,
+    RELATIVE_TARGET,
+    RunOptions,
+    TargetStream,
+)
+from dualarm_control.references.goals import GoalsSource, GoalsStream
 from dualarm_control.references.plan import PlanSource
 from dualarm_control.ros import convert
 from dualarm_control.ros.inputs import StampGate, Throttle, subscribe_checked
@@ -39,11 +56,15 @@ from dualarm_control.ros.node import (
 )
 from dualarm_control.ros.qos import QOS_PARAMETER, publisher_depth, stream_qos
 from dualarm_control.scenario import load_scenario
-from dualarm_control.trajectory import RelativeTrajectory
+from dualarm_control.trajectory import MotionLimits
 
 DEFAULT_PRIORITY = 40
+SCENARIO, INTERACTIVE = "scenario", "interactive"
 PARAMETERS = (
     ParamSpec("scenario", "assembly", "scenario name (config/scenarios/<name>.yaml) or YAML path", read_only=True),
+    ParamSpec("mode", SCENARIO, "scenario: stream the scenario's reference; interactive: hold the measured pose "
+              "and follow /relative_goal and /relative_twist", choices=lambda: [SCENARIO, INTERACTIVE],
+              read_only=True),
     ParamSpec("control_period", 0.005, "target period in real-time mode [s]", check=positive, read_only=True),
     ParamSpec("lockstep", False, "publish one target per joint state, with its stamp", read_only=True),
     ParamSpec("plan", "", "plan.json of `dualarm plan`: stream its joint trajectory on /joint_reference "
@@ -56,39 +77,52 @@ PARAMETERS = (
 
 
 class TrajectoryNode:
-    """Node shell around :class:`RelativeTrajectory`."""
+    """Node shell around a reference source's :class:`~dualarm_control.references.base.TargetStream`."""
 
     def __init__(self, context: Any, priority_note: str = "disabled") -> None:
+        from dualarm_control.nodes.interactive import (
+            LIMIT_PREFIX,
+            InteractiveDrive,
+            limit_specs,
+        )
+
         self.node = Node("trajectory_node", context=context)
         p = declare(self.node, PARAMETERS)
         self.scenario = load_scenario(p["scenario"])
         self.lockstep = bool(p["lockstep"])
         self.repeat = bool(p["repeat"])
+        self.period = float(p["control_period"])
         self.repetitions = 0
-        self.model = DualArmModel()
-        self.plan = PlanSource.from_file(self.model, p["plan"]) if p["plan"] else None
-        self.order = {name: i for i, name in enumerate(self.model.joint_names)}
+        self.model = DualArmModel(self.scenario.urdf_path)
         n = self.node
-        qos = stream_qos(p["qos_reliability"])
-        depth = publisher_depth(self.lockstep)
-        self.pub = n.create_publisher(MultiDOFJointTrajectory, "/relative_target", stream_qos(p["qos_reliability"], depth))
+        self.log = n.get_logger()
+        self.qos = stream_qos(p["qos_reliability"])
+        self.drive: InteractiveDrive | None = None
+        self.source: Any = self.scenario.reference
+        if p["plan"]:
+            self.source = PlanSource.from_file(self.model, p["plan"])
+        if p["mode"] == INTERACTIVE:
+            self.source = GoalsSource(None)
+            limits = declare(n, limit_specs(self.scenario.limits))
+            self.drive = InteractiveDrive(n, self.model, MotionLimits(
+                **{k[len(LIMIT_PREFIX):]: v for k, v in limits.items()}), self.qos)
+        self.order = {name: i for i, name in enumerate(self.model.joint_names)}
+        depth = stream_qos(p["qos_reliability"], publisher_depth(self.lockstep))
+        self.pub = n.create_publisher(MultiDOFJointTrajectory, RELATIVE_TARGET, depth)
+        self.pub_joint = (n.create_publisher(JointTrajectory, JOINT_REFERENCE, depth)
+                          if JOINT_REFERENCE in self.source.streams else None)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.pub_joint = n.create_publisher(JointTrajectory, "/joint_reference", stream_qos(p["qos_reliability"], depth))
-        self.qos = qos
         self.states: Any = None  # the /joint_states subscription while one is needed
         self.subscribe_states()
-        self.log = n.get_logger()
         self.throttle = Throttle(1.0)
         self.gate = StampGate("joint_states")
-        self.trajectory: RelativeTrajectory | None = None
+        self.stream: TargetStream | None = None
         self.start_ns = 0
-        self.segment = -1
-        self.end_s = 0.0
+        self.stage = ""
         self.finished = False
         if not self.lockstep:
-            n.create_timer(p["control_period"], self.on_tick)
-        what = (self.plan or self.scenario.reference).describe()
-        self.log.info(f"scenario '{self.scenario.name}': {what}, "
+            n.create_timer(self.period, self.on_tick)
+        self.log.info(f"scenario '{self.scenario.name}': {self.source.describe()}, "
                       f"{'lockstep' if self.lockstep else 'real-time'}; waiting for /joint_states")
         if priority_note and priority_note != "disabled":
             self.log.warning(priority_note)
@@ -109,13 +143,16 @@ class TrajectoryNode:
             self.reject(verdict.message)
         if not verdict.accepted:
             return
-        if self.trajectory is None:
-            self.trajectory = self.scenario.trajectory(*self.model.relative_pose(decoded[0]))
+        if self.drive is not None:
+            self.drive.q = decoded[0]
+        if self.stream is None:
+            options = RunOptions(self.scenario.limits, self.scenario.settle_time)
+            self.stream = self.source.stream(self.model, decoded[0], options, self.period)
             self.start_ns = stamp if self.lockstep else self.node.get_clock().now().nanoseconds
-            duration, settle = ((self.plan.duration, self.plan.settle_time) if self.plan
-                                else (self.trajectory.duration, self.scenario.settle_time))
-            self.end_s = duration + settle
-            self.log.info(f"trajectory: {duration:.2f} s + settle {settle:.2f} s")
+            if self.drive is not None and isinstance(self.stream, GoalsStream):
+                self.drive.start(self.stream.generator)
+            if self.drive is None:
+                self.log.info(f"targets: {self.stream.end:.2f} s (with settle {self.scenario.settle_time:.2f} s)")
         if self.lockstep:
             self.publish(stamp, stamp - self.start_ns)
 
@@ -126,50 +163,60 @@ class TrajectoryNode:
             self.log.warning(line)
 
     def on_tick(self) -> None:
-        if self.trajectory is not None:
-            if self.states is not None:  # started: the timer drives the stream (not destroyed in its own callback)
-                self.node.destroy_subscription(self.states)
+        if self.stream is not None:
+            if self.states is not None and self.drive is None:  # started: the timer drives the stream
+                self.node.destroy_subscription(self.states)  # (not destroyed in its own callback)
                 self.states = None
             now = self.node.get_clock().now().nanoseconds
             self.publish(now, now - self.start_ns)
 
     def publish(self, stamp: int, elapsed_ns: int) -> None:
-        assert self.trajectory is not None
+        assert self.stream is not None
         t = elapsed_ns / 1e9
-        if t >= self.end_s:  # no target at or after the end: as many cycles as the in-process run
+        if t >= self.stream.end:  # no target at or after the end: as many cycles as the in-process run
             self.log.info(f"scenario '{self.scenario.name}' complete at t={t:.2f} s")
             self._status(stamp, 0, "complete", t)
             self.repetitions += 1
             if self.repeat:  # the next joint state plans the next run from where the arms are
-                self.trajectory, self.segment = None, -1
+                self.stream, self.stage = None, ""
                 if self.states is None:
                     self.subscribe_states()
             else:
                 self.finished = True  # run() stops spinning after this callback
             return
-        if self.plan is not None:
-            ref = self.plan.sample(t)
+        try:
+            sample = self.stream.sample(t)
+        except Exception as exc:  # a live command drove ruckig into a failure: hold, do not stop the cell
+            if self.drive is None:
+                raise
+            self.drive.recover(exc)
+            sample = self.stream.sample(t)
+        self.pub.publish(convert.target_message(stamp, elapsed_ns, sample.relative))
+        if self.pub_joint is not None and sample.joints is not None:
             self.pub_joint.publish(convert.joint_reference_message(stamp, elapsed_ns, self.model.joint_names,
-                                                                   ref.joint_positions, ref.joint_velocities))
-            self.pub.publish(convert.target_message(stamp, elapsed_ns, ref))
-            return
-        sample = self.trajectory.sample(t)
-        self.pub.publish(convert.target_message(stamp, elapsed_ns, sample))
-        if sample.segment != self.segment and not sample.done:
-            self.segment = sample.segment
-            self.log.info(f"t={t:.2f} s: segment {sample.segment + 1}/{len(self.trajectory.segments)} "
-                          f"'{sample.segment_name}'")
-            self._status(stamp, 0, f"segment {sample.segment_name}", t)
+                                                                   *sample.joints))
+        if self.drive is not None:
+            status = self.drive.cycle(stamp)
+            if status is not None:
+                self.pub_diag.publish(status)
+        elif sample.stage != self.stage:
+            self.stage = sample.stage
+            self.log.info(f"t={t:.2f} s: {sample.stage}")
+            self._status(stamp, 0, sample.stage, t)
 
     def _status(self, stamp: int, level: int, message: str, t: float) -> None:
-        values = {"scenario": self.scenario.name, "time_s": f"{t:.3f}", "duration_s": f"{self.end_s:.3f}",
+        values = {"scenario": self.scenario.name, "time_s": f"{t:.3f}", "duration_s": f"{self.stream_end:.3f}",
                   "repetitions": self.repetitions}
         self.pub_diag.publish(convert.diagnostics(stamp, "trajectory_node", level, message, values))
+
+    @property
+    def stream_end(self) -> float:
+        return self.stream.end if self.stream is not None else 0.0
 
 
 def main(args: list[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
-    # Before any middleware thread exists, so they inherit the scheduling: a starved target stream
+    # Applied to every thread (the middleware's too) once the node is built: a starved target stream
     # stops the controller (target_timeout), as `dualarm soak` showed on a loaded machine.
     why_not = request_realtime_priority(priority_from_args(argv, DEFAULT_PRIORITY, "trajectory_node"))
     return run(lambda context: TrajectoryNode(context, why_not), argv,

@@ -19,10 +19,11 @@ the measured start configuration, giving one :class:`~dualarm_control.controller
 in-process runner (:mod:`dualarm_control.app.run.experiment`) is one loop over a follower,
 whatever the kind.
 
-A fourth source, e.g. timed relative goals and twists replanned online by ruckig (issue 18),
-is one more class with these members (``kind``, ``streams``, ``describe``, ``cell``,
-``follower``) and a follower whose ``cycle`` samples its generator at t and calls
-:meth:`~dualarm_control.controller.RelativeController.step`; the consumers (runner, nodes,
+* ``goals`` (issue 18, :class:`~dualarm_control.references.goals.GoalsSource`): timed relative
+  goals and twists (or live ones), replanned online by ruckig, streamed on /relative_target.
+
+Over ROS the trajectory node publishes a source's :class:`TargetStream` (``stream``): what it
+publishes at each cycle is the source's :class:`StreamSample`; the consumers (runner, nodes,
 report) read only these members.
 """
 
@@ -87,6 +88,35 @@ class Follower(Protocol):
         ...
 
 
+@dataclass(frozen=True)
+class StreamSample:
+    """What the trajectory node publishes at one cycle (the source decides).
+
+    Attributes:
+        relative: the relative target (pose, twist, acceleration of F2 in F1: ``position``,
+            ``rotation``, ``linear_velocity``, ``angular_velocity``, ``linear_acceleration``,
+            ``angular_acceleration``) for /relative_target.
+        joints: ``(q_ref, qd_ref)`` (n,) each [rad, rad/s] for /joint_reference, or None.
+        stage: the stage's name (a segment's, "execute", "goal", "jog", "hold"): logged when it changes.
+    """
+
+    relative: Any
+    joints: tuple[FloatArray, FloatArray] | None
+    stage: str
+
+
+class TargetStream(Protocol):
+    """The targets of one run of a streaming source, sampled at non-decreasing times t [s].
+
+    Attributes:
+        end: time [s] of the first cycle with no target (trajectory + settle; inf: no end).
+    """
+
+    end: float
+
+    def sample(self, t: float) -> StreamSample: ...
+
+
 class ReferenceSource(Protocol):
     """What a scenario's controller follows (module docstring).
 
@@ -107,6 +137,9 @@ class ReferenceSource(Protocol):
             table height, the contact pair of the force variant), plain data.
         follower(model, params, q0, options): the source bound to a new controller from the
             measured start configuration q0 (n,).
+        stream(model, q0, options, period): the targets the trajectory node publishes for a run
+            from q0 (n,) at ``period`` [s] (:class:`TargetStream`); ScenarioError for a source
+            without a target stream (tasks).
     """
 
     kind: ClassVar[str]
@@ -120,6 +153,8 @@ class ReferenceSource(Protocol):
 
     def follower(self, model: DualArmModel, params: ControllerParams, q0: FloatArray,
                  options: RunOptions) -> Follower: ...
+
+    def stream(self, model: DualArmModel, q0: FloatArray, options: RunOptions, period: float) -> TargetStream: ...
 
 
 def get(flat: Mapping[str, Any], key: str, default: Any = None) -> Any:

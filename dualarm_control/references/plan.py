@@ -24,6 +24,7 @@ from dualarm_control.references.base import (
     RELATIVE_TARGET,
     RunOptions,
     SourceDefaults,
+    StreamSample,
 )
 
 
@@ -89,6 +90,9 @@ class PlanSource(SourceDefaults):
     def describe(self) -> str:
         return f"plan {self.path}"
 
+    def stream(self, model: DualArmModel, q0: FloatArray, options: RunOptions, period: float) -> PlanStream:
+        return PlanStream(self)
+
     def sample(self, t: float) -> PlanReference:
         """The reference at ``t`` [s] (held at the last configuration after the end)."""
         ref = self.trajectory.sample(t)
@@ -97,6 +101,18 @@ class PlanSource(SourceDefaults):
         zero = np.zeros(3)
         return PlanReference(ref.positions, ref.velocities, state.position, state.rotation, twist[:3], twist[3:],
                              zero, zero)
+
+
+class PlanStream:
+    """The plan's joint reference and its relative pose, for the trajectory node."""
+
+    def __init__(self, source: PlanSource) -> None:
+        self.source = source
+        self.end = source.duration + source.settle_time
+
+    def sample(self, t: float) -> StreamSample:
+        ref = self.source.sample(t)
+        return StreamSample(ref, (ref.joint_positions, ref.joint_velocities), "execute")
 
 
 class PlanFollower:

@@ -23,6 +23,7 @@ from dualarm_control.references.base import (
     RELATIVE_TARGET,
     RunOptions,
     SourceDefaults,
+    StreamSample,
     get,
     number,
     vector,
@@ -64,6 +65,16 @@ class SegmentsSource(SourceDefaults):
         return SegmentsFollower(RelativeController(model, params),
                                 self.trajectory(*model.relative_pose(q0), options.limits), options.settle_time)
 
+    def stream(self, model: DualArmModel, q0: FloatArray, options: RunOptions, period: float) -> SegmentsStream:
+        return SegmentsStream(self.trajectory(*model.relative_pose(q0), options.limits), options.settle_time)
+
+    def end_pose(self, model: DualArmModel, q0: FloatArray, limits: MotionLimits,
+                 period: float) -> tuple[FloatArray, FloatArray]:
+        """The last segment's end pose (position [m] (3,), rotation (3, 3)) from q0's pose."""
+        trajectory = self.trajectory(*model.relative_pose(q0), limits)
+        end = trajectory.sample(trajectory.duration)
+        return end.position, end.rotation
+
     def trajectory(self, start_position: FloatArray, start_rotation: FloatArray,
                    limits: MotionLimits) -> RelativeTrajectory:
         """The ruckig relative trajectory from the measured start pose through all segments."""
@@ -99,6 +110,19 @@ class SegmentsFollower:
         out = self.controller.step(q, target)
         out.stage = target.segment_name
         return out
+
+
+class SegmentsStream:
+    """The segments' targets for the trajectory node (stage: the segment's name)."""
+
+    def __init__(self, trajectory: RelativeTrajectory, settle_time: float) -> None:
+        self.trajectory = trajectory
+        self.end = trajectory.duration + settle_time
+
+    def sample(self, t: float) -> StreamSample:
+        target = self.trajectory.sample(t)
+        stage = f"segment {target.segment + 1}/{len(self.trajectory.segments)} '{target.segment_name}'"
+        return StreamSample(target, None, stage)
 
 
 def parse_segments(flat: Mapping[str, Any]) -> SegmentsSource:

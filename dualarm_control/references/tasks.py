@@ -104,6 +104,11 @@ class TasksSource(SourceDefaults):
         duration = options.duration if options.duration is not None else self.duration
         return TasksController(model, params, self, self.gain(options), options.force, duration)
 
+    def stream(self, model: DualArmModel, q0: FloatArray, options: RunOptions, period: float) -> Any:
+        """No target stream: the controller node evaluates the tasks itself (ScenarioError)."""
+        raise ScenarioError("a task scenario has no target stream: the controller node runs its tasks "
+                            "(no trajectory node)")
+
     def build(self, gain: float, height_offset: float = 0.0) -> list[Task]:
         """Task objects with gain k for every task; ``height_offset`` [m] is added to the circle
         height (a modelling error of the pan along its normal: the model's pan surface is

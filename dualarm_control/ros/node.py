@@ -5,7 +5,7 @@
   values with the core's rules, so a bad value from a file, ``-p`` or a live ``param set``
   is refused with the same message.
 * :func:`run` is a node's ``main``: it checks ``--params-file`` files, initialises rclpy with
-  localhost discovery by default, spins until the node finishes, Ctrl-C or SIGTERM, then
+  localhost discovery and fast Fast DDS announcements by default (ros/env.py), spins until the node finishes, Ctrl-C or SIGTERM, then
   closes the shell, destroys the node and shuts rclpy down in that order (so no "publisher's
   context is invalid"). Exit codes: 0 normal end or signal, 2 bad parameters, 1 other errors.
 * :func:`tool_node` gives the tool verbs a short-lived node and executor.
@@ -23,7 +23,11 @@ from typing import Any, Generic, Self, TypeVar
 
 from dualarm_control.errors import DualArmError, ParameterError
 from dualarm_control.params import ParamSpec, read_params_files
-from dualarm_control.ros.env import apply_localhost_default, stop_with_launcher
+from dualarm_control.ros.env import (
+    apply_discovery_profile,
+    apply_localhost_default,
+    stop_with_launcher,
+)
 
 EXIT_OK = 0
 EXIT_ERROR = 1
@@ -154,11 +158,13 @@ class _StopOnSignal:
 
 
 def init_rclpy(argv: Sequence[str]) -> Any:
-    """``rclpy.init`` with localhost discovery by default and no rclpy signal handlers; returns the context."""
+    """``rclpy.init`` with localhost discovery and the package's Fast DDS discovery profile by default
+    (ros/env.py), and no rclpy signal handlers; returns the context."""
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
     apply_localhost_default()
+    apply_discovery_profile()
     context = rclpy.Context()
     rclpy.init(args=list(argv), context=context, signal_handler_options=SignalHandlerOptions.NO)
     return context
@@ -232,6 +238,7 @@ def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text
             shell = make(context)
             executor = make_executor(context)
             executor.add_node(shell.node)
+            apply_requested_priority()
             spin_until_stopped(executor, stop, lambda: bool(getattr(shell, "finished", False)))
         except ParameterError as exc:
             print(f"error: {exc}", file=sys.stderr, flush=True)
@@ -251,10 +258,35 @@ def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text
                 close = getattr(shell, "close", None)
                 if close is not None:
                     close()
+                flush_publishers(shell.node, ACK_TIMEOUT_S)
                 shell.node.destroy_node()
             if context is not None:
                 context.try_shutdown()
     return EXIT_OK
+
+
+ACK_TIMEOUT_S = 5.0
+"""How long, in all, a stopping node waits for its readers to acknowledge what it published."""
+
+
+def flush_publishers(node: Any, timeout_s: float) -> bool:
+    """Wait (at most ``timeout_s`` in all) until every reliable reader acknowledged every sample
+    of ``node``'s publishers (rclpy ``Publisher.wait_for_all_acked``), so that a recorder lagging
+    behind a fast lockstep run still receives the samples queued at a node's exit instead of losing
+    them with the node's writer history. True when all were acknowledged in time."""
+    import time
+
+    from rclpy.duration import Duration
+
+    end = time.monotonic() + timeout_s
+    acked = True
+    for publisher in list(node.publishers):
+        left = max(0.0, end - time.monotonic())
+        try:
+            acked = publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))) and acked
+        except RuntimeError:  # rclpy's RCLError / InvalidHandle: the context is gone, nothing to deliver
+            acked = False
+    return acked
 
 
 DISCOVERY_TIMEOUT_S = 20.0
@@ -299,8 +331,8 @@ def log_priority(log: Any, note: str, priority: int) -> None:
 
 
 def priority_from_args(argv: Sequence[str], default: int, node_name: str) -> int:
-    """``thread_priority`` as the node will declare it, read before rclpy exists (so the
-    middleware's threads inherit the scheduling): ``-p thread_priority:=N`` in ``argv`` wins
+    """``thread_priority`` as the node will declare it, read before rclpy exists (its permission is
+    checked before the node starts): ``-p thread_priority:=N`` in ``argv`` wins
     over the node's entry in ``--params-file`` files (later files win), as in ROS 2; ``default``
     when absent or malformed (:func:`declare` then reports a malformed value with exit 2)."""
     priority = default
@@ -319,15 +351,49 @@ def priority_from_args(argv: Sequence[str], default: int, node_name: str) -> int
     return priority
 
 
+_requested_priority = 0
+"""SCHED_FIFO priority that :func:`run` gives every thread of the process before spinning (0: none)."""
+
+
 def request_realtime_priority(priority: int) -> str:
-    """Put this process (and threads it creates later) under SCHED_FIFO ``priority`` (1-99), like
-    ros2_control's ``thread_priority``. Returns '' on success, else why not (callers warn and go on)."""
+    """Ask for SCHED_FIFO ``priority`` (1-99) for this process, like ros2_control's ``thread_priority``.
+
+    The permission is checked now (on this thread, then restored); :func:`run` applies the
+    priority to every thread of the process, the middleware's included, once the node is built
+    and right before it spins. Start-up (imports, participant, node) runs under normal
+    scheduling: a node starting under SCHED_FIFO while another one still started took its
+    first /joint_states 0.05-0.5 s after being up instead of 3-30 ms (docs/bench.md, "Start-up").
+    Returns '' when granted, else why not (callers warn and go on).
+    """
     import os
 
+    global _requested_priority
+    _requested_priority = 0
     if priority <= 0:
         return "disabled"
     try:
+        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(min(priority, 99)))
+        os.sched_setscheduler(0, policy, param)
     except (AttributeError, PermissionError, OSError) as exc:
         return f"SCHED_FIFO {priority} not permitted ({exc}); running with normal priority"
+    _requested_priority = min(priority, 99)
     return ""
+
+
+def apply_requested_priority() -> None:
+    """Put every thread of this process under the priority granted by :func:`request_realtime_priority`
+    (threads created later inherit it); nothing if none was."""
+    import os
+
+    if _requested_priority <= 0:
+        return
+    try:
+        threads = [int(tid) for tid in os.listdir("/proc/self/task")]
+    except OSError:
+        threads = [0]
+    for tid in threads:
+        try:
+            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(_requested_priority))
+        except (ProcessLookupError, PermissionError, OSError):
+            pass  # a thread that ended meanwhile

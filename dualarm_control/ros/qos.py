@@ -14,12 +14,14 @@ from dualarm_control.params import ParamSpec
 
 RELIABILITIES = ("reliable", "best_effort")
 STREAM_DEPTH = 10
-LOCKSTEP_DEPTH = 1000
+LOCKSTEP_DEPTH = 10000
 """History of every per-cycle publisher in lockstep mode. A keep-last writer drops its oldest
 sample when its history is full, acknowledged or not, and in lockstep the cell runs as fast as
 the simulator and controller answer each other: a recorder starved for more than 10 samples
 (about 25 ms of a lockstep run on a loaded machine) lost joint states (test_task_nodes under
-``stress-ng --cpu 1``). 1000 samples, as the recorder's own depth, is seconds of a run."""
+``stress-ng --cpu 1``), and a demo recorder 1300 samples behind at the end lost the run's end
+with 1000. 10000 samples, as the recorder's own depth, is 50 s of simulated time at 200 Hz (a few
+MB per writer); a node waits at its exit until they are acknowledged (``ros.node.flush_publishers``)."""
 
 QOS_PARAMETER = ParamSpec(
     "qos_reliability", "reliable",

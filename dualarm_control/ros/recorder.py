@@ -52,7 +52,7 @@ from dualarm_control.ros.node import tool_node
 
 BAG_VERSION: Final = 9
 """rosbag2 metadata version written by Jazzy."""
-RECORD_DEPTH = 1000
+RECORD_DEPTH = 10000
 """Keep-last depth of the recording subscriptions."""
 PROGRESS_INTERVAL_S = 2.0
 POLL_INTERVAL_S = 0.25

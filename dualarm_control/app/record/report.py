@@ -128,10 +128,9 @@ def summarize_run(record: RunRecord, scenario: Scenario | None,
 
 def final_errors(record: RunRecord, scenario: Scenario, model: DualArmModel) -> tuple[float, float]:
     """Relative position [m] and orientation [rad] error of the final state vs the scenario's end pose."""
-    trajectory = scenario.trajectory(*model.relative_pose(record.positions[0]))
-    end = trajectory.sample(trajectory.duration)
+    end_position, end_rotation = scenario.end_pose(record.positions[0], model, record.period)
     p, r = model.relative_pose(record.final_positions)
-    return float(np.linalg.norm(p - end.position)), rotation_angle(r, end.rotation)
+    return float(np.linalg.norm(p - end_position)), rotation_angle(r, end_rotation)
 
 
 def write_figures(scenario: Scenario, logs: Sequence[RunRecord], out: Path, title: str,

@@ -25,6 +25,12 @@ NODES = {
     "trajectory_node": "dualarm_control.nodes.trajectory_node",
 }
 STOP_GRACE_S = 10.0
+STOPPED_LAST = ("bag",)
+"""Processes stopped after every other one: the recorder takes what the nodes still send."""
+INTERACTIVE = "interactive"
+"""`dualarm launch interactive`: the trajectory node in mode:=interactive (issue 18)."""
+INTERACTIVE_CELL = "interactive_demo"
+"""The scenario whose cell (start configuration) and limits `dualarm launch interactive` uses."""
 GRAPH_TOPICS = ("/joint_states", "/velocity_controller/commands", "/relative_target", "/relative_pose",
                 "/diagnostics", "/wrench", "/clock")
 PLAN_TOPICS = (*GRAPH_TOPICS, "/joint_reference")
@@ -111,9 +117,16 @@ class Launch:
         return {p.name: p.popen.returncode for p in self.procs}
 
     def stop(self) -> None:
-        """SIGINT every live child (like Ctrl-C), escalate to SIGTERM/SIGKILL after a grace period."""
+        """Stop the nodes, then the recorder (:data:`STOPPED_LAST`): a node waits at its exit until
+        its per-cycle samples are acknowledged (``ros.node.flush_publishers``), which needs the
+        recorder alive, so a recorder lagging behind a fast lockstep run still gets the run's end."""
+        self._stop([p for p in self.procs if p.name not in STOPPED_LAST])
+        self._stop(self.procs)
+
+    def _stop(self, procs: Sequence[Process]) -> None:
+        """SIGINT every live one of ``procs`` (like Ctrl-C), escalate to SIGTERM/SIGKILL after a grace period."""
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
-            alive = [p for p in self.procs if p.popen.poll() is None]
+            alive = [p for p in procs if p.popen.poll() is None]
             if not alive:
                 return
             for p in alive:
@@ -137,6 +150,7 @@ def launch_scenario(
     record_topics: Sequence[str] = GRAPH_TOPICS,
     plan: Path | None = None,
     force: bool = False,
+    interactive: bool = False,
 ) -> int:
     """Run the three nodes (and a recorder of ``record_topics``) on ``scenario``; ``rate_hz`` sets every
     node's control period. Returns 0 if the scenario completed cleanly, 130 on Ctrl-C.
@@ -145,10 +159,16 @@ def launch_scenario(
     controller runs the scenario's tasks (``-p scenario:=NAME``), its task time comes from the
     joint-state stamps, so there is no trajectory_node; the run ends when the controller reports
     the scenario's duration complete. ``force`` selects the force variant in both nodes.
+
+    ``interactive`` (issue 18): the trajectory node in ``mode:=interactive`` on the scenario's
+    cell and limits: it holds the measured relative pose and follows /relative_goal and
+    /relative_twist, in real time, until Ctrl-C or ``timeout``.
     """
     from dualarm_control.scenario import load_scenario
 
     tasks = load_scenario(scenario).tasks is not None
+    if interactive and (tasks or lockstep or plan is not None):
+        raise ValueError("interactive runs in real time on a relative motion scenario (no lockstep, plan or tasks)")
     if force and not tasks:
         raise ValueError(f"force feedback applies to task scenarios (pan_cleaning), not to {scenario!r}")
     common = ["-p", f"lockstep:={'true' if lockstep else 'false'}"]
@@ -161,6 +181,7 @@ def launch_scenario(
         controller_args = [*controller_args, "-p", "reference:=joint"]
     for f in params:
         common += ["--params-file", str(Path(f).resolve())]
+    trajectory_args = [*with_scenario, "-p", "mode:=interactive"] if interactive else with_scenario
     if tasks:
         with_scenario += ["-p", f"force:={'true' if force else 'false'}"]
         controller_args = [*with_scenario, *controller_args]
@@ -182,7 +203,7 @@ def launch_scenario(
         readers = (1 if tasks else 2) + (record is not None)
         launch.start("controller_node", node_command("controller_node", [*common, *sim_time, *controller_args]))
         if not tasks:
-            launch.start("trajectory_node", node_command("trajectory_node", [*common, *sim_time, *with_scenario]))
+            launch.start("trajectory_node", node_command("trajectory_node", [*common, *sim_time, *trajectory_args]))
         launch.start("sim_node", node_command("sim_node", [*common, *with_scenario,
                                                             "-p", f"lockstep_subscribers:={readers}"]))
         codes = launch.wait_until(finisher, timeout)

@@ -22,6 +22,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, Self
 
+from dualarm_control.app.view.server import stop_process
 from dualarm_control.errors import DualArmError
 
 CHROMIUM = "/usr/bin/chromium"
@@ -126,13 +127,7 @@ class Chromium:
         ws = getattr(self, "ws", None)
         if ws is not None:
             ws.close()
-        if self.process.poll() is None:
-            self.process.terminate()
-            try:
-                self.process.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait(timeout=10)
+        stop_process(self.process)
         self.log.close()
         shutil.rmtree(self.profile, ignore_errors=True)
 

@@ -41,6 +41,17 @@ def _listening(port: int) -> bool:
         return s.connect_ex((HOST, port)) == 0
 
 
+
+def stop_process(process: subprocess.Popen[bytes], grace_s: float = 10.0) -> None:
+    """SIGTERM ``process`` if it still runs, SIGKILL it after ``grace_s`` [s], and reap it."""
+    if process.poll() is None:
+        process.terminate()
+        try:
+            process.wait(timeout=grace_s)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait(timeout=grace_s)
+
 class WebViewer:
     """``rerun --serve-web`` on 127.0.0.1: its gRPC proxy URL (to log into) and the page URL."""
 
@@ -74,13 +85,7 @@ class WebViewer:
         return f"http://{HOST}:{self.web_port}/?url={urllib.parse.quote(self.grpc_url, safe='')}&renderer=webgl"
 
     def close(self) -> None:
-        if self.process.poll() is None:
-            self.process.terminate()
-            try:
-                self.process.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait(timeout=10)
+        stop_process(self.process)
 
     def __enter__(self) -> Self:
         return self

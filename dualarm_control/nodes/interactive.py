@@ -1,0 +1,192 @@
+"""The trajectory node's interactive mode: goals and twists from any ROS 2 tool (issue 18).
+
+Subscribes ``/relative_goal`` (geometry_msgs/PoseStamped) and ``/relative_twist``
+(geometry_msgs/TwistStamped), both in frame ``left_tool`` (F1; an empty frame id reads as
+``left_tool``), and gives them to the live :class:`~dualarm_control.references.goals.GoalsSource`'s
+generator; a refused command (NaN/inf, quaternion far from unit norm, unknown frame, beyond
+reach, stamp older than the last accepted: :mod:`dualarm_control.drive_commands`) changes
+nothing and is reported ``rejected`` with its reason. The motion limits
+(``limits.<MotionLimits field>``) are live parameters, validated as the scenario file's. Every
+cycle the drive keys (:func:`~dualarm_control.online_trajectory.status_values`: state, goal
+stamp, measured distance and angle to the goal, time to go) go on ``/diagnostics``; the arms'
+arrival and stalls are judged by :class:`~dualarm_control.drive_monitor.GoalMonitor`. One log
+line per goal accepted, preempted, reached, stalled or rejected.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import fields
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+from geometry_msgs.msg import PoseStamped, TwistStamped
+from rcl_interfaces.msg import SetParametersResult
+
+from dualarm_control.drive_monitor import GoalMonitor
+from dualarm_control.errors import DualArmError
+from dualarm_control.kinematics import DualArmModel, FloatArray
+from dualarm_control.online_trajectory import (
+    JOGGING,
+    MOVING,
+    REACHED,
+    REJECTED,
+    STALLED,
+    STATUS_NAME,
+    CommandResult,
+    OnlineTrajectory,
+    status_values,
+)
+from dualarm_control.params import ParamSpec, positive
+from dualarm_control.ros import convert
+from dualarm_control.ros.drive import GOAL_TOPIC, TWIST_TOPIC
+from dualarm_control.ros.inputs import Throttle
+from dualarm_control.trajectory import MotionLimits
+
+LIMIT_PREFIX = "limits."
+REJECTED_HOLD_S = 1.0  # s a rejection stays the reported state (unless a command is accepted)
+
+
+def limit_specs(limits: MotionLimits) -> list[ParamSpec]:
+    """Live parameters ``limits.<field>`` with the scenario's values as defaults."""
+    return [ParamSpec(LIMIT_PREFIX + f.name, float(getattr(limits, f.name)), f"motion limit {f.name} (live)",
+                      check=positive) for f in fields(MotionLimits)]
+
+
+def _stamp_s(stamp: Any) -> float:
+    return float(stamp.sec) + 1e-9 * float(stamp.nanosec)
+
+
+class InteractiveDrive:
+    """Commands in, drive status out, for the trajectory node (module docstring)."""
+
+    def __init__(self, node: Any, model: DualArmModel, limits: MotionLimits, qos: Any) -> None:
+        self.node = node
+        self.log = node.get_logger()
+        self.model = model
+        self.limits = limits
+        self.pending_limits: MotionLimits | None = None
+        self.generator: OnlineTrajectory | None = None
+        self.monitor = GoalMonitor(model)
+        self.q: FloatArray | None = None
+        self.rejected: tuple[float | None, str, float] | None = None  # (goal stamp, reason, since t)
+        self.last_state = ""
+        self.throttle = Throttle(1.0)
+        node.create_subscription(PoseStamped, GOAL_TOPIC, self.on_goal, 10)
+        node.create_subscription(TwistStamped, TWIST_TOPIC, self.on_twist, qos)
+        node.add_on_set_parameters_callback(self.on_set_parameters)
+
+    def start(self, generator: OnlineTrajectory) -> None:
+        """Hold the generator's (measured) pose; commands apply from now."""
+        self.generator = generator
+        generator.set_limits(self.limits)
+        self.log.info("interactive: holding the measured relative pose; goals on "
+                      f"{GOAL_TOPIC}, twists on {TWIST_TOPIC} (frame left_tool)")
+
+    # ---------------------------------------------------------------- commands
+    def on_goal(self, msg: Any) -> None:
+        gen = self.generator
+        stamp = _stamp_s(msg.header.stamp)
+        if gen is None:
+            self._reject(stamp, "not started (no joint state yet)")
+            return
+        p, o = msg.pose.position, msg.pose.orientation
+        before = gen.state if gen.goal is not None else ""
+        result = gen.command_goal([p.x, p.y, p.z], [o.x, o.y, o.z, o.w], frame=msg.header.frame_id, stamp=stamp)
+        if not self._answer(result, stamp, "goal"):
+            return
+        self.monitor.reset()
+        if before in (MOVING, JOGGING) or result.reason:
+            self.log.info(f"goal preempted by the goal of stamp {stamp:.9f}")
+        assert gen.goal is not None
+        angle = float(np.linalg.norm(pin.log3(gen.goal.rotation)))
+        self.log.info(f"goal accepted: xyz [{p.x:.4f}, {p.y:.4f}, {p.z:.4f}] m, rotation angle {angle:.4f} rad, "
+                      f"stamp {stamp:.9f}")
+
+    def on_twist(self, msg: Any) -> None:
+        gen = self.generator
+        stamp = _stamp_s(msg.header.stamp)
+        if gen is None:
+            return
+        lin, ang = msg.twist.linear, msg.twist.angular
+        had_goal = gen.goal is not None and gen.state == MOVING
+        result = gen.command_twist([lin.x, lin.y, lin.z], [ang.x, ang.y, ang.z], frame=msg.header.frame_id,
+                                   stamp=stamp)
+        if self._answer(result, None, "twist"):
+            self.monitor.reset()
+            if had_goal:
+                self.log.info("goal preempted by a twist")
+
+    def _answer(self, result: CommandResult, stamp: float | None, what: str) -> bool:
+        if result.accepted:
+            self.rejected = None
+            return True
+        self._reject(stamp, f"{what} rejected: {result.reason}")
+        return False
+
+    def _reject(self, stamp: float | None, reason: str) -> None:
+        gen = self.generator
+        self.rejected = (stamp, reason, gen.time if gen is not None else 0.0)
+        line = self.throttle.text(reason)
+        if line is not None:
+            self.log.warning(line)
+
+    def on_set_parameters(self, parameters: list[Any]) -> SetParametersResult:
+        """A live limit change, validated as the scenario file's (applied at the next cycle)."""
+        changes = {p.name[len(LIMIT_PREFIX):]: p.value for p in parameters if p.name.startswith(LIMIT_PREFIX)}
+        if not changes:
+            return SetParametersResult(successful=True)
+        try:
+            limits = dataclasses.replace(self.pending_limits or self.limits, **changes)
+        except (DualArmError, ValueError, TypeError) as exc:
+            self.log.warning(f"limit change refused: {exc}")
+            return SetParametersResult(successful=False, reason=str(exc))
+        self.pending_limits = limits
+        self.log.info(f"limits changed: {', '.join(f'{k}={v:g}' for k, v in changes.items())}")
+        return SetParametersResult(successful=True)
+
+    def recover(self, exc: Exception) -> None:
+        """The generator failed (ruckig): hold where the arms are, report it, keep running."""
+        gen = self.generator
+        assert gen is not None and self.q is not None
+        self.log.error(f"online trajectory failed ({type(exc).__name__}: {str(exc).strip()[:200]}); "
+                       "holding the measured relative pose")
+        gen.hold(*self.model.relative_pose(self.q))
+        gen.goal = None
+        self.monitor.reset()
+        self.rejected = (None, f"trajectory failed: {type(exc).__name__}", gen.time)
+
+    # ---------------------------------------------------------------- per cycle
+    def cycle(self, stamp_ns: int) -> bytes | None:
+        """After the cycle's step: apply new limits, judge the goal, the /diagnostics status (CDR)."""
+        gen = self.generator
+        if gen is None or self.q is None:
+            return None
+        if self.pending_limits is not None:
+            self.limits, self.pending_limits = self.pending_limits, None
+            gen.set_limits(self.limits)
+        progress = gen.progress()
+        goal = (gen.goal.position, gen.goal.rotation) if gen.goal is not None else None
+        verdict = self.monitor.judge(progress, goal, self.q, gen.time)
+        state, reason, goal_stamp = verdict.state, verdict.reason, None
+        if verdict.state != self.last_state:
+            self._log_state(verdict.state, verdict.distance, verdict.angle, reason, progress.goal_stamp)
+            self.last_state = verdict.state
+            if verdict.state == STALLED:  # hold where the arms are: the controller stops pushing
+                gen.hold(*self.model.relative_pose(self.q))
+        if self.rejected is not None:
+            if gen.time - self.rejected[2] <= REJECTED_HOLD_S:
+                goal_stamp, reason, state = self.rejected[0], self.rejected[1], REJECTED
+            else:
+                self.rejected = None
+        values = status_values(dataclasses.replace(progress, distance=verdict.distance, angle=verdict.angle),
+                               state=state, reason=reason, goal_stamp=goal_stamp)
+        level = 1 if state in (STALLED, REJECTED) else 0
+        return convert.diagnostics(stamp_ns, STATUS_NAME, level, state, values)
+
+    def _log_state(self, state: str, distance: float, angle: float, reason: str, stamp: float | None) -> None:
+        if state == REACHED and stamp is not None:
+            self.log.info(f"goal reached (stamp {stamp:.9f}): error {distance * 1000:.3f} mm, {angle:.5f} rad")
+        elif state == STALLED:
+            self.log.warning(f"goal stalled (stamp {stamp:.9f}): {reason}")

@@ -1,0 +1,594 @@
+"""Online relative motion: goals and twists accepted at any cycle, replanned by ruckig.
+
+Paper 000 generates the desired relative motion with Reflexxes, an *online* trajectory
+generator: at every control cycle a new target may arrive and the motion is replanned from
+the current position, velocity and acceleration, so the reference never jumps. This module
+does that with ruckig's online interface (``Ruckig(dofs, T).update(input, output)``), for the
+pose of the right tool (F2) in the left tool frame (F1). Units: m, rad, s; every vector in F1.
+
+State (held by :class:`OnlineTrajectory`, advanced by one period ``T`` per :meth:`~OnlineTrajectory.step`):
+``p, v, a`` (3,) [m, m/s, m/s^2] and ``R`` (3, 3), ``w, alpha`` (3,) [rad/s, rad/s^2] with
+``dR/dt = [w]x R`` and ``alpha = dw/dt``.
+
+**Position** (3 DoF, per axis limits of :class:`~dualarm_control.trajectory.MotionLimits`,
+exactly as the offline segments): one persistent ruckig instance; a goal uses the position
+interface (target ``p_g``, zero velocity and acceleration, ``Synchronization.Phase``: a
+straight line when ruckig finds one), a twist the velocity interface (target ``v_cmd``);
+``out.pass_to_input(inp)`` carries the state to the next cycle.
+
+**Orientation** (no Euler angles): three rotation coordinates ``s`` (a rotation vector)
+relative to an *anchor* re-taken at every cycle, ``R(t) = exp([s(t)]x) R_k`` with
+``R_k = R(t_k)``, ``s(t_k) = 0``. With the left Jacobian of SO(3)
+``J_l(s) = I + A [s]x + B [s]x^2``, ``A = (1 - cos th)/th^2``, ``B = (th - sin th)/th^3``,
+``th = ||s||``:
+
+    (1)  w = J_l(s) s'
+    (2)  alpha = J_l(s) s'' + (dJ_l/dt) s'
+
+and at ``s = 0``: ``J_l = I``, ``(dJ_l/dt) s' = 1/2 s' x s' = 0``, so ``s' = w`` and
+``s'' = alpha`` exactly: the cycle's ruckig problem starts from the true angular state
+(no jump, no flip at +-pi: the goal enters as ``s_g = log3(R_g R_k^T)``, angle in [0, pi]).
+The three coordinates get per-coordinate limits in an orthonormal basis ``Q`` (columns):
+``|(Q^T s')_i| <= b_i vmax``, same ``b`` for acceleration and jerk, with ``||b|| <= 1``, so
+
+    (3)  ||s'|| <= vmax,  ||s''|| <= amax,  ||s'''|| <= jmax      (a box inside the ball).
+
+``Q``'s first column is the motion's direction (the goal's rotation axis, the commanded
+angular velocity), and ``b`` is the largest box along it that still contains the current
+``w/vmax`` and ``alpha/amax`` (:func:`rotation_box`); from rest ``b = (1, 0, 0)``: the
+orientation turns about the fixed goal axis with the full scalar limits, the profile of
+today's rest-to-rest segment (:class:`~dualarm_control.trajectory.RelativeTrajectory`).
+
+What is guaranteed for the angular motion (vmax, amax, jmax the angular limits):
+
+* ``||w|| <= vmax`` always: ``J_l(s)`` has singular values 1 and ``|sinc(th/2)| <= 1``.
+* Motions whose ``w``, ``alpha`` and direction stay parallel (every goal or jog started from
+  rest, or along the current motion's axis): ``s`` stays on a line through 0, ``J_l(s) s' = s'``
+  and the curvature terms of (2) vanish: ``||alpha|| <= amax`` and ``||dalpha/dt|| <= jmax``
+  exactly (up to rounding).
+* Otherwise (a preemption turning the rotation axis) the curvature terms of (2) add to
+  the box limits: ``||alpha|| <= amax + vmax^3 T / 3`` (the term of (2) after one cycle,
+  ``||s|| <= vmax T``: 2e-4 rad/s^2 with the default limits at T = 5 ms), and each cycle's
+  change ``||alpha_k+1 - alpha_k|| <= (jmax + vmax amax / 2 + vmax^3 / 3) T`` (from
+  ``dalpha/dt = s''' + 1/2 s' x s'' + 1/3 s' x (s' x s')`` at ``s = 0``; +5.8 % of jmax with
+  the defaults). The box changes from cycle to cycle, so ruckig's velocity bound holds for
+  each cycle's plan, not across plans: measured ``||w||`` up to 1.001 vmax in such
+  preemptions (a known gap, see docs/driving.md). A state outside every box (e.g. produced
+  under larger limits) is first braked back by ruckig. Coordinates without motion get a
+  1e-3 share, not 0 (ruckig refuses zero limits): they only move by rounding.
+
+Position and orientation are each time-optimal and not synchronized with each other, so a
+goal from rest takes ``max(position time, rotation time)``, which is the duration of a
+rest-to-rest segment (one scalar path parameter, the slowest coordinate time-optimal).
+
+Twists (jogging) use ruckig's velocity interface toward ``(v_cmd, w_cmd)``, clipped to the
+velocity limits (per axis for ``v``, the norm for ``w``). With no new twist for
+``jog_timeout`` (0.1 s) the target velocity becomes zero: the motion brakes to rest within
+the limits. A goal or a twist accepted mid-motion replaces the previous one from the
+current state (preemption).
+
+States (:data:`IDLE` at rest without a goal, :data:`MOVING` toward a goal, :data:`JOGGING`
+following or braking from a twist, :data:`REACHED` at rest exactly on the last goal).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+import ruckig
+
+from dualarm_control.drive_commands import (
+    CommandError,
+    GoalCommand,
+    TwistCommand,
+    goal_command,
+    twist_command,
+)
+from dualarm_control.kinematics import LEFT_TOOL
+from dualarm_control.trajectory import (
+    FloatArray,
+    MotionLimits,
+    TargetSample,
+    TrajectoryError,
+    _check_rotation,
+    _frozen_vector,
+)
+
+IDLE = "idle"
+MOVING = "moving"
+JOGGING = "jogging"
+REACHED = "reached"
+STATES = (IDLE, MOVING, JOGGING, REACHED)
+
+DEFAULT_PERIOD = 0.005  # s
+DEFAULT_JOG_TIMEOUT = 0.1  # s
+_SERIES_ANGLE = 1e-2  # rad: below it the Jacobian coefficients use their Taylor series
+_PARALLEL = 1e-9  # relative cross-product norm under which a hint counts as parallel
+_MIN_SHARE = 1e-3  # smallest box share b_i given to ruckig (it refuses zero or tiny limits)
+_ROUNDING = 1e-9  # relative excess of a limit counted as rounding
+_SIDE_SHARE = 0.3  # least box share of a sideways coordinate that moves (its braking room)
+_SNAP = 1e-9  # m or rad: a remaining distance a near-rest state may snap over (see _near_rest)
+_SIDE_STATE = 1e-3  # sideways state share below which the least share (1e-3) is room enough
+
+
+@dataclass(frozen=True)
+class CommandResult:
+    """Answer to a command: accepted or not, and why (the reason of a refusal, or a note)."""
+
+    accepted: bool
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class GoalProgress:
+    """The generator's state for status reports.
+
+    Attributes:
+        state: one of :data:`STATES`.
+        goal_stamp: stamp [s] of the current goal (None: no goal, or not stamped).
+        distance: ||p_g - p|| [m] (0 without a goal).
+        angle: rotation angle of ``R_g R^T`` [rad] in [0, pi] (0 without a goal).
+        time_to_go: time [s] until the goal is reached at rest, per the current plan
+            (0 without a goal; for a jog: until at rest once braking).
+    """
+
+    state: str
+    goal_stamp: float | None
+    distance: float
+    angle: float
+    time_to_go: float
+
+
+def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
+    """a x b for 3-vectors (numpy's general ``cross`` costs ~10x more per call on (3,) arrays)."""
+    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
+    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
+    return np.array((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0))
+
+
+def _jacobian_coefficients(theta: float) -> tuple[float, float, float, float]:
+    """``A, B, A'/th, B'/th`` of ``J_l = I + A [s]x + B [s]x^2`` at ``th = ||s||`` [rad]."""
+    if theta < _SERIES_ANGLE:
+        t2 = theta * theta
+        return (0.5 - t2 / 24.0 + t2 * t2 / 720.0, 1.0 / 6.0 - t2 / 120.0 + t2 * t2 / 5040.0,
+                -1.0 / 12.0 + t2 / 180.0, -1.0 / 60.0 + t2 / 1260.0)
+    s, c = math.sin(theta), math.cos(theta)
+    a = (1.0 - c) / theta**2
+    b = (theta - s) / theta**3
+    da = (theta * s - 2.0 * (1.0 - c)) / theta**4
+    db = (1.0 - c) / theta**4 - 3.0 * (theta - s) / theta**5
+    return a, b, da, db
+
+
+def angular_velocity(s: FloatArray, ds: FloatArray) -> FloatArray:
+    """``w = J_l(s) s'`` (1) [rad/s], (3,), for rotation coordinates ``s`` [rad] and rates ``s'``."""
+    a, b, _, _ = _jacobian_coefficients(float(np.linalg.norm(s)))
+    sxd = _cross(s, ds)
+    return ds + a * sxd + b * _cross(s, sxd)
+
+
+def angular_acceleration(s: FloatArray, ds: FloatArray, dds: FloatArray) -> FloatArray:
+    """``alpha = J_l(s) s'' + (dJ_l/dt) s'`` (2) [rad/s^2], (3,).
+
+    ``(dJ_l/dt) s' = (A'/th)(s.s')(s x s') + (B'/th)(s.s')(s x (s x s')) + B s' x (s x s')``.
+    """
+    a, b, da, db = _jacobian_coefficients(float(np.linalg.norm(s)))
+    sxd = _cross(s, ds)
+    sdd = _cross(s, dds)
+    dot = float(s @ ds)
+    return (dds + a * sdd + b * _cross(s, sdd)
+            + da * dot * sxd + db * dot * _cross(s, sxd) + b * _cross(ds, sxd))
+
+
+def _unit(v: FloatArray) -> FloatArray | None:
+    n = float(np.linalg.norm(v))
+    return v / n if n > 0.0 else None
+
+
+def _basis(first: FloatArray, hint: FloatArray | None) -> FloatArray:
+    """Orthonormal basis (3, 3) (columns) with first column ``first`` (unit) and the second
+    in the plane of ``first`` and ``hint`` when they are not parallel."""
+    e2 = None
+    if hint is not None:
+        e2 = _unit(hint - (hint @ first) * first)
+        if e2 is not None and float(np.linalg.norm(hint - (hint @ first) * first)) < _PARALLEL * float(
+                np.linalg.norm(hint)):
+            e2 = None
+    if e2 is None:
+        other = np.eye(3)[int(np.argmin(np.abs(first)))]
+        e2 = _unit(other - (other @ first) * first)
+        assert e2 is not None
+    return np.column_stack((first, e2, _cross(first, e2)))
+
+
+def rotation_box(direction: FloatArray, x: FloatArray, y: FloatArray,
+                 braking: float = 0.0) -> tuple[FloatArray, FloatArray]:
+    """Basis ``Q`` (3, 3) and box shares ``b`` (3,) for the rotation coordinates (see (3)).
+
+    Args:
+        direction: the motion's direction (goal rotation vector, commanded angular velocity),
+            (3,), any norm (zero: none).
+        x: current ``w / vmax`` (3,), norm <= 1 when the limits were respected.
+        y: current ``alpha / amax`` (3,), norm <= 1 likewise.
+        braking: ``amax^2 / (2 jmax vmax)`` [-]: a coordinate whose acceleration still raises
+            its speed needs the velocity share ``|x_i| + braking y_i^2 / b_i`` (the speed it
+            reaches before its acceleration, jerk-limited, falls to zero), else ruckig
+            overshoots its velocity limit.
+
+    Returns:
+        ``Q`` with first column along ``direction`` (else along ``x``, ``y``), and ``b >= 0``
+        with ``||b|| = 1`` and ``|Q^T x| <= b``, ``|Q^T y| <= b`` componentwise: a sideways
+        coordinate (2, 3) that moves gets at least a 0.3 share to brake in (without a floor its
+        box would shrink with its state and it would never stop), the rest goes to ``b_1``. When no box along ``direction`` contains both (``x`` and ``y`` large
+        and apart), the basis bisects ``x`` and ``y`` instead: ``b = max(|x|, |y|) (cos(phi/2),
+        sin(phi/2), 0)`` scaled to unit norm, which contains both while ``||x||, ||y|| <= 1``.
+    """
+    first = _unit(direction)
+    if first is None:
+        first = _unit(x) if _unit(x) is not None else _unit(y)
+    if first is None:
+        return np.eye(3), np.array([1.0, 0.0, 0.0])
+    hint = x if float(np.linalg.norm(_cross(first, x))) > float(np.linalg.norm(_cross(first, y))) else y
+    q = _basis(first, hint)
+    xq, yq = q.T @ x, q.T @ y
+    rising = xq * yq > 0.0
+    b = np.maximum(np.abs(xq), np.abs(yq))
+    for _ in range(3):  # the braking share depends on b: a fixed point in a few rounds
+        need = np.abs(xq) + np.where(rising, braking * yq * yq / np.maximum(b, _MIN_SHARE), 0.0)
+        c = np.maximum(need, np.abs(yq))
+        c = np.where(c <= 1.0 + _ROUNDING, np.minimum(c, 1.0), c)  # at the limit up to rounding: at it
+        side = np.where(c[1:] > _SIDE_STATE, np.maximum(c[1:], _SIDE_SHARE), c[1:])  # room to brake sideways
+        for sides in (side, c[1:]):
+            rest = float(sides @ sides)
+            if rest + float(c[0]) ** 2 <= 1.0:
+                b = np.array([math.sqrt(1.0 - rest), *sides])
+                break
+        else:
+            break
+    else:
+        return q, b
+    ux, uy = _unit(x), _unit(y)
+    if ux is None or uy is None:  # the braking share alone overflows: the largest box, ruckig brakes the excess
+        c = np.maximum(c, _MIN_SHARE)
+        return q, c / float(np.linalg.norm(c))
+    if ux @ uy < 0.0:
+        uy = -uy
+    q = _basis(_unit(ux + uy), ux - uy)  # type: ignore[arg-type]
+    c = np.maximum(np.abs(q.T @ x), np.abs(q.T @ y))
+    c[2] = math.sqrt(max(1.0 - float(c[:2] @ c[:2]), 0.0))  # the rest of the ball: room toward the goal
+    c = np.maximum(c, _MIN_SHARE)
+    return q, c / max(float(np.linalg.norm(c)), 1.0)
+
+
+def _in_ball(v: FloatArray) -> FloatArray:
+    """``v`` scaled into the unit ball (a state beyond the limits by rounding, or by a limit change)."""
+    n = float(np.linalg.norm(v))
+    return v / n if n > 1.0 else v
+
+
+class OnlineTrajectory:
+    """The relative target, advanced one period per :meth:`step`, steered by goals and twists.
+
+    Args:
+        position: initial p [m] in F1, (3,) (the measured relative pose: hold it).
+        rotation: initial R in F1, (3, 3).
+        limits: motion limits (per axis linear, norm angular; see the module docstring).
+        period: cycle T [s] (ruckig's control cycle).
+        jog_timeout: seconds without a new twist after which a jog brakes to rest.
+        reach: largest accepted ``||p_g||`` [m] of a goal (``DualArmModel.relative_reach()``:
+            2.870 m for the cell).
+
+    The generator is deterministic: its time is ``cycles * period``; commands apply from the
+    next :meth:`step`.
+    """
+
+    def __init__(self, position: FloatArray, rotation: FloatArray, limits: MotionLimits | None = None,
+                 period: float = DEFAULT_PERIOD, jog_timeout: float = DEFAULT_JOG_TIMEOUT,
+                 reach: float = math.inf) -> None:
+        if not (math.isfinite(period) and period > 0.0):
+            raise ValueError(f"period: expected a duration > 0 s, got {period!r}")
+        if not (math.isfinite(jog_timeout) and jog_timeout > 0.0):
+            raise ValueError(f"jog_timeout: expected a duration > 0 s, got {jog_timeout!r}")
+        self.limits = limits if limits is not None else MotionLimits()
+        self.period = float(period)
+        self.jog_timeout = float(jog_timeout)
+        self.reach = float(reach)
+        self.cycles = 0
+        self.p = np.array(_frozen_vector(position, "position"))
+        self.r = np.array(_check_rotation(rotation, "rotation"))
+        self.v, self.a = np.zeros(3), np.zeros(3)
+        self.w, self.alpha = np.zeros(3), np.zeros(3)
+        self.state = IDLE
+        self.goal: GoalCommand | None = None
+        self.twist: TwistCommand | None = None
+        self.last_stamp: float | None = None
+        self.commands = 0  # accepted commands (TargetSample.segment)
+        self._twist_time = 0.0  # generator time of the last twist [s]
+        self._pos = ruckig.Ruckig(3, self.period)
+        self._pin = ruckig.InputParameter(3)
+        self._pout = ruckig.OutputParameter(3)
+        self._rot = ruckig.Ruckig(3, self.period)
+        self._rin = ruckig.InputParameter(3)
+        self._rout = ruckig.OutputParameter(3)
+        self._pos_done = self._rot_done = True
+        self._pos_left = self._rot_left = 0.0  # s, time to go of each plan
+        self.set_limits(self.limits)
+        self._reset_position_input()
+
+    # ------------------------------------------------------------------ commands
+
+    @property
+    def time(self) -> float:
+        """Generator time [s]: cycles done times the period."""
+        return self.cycles * self.period
+
+    def set_limits(self, limits: MotionLimits) -> None:
+        """New limits from the next cycle (a state beyond them is braked back by ruckig)."""
+        self.limits = limits
+        self._pin.max_velocity = [limits.max_linear_velocity] * 3
+        self._pin.max_acceleration = [limits.max_linear_acceleration] * 3
+        self._pin.max_jerk = [limits.max_linear_jerk] * 3
+
+    def command_goal(self, position: object, orientation: object, *, frame: str = LEFT_TOOL,
+                     stamp: float | None = None) -> CommandResult:
+        """Go to the pose ``(position [m], orientation)`` in F1 and stop there.
+
+        ``orientation``: quaternion ``(x, y, z, w)`` or rotation matrix (3, 3). Refused (with the
+        reason, motion unchanged) per :func:`dualarm_control.drive_commands.goal_command`.
+        """
+        try:
+            goal = goal_command(position, orientation, frame=frame, stamp=stamp, last_stamp=self.last_stamp,
+                                reach=self.reach)
+        except CommandError as exc:
+            return CommandResult(False, str(exc))
+        note = "preempts the current motion" if self.state in (MOVING, JOGGING) else ""
+        self._accept(stamp)
+        self.goal, self.twist = goal, None
+        self.state = MOVING
+        self._pin.control_interface = ruckig.ControlInterface.Position
+        self._pin.synchronization = ruckig.Synchronization.Phase
+        self._pin.target_position = goal.position.tolist()
+        self._pin.target_velocity = [0.0] * 3
+        self._pin.target_acceleration = [0.0] * 3
+        self._pos_done = self._rot_done = False
+        return CommandResult(True, note)
+
+    def command_twist(self, linear: object, angular: object, *, frame: str = LEFT_TOOL,
+                      stamp: float | None = None) -> CommandResult:
+        """Follow the twist ``(linear [m/s], angular [rad/s])`` in F1 until ``jog_timeout`` passes
+        without a new one; then brake to rest. Clipped to the velocity limits (the result's
+        reason says so); refused per :func:`dualarm_control.drive_commands.twist_command`."""
+        try:
+            twist = twist_command(linear, angular, frame=frame, stamp=stamp, last_stamp=self.last_stamp)
+        except CommandError as exc:
+            return CommandResult(False, str(exc))
+        lim = self.limits
+        v = np.clip(twist.linear, -lim.max_linear_velocity, lim.max_linear_velocity)
+        w = twist.angular
+        speed = float(np.linalg.norm(w))
+        if speed > lim.max_angular_velocity:
+            w = w * (lim.max_angular_velocity / speed)
+        clipped = not (np.array_equal(v, twist.linear) and np.array_equal(w, twist.angular))
+        self._accept(stamp)
+        self.goal, self.twist = None, TwistCommand(v, w, stamp)
+        self.state = JOGGING
+        self._twist_time = self.time
+        self._set_velocity_target(v)
+        self._pos_done = self._rot_done = False
+        return CommandResult(True, "clipped to the velocity limits" if clipped else "")
+
+    def hold(self, position: FloatArray, rotation: FloatArray) -> None:
+        """Stop at once at ``(position [m] (3,), rotation (3, 3))`` (where the arms are): a target at
+        rest, state :data:`IDLE`, the goal kept for reporting. For a node giving up on a goal the arms
+        cannot reach (stalled): a jump of the target to the measured pose, not a planned motion."""
+        self.p = np.array(_frozen_vector(position, "position"))
+        self.r = np.array(_check_rotation(rotation, "rotation"))
+        self.v, self.a = np.zeros(3), np.zeros(3)
+        self.w, self.alpha = np.zeros(3), np.zeros(3)
+        self.twist = None
+        self.state = IDLE
+        self._pos_done = self._rot_done = True
+        self._pos_left = self._rot_left = 0.0
+        self._reset_position_input()
+
+    def _accept(self, stamp: float | None) -> None:
+        self.commands += 1
+        if stamp is not None:
+            self.last_stamp = stamp
+
+    def _set_velocity_target(self, v: FloatArray) -> None:
+        self._pin.control_interface = ruckig.ControlInterface.Velocity
+        self._pin.synchronization = ruckig.Synchronization.Time
+        self._pin.target_velocity = v.tolist()
+        self._pin.target_acceleration = [0.0] * 3
+
+    def _reset_position_input(self) -> None:
+        self._pin.current_position = self.p.tolist()
+        self._pin.current_velocity = self.v.tolist()
+        self._pin.current_acceleration = self.a.tolist()
+
+    # ------------------------------------------------------------------ cycle
+
+    def step(self) -> TargetSample:
+        """Advance one period and return the new target (pose, twist, acceleration in F1)."""
+        self.cycles += 1
+        if self.state == JOGGING and self.twist is not None and (
+                self.time - self._twist_time > self.jog_timeout + 1e-9 * self.period):
+            self.twist = TwistCommand(np.zeros(3), np.zeros(3), self.twist.stamp)  # brake to rest
+            self._set_velocity_target(np.zeros(3))
+        if self.state in (MOVING, JOGGING):
+            if not self._pos_done:
+                self._step_position()
+            if not self._rot_done:
+                self._step_rotation()
+            if self._pos_done and self._rot_done:
+                if self.state == MOVING:
+                    self.state = REACHED
+                elif self.twist is not None and not np.any(self.twist.linear) and not np.any(self.twist.angular):
+                    self.state = IDLE
+        return self.sample()
+
+    def _near_rest(self, remaining: float, velocity: FloatArray, acceleration: FloatArray, amax: float,
+                   jmax: float) -> bool:
+        """The state is one cycle's change from rest on the target: ``remaining`` [m or rad] below
+        :data:`_SNAP`, ``||v|| <= amax T`` and ``||a|| <= jmax T`` (a snap to rest stays inside the
+        limits). Ruckig may fail on such a state (RuckigError "error in step 2", measured with a
+        remaining 5e-13 rad, 1.8e-9 rad/s, -4.2e-6 rad/s^2 after a jog and a goal at the same pose)."""
+        t = self.period
+        return (remaining <= _SNAP and float(np.linalg.norm(velocity)) <= amax * t
+                and float(np.linalg.norm(acceleration)) <= jmax * t)
+
+    def _step_position(self) -> None:
+        try:
+            result = self._pos.update(self._pin, self._pout)
+        except ruckig.RuckigError:
+            lim = self.limits
+            if self.goal is None or not self._near_rest(float(np.linalg.norm(self.goal.position - self.p)), self.v,
+                                                        self.a, lim.max_linear_acceleration, lim.max_linear_jerk):
+                raise
+            result = ruckig.Result.Finished  # on the goal, at rest within one cycle's change
+        if result not in (ruckig.Result.Working, ruckig.Result.Finished):
+            raise TrajectoryError(f"ruckig failed on the relative position ({result.name})")
+        if result == ruckig.Result.Finished and self.goal is not None:
+            self.p, self.v, self.a = self.goal.position.copy(), np.zeros(3), np.zeros(3)
+            self._reset_position_input()
+            self._pos_done, self._pos_left = True, 0.0
+            return
+        self._pout.pass_to_input(self._pin)
+        self.p = np.array(self._pout.new_position)
+        self.v = np.array(self._pout.new_velocity)
+        self.a = np.array(self._pout.new_acceleration)
+        self._pos_left = max(float(self._pout.trajectory.duration) - float(self._pout.time), 0.0)
+        if result == ruckig.Result.Finished and not np.any(self._pin.target_velocity):  # braked to rest
+            self.v, self.a = np.zeros(3), np.zeros(3)
+            self._reset_position_input()
+            self._pos_done, self._pos_left = True, 0.0
+
+    def _step_rotation(self) -> None:
+        lim = self.limits
+        vmax, amax, jmax = lim.max_angular_velocity, lim.max_angular_acceleration, lim.max_angular_jerk
+        if self.goal is not None:
+            direction = np.asarray(pin.log3(self.goal.rotation @ self.r.T))
+            target_velocity = np.zeros(3)
+        else:
+            assert self.twist is not None
+            target_velocity = self.twist.angular
+            direction = target_velocity if np.any(target_velocity) else self.w
+        if not np.any(self.w) and not np.any(self.alpha) and not np.any(
+                direction if self.goal is not None else target_velocity):
+            self._finish_rotation()
+            return
+        braking = amax**2 / (2.0 * jmax * vmax)
+        q, b = rotation_box(direction, _in_ball(self.w / vmax), _in_ball(self.alpha / amax), braking)
+        share = np.maximum(b, _MIN_SHARE)
+        inp = self._rin
+        inp.current_position = [0.0] * 3
+        inp.current_velocity = (q.T @ self.w).tolist()
+        inp.current_acceleration = (q.T @ self.alpha).tolist()
+        inp.max_velocity = (vmax * share).tolist()
+        inp.max_acceleration = (amax * share).tolist()
+        inp.max_jerk = (jmax * share).tolist()
+        if self.goal is not None:
+            inp.control_interface = ruckig.ControlInterface.Position
+            inp.target_position = (q.T @ direction).tolist()
+            inp.target_velocity = [0.0] * 3
+        else:
+            inp.control_interface = ruckig.ControlInterface.Velocity
+            inp.target_velocity = np.clip(q.T @ target_velocity, -vmax * b, vmax * b).tolist()
+        inp.target_acceleration = [0.0] * 3
+        try:
+            result = self._rot.update(inp, self._rout)
+        except ruckig.RuckigError:
+            if self.goal is None or not self._near_rest(float(np.linalg.norm(direction)), self.w, self.alpha,
+                                                        amax, jmax):
+                raise
+            self._finish_rotation()  # on the goal, at rest within one cycle's change
+            return
+        if result not in (ruckig.Result.Working, ruckig.Result.Finished):
+            raise TrajectoryError(f"ruckig failed on the relative orientation ({result.name})")
+        self._rot_left = max(float(self._rout.trajectory.duration) - self.period, 0.0)
+        s = q @ np.array(self._rout.new_position)
+        ds = q @ np.array(self._rout.new_velocity)
+        dds = q @ np.array(self._rout.new_acceleration)
+        if result == ruckig.Result.Finished and self.goal is not None:
+            self._finish_rotation()
+            return
+        self.r = np.asarray(pin.exp3(s)) @ self.r
+        self.w = angular_velocity(s, ds)
+        self.alpha = angular_acceleration(s, ds, dds)
+        if result == ruckig.Result.Finished and not np.any(target_velocity):  # braked to rest
+            self._finish_rotation()
+
+    def _finish_rotation(self) -> None:
+        if self.goal is not None:
+            self.r = self.goal.rotation.copy()
+        self.w, self.alpha = np.zeros(3), np.zeros(3)
+        self._rot_done, self._rot_left = True, 0.0
+
+    # ------------------------------------------------------------------ outputs
+
+    def sample(self) -> TargetSample:
+        """The current target (copies), as the offline trajectory gives it."""
+        name = "goal" if self.goal is not None else "jog" if self.twist is not None else "hold"
+        return TargetSample(
+            time=self.time, position=self.p.copy(), rotation=self.r.copy(),
+            linear_velocity=self.v.copy(), angular_velocity=self.w.copy(),
+            segment=self.commands, segment_name=name, done=self.state in (IDLE, REACHED),
+            linear_acceleration=self.a.copy(), angular_acceleration=self.alpha.copy(),
+        )
+
+    def progress(self) -> GoalProgress:
+        """State, distance [m], angle [rad] and time to go [s] to the goal (see :class:`GoalProgress`)."""
+        if self.goal is None:
+            left = max(self._pos_left, self._rot_left) if self.state == JOGGING else 0.0
+            return GoalProgress(self.state, None, 0.0, 0.0, left)
+        distance = float(np.linalg.norm(self.goal.position - self.p))
+        angle = float(np.linalg.norm(pin.log3(self.goal.rotation @ self.r.T)))
+        left = 0.0 if self.state == REACHED else max(self._pos_left, self._rot_left)
+        return GoalProgress(self.state, self.goal.stamp, distance, angle, left)
+
+
+# ---------------------------------------------------------------------- status keys (one place)
+
+STALLED = "stalled"
+"""Node-level state: the controller cannot follow (joint limits); set by the node, not here."""
+REJECTED = "rejected"
+"""Node-level state: the last command was refused (``reason`` says why); the motion goes on."""
+DRIVE_STATES = (*STATES, STALLED, REJECTED)
+
+STATUS_NAME = "trajectory_node"
+"""``/diagnostics`` status name carrying the drive keys (the trajectory node's entry)."""
+KEY_STATE = "drive_state"
+KEY_GOAL_STAMP = "goal_stamp"  # s, "%.9f" (the last goal received, accepted or not)
+KEY_DISTANCE = "distance_m"
+KEY_ANGLE = "angle_rad"
+KEY_TIME_TO_GO = "time_to_go_s"
+KEY_REASON = "reason"
+STATUS_KEYS = (KEY_STATE, KEY_GOAL_STAMP, KEY_DISTANCE, KEY_ANGLE, KEY_TIME_TO_GO, KEY_REASON)
+
+
+def status_values(progress: GoalProgress, state: str | None = None, reason: str = "",
+                  goal_stamp: float | None = None) -> dict[str, str]:
+    """The drive keys of the ``/diagnostics`` status (strings, as diagnostic_msgs/KeyValue holds them).
+
+    ``state`` overrides the generator's state (the node's :data:`STALLED` / :data:`REJECTED`);
+    ``goal_stamp`` the goal's stamp (a rejected goal's own stamp).
+    """
+    stamp = goal_stamp if goal_stamp is not None else progress.goal_stamp
+    return {KEY_STATE: state or progress.state, KEY_GOAL_STAMP: "" if stamp is None else f"{stamp:.9f}",
+            KEY_DISTANCE: f"{progress.distance:.6f}", KEY_ANGLE: f"{progress.angle:.6f}",
+            KEY_TIME_TO_GO: f"{progress.time_to_go:.3f}", KEY_REASON: reason}
+
+
+def parse_status(values: dict[str, str]) -> tuple[GoalProgress, str] | None:
+    """Inverse of :func:`status_values`: ``(progress, reason)``, or None if the keys are absent/malformed."""
+    try:
+        stamp = values[KEY_GOAL_STAMP]
+        progress = GoalProgress(values[KEY_STATE], float(stamp) if stamp else None, float(values[KEY_DISTANCE]),
+                                float(values[KEY_ANGLE]), float(values[KEY_TIME_TO_GO]))
+    except (KeyError, ValueError):
+        return None
+    return progress, values.get(KEY_REASON, "")

@@ -1,0 +1,153 @@
+"""Reference source of issue 18: timed goals and twists (or live ones), replanned online by ruckig.
+
+The relative target is the state of an :class:`~dualarm_control.online_trajectory.OnlineTrajectory`
+started at the measured relative pose (it holds it until a command comes). Its commands are
+
+* a script, the scenario file's ``goals:`` list (:mod:`dualarm_control.goal_script` gives the
+  schema), fed at their cycles by a :class:`~dualarm_control.goal_script.ScriptDriver`: the run
+  is deterministic, the same in one process and over ROS in lockstep; it ends ``settle_time``
+  after the script's last command has ended and the generator is at rest (found by a dry run of
+  the script from the same start pose, so both runs have the same number of cycles);
+* or live commands (``GoalsSource(None)``: the trajectory node's interactive mode), given to the
+  generator by the caller (:attr:`GoalsStream.generator`); the run has no end.
+
+Keys of a scenario file: ``goals`` (the list) instead of ``segments`` or ``tasks``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import ClassVar
+
+from dualarm_control.controller import ControllerParams, Cycle, RelativeController
+from dualarm_control.errors import ScenarioError
+from dualarm_control.goal_script import (
+    ScriptDriver,
+    ScriptError,
+    TimedCommand,
+    parse_goals,
+    script_duration,
+)
+from dualarm_control.kinematics import DualArmModel, FloatArray
+from dualarm_control.online_trajectory import OnlineTrajectory
+from dualarm_control.references.base import (
+    RELATIVE_TARGET,
+    RunOptions,
+    SourceDefaults,
+    StreamSample,
+)
+from dualarm_control.trajectory import MotionLimits
+
+MAX_SCRIPT_TIME = 600.0
+"""Longest a script may take to come to rest after its last command [s] (a dry run's bound)."""
+
+
+class GoalsStream:
+    """The online generator (and the script's driver) sampled at the cycle times 0, T, 2T, ...
+
+    Attributes:
+        generator: the online generator (live commands go to it).
+        driver: the script's driver, or None for live commands.
+        end: time [s] of the first cycle with no target (script end at rest + settle), inf when live.
+    """
+
+    def __init__(self, generator: OnlineTrajectory, commands: Sequence[TimedCommand] | None, end: float) -> None:
+        self.generator = generator
+        self.driver = ScriptDriver(commands, generator) if commands is not None else None
+        self.end = end
+
+    def advance(self, t: float) -> None:
+        """Step the generator (feeding the script first) until its time is ``t`` [s] (to half a period)."""
+        gen = self.generator
+        while gen.time < t - 0.5 * gen.period:
+            if self.driver is not None:
+                self.driver.feed()
+            gen.step()
+
+    def sample(self, t: float) -> StreamSample:
+        """The target at ``t`` [s] (times must not decrease)."""
+        self.advance(t)
+        target = self.generator.sample()
+        return StreamSample(target, None, f"{target.segment_name} {target.segment}")
+
+
+@dataclass(frozen=True)
+class GoalsSource(SourceDefaults):
+    """Timed goals and twists (``commands``), or live ones (``commands`` None): a
+    :class:`~dualarm_control.references.base.ReferenceSource` streaming /relative_target."""
+
+    commands: tuple[TimedCommand, ...] | None
+    kind: ClassVar[str] = "goals"
+    streams: ClassVar[tuple[str, ...]] = (RELATIVE_TARGET,)
+
+    def describe(self) -> str:
+        if self.commands is None:
+            return "live goals and twists"
+        goals = sum(1 for c in self.commands if not hasattr(c, "duration"))
+        return f"{goals} goals, {len(self.commands) - goals} twists"
+
+    def generator(self, model: DualArmModel, q0: FloatArray, limits: MotionLimits, period: float) -> OnlineTrajectory:
+        """A new generator holding the relative pose of q0 (n,) [rad]."""
+        return OnlineTrajectory(*model.relative_pose(q0), limits=limits, period=period, reach=model.relative_reach())
+
+    def end_time(self, model: DualArmModel, q0: FloatArray, options: RunOptions, period: float) -> float:
+        """Time [s] of the first cycle without target: a dry run of the script from q0's pose
+        until its last command has ended and the generator is at rest, plus the settle time."""
+        if self.commands is None:
+            return math.inf
+        stream = GoalsStream(self.generator(model, q0, options.limits, period), self.commands, math.inf)
+        last = script_duration(self.commands)
+        gen = stream.generator
+        assert stream.driver is not None
+        while not stream.driver.given or gen.time < last - 0.5 * period or not gen.sample().done:
+            if gen.time > last + MAX_SCRIPT_TIME:
+                raise RuntimeError(f"goals script not at rest {MAX_SCRIPT_TIME} s after its last command")
+            stream.advance(gen.time + period)
+        return gen.time + options.settle_time
+
+    def end_pose(self, model: DualArmModel, q0: FloatArray, limits: MotionLimits,
+                 period: float) -> tuple[FloatArray, FloatArray]:
+        """Where the script leaves the target at rest (position [m] (3,), rotation (3, 3)), from q0's pose."""
+        gen = self.generator(model, q0, limits, period)
+        if self.commands is not None:
+            stream = GoalsStream(gen, self.commands, math.inf)
+            end = self.end_time(model, q0, RunOptions(limits, 0.0), period)
+            stream.advance(end)
+        return gen.p.copy(), gen.r.copy()
+
+    def stream(self, model: DualArmModel, q0: FloatArray, options: RunOptions, period: float) -> GoalsStream:
+        """The targets of a run from the measured start configuration q0 (n,) [rad]."""
+        end = self.end_time(model, q0, options, period)
+        return GoalsStream(self.generator(model, q0, options.limits, period), self.commands, end)
+
+    def follower(self, model: DualArmModel, params: ControllerParams, q0: FloatArray,
+                 options: RunOptions) -> GoalsFollower:
+        return GoalsFollower(RelativeController(model, params), self.stream(model, q0, options, params.period))
+
+
+class GoalsFollower:
+    """The online generator's target followed by the relative pose task (as the segments')."""
+
+    uses_wrench = False
+
+    def __init__(self, controller: RelativeController, stream: GoalsStream) -> None:
+        self.controller = controller
+        self.stream = stream
+        self.label = controller.params.solver
+        self.steps = round(stream.end / controller.params.period)
+
+    def cycle(self, t: float, q: FloatArray, wrench: FloatArray | None) -> Cycle:
+        sample = self.stream.sample(t)
+        out = self.controller.step(q, sample.relative)
+        out.stage = sample.stage
+        return out
+
+
+def parse_goals_source(items: object) -> GoalsSource:
+    """The ``scenario.goals`` list as a source (ScenarioError naming the bad entry)."""
+    try:
+        return GoalsSource(parse_goals(items, "scenario.goals"))
+    except ScriptError as exc:
+        raise ScenarioError(str(exc)) from None

@@ -1,0 +1,108 @@
+"""`dualarm launch interactive` (issue 18), driven as a user would: a plain rclpy script
+(test/data/plain_driver.py, nothing from this package), `dualarm goal --wait`, and bad commands
+refused with their reason while the motion goes on. One real-time launch for the module."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from test_ros_live import Launch
+
+REPO = Path(__file__).resolve().parents[1]
+DRIVER = Path(__file__).parent / "data" / "plain_driver.py"
+
+
+@pytest.fixture(scope="module")
+def cell() -> Iterator[Launch]:
+    launch = Launch("interactive", "--solver", "sparse_qp")
+    try:
+        launch.wait_for("interactive: holding the measured relative pose", timeout=120)
+        yield launch
+    finally:
+        launch.kill()
+
+
+def drive(mode: str) -> dict[str, Any]:
+    done = subprocess.run([sys.executable, str(DRIVER), mode], check=False, capture_output=True, text=True, timeout=600)
+    lines = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
+    assert done.returncode == 0 and lines, done.stdout + done.stderr
+    return dict(json.loads(lines[-1][len("RESULT "):]))
+
+
+def test_plain_rclpy_goals_are_reached_and_a_mid_motion_goal_preempts(cell: Launch) -> None:
+    result = drive("goals")
+    assert len(result["reached"]) == 3
+    for distance, angle in result["reached"]:
+        assert distance <= 1e-3 and angle <= 1e-2
+    # the far goal (0.10 m away) was left after about 15 mm: the arms never came near it
+    assert result["nearest_to_far_m"] > 0.05
+    cell.wait_for("goal preempted by the goal of stamp")
+    cell.wait_for("goal reached (stamp")  # the node's own judge (0.5 mm, 5 mrad) of the last goal
+
+
+def test_dualarm_goal_wait_exits_0_on_reach(cell: Launch) -> None:
+    pose = subprocess.run([sys.executable, "-m", "dualarm_control.app.cli", "topic", "echo", "/relative_pose",
+                           "--once"], cwd=REPO, check=False, capture_output=True, text=True, timeout=120)
+    assert pose.returncode == 0, pose.stderr
+    import yaml
+
+    msg = next(d for d in yaml.safe_load_all(pose.stdout) if d)
+    p, o = msg["pose"]["position"], msg["pose"]["orientation"]
+    done = subprocess.run([sys.executable, "-m", "dualarm_control.app.cli", "goal", "--xyz", str(p["x"] + 0.02),
+                           str(p["y"]), str(p["z"]), "--quat", str(o["x"]), str(o["y"]), str(o["z"]), str(o["w"]),
+                           "--wait", "--timeout", "120"], cwd=REPO, check=False, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "reached: distance" in done.stdout
+
+
+@pytest.fixture(scope="module")
+def refusals(cell: Launch) -> dict[str, Any]:
+    return drive("bad")
+
+
+@pytest.mark.parametrize(("case", "reason"), [
+    ("nan", "NaN"), ("inf", "inf"), ("quaternion", "quaternion"), ("frame", "frame"),
+    ("reach", "beyond the arms' reach"), ("older_stamp", "older"),
+])
+def test_bad_goal_is_refused_with_its_reason_and_the_motion_goes_on(refusals: dict[str, Any], case: str,
+                                                                     reason: str) -> None:
+    r = refusals[case]
+    assert reason.lower() in r["reason"].lower()
+    assert r["rejected_stamp"] == pytest.approx(r["sent_stamp"], abs=1e-6)
+    # the motion went on to the goal accepted before: reached, and the status is that goal's again
+    assert r["arrived"][0] <= 1e-3 and r["arrived"][1] <= 1e-2
+    assert r["goal_stamp_after"] == pytest.approx(r["good_stamp"], abs=1e-6)
+    assert r["moved_m"] > 0.0
+
+
+def test_live_limit_is_validated(cell: Launch) -> None:
+    cli = [sys.executable, "-m", "dualarm_control.app.cli", "param", "set", "/trajectory_node"]
+    bad = subprocess.run([*cli, "limits.max_linear_velocity", "-0.1"], cwd=REPO, check=False, capture_output=True, text=True,
+                         timeout=120)
+    assert bad.returncode != 0
+    good = subprocess.run([*cli, "limits.max_linear_velocity", "0.08"], cwd=REPO, check=False, capture_output=True, text=True,
+                          timeout=120)
+    assert good.returncode == 0, good.stdout + good.stderr
+    cell.wait_for("limits changed: max_linear_velocity=0.08")
+
+
+def test_goal_out_of_the_joint_limits_ends_stalled_not_in_a_hang(cell: Launch) -> None:
+    """2.7 m apart is inside the reach bound (2.870 m) but not in the arms' workspace: stalled,
+    with the remaining error and the joints at a limit; `dualarm goal --wait` exits 1."""
+    cli = [sys.executable, "-m", "dualarm_control.app.cli"]
+    for name, value in (("max_linear_velocity", "0.25"), ("max_linear_acceleration", "1.0")):
+        done = subprocess.run([*cli, "param", "set", "/trajectory_node", f"limits.{name}", value], cwd=REPO,
+                              check=False, capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stdout + done.stderr
+    done = subprocess.run([*cli, "goal", "--xyz", "0", "0", "2.7", "--rpy", "0", "0", "0", "--wait", "--timeout", "200"],
+                          cwd=REPO, check=False, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 1, done.stdout + done.stderr
+    last = done.stdout.strip().splitlines()[-1]
+    assert last.startswith("stalled: ") and "remaining error" in last and "joints at a limit: left_joint" in last
+    cell.wait_for("goal stalled (stamp")

@@ -1,0 +1,101 @@
+"""A dependable start (issue 20, point 6): a node that joins a running cell gets its topics at once.
+
+Fast DDS 2.14 sends a new participant's first announcement before it listens
+(``RTPSParticipantImpl::enable``): a peer that answers at once is not heard, and does not
+answer the newcomer's later announcements, so the two matched only at the peer's next
+periodic announcement, every 3 s by default. The nodes announce every 0.1 s
+(config/fastdds_discovery.xml, applied by dualarm_control/ros/env.py). The worst case is a
+node joining a cell that is already running (no later newcomer makes the peer announce
+itself again): here the trajectory node starts 10 times against one running sim_node, in
+real time, and must receive its first /joint_states within 0.5 s of being up each time.
+That is the suite's one timing assertion: a start-up property, 6x the normal 80 ms; before
+the profile, 21 of 30 such starts took over 0.5 s, up to 3.3 s (docs/bench.md, "Start-up").
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+from xml.etree import ElementTree
+
+from dualarm_control.app.run.launcher import Launch, Process, node_command
+from dualarm_control.paths import config_path
+from dualarm_control.ros.env import (
+    FASTDDS_PROFILE_VARIABLE,
+    apply_discovery_profile,
+    apply_localhost_default,
+    discovery_profile,
+    localhost_environment,
+)
+
+STARTS = 10
+FIRST_STATE_WITHIN_S = 0.5
+REAL_TIME = ["-p", "lockstep:=false", "-p", "scenario:=assembly"]
+LOG_FORMAT = {"RCUTILS_CONSOLE_OUTPUT_FORMAT": "[{severity}] [{time}] [{name}]: {message}"}
+LOG_LINE = re.compile(r"\[INFO\] \[(\d+\.\d+)\] \[trajectory_node\]: (.*)")
+
+
+def log_time(lines: list[str], prefix: str) -> float:
+    """Time stamp [s] of the trajectory node's first log line starting with ``prefix``."""
+    for line in lines:
+        match = LOG_LINE.search(line)
+        if match and match.group(2).startswith(prefix):
+            return float(match.group(1))
+    raise AssertionError(f"no '{prefix}' line in:\n" + "\n".join(lines[-20:]))
+
+
+def wait_for(process: Process, text: str) -> None:
+    deadline = time.monotonic() + 120.0
+    while not any(text in line for line in process.lines):
+        assert time.monotonic() < deadline and process.popen.poll() is None, "\n".join(process.lines[-20:])
+        time.sleep(0.02)
+
+
+def first_state_delay() -> float:
+    """Start the trajectory node, stop it at its first joint state; seconds from up to that state."""
+    run = Launch(echo=False)
+    node = run.start("trajectory_node", node_command("trajectory_node", REAL_TIME), LOG_FORMAT)
+    try:
+        wait_for(node, "trajectory:")
+    finally:
+        run.stop()
+    # "scenario 'assembly': ... waiting for /joint_states" ends __init__; "trajectory: ..." is the first state
+    return log_time(node.lines, "trajectory:") - log_time(node.lines, "scenario '")
+
+
+def test_a_node_joining_a_running_cell_gets_its_first_joint_state_within_half_a_second() -> None:
+    cell = Launch(echo=False)
+    try:
+        sim = cell.start("sim_node", node_command("sim_node", REAL_TIME), LOG_FORMAT)
+        wait_for(sim, "real-time at")  # the end of its __init__: publishing from the next period on
+        delays = [first_state_delay() for _ in range(STARTS)]
+        assert sim.popen.poll() is None, "\n".join(sim.lines[-20:])
+    finally:
+        cell.stop()
+    assert max(delays) < FIRST_STATE_WITHIN_S, [round(d, 3) for d in delays]
+
+
+def announcement_period(profile: Path) -> float:
+    """The participant profile's periodic announcement [s] (Fast DDS XML leaseAnnouncement)."""
+    ns = {"f": "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"}
+    node = ElementTree.parse(profile).find(".//f:participant/f:rtps/f:builtin/f:discovery_config/f:leaseAnnouncement",
+                                           ns)
+    assert node is not None, profile
+    return float(node.findtext("f:sec", "0", ns)) + 1e-9 * float(node.findtext("f:nanosec", "0", ns))
+
+
+def test_the_discovery_profile_applies_unless_the_user_chose_a_fast_dds_profile(tmp_path: Path) -> None:
+    ours = str(discovery_profile())
+    assert announcement_period(discovery_profile()) == announcement_period(config_path("fastdds_link.xml")) == 0.1
+    env: dict[str, str] = {}
+    apply_localhost_default(env)
+    assert apply_discovery_profile(env, cwd=tmp_path) and env[FASTDDS_PROFILE_VARIABLE] == ours
+    assert localhost_environment({FASTDDS_PROFILE_VARIABLE: ours})["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    for key in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE"):  # the user's file wins
+        user = {key: "/home/me/my_profile.xml"}
+        assert not apply_discovery_profile(user, cwd=tmp_path) and user == {key: "/home/me/my_profile.xml"}
+        assert "ROS_AUTOMATIC_DISCOVERY_RANGE" not in localhost_environment(user)
+    (tmp_path / "DEFAULT_FASTRTPS_PROFILES.xml").write_text("<dds/>")  # Fast DDS loads it from the cwd
+    cwd_user: dict[str, str] = {}
+    assert not apply_discovery_profile(cwd_user, cwd=tmp_path) and cwd_user == {}
