@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from dualarm_control.app.faults.episodes import (
-    RunRecord,
+    GraphStreams,
     Status,
     arm_stop,
     completion,
@@ -22,7 +22,7 @@ def cycle(t: int, watchdog: str = "ok", trips: int = 0) -> Status:
 
 
 def test_safe_episode_figures() -> None:
-    rec = RunRecord()
+    rec = GraphStreams()
     rec.controller = [cycle(0), Status(120 * MS, 2, "joint_states stale by 16.2 ms", {"watchdog_trips": "1"}),
                       cycle(620 * MS, trips=1)]
     rec.command_t = [10 * MS, 125 * MS, 200 * MS, 300 * MS, 630 * MS]
@@ -34,7 +34,7 @@ def test_safe_episode_figures() -> None:
 
 
 def test_safe_episode_without_error_is_nan() -> None:
-    rec = RunRecord(controller=[cycle(0), cycle(5 * MS)])
+    rec = GraphStreams(controller=[cycle(0), cycle(5 * MS)])
     ep = safe_episode(rec, 1 * MS, 3 * MS, "joint_states stale")
     assert math.isnan(ep.detected_ms) and ep.zero_commands == 0
 
@@ -42,19 +42,19 @@ def test_safe_episode_without_error_is_nan() -> None:
 def test_arm_stop_counts_steps_from_the_last_answered_state() -> None:
     stamps = [k * 5 * MS for k in range(30)]
     speeds = [0.2] * 12 + [0.1] * 10 + [1e-4] * 8  # last answered state: index 9; rest from index 22
-    rec = RunRecord(state_stamp=stamps, state_speed=speeds, pose_stamp=stamps[:10])
+    rec = GraphStreams(state_stamp=stamps, state_speed=speeds, pose_stamp=stamps[:10])
     stop = arm_stop(rec, 0)
     assert stop.speed_at_last == 0.2 and stop.steps == 13 and stop.wall_ms == 65.0
 
 
 def test_arm_stop_never_at_rest() -> None:
     stamps = [k * 5 * MS for k in range(5)]
-    rec = RunRecord(state_stamp=stamps, state_speed=[0.2] * 5, pose_stamp=stamps[:2])
+    rec = GraphStreams(state_stamp=stamps, state_speed=[0.2] * 5, pose_stamp=stamps[:2])
     assert arm_stop(rec, 0).steps == -1
 
 
 def test_completion_reads_the_last_cycle() -> None:
-    rec = RunRecord(controller=[cycle(0), cycle(5 * MS)],
+    rec = GraphStreams(controller=[cycle(0), cycle(5 * MS)],
                     trajectory=[Status(6 * MS, 0, "complete", {})])
     done = completion(rec)
     assert done.complete and done.position_error_m == 1e-5 and done.latency_p50_ms == 1.0

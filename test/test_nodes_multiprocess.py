@@ -141,7 +141,7 @@ def test_table_one_means_from_the_bag_equal_in_process(lockstep_bags: dict[str, 
     model = DualArmModel()
     log = run_scenario(scenario, controller_params({"solver": solver}), model)
     expected = summarize_run(log, scenario, model)
-    got = report(lockstep_bags[solver], tmp_path)[solver]
+    got = report(lockstep_bags[solver], tmp_path)[0][solver]
     for key in ("l0_mean", "l1_mean", "l2_mean"):
         assert got[key] == pytest.approx(expected[key], rel=1e-9, abs=1e-12), key
 
@@ -155,7 +155,7 @@ def test_plan_run_by_the_nodes(tmp_path: Path) -> None:
     assert plan.returncode == 0, plan.stderr
     bag = tmp_path / "bag"
     assert launch_scenario("corner_path", [], [], True, bag, timeout=240.0, plan=tmp_path / "plan" / "plan.json") == 0
-    metrics = report(bag, tmp_path / "report")["joint_tracking"]
+    metrics = report(bag, tmp_path / "report")[0]["joint_tracking"]
     assert metrics["solver_failures"] == 0 and metrics["joint_velocity_limit_violations"] == 0
     assert metrics["max_tracking_error_m"] < 1e-3 and metrics["max_tracking_error_rad"] < 5e-3
     assert metrics["duration_s"] > 5.0

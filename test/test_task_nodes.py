@@ -19,9 +19,8 @@ from typing import Any
 import numpy as np
 
 from dualarm_control.app.record.bag import (
-    holds_task_cycles,
-    read_task_run,
-    report_tasks,
+    read_run,
+    report,
 )
 from dualarm_control.app.record.report import summarize_run
 from dualarm_control.app.run.experiment import run_scenario
@@ -35,6 +34,13 @@ DURATION = 6.0  # s of task time: past the 5 s convergence time of the metrics
 WALL_CLOCK = ("cycle_time_p50_s", "cycle_time_p99_s")  # measured, not reproducible
 PERIOD = 0.005
 
+
+
+def read_task(bag: Path) -> tuple[Any, Any]:
+    """The one run record of a task bag and its scenario."""
+    (log,), scenario = read_run(bag)
+    assert scenario is not None
+    return log, scenario
 
 def assert_cycle_times_reported(metrics: dict[str, float | int | str]) -> None:
     """The wall-clock figures are there and finite (their size belongs to ``dualarm bench``)."""
@@ -61,8 +67,8 @@ def test_lockstep_bag_metrics_equal_in_process(tmp_path: Path) -> None:
     bag = tmp_path / "bag"
     assert launch_scenario("pan_cleaning", [PARAMS], ["-p", f"duration:={DURATION!r}"], True, bag,
                            timeout=120.0) == 0
-    assert holds_task_cycles(bag)
-    results = report_tasks(bag, tmp_path / "report")
+    results, scenario = report(bag, tmp_path / "report")
+    assert scenario is not None and scenario.tasks is not None  # read as a task run
     assert (tmp_path / "report" / "metrics.json").is_file()
     assert (tmp_path / "report" / "tool_path.png").is_file()
     from_bag = results["k=1"]
@@ -72,7 +78,7 @@ def test_lockstep_bag_metrics_equal_in_process(tmp_path: Path) -> None:
         if key not in WALL_CLOCK:
             assert from_bag[key] == value, key
     assert_cycle_times_reported(from_bag)
-    log, _ = read_task_run(bag)
+    log, _ = read_task(bag)
     assert len(log.time) == round(DURATION / PERIOD)
 
 
@@ -82,11 +88,11 @@ def test_realtime_200hz_reports_cycle_time_and_tracks_the_circle(tmp_path: Path)
     bag = tmp_path / "bag"
     assert launch_scenario("pan_cleaning", [PARAMS], ["-p", f"duration:={DURATION!r}"], False, bag,
                            timeout=120.0, rate_hz=200.0) == 0
-    log, scenario = read_task_run(bag)
+    log, scenario = read_task(bag)
     metrics = summarize_run(log, scenario)
     print({k: metrics[k] for k in ("cycle_time_p50_s", "cycle_time_p99_s", "circle_rms_error_m")})
     # The task starts once the recorder reads /diagnostics (task_start_readers): the bag holds the
-    # run from t = 0 to the end (read_task_run checks every cycle's state is in it); in real time the
+    # run from t = 0 to the end (read_run checks every cycle's state is in it); in real time the
     # task time is the states' wall-clock stamps since the first, and a cycle may be missing where the
     # loaded machine missed a period (how many is a benchmark figure, not this test's).
     assert log.time[0] == 0.0 and log.time[-1] > DURATION - 0.01
@@ -154,7 +160,7 @@ def test_force_variant_lockstep_bag_metrics_equal_in_process(tmp_path: Path) -> 
     bag = tmp_path / "bag"
     assert launch_scenario("pan_cleaning", [PARAMS], ["-p", f"duration:={duration!r}"], True, bag,
                            timeout=120.0, force=True) == 0
-    log, scenario = read_task_run(bag)
+    log, scenario = read_task(bag)
     from_bag = summarize_run(log, scenario)
     expected = in_process(duration, force=True)
     assert set(from_bag) == set(expected)

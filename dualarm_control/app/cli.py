@@ -285,20 +285,15 @@ def cmd_bag_info(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    """Metrics of a recorded run: DIR/metrics.json, DIR/velocity_norms.png and the table."""
-    from dualarm_control.app.record.bag import holds_task_cycles, report, report_tasks
+    """Metrics of a recorded run: DIR/metrics.json, the figures of its kind and the table."""
+    from dualarm_control.app.record.bag import report
     from dualarm_control.app.record.report import format_table, format_task_table
 
     out = Path(args.output)
-    if holds_task_cycles(Path(args.bag)):  # a task scenario (pan_cleaning over ROS): the experiment's task metrics
-        task_results = report_tasks(Path(args.bag), out)
-        print(format_task_table(task_results))
-        print(f"\nwrote {out / 'metrics.json'}, {out / 'tool_path.png'}, {out / 'task_values.png'} and "
-              f"{out / 'joint_velocities.png'}")
-        return 0
-    results = report(Path(args.bag), out)
-    print(format_table(results))
-    print(f"\nwrote {out / 'metrics.json'} and {out / 'velocity_norms.png'}")
+    results, scenario = report(Path(args.bag), out)
+    print(format_table(results) if scenario is None else format_task_table(results))
+    figures = "velocity_norms.png" if scenario is None else "tool_path.png, task_values.png, joint_velocities.png"
+    print(f"\nwrote {out / 'metrics.json'} and {figures} in {out}")
     return 0
 
 

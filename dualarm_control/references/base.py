@@ -126,8 +126,8 @@ class ReferenceSource(Protocol):
             there is force).
         streams: the topics a controller cycle consumes besides /joint_states, in the node
             (the source decides what the controller node subscribes): segments
-            (/relative_target), plan (/joint_reference and /relative_target), tasks with force (/wrench), none
-            for tasks without force.
+            (/relative_target), plan (/relative_target and /joint_reference), none for tasks (the
+            force variant adds /wrench: ``Follower.uses_wrench``).
 
     Methods:
         describe(): one line for logs ("3 segments", "6 tasks", "plan <file>").

@@ -61,7 +61,7 @@ class PlanSource(SourceDefaults):
     """
 
     kind: ClassVar[str] = "plan"
-    streams: ClassVar[tuple[str, ...]] = (JOINT_REFERENCE, RELATIVE_TARGET)
+    streams: ClassVar[tuple[str, ...]] = (RELATIVE_TARGET, JOINT_REFERENCE)
 
     def __init__(self, model: DualArmModel, config: PlanConfig, configurations: FloatArray, path: str = "") -> None:
         self.model = model

@@ -203,6 +203,11 @@ class TasksController:
         """The circle task as built (normal offset 0), or None."""
         return self._circle
 
+    def circle_error(self, cycle: Cycle) -> float:
+        """|value| of the circle task in a cycle of this controller [m] (NaN without a circle task)."""
+        rows = next((r for r in cycle.rows if self.circle is not None and r.name == self.circle.name), None)
+        return float(np.linalg.norm(rows.value)) if rows is not None else math.nan
+
     def reset(self) -> None:
         """Forget the solver's warm start, the filter state and the force integral."""
         self.controller.reset()

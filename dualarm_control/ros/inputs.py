@@ -10,22 +10,31 @@ solver failure"):
   source (a simulator restarted mid-run) is accepted after a few consecutive, mutually
   monotonic older samples.
 * :class:`Throttle`: at most one log line per interval, with the count of suppressed ones.
+* :class:`StreamInputs`: the latest (lockstep: by stamp) samples of the streams a cycle takes.
+* :class:`CycleTiming`: period jitter, missed periods and state-to-command latency of the cycles.
 
 Nothing here holds control math; only :func:`subscribe_checked` imports rclpy.
 """
 
 from __future__ import annotations
 
+import math
 import time
-from collections.abc import Callable
+from collections import deque
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar
 
+import numpy as np
+
+from dualarm_control.metrics import percentiles
 from dualarm_control.ros.cdr import CdrError
 
 DESERIALIZE_ERRORS = (RuntimeError, ValueError, TypeError, OverflowError, MemoryError)
 """What deserialize_message raises on a bad payload (rclpy's RMWError is a RuntimeError)."""
 T_co = TypeVar("T_co", covariant=True)
+WINDOW = 2000
+"""Samples kept for the jitter and latency percentiles."""
 RESTART_AFTER = 3
 """Consecutive older, mutually monotonic stamps after which a new time base is accepted."""
 
@@ -139,3 +148,87 @@ def subscribe_checked(node: Any, msg_type: Any, topic: str, callback: Callable[[
         callback(msg if decoder is None else decoder.from_message(msg))
 
     return node.create_subscription(msg_type, topic, receive, qos, raw=True)
+
+
+class StreamInputs:
+    """What a node's cycle takes besides the joint state: per stream (topic) the latest accepted
+    sample with its receipt time (monotonic ns) and, in lockstep, the samples waiting for the
+    cycle of their stamp. Stamps are checked per stream, ``/joint_states`` included (:class:`StampGate`)."""
+
+    def __init__(self, streams: Sequence[str], lockstep: bool) -> None:
+        self.streams, self.lockstep = tuple(streams), lockstep
+        self.gates = {s: StampGate(s.lstrip("/")) for s in ("/joint_states", *self.streams)}
+        self.latest: dict[str, tuple[Any, int]] = {}
+        self.pending: dict[str, dict[int, Any]] = {s: {} for s in self.streams}
+
+    def check(self, stream: str, stamp_ns: int) -> StampVerdict:
+        """The stream's stamp gate; a restarted time source drops the lockstep samples of the old time base."""
+        verdict = self.gates[stream].check(stamp_ns)
+        if verdict.accepted and verdict.message:
+            self.pending = {s: {k: v for k, v in p.items() if k <= stamp_ns} for s, p in self.pending.items()}
+        return verdict
+
+    def put(self, stream: str, stamp_ns: int, value: Any) -> None:
+        """An accepted sample: the latest of its stream (lockstep: also kept by stamp)."""
+        self.latest[stream] = (value, time.monotonic_ns())
+        if self.lockstep:
+            self.pending[stream][stamp_ns] = value
+
+    def at(self, stamp_ns: int) -> dict[str, Any] | None:
+        """Lockstep: the sample of every stream stamped ``stamp_ns`` (these and older ones are
+        dropped), or None while one of them is on the way."""
+        if not all(stamp_ns in p for p in self.pending.values()):
+            return None
+        out = {s: p[stamp_ns] for s, p in self.pending.items()}
+        self.pending = {s: {k: v for k, v in p.items() if k > stamp_ns} for s, p in self.pending.items()}
+        return out
+
+
+class CycleTiming:
+    """Timing of the cycles a stream drives: the stream's period jitter and missed periods (real
+    time only), and the state-to-command latency; percentiles over the last ``WINDOW`` cycles."""
+
+    def __init__(self, realtime: bool) -> None:
+        self.realtime = realtime
+        self.missed = 0
+        self.interval = math.nan  # last inter-arrival time [s]
+        self.jitter: deque[float] = deque(maxlen=WINDOW)
+        self.latency: deque[float] = deque(maxlen=WINDOW)
+        self._last: int | None = None
+        self._stats = self.percentiles()
+
+    def arrival(self, now_ns: int, period: float) -> None:
+        """A sample of the driving stream arrived at monotonic ``now_ns``; ``period`` [s] is the nominal one."""
+        period_ns = period * 1e9
+        if self._last is not None and self.realtime:
+            dt = now_ns - self._last
+            self.interval = dt / 1e9
+            self.jitter.append(abs(dt - period_ns) / 1e9)
+            if dt > 1.5 * period_ns:
+                self.missed += round(dt / period_ns) - 1
+        self._last = now_ns
+
+    def command(self, stamp_ns: int, received_ns: int, period: float) -> float:
+        """A command was sent for the state of ``stamp_ns`` received at monotonic ``received_ns``;
+        returns the latency [s]. Real time: from the state's stamp (its publication, wall clock) to
+        now, transport included; lockstep stamps are simulation time: from receipt."""
+        latency = (time.time_ns() - stamp_ns if self.realtime else time.monotonic_ns() - received_ns) / 1e9
+        self.latency.append(latency)
+        if self.realtime and latency > period:
+            self.missed += 1
+        return latency
+
+    def values(self, latency: float, refresh: bool) -> dict[str, str]:
+        """A cycle's /diagnostics timing values: its ``latency`` [s], the last interval, and the
+        percentiles of both (recomputed when ``refresh``: once a second, not every cycle)."""
+        if refresh:
+            self._stats = self.percentiles()
+        (j50, j99), (l50, l99) = self._stats
+        return {"period_jitter_p50_s": f"{j50:.6e}", "period_jitter_p99_s": f"{j99:.6e}",
+                "state_interval_s": f"{self.interval:.6e}", "state_to_command_latency_s": f"{latency:.6e}",
+                "state_to_command_latency_p50_s": f"{l50:.6e}", "state_to_command_latency_p99_s": f"{l99:.6e}"}
+
+    def percentiles(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        """(p50, p99) of the period jitter and of the latency [s] (NaN when there is no sample)."""
+        return tuple(percentiles(np.array(b)) if b else (math.nan, math.nan)  # type: ignore[return-value]
+                     for b in (self.jitter, self.latency))

@@ -9,6 +9,7 @@
   closes the shell, destroys the node and shuts rclpy down in that order (so no "publisher's
   context is invalid"). Exit codes: 0 normal end or signal, 2 bad parameters, 1 other errors.
 * :func:`tool_node` gives the tool verbs a short-lived node and executor.
+* :class:`LiveParameters`: live changes validated at once, applied at the next cycle boundary.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import sys
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from types import FrameType
-from typing import Any, Self
+from typing import Any, Generic, Self, TypeVar
 
 from dualarm_control.errors import DualArmError, ParameterError
 from dualarm_control.params import ParamSpec, read_params_files
@@ -32,6 +33,7 @@ EXIT_OK = 0
 EXIT_ERROR = 1
 EXIT_PARAMS = 2
 SPIN_TIMEOUT_S = 0.1
+T = TypeVar("T")
 
 
 def descriptor(spec: ParamSpec) -> Any:
@@ -76,6 +78,48 @@ def declare(node: Any, specs: Iterable[ParamSpec]) -> dict[str, Any]:
         if key not in declared and not node.has_parameter(key):
             node.get_logger().warning(f"ignoring unknown parameter '{key}' (not declared by {name})")
     return values
+
+
+class LiveParameters(Generic[T]):
+    """Live parameter changes of ``node``: each is validated with the core's rules (``specs``) and
+    by ``build`` (which makes what the change needs, e.g. a new controller, and raises
+    DualArmError or ValueError to refuse it) when it is set; :meth:`take` hands the accepted
+    change over at the next cycle boundary. A refused change leaves the running values untouched."""
+
+    def __init__(self, node: Any, specs: Mapping[str, ParamSpec], values: dict[str, Any],
+                 build: Callable[[dict[str, Any]], T]) -> None:
+        self.node, self.specs, self.values, self.build = node, specs, values, build
+        self.pending: tuple[dict[str, Any], T] | None = None
+        node.add_on_set_parameters_callback(self.on_set)
+
+    def on_set(self, parameters: list[Any]) -> Any:
+        from rcl_interfaces.msg import SetParametersResult
+
+        changes = {p.name: p.value for p in parameters if p.name in self.specs}
+        if not changes:
+            return SetParametersResult(successful=True)
+        try:
+            for key, value in changes.items():
+                self.specs[key].validate(value, self.node.get_name())
+            merged = {**self.values, **changes}
+            built = self.build(merged)
+        except (DualArmError, ValueError) as exc:
+            self.node.get_logger().warning(f"parameter change refused: {exc}")
+            return SetParametersResult(successful=False, reason=str(exc))
+        self.pending = (merged, built)
+        return SetParametersResult(successful=True)
+
+    def take(self, where: str = "") -> tuple[dict[str, Any], T] | None:
+        """The accepted change not yet applied (its values and what ``build`` made), logged
+        ("parameters changed<where>: ..."); or None."""
+        if self.pending is None:
+            return None
+        (merged, built), self.pending = self.pending, None
+        changed = {k: v for k, v in merged.items() if self.values.get(k) != v}
+        self.values = merged
+        self.node.get_logger().info(f"parameters changed{where}: "
+                                    + ", ".join(f"{k}={v!r}" for k, v in changed.items()))
+        return merged, built
 
 
 def params_files(argv: Sequence[str]) -> list[str]:
@@ -276,6 +320,14 @@ def thread_priority_spec(default: int, what: str) -> ParamSpec:
     """The ``thread_priority`` parameter of a node whose ``what`` runs every control period."""
     return ParamSpec("thread_priority", default, f"SCHED_FIFO priority of {what} (0: normal scheduling)",
                      check=lambda v: "" if 0 <= v <= 99 else "an integer in [0, 99]", read_only=True, bounds=(0, 99))
+
+
+def log_priority(log: Any, note: str, priority: int) -> None:
+    """Log the outcome of :func:`request_realtime_priority` (``note``: '' granted, "disabled", or why not)."""
+    if note and note != "disabled":
+        log.warning(note)
+    elif not note:
+        log.info(f"running under SCHED_FIFO priority {priority}")
 
 
 def priority_from_args(argv: Sequence[str], default: int, node_name: str) -> int:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dualarm_control.app.faults.episodes import RunRecord, read_record
+from dualarm_control.app.faults.episodes import GraphStreams, read_record
 from dualarm_control.app.faults.netns import exec_prefix
 from dualarm_control.app.run.launcher import (
     Launch,
@@ -154,5 +154,5 @@ class CellRun:
             (self.out / f"{proc.name}{suffix}.log").write_text("\n".join(proc.lines) + "\n")
         return {p.name: p.popen.returncode for p in self.launch.procs}
 
-    def record(self) -> RunRecord:
+    def record(self) -> GraphStreams:
         return read_record(self.bag)

@@ -39,8 +39,12 @@ class Status:
 
 
 @dataclass
-class RunRecord:
-    """The streams of one run, in receive order."""
+class GraphStreams:
+    """The graph-level streams of a fault run, in receive order: every node's /diagnostics
+    status (controller, simulator, trajectory node), the largest |command| per message, the
+    joint-state and pose stamps. Not a per-cycle record (that is
+    :class:`dualarm_control.app.run.experiment.RunRecord`): a fault run is judged on what
+    every node published and when, including safe commands and statuses outside cycles."""
 
     controller: list[Status] = field(default_factory=list)
     sim: list[Status] = field(default_factory=list)
@@ -52,32 +56,22 @@ class RunRecord:
     pose_stamp: list[int] = field(default_factory=list)
 
 
-def read_record(bag: Path) -> RunRecord:
-    """Decode the graph topics of a fault run's bag."""
-    from dualarm_control.app.record.bag import open_reader
+def read_record(bag: Path) -> GraphStreams:
+    """The graph streams of a fault run's bag, from the one bag reader (:func:`~dualarm_control.app.record.bag.read_bag`)."""
+    from dualarm_control.app.record.bag import COMMANDS_TOPIC, read_bag
 
-    rec = RunRecord()
+    data, rec = read_bag(bag), GraphStreams()
     statuses = {"controller_node": rec.controller, "sim_node": rec.sim, "trajectory_node": rec.trajectory}
-    reader = open_reader(bag)
-    try:
-        for conn, t, raw in reader.messages():
-            msg: Any = reader.deserialize(raw, conn.msgtype)
-            if conn.topic == "/diagnostics":
-                for s in msg.status:
-                    if s.name in statuses:
-                        level = s.level[0] if isinstance(s.level, (bytes, bytearray)) else int(s.level)
-                        statuses[s.name].append(Status(t, int(level), s.message,
-                                                       {kv.key: kv.value for kv in s.values}))
-            elif conn.topic == "/velocity_controller/commands":
-                rec.command_t.append(t)
-                rec.command_max.append(float(np.max(np.abs(msg.data))) if len(msg.data) else 0.0)
-            elif conn.topic == "/joint_states":
-                rec.state_stamp.append(stamp_ns(msg.header.stamp))
-                rec.state_speed.append(float(np.max(np.abs(msg.velocity))) if len(msg.velocity) else 0.0)
-            elif conn.topic == "/relative_pose":
-                rec.pose_stamp.append(stamp_ns(msg.header.stamp))
-    finally:
-        reader.close()
+    for s in data.statuses:
+        if s.name in statuses:
+            statuses[s.name].append(Status(s.t, s.level, s.message, s.values))
+    for t, command in data.rows[COMMANDS_TOPIC]:
+        rec.command_t.append(t)
+        rec.command_max.append(float(np.max(np.abs(command))) if len(command) else 0.0)
+    for _, stamp, _, msg in data.states:
+        rec.state_stamp.append(stamp)
+        rec.state_speed.append(float(np.max(np.abs(msg.velocity))) if len(msg.velocity) else 0.0)
+    rec.pose_stamp = list(data.pose_stamps)
     return rec
 
 
@@ -108,7 +102,7 @@ def _trips(statuses: list[Status]) -> int:
     return max((int(s.values.get("watchdog_trips", 0)) for s in statuses), default=0)
 
 
-def safe_episode(rec: RunRecord, start: int, resume: int, reason_text: str, end: int | None = None) -> SafeEpisode:
+def safe_episode(rec: GraphStreams, start: int, resume: int, reason_text: str, end: int | None = None) -> SafeEpisode:
     """First ERROR whose message contains ``reason_text`` after ``start``, the commands sent while safe,
     and the first cycle after ``resume`` with the watchdog ok (searched until ``end``)."""
     errors = [s for s in rec.controller if s.t >= start and s.level == 2 and reason_text in s.message
@@ -141,7 +135,7 @@ class ArmStop:
                 f"({self.wall_ms:.0f} ms wall) after the last state it answered")
 
 
-def arm_stop(rec: RunRecord, after_stamp: int) -> ArmStop:
+def arm_stop(rec: GraphStreams, after_stamp: int) -> ArmStop:
     """Steps from the last state the controller answered (stamp >= ``after_stamp``) to rest."""
     answered = [s for s in rec.pose_stamp if s >= after_stamp]
     if not answered:
@@ -178,7 +172,7 @@ class Completion:
                 f"mrad, state-to-command latency p50/p99 {self.latency_p50_ms:.2f}/{self.latency_p99_ms:.2f} ms")
 
 
-def completion(rec: RunRecord) -> Completion:
+def completion(rec: GraphStreams) -> Completion:
     cycles = [s for s in rec.controller if s.is_cycle]
     complete = any(s.message == "complete" for s in rec.trajectory)
     if not cycles:
@@ -208,7 +202,7 @@ class BagCheck:
 SIGNAL_MARGIN_NS = 1_000_000
 
 
-def check_signalled_bag(bag: Path, reference: RunRecord, signal_ns: int) -> BagCheck:
+def check_signalled_bag(bag: Path, reference: GraphStreams, signal_ns: int) -> BagCheck:
     """Every /joint_states of the reference stamped from the bag's first to 1 ms before the signal is in the bag."""
     from dualarm_control.app.record.bag import BagError, open_reader
 

@@ -23,7 +23,7 @@ from typing import Any
 
 from dualarm_control.app.faults.cell_run import CellRun, RunError
 from dualarm_control.app.faults.episodes import (
-    RunRecord,
+    GraphStreams,
     arm_stop,
     check_signalled_bag,
     completion,
@@ -125,7 +125,7 @@ def _recovered(run: CellRun, line: int, timeout: float = 30.0) -> tuple[int, int
     return sum("safe state:" in t for t in lines), sum("recovered after" in t for t in lines)
 
 
-def _episode_row(name: str, rec: RunRecord, ep: _Episode, reason: str, limit_ms: float, within_ms: float) -> Row:
+def _episode_row(name: str, rec: GraphStreams, ep: _Episode, reason: str, limit_ms: float, within_ms: float) -> Row:
     e = safe_episode(rec, ep.start, ep.resume, reason)
     logs = ep.logs
     passed = (e.age_ms <= limit_ms and e.other_commands == 0 and e.zero_commands > 0
@@ -244,7 +244,7 @@ def _ros_env(profile: bool, peer: str = "") -> dict[str, str]:
             "FASTRTPS_DEFAULT_PROFILES_FILE": str(config_path("fastdds_link.xml"))}
 
 
-def _completion_row(name: str, rec: RunRecord, extra: str = "", ok: bool = True, **figures: Any) -> Row:
+def _completion_row(name: str, rec: GraphStreams, extra: str = "", ok: bool = True, **figures: Any) -> Row:
     c = completion(rec)
     passed = (ok and c.complete and c.position_error_m < FINAL_POSITION_M
               and c.orientation_error_rad < FINAL_ORIENTATION_RAD)

@@ -1,8 +1,10 @@
 """``bag info`` and the bag report: reading rosbag2 bags with ``rosbags`` (no ROS needed).
 
-Recording is :mod:`dualarm_control.ros.recorder` (rclpy). The report reads a bag with
-``rosbags.highlevel.AnyReader`` and builds the same metrics record as an in-process
-experiment (:func:`dualarm_control.app.record.report.summarize`).
+Recording is :mod:`dualarm_control.ros.recorder` (rclpy). :func:`read_run` reads a bag (one
+pass, ``rosbags.highlevel.AnyReader``) into the run records of the in-process runner
+(:class:`~dualarm_control.app.run.experiment.RunRecord`: one per solver of a relative-motion
+run, the one of a task run); :func:`report` summarises them with the same
+:func:`~dualarm_control.app.record.report.summarize_run` and draws the figures of their kind.
 
 Task bags (paper 001): A task run's bag holds ``/joint_states``, ``/velocity_controller/commands``, ``/diagnostics``
 (``/wrench``, ``/clock``). The controller's per-cycle status names the scenario, the gain k,
@@ -26,7 +28,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -53,6 +55,12 @@ REPORT_TOPICS = (COMMANDS_TOPIC, JOINT_STATES_TOPIC, DIAGNOSTICS_TOPIC, POSE_TOP
 CONTROLLER_STATUS = "controller_node"
 """``DiagnosticStatus.name`` of the controller's per-cycle status."""
 DEFAULT_PERIOD_S = 0.005
+TASK_KEY = "task_gain"
+"""A controller status with this key is a task cycle (controller_node task mode)."""
+SCENARIO_KEY = "scenario"
+"""The task scenario's name or path in a task cycle's status."""
+SIM_STATUS = "sim_node"
+CONTACT_TOPIC = "/contact_force"
 
 
 class BagError(DualArmError):
@@ -162,40 +170,14 @@ class TimedSeries:
     values: FloatArray
 
 
-@dataclass
-class ControllerDiagnostics:
-    """The controller's per-cycle status from ``/diagnostics`` (one entry per cycle)."""
-
-    t: IntArray
-    solver: list[str] = field(default_factory=list)
-    status: list[str] = field(default_factory=list)
-    cycle_time: list[float] = field(default_factory=list)
-    position_error: list[float] = field(default_factory=list)
-    orientation_error: list[float] = field(default_factory=list)
-    period: list[float] = field(default_factory=list)
-    stamp_ns: list[int | None] = field(default_factory=list)
-
-
-@dataclass
-class RunData:
-    """What a report needs from a bag, joint vectors in the model's joint order."""
-
-    commands: TimedSeries
-    positions: TimedSeries
-    velocities: FloatArray
-    poses: TimedSeries
-    targets: TimedSeries
-    diagnostics: ControllerDiagnostics
-
-
-def _float(text: str | None, default: float = float("nan")) -> float:
+def parse_float(text: str | None, default: float = float("nan")) -> float:
     try:
         return float(text) if text is not None else default
     except ValueError:
         return default
 
 
-def _int_or_none(text: str | None) -> int | None:
+def parse_int(text: str | None) -> int | None:
     try:
         return int(text) if text is not None else None
     except ValueError:
@@ -207,60 +189,84 @@ def _pose_vector(translation: Any, rotation: Any) -> list[float]:
             float(rotation.x), float(rotation.y), float(rotation.z), float(rotation.w)]
 
 
-class _RunCollector:
-    """Accumulates the messages of one bag pass, topic by topic."""
+@dataclass(frozen=True)
+class Status:
+    """One /diagnostics status: receive time [ns], node name, level, message and values."""
 
-    def __init__(self, joint_names: Sequence[str]) -> None:
-        self.joint_names = list(joint_names)
-        self.rows: dict[str, list[tuple[int, Any]]] = {t: [] for t in REPORT_TOPICS}
-        self.velocities: list[FloatArray] = []
-        self.diag = ControllerDiagnostics(t=np.zeros(0, dtype=np.int64))
-        self.diag_t: list[int] = []
-        self._order: dict[tuple[str, ...], list[int]] = {}
+    t: int
+    name: str
+    level: int
+    message: str
+    values: dict[str, str]
+
+
+@dataclass
+class Bag:
+    """The messages of one pass over a bag (:func:`read_bag`): what a run record of either kind,
+    and the fault matrix's graph streams (:mod:`dualarm_control.app.faults.episodes`), are built from."""
+
+    rows: dict[str, list[tuple[int, Any]]] = field(  # (receive ns, values) of commands, poses, targets
+        default_factory=lambda: {t: [] for t in (COMMANDS_TOPIC, POSE_TOPIC, TARGET_TOPIC)})
+    states: list[tuple[int, int, list[str], Any]] = field(default_factory=list)  # (receive ns, stamp, names, msg)
+    statuses: list[Status] = field(default_factory=list)  # every node's, in receive order
+    pose_stamps: list[int] = field(default_factory=list)  # /relative_pose header stamps
+    contact: dict[int, float] = field(default_factory=dict)  # /contact_force by header stamp
+    missing: list[str] = field(default_factory=list)  # the relative report's topics the bag lacks
 
     def add(self, topic: str, t: int, msg: Any) -> None:
-        handler = {
-            COMMANDS_TOPIC: lambda: self.rows[topic].append((t, np.asarray(msg.data, dtype=float))),
-            JOINT_STATES_TOPIC: lambda: self._joint_state(t, msg),
-            DIAGNOSTICS_TOPIC: lambda: self._diagnostics(t, msg),
-            POSE_TOPIC: lambda: self.rows[topic].append((t, _pose_vector(msg.pose.position, msg.pose.orientation))),
-            TARGET_TOPIC: lambda: self._target(t, msg),
-        }[topic]
-        handler()
+        if topic == JOINT_STATES_TOPIC:
+            self.states.append((t, stamp_ns(msg.header.stamp), list(msg.name), msg))
+        elif topic == CONTACT_TOPIC:
+            self.contact.setdefault(stamp_ns(msg.header.stamp), float(msg.vector.z))
+        elif topic == COMMANDS_TOPIC:
+            self.rows[topic].append((t, np.asarray(msg.data, dtype=float)))
+        elif topic == POSE_TOPIC:
+            self.rows[topic].append((t, _pose_vector(msg.pose.position, msg.pose.orientation)))
+            self.pose_stamps.append(stamp_ns(msg.header.stamp))
+        elif topic == TARGET_TOPIC:
+            if msg.points and msg.points[0].transforms:
+                tf = msg.points[0].transforms[0]
+                self.rows[topic].append((t, _pose_vector(tf.translation, tf.rotation)))
+        else:
+            for s in msg.status:
+                level = s.level[0] if isinstance(s.level, (bytes, bytearray)) else int(s.level)
+                self.statuses.append(Status(t, s.name, int(level), s.message, {kv.key: kv.value for kv in s.values}))
 
-    def _reorder(self, names: Sequence[str]) -> list[int]:
-        key = tuple(names)
-        if key not in self._order:
-            missing = [j for j in self.joint_names if j not in key]
-            if missing:
-                raise BagError(f"{JOINT_STATES_TOPIC} lacks joints {', '.join(missing)} (has {', '.join(key)})")
-            self._order[key] = [key.index(j) for j in self.joint_names]
-        return self._order[key]
+    @property
+    def cycles(self) -> list[tuple[int, dict[str, str]]]:
+        """(receive ns, values) of the controller's statuses."""
+        return [(s.t, s.values) for s in self.statuses if s.name == CONTROLLER_STATUS]
 
-    def _joint_state(self, t: int, msg: Any) -> None:
-        idx = self._reorder(list(msg.name))
-        self.rows[JOINT_STATES_TOPIC].append((t, np.asarray(msg.position, dtype=float)[idx]))
-        if len(msg.velocity) == len(msg.name):
-            self.velocities.append(np.asarray(msg.velocity, dtype=float)[idx])
+    @property
+    def table_contacts(self) -> int:
+        """The simulator's running total of table contacts (its last 1 Hz status)."""
+        return max((int(s.values["table_contacts"]) for s in self.statuses
+                    if s.name == SIM_STATUS and "table_contacts" in s.values), default=0)
 
-    def _target(self, t: int, msg: Any) -> None:
-        if msg.points and msg.points[0].transforms:
-            tf = msg.points[0].transforms[0]
-            self.rows[TARGET_TOPIC].append((t, _pose_vector(tf.translation, tf.rotation)))
+    @property
+    def task_cycles(self) -> list[tuple[int, dict[str, str]]]:
+        """The controller's task cycles (none in a bag with relative targets)."""
+        return [] if self.rows[TARGET_TOPIC] else [(t, v) for t, v in self.cycles if TASK_KEY in v]
 
-    def _diagnostics(self, t: int, msg: Any) -> None:
-        for status in msg.status:
-            if status.name != CONTROLLER_STATUS:
-                continue
-            values = {kv.key: kv.value for kv in status.values}
-            self.diag_t.append(t)
-            self.diag.solver.append(values.get("solver", "unknown"))
-            self.diag.status.append(values.get("status", ""))
-            self.diag.cycle_time.append(_float(values.get("cycle_time_s")))
-            self.diag.position_error.append(_float(values.get("position_error_m")))
-            self.diag.orientation_error.append(_float(values.get("orientation_error_rad")))
-            self.diag.period.append(_float(values.get("control_period_s")))
-            self.diag.stamp_ns.append(_int_or_none(values.get("stamp_ns")))
+    def require_report_topics(self, path: Path) -> None:
+        """BagError naming the topics a relative-motion report needs and the bag lacks."""
+        if self.missing:
+            raise BagError(f"bag {path} lacks {', '.join(self.missing)} (the report needs {', '.join(REPORT_TOPICS)})")
+
+    def joint_states(self, joint_names: Sequence[str]) -> tuple[TimedSeries, FloatArray]:
+        """/joint_states in the order of ``joint_names``: positions by receive time, and the
+        velocities (as many rows as states carry them)."""
+        order: dict[tuple[str, ...], list[int]] = {}
+        q_rows, qd_rows = [], []
+        for _, _, names, msg in self.states:
+            idx = _joint_order(names, joint_names, order)
+            q_rows.append(np.asarray(msg.position, dtype=float)[idx])
+            if len(msg.velocity) == len(names):
+                qd_rows.append(np.asarray(msg.velocity, dtype=float)[idx])
+        n = len(joint_names)
+        return (TimedSeries(np.array([s[0] for s in self.states], dtype=np.int64),
+                            np.array(q_rows, dtype=float).reshape(len(q_rows), n)),
+                np.array(qd_rows, dtype=float).reshape(len(qd_rows), n))
 
     def series(self, topic: str, width: int) -> TimedSeries:
         rows = self.rows[topic]
@@ -268,18 +274,18 @@ class _RunCollector:
         values = np.array([r[1] for r in rows], dtype=float).reshape(len(rows), width)
         return TimedSeries(t, values)
 
-    def finish(self) -> RunData:
-        n = len(self.joint_names)
-        widths = {len(v) for _, v in self.rows[COMMANDS_TOPIC]}
-        if widths != {n}:
-            raise BagError(f"{COMMANDS_TOPIC} data must have {n} values (one per joint), got lengths {sorted(widths)}")
-        if not self.diag_t:
-            raise BagError(f"{DIAGNOSTICS_TOPIC} has no status named '{CONTROLLER_STATUS}'")
-        self.diag.t = np.array(self.diag_t, dtype=np.int64)
-        positions = self.series(JOINT_STATES_TOPIC, n)
-        velocities = np.array(self.velocities, dtype=float).reshape(len(self.velocities), n)
-        return RunData(self.series(COMMANDS_TOPIC, n), positions, velocities,
-                       self.series(POSE_TOPIC, 7), self.series(TARGET_TOPIC, 7), self.diag)
+
+def read_bag(path: Path) -> Bag:
+    """Every message a report or a fault analysis reads, in one pass."""
+    reader = open_reader(path)
+    bag = Bag(missing=missing_topics(reader))
+    try:
+        connections = [c for c in reader.connections if c.topic in (*REPORT_TOPICS, CONTACT_TOPIC)]
+        for conn, t, raw in reader.messages(connections=connections):
+            bag.add(conn.topic, t, reader.deserialize(raw, conn.msgtype))
+    finally:
+        reader.close()
+    return bag
 
 
 def missing_topics(reader: AnyReader, needed: Iterable[str] = REPORT_TOPICS) -> list[str]:
@@ -288,20 +294,77 @@ def missing_topics(reader: AnyReader, needed: Iterable[str] = REPORT_TOPICS) -> 
     return [t for t in needed if t not in topics or topics[t].msgcount == 0]
 
 
-def read_run(path: Path, joint_names: Sequence[str]) -> RunData:
-    """Read the report topics of a bag; BagError naming the topics it lacks."""
-    reader = open_reader(path)
-    try:
-        missing = missing_topics(reader)
+def read_run(path: Path, bag: Bag | None = None) -> tuple[list[RunRecord], Scenario | None]:
+    """The run records of a bag (``bag``: its messages if already read) and, for a task run, its
+    scenario: one record per solver of a relative-motion run (:func:`_relative_records`), the one
+    record of a task run (:func:`_task_record`); BagError naming what the bag lacks."""
+    bag = bag or read_bag(Path(path))
+    if bag.task_cycles:
+        return _task_record(Path(path), bag)
+    bag.require_report_topics(path)
+    return _relative_records(bag), None
+
+
+def _joint_order(names: Sequence[str], joint_names: Sequence[str], cache: dict[tuple[str, ...], list[int]]) -> list[int]:
+    key = tuple(names)
+    if key not in cache:
+        missing = [j for j in joint_names if j not in key]
         if missing:
-            raise BagError(f"bag {path} lacks {', '.join(missing)} (the report needs {', '.join(REPORT_TOPICS)})")
-        collector = _RunCollector(joint_names)
-        connections = [c for c in reader.connections if c.topic in REPORT_TOPICS]
-        for conn, t, raw in reader.messages(connections=connections):
-            collector.add(conn.topic, t, reader.deserialize(raw, conn.msgtype))
-        return collector.finish()
-    finally:
-        reader.close()
+            raise BagError(f"{JOINT_STATES_TOPIC} lacks joints {', '.join(missing)} (has {', '.join(key)})")
+        cache[key] = [key.index(j) for j in joint_names]
+    return cache[key]
+
+
+def _relative_records(bag: Bag) -> list[RunRecord]:
+    """One :class:`RunRecord` per solver of the controller's statuses (a bag normally holds one).
+
+    Messages are attributed to the solver of the nearest controller status in receive time.
+    The final error is the last /relative_pose against the last /relative_target of the solver.
+    """
+    from dualarm_control.app.run.experiment import RunRecord, nan_column
+    from dualarm_control.kinematics import DualArmModel
+
+    joint_names = DualArmModel().joint_names
+    n = len(joint_names)
+    widths = {len(v) for _, v in bag.rows[COMMANDS_TOPIC]}
+    if widths != {n}:
+        raise BagError(f"{COMMANDS_TOPIC} data must have {n} values (one per joint), got lengths {sorted(widths)}")
+    if not bag.cycles:
+        raise BagError(f"{DIAGNOSTICS_TOPIC} has no status named '{CONTROLLER_STATUS}'")
+    states, velocities = bag.joint_states(joint_names)
+    diag_t = np.array([t for t, _ in bag.cycles], dtype=np.int64)
+    solvers = [v.get("solver", "unknown") for _, v in bag.cycles]
+    series = {JOINT_STATES_TOPIC: states, COMMANDS_TOPIC: bag.series(COMMANDS_TOPIC, n),
+              POSE_TOPIC: bag.series(POSE_TOPIC, 7), TARGET_TOPIC: bag.series(TARGET_TOPIC, 7)}
+    labels = {topic: nearest_labels(s.t, diag_t, solvers) for topic, s in series.items()}
+    by_state = len(velocities) == len(states.t)
+    out = []
+    for solver in dict.fromkeys(solvers):
+        mine = {topic: labels[topic] == solver for topic in series}
+        commands = series[COMMANDS_TOPIC].values[mine[COMMANDS_TOPIC]]
+        if commands.shape[0] == 0:
+            continue
+        cycles = [v for (_, v), s in zip(bag.cycles, solvers, strict=True) if s == solver]
+
+        def column(key: str, cycles: list[dict[str, str]] = cycles) -> FloatArray:
+            return np.array([parse_float(v.get(key)) for v in cycles])
+
+        periods = column("control_period_s")
+        period = float(np.median(periods[np.isfinite(periods)])) if np.isfinite(periods).any() else DEFAULT_PERIOD_S
+        q = states.values[mine[JOINT_STATES_TOPIC]]
+        k = commands.shape[0]
+        out.append(RunRecord(
+            label=solver, kind="segments", period=period,
+            time=_time_axis([parse_int(v.get("stamp_ns")) for v in cycles], k, period),
+            positions=q[:-1], velocities=velocities[mine[JOINT_STATES_TOPIC]] if by_state else np.zeros((0, n)),
+            commands=commands, status=[v.get("status", "") for v in cycles], solve_time=nan_column(k),
+            cycle_time=column("cycle_time_s"), position_error=column("position_error_m"),
+            orientation_error=column("orientation_error_rad"),
+            final_positions=q[-1] if len(q) else nan_column(n), contact_force=nan_column(k),
+            measured_force=nan_column(k), normal_offset=nan_column(k), table_contacts=nan_column(k),
+            final_errors=pose_error(_last_in(series[POSE_TOPIC], mine[POSE_TOPIC]),
+                                    _last_in(series[TARGET_TOPIC], mine[TARGET_TOPIC]))))
+    return out
 
 
 # ===================================================================== summarising a run
@@ -334,71 +397,10 @@ def nearest_labels(t: IntArray, ref_t: IntArray, labels: Sequence[str]) -> npt.N
     return lab[np.where(use_left, left, right)]
 
 
-@dataclass
-class SolverRun:
-    """One solver's slice of a bag: its metrics record and its command time series."""
-
-    solver: str
-    record: dict[str, float | int]
-    time: FloatArray
-    commands: FloatArray
-
-
 def _last_in(series: TimedSeries, mask: npt.NDArray[np.bool_]) -> FloatArray:
     """The last value selected by ``mask`` (the last overall when the mask selects none)."""
     values = series.values[mask] if mask.any() else series.values
     return values[-1]
-
-
-def _finite(values: Iterable[float]) -> FloatArray:
-    arr = np.asarray(list(values), dtype=float)
-    return arr[np.isfinite(arr)]
-
-
-def summarize_solvers(run: RunData, model: Any) -> list[SolverRun]:
-    """Per solver in the controller diagnostics, the metrics record and command series.
-
-    Messages are attributed to the solver of the nearest controller diagnostics in
-    receive time (a bag normally holds one solver). ``model`` gives joint limits
-    (``q_min``, ``q_max``, ``qd_max``).
-    """
-    from dualarm_control.app.record.report import summarize
-
-    diag = run.diagnostics
-    solvers = list(dict.fromkeys(diag.solver))
-    per_msg = {
-        "commands": nearest_labels(run.commands.t, diag.t, diag.solver),
-        "positions": nearest_labels(run.positions.t, diag.t, diag.solver),
-        "poses": nearest_labels(run.poses.t, diag.t, diag.solver),
-        "targets": nearest_labels(run.targets.t, diag.t, diag.solver),
-    }
-    velocity_labels = per_msg["positions"] if len(run.velocities) == len(run.positions.t) else None
-    out = []
-    for solver in solvers:
-        in_diag = np.array([s == solver for s in diag.solver])
-        commands = run.commands.values[per_msg["commands"] == solver]
-        if commands.shape[0] == 0:
-            continue
-        periods = _finite(np.array(diag.period)[in_diag])
-        period = float(np.median(periods)) if periods.size else DEFAULT_PERIOD_S
-        velocities = (run.velocities[velocity_labels == solver] if velocity_labels is not None
-                      else np.zeros((0, commands.shape[1])))
-        record = summarize(
-            commands=commands,
-            positions=run.positions.values[per_msg["positions"] == solver],
-            velocities=velocities,
-            period=period,
-            statuses=[s for s, keep in zip(diag.status, in_diag, strict=True) if keep],
-            cycle_times=_finite(np.array(diag.cycle_time)[in_diag]),
-            tracking_errors=(np.array(diag.position_error)[in_diag], np.array(diag.orientation_error)[in_diag]),
-            final_errors=pose_error(_last_in(run.poses, per_msg["poses"] == solver),
-                                    _last_in(run.targets, per_msg["targets"] == solver)),
-            q_limits=(model.q_min, model.q_max),
-            qd_max=model.qd_max,
-        )
-        stamps = [s for s, keep in zip(diag.stamp_ns, in_diag, strict=True) if keep]
-        out.append(SolverRun(solver, record, _time_axis(stamps, commands.shape[0], period), commands))
-    return out
 
 
 def _time_axis(stamps: Sequence[int | None], n: int, period: float) -> FloatArray:
@@ -409,89 +411,8 @@ def _time_axis(stamps: Sequence[int | None], n: int, period: float) -> FloatArra
     return np.arange(n, dtype=float) * period
 
 
-def report(path: Path, output: Path) -> dict[str, dict[str, float | int]]:
-    """Summarise a recorded run: ``output/metrics.json`` and ``output/velocity_norms.png``.
-
-    Returns ``{solver: record}``; BagError when the bag lacks needed topics.
-    """
-    from dualarm_control.app.record.report import plot_velocity_norms, write_metrics
-    from dualarm_control.kinematics import DualArmModel
-
-    model = DualArmModel()
-    runs = summarize_solvers(read_run(Path(path), model.joint_names), model)
-    if not runs:
-        raise BagError(f"bag {path}: no {COMMANDS_TOPIC} message could be attributed to a solver")
-    results = {r.solver: r.record for r in runs}
-    output = Path(output)
-    write_metrics(output / "metrics.json", results)
-    plot_velocity_norms({r.solver: (r.time, r.commands) for r in runs}, output / "velocity_norms.png",
-                        title=f"{Path(path).name}: |qd_i| and active joints")
-    return results
-
-
-# --- task bags (paper 001) ---------------------------------------------------------
-TASK_KEY = "task_gain"
-"""A controller status with this key is a task cycle (controller_node task mode)."""
-SCENARIO_KEY = "scenario"
-"""The task scenario's name or path in a task cycle's status."""
-SIM_STATUS = "sim_node"
-CONTACT_TOPIC = "/contact_force"
-
-
-@dataclass
-class _TaskBag:
-    joint_states: dict[int, tuple[list[str], FloatArray]] = field(default_factory=dict)  # by header stamp
-    commands: list[tuple[int, FloatArray]] = field(default_factory=list)  # (receive ns, data)
-    cycles: list[tuple[int, dict[str, str]]] = field(default_factory=list)  # (receive ns, values)
-    table_contacts: int = 0
-    contact: dict[int, float] = field(default_factory=dict)  # /contact_force by header stamp
-
-
-def holds_task_cycles(path: Path) -> bool:
-    """Whether the bag holds controller task cycles (and no relative target)."""
-    reader = open_reader(path)
-    try:
-        if "/relative_target" in reader.topics or DIAGNOSTICS_TOPIC not in reader.topics:
-            return False
-        connections = [c for c in reader.connections if c.topic == DIAGNOSTICS_TOPIC]
-        for conn, _, raw in reader.messages(connections=connections):
-            for status in cast(Any, reader.deserialize(raw, conn.msgtype)).status:
-                if status.name == CONTROLLER_STATUS and any(kv.key == TASK_KEY for kv in status.values):
-                    return True
-        return False
-    finally:
-        reader.close()
-
-
-def _read(path: Path) -> _TaskBag:
-    reader = open_reader(path)
-    out = _TaskBag()
-    try:
-        topics = (JOINT_STATES_TOPIC, COMMANDS_TOPIC, DIAGNOSTICS_TOPIC, CONTACT_TOPIC)
-        connections = [c for c in reader.connections if c.topic in topics]
-        for conn, t, raw in reader.messages(connections=connections):
-            msg: Any = reader.deserialize(raw, conn.msgtype)
-            if conn.topic == JOINT_STATES_TOPIC:  # a re-sent state (lockstep) has the same stamp and values
-                out.joint_states.setdefault(stamp_ns(msg.header.stamp),
-                                            (list(msg.name), np.array(msg.position, dtype=np.float64)))
-            elif conn.topic == CONTACT_TOPIC:
-                out.contact.setdefault(stamp_ns(msg.header.stamp), float(msg.vector.z))
-            elif conn.topic == COMMANDS_TOPIC:
-                out.commands.append((t, np.array(msg.data, dtype=np.float64)))
-            else:
-                for status in msg.status:
-                    values = {kv.key: kv.value for kv in status.values}
-                    if status.name == CONTROLLER_STATUS and TASK_KEY in values:
-                        out.cycles.append((t, values))
-                    elif status.name == SIM_STATUS and "table_contacts" in values:
-                        out.table_contacts = max(out.table_contacts, int(values["table_contacts"]))
-    finally:
-        reader.close()
-    return out
-
-
-def read_task_run(path: Path) -> tuple[RunRecord, Scenario]:
-    """The :class:`RunRecord` of a task-scenario bag and its scenario; BagError if it is not one."""
+def _task_record(path: Path, bag: Bag) -> tuple[list[RunRecord], Scenario]:
+    """The :class:`RunRecord` of a task-scenario bag (see the module docstring) and its scenario."""
     from dualarm_control.app.run.experiment import (
         RunRecord,
         nan_column,
@@ -500,17 +421,17 @@ def read_task_run(path: Path) -> tuple[RunRecord, Scenario]:
     from dualarm_control.kinematics import DualArmModel
     from dualarm_control.scenario import load_scenario
 
-    bag = _read(Path(path))
-    if not bag.cycles:
-        raise BagError(f"bag {path}: no controller task cycles on {DIAGNOSTICS_TOPIC} (key '{TASK_KEY}')")
     by_stamp: dict[int, tuple[int, dict[str, str]]] = {}
-    for t, values in bag.cycles:
+    for t, values in bag.task_cycles:
         by_stamp.setdefault(int(values["stamp_ns"]), (t, values))
     first = by_stamp[min(by_stamp)][1]
+    joint_states: dict[int, tuple[list[str], Any]] = {}  # by stamp: a re-sent state (lockstep) is the same
+    for _, stamp, names, msg in bag.states:
+        joint_states.setdefault(stamp, (names, msg.position))
     # A real-time recording starts when the recorder's subscriptions are matched, which can be
     # a few states after the first cycle: cycles before the first recorded state are outside
     # the bag. From that state on, every cycle's state must be in the bag.
-    covered_from = min(bag.joint_states, default=min(by_stamp))
+    covered_from = min(joint_states, default=min(by_stamp))
     stamps = sorted(s for s in by_stamp if s >= covered_from)
     if not stamps:
         raise BagError(f"bag {path}: no controller task cycle at or after the first recorded {JOINT_STATES_TOPIC}")
@@ -519,15 +440,16 @@ def read_task_run(path: Path) -> tuple[RunRecord, Scenario]:
     order: dict[tuple[str, ...], list[int]] = {}
     positions = np.zeros((len(stamps), model.nq))
     for k, stamp in enumerate(stamps):
-        if stamp not in bag.joint_states:
+        if stamp not in joint_states:
             raise BagError(f"bag {path}: no {JOINT_STATES_TOPIC} with the stamp {stamp} of controller cycle {k}")
-        names, q = bag.joint_states[stamp]
+        names, q = joint_states[stamp]
         idx = order.setdefault(tuple(names), [names.index(j) for j in model.joint_names])
-        positions[k] = q[idx]
+        positions[k] = np.asarray(q, dtype=np.float64)[idx]
     cycles = [by_stamp[s] for s in stamps]
-    received = np.array([t for t, _ in bag.commands], dtype=np.int64)
+    sent = bag.rows[COMMANDS_TOPIC]
+    received = np.array([t for t, _ in sent], dtype=np.int64)
     nearest = np.clip(np.searchsorted(received, [t for t, _ in cycles]), 0, max(len(received) - 1, 0))
-    commands = (np.array([bag.commands[i][1] for i in nearest]) if len(received)
+    commands = (np.array([sent[i][1] for i in nearest]) if len(received)
                 else np.full((len(stamps), model.nq), np.nan))
 
     def column(key: str) -> FloatArray:
@@ -551,21 +473,31 @@ def read_task_run(path: Path) -> tuple[RunRecord, Scenario]:
         position_error=nan_column(n), orientation_error=nan_column(n), final_positions=nan_column(model.nq),
         contact_force=contact, measured_force=column("measured_force_n"), normal_offset=column("normal_offset_m"),
         table_contacts=table)
-    return with_task_values(record, scenario, model, gain, force), scenario
+    return [with_task_values(record, scenario, model, gain, force)], scenario
 
 
-def report_tasks(path: Path, output: Path) -> dict[str, dict[str, Any]]:
-    """``dualarm report`` on a task bag: ``output/metrics.json`` ({label: record}, the keys of
-    ``dualarm experiment pan_cleaning``), the tool path, task values and joint velocity plots."""
+def report(path: Path, output: Path) -> tuple[dict[str, dict[str, Any]], Scenario | None]:
+    """``dualarm report``: ``output/metrics.json`` ({label: record}, the keys of ``dualarm
+    experiment``) and the figures of the run's kind (relative motion: velocity_norms.png; tasks:
+    the tool path, task values and joint velocities). Returns the records and, for a task run,
+    its scenario; BagError when the bag lacks what the report needs.
+    """
     from dualarm_control.app.record.report import (
+        plot_velocity_norms,
         summarize_run,
         write_figures,
         write_metrics,
     )
 
-    log, scenario = read_task_run(path)
-    results = {log.label: summarize_run(log, scenario)}
+    runs, scenario = read_run(Path(path))
+    if not runs:
+        raise BagError(f"bag {path}: no {COMMANDS_TOPIC} message could be attributed to a solver")
+    results = {r.label: summarize_run(r, scenario) for r in runs}
     output = Path(output)
     write_metrics(output / "metrics.json", results)
-    write_figures(scenario, [log], output, Path(path).name, contact=False)
-    return results
+    if scenario is not None:
+        write_figures(scenario, runs, output, Path(path).name, contact=False)
+    else:
+        plot_velocity_norms({r.label: (r.time, r.commands) for r in runs}, output / "velocity_norms.png",
+                            title=f"{Path(path).name}: |qd_i| and active joints")
+    return results, scenario

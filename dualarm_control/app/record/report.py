@@ -78,7 +78,7 @@ def summarize(
     """
     norms = velocity_norm_metrics(commands, period)
     vel_violations = limit_violations(np.vstack((commands, velocities)), -qd_max, qd_max, VELOCITY_TOLERANCE)
-    p50, p99 = percentiles(cycle_times)
+    p50, p99 = percentiles(cycle_times[np.isfinite(cycle_times)])  # a bag's unparsable times are NaN
     out: dict[str, float | int] = dict(asdict(norms))
     out.update(
         final_position_error_m=float(final_errors[0]),
@@ -99,13 +99,19 @@ def summarize(
     return out
 
 
-def summarize_run(record: RunRecord, scenario: Scenario,
+def summarize_run(record: RunRecord, scenario: Scenario | None,
                   model: DualArmModel | None = None) -> dict[str, float | int | str]:
     """The metrics.json record of a run, in-process or from a bag: Table I's keys for relative
-    motion (:func:`summarize`), paper 001's for tasks (:func:`task_metrics`)."""
+    motion (:func:`summarize`), paper 001's for tasks (:func:`task_metrics`). The scenario may be
+    None for a relative-motion record that holds its ``final_errors`` (a bag's)."""
     if record.tasks is not None:
+        assert scenario is not None
         return task_metrics(record, record.tasks, scenario)
-    model = model or DualArmModel(scenario.urdf_path)
+    model = model or (DualArmModel(scenario.urdf_path) if scenario is not None else DualArmModel())
+    errors = record.final_errors
+    if errors is None:
+        assert scenario is not None, "a run without recorded final errors needs its scenario"
+        errors = final_errors(record, scenario, model)
     return dict(summarize(
         commands=record.commands,
         positions=np.vstack((record.positions, record.final_positions)),
@@ -113,7 +119,7 @@ def summarize_run(record: RunRecord, scenario: Scenario,
         period=record.period,
         statuses=record.status,
         cycle_times=record.cycle_time,
-        final_errors=final_errors(record, scenario, model),
+        final_errors=errors,
         q_limits=(model.q_min, model.q_max),
         qd_max=model.qd_max,
         tracking_errors=(record.position_error, record.orientation_error),

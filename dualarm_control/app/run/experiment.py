@@ -82,6 +82,9 @@ class RunRecord:
         normal_offset: f_F of eq (9) [m], (N,).
         table_contacts: contact points with the table, (N,).
         tasks: task values and bounds where there are tasks, else None.
+        final_errors: final relative (position [m], orientation [rad]) error where the recording
+            gives it (a bag: its last /relative_pose against its last /relative_target); None:
+            the report computes it from ``final_positions`` and the scenario.
     """
 
     label: str
@@ -102,6 +105,7 @@ class RunRecord:
     normal_offset: FloatArray
     table_contacts: FloatArray
     tasks: TaskValues | None = field(default=None)
+    final_errors: tuple[float, float] | None = None
 
 
 EXIT_INTERRUPTED = 130

@@ -1,10 +1,9 @@
 """Adapter: a recorded run (today's bag readers) -> the arrays :func:`.rerun_view.log_run` takes.
 
-Kept apart and small on purpose: when the per-cycle run record exists, this is the only
-file to re-point. A relative-pose bag (``app.record.bag.read_run``) is cut into controller cycles,
-one per controller status on ``/diagnostics``; each cycle takes the joint state, command and
-target received nearest to its status. A task-scenario bag (``app.record.bag.read_task_run``)
-is already per cycle.
+Both kinds of bag are read by the one bag reader (``app.record.bag.read_bag``). A relative-pose
+bag is cut into controller cycles, one per controller status on ``/diagnostics``; each cycle
+takes the joint state, command and target received nearest to its status. A task-scenario bag
+gives its :class:`RunRecord` (``app.record.bag.read_run``), already per cycle.
 """
 
 from __future__ import annotations
@@ -19,6 +18,7 @@ from dualarm_control.app.view import rerun_view as rv
 from dualarm_control.kinematics import DualArmModel, FloatArray
 
 if TYPE_CHECKING:
+    from dualarm_control.app.record.bag import Bag
     from dualarm_control.app.run.experiment import RunRecord
 
 
@@ -50,25 +50,38 @@ def _seconds(ns: np.ndarray) -> FloatArray:
     return (ns - ns[0]).astype(float) * 1e-9
 
 
-def relative_run_arrays(path: Path, model: DualArmModel) -> RunArrays:
+def relative_run_arrays(path: Path, model: DualArmModel, bag: Bag | None = None) -> RunArrays:
     """A relative-pose run's bag, per controller cycle (time: the cycles' joint-state stamps)."""
-    from dualarm_control.app.record.bag import read_run
+    from dualarm_control.app.record.bag import (
+        COMMANDS_TOPIC,
+        TARGET_TOPIC,
+        parse_float,
+        parse_int,
+        read_bag,
+    )
 
-    run = read_run(Path(path), model.joint_names)
-    diag = run.diagnostics
-    stamps = diag.stamp_ns
+    bag = bag or read_bag(Path(path))
+    bag.require_report_topics(path)
+    diag_t = np.array([t for t, _ in bag.cycles], dtype=np.int64)
+    cycles = [v for _, v in bag.cycles]
+    stamps = [parse_int(v.get("stamp_ns")) for v in cycles]
     by_stamp = all(s is not None for s in stamps) and bool(np.all(np.diff(np.array(stamps, dtype=float)) >= 0))
-    t = _seconds(np.array(stamps, dtype=np.int64) if by_stamp else diag.t)
-    commands = run.commands.values[_nearest(run.commands.t, diag.t)]
+    t = _seconds(np.array(stamps, dtype=np.int64) if by_stamp else diag_t)
+    commands, targets = bag.series(COMMANDS_TOPIC, model.nq), bag.series(TARGET_TOPIC, 7)
+    positions, _ = bag.joint_states(model.joint_names)
+
+    def column(key: str) -> FloatArray:
+        return np.array([parse_float(v.get(key)) for v in cycles])
+
     series = {
-        **rv.velocity_norm_series(commands),
-        rv.TRACKING_POSITION: np.array(diag.position_error, dtype=float),
-        rv.TRACKING_ORIENTATION: np.array(diag.orientation_error, dtype=float),
-        rv.CYCLE_TIME: np.array(diag.cycle_time, dtype=float),
+        **rv.velocity_norm_series(commands.values[_nearest(commands.t, diag_t)]),
+        rv.TRACKING_POSITION: column("position_error_m"),
+        rv.TRACKING_ORIENTATION: column("orientation_error_rad"),
+        rv.CYCLE_TIME: column("cycle_time_s"),
     }
-    return RunArrays(model.urdf, t, run.positions.values[_nearest(run.positions.t, diag.t)], list(model.joint_names),
-                     series, {"relative_target": run.targets.values[_nearest(run.targets.t, diag.t)]},
-                     list(diag.status))
+    return RunArrays(model.urdf, t, positions.values[_nearest(positions.t, diag_t)], list(model.joint_names),
+                     series, {"relative_target": targets.values[_nearest(targets.t, diag_t)]},
+                     [v.get("status", "") for v in cycles])
 
 
 def record_arrays(record: RunRecord, model: DualArmModel,
@@ -96,16 +109,14 @@ def record_arrays(record: RunRecord, model: DualArmModel,
                      frames or {}, list(record.status))
 
 
-def task_run_arrays(path: Path) -> RunArrays:
-    """A task-scenario run's bag, through the same :class:`RunRecord` the report reads."""
-    from dualarm_control.app.record.bag import read_task_run
-
-    record, scenario = read_task_run(Path(path))
-    return record_arrays(record, DualArmModel(scenario.urdf_path))
-
-
 def bag_run_arrays(path: Path) -> RunArrays:
-    """Either kind of bag the cell records (task scenario or relative pose)."""
-    from dualarm_control.app.record.bag import holds_task_cycles
+    """Either kind of bag the cell records: a task scenario's through the same :class:`RunRecord`
+    the report reads, a relative-pose run's per controller cycle."""
+    from dualarm_control.app.record.bag import read_bag, read_run
 
-    return task_run_arrays(path) if holds_task_cycles(Path(path)) else relative_run_arrays(path, DualArmModel())
+    bag = read_bag(Path(path))
+    if not bag.task_cycles:
+        return relative_run_arrays(path, DualArmModel(), bag)
+    (record,), scenario = read_run(Path(path), bag)
+    assert scenario is not None
+    return record_arrays(record, DualArmModel(scenario.urdf_path))

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from dualarm_control.app.record.bag import CONTROLLER_STATUS
+from dualarm_control.app.record.bag import CONTROLLER_STATUS, parse_float
 from dualarm_control.app.view import rerun_view as rv
 from dualarm_control.kinematics import DualArmModel
 
@@ -27,13 +27,6 @@ FLUSH_PERIOD_S = 0.1
 QUEUE_DEPTH = 1000
 """Samples kept per subscription while the view is busy logging (5 s of one topic at 200 Hz)."""
 TOPICS = ("/joint_states", "/velocity_controller/commands", "/relative_target", "/diagnostics")
-
-
-def _float(text: str | None) -> float:
-    try:
-        return float(text) if text is not None else float("nan")
-    except ValueError:
-        return float("nan")
 
 
 class LiveLog:
@@ -109,10 +102,10 @@ class LiveLog:
             t, values = zip(*self.cycles, strict=True)
             stamps = np.array(t)
             rv.log_series(stamps, {
-                rv.TRACKING_POSITION: np.array([_float(v.get("position_error_m")) for v in values]),
-                rv.TRACKING_ORIENTATION: np.array([_float(v.get("orientation_error_rad")) for v in values]),
-                rv.SOLVE_TIME: np.array([_float(v.get("solve_time_s")) for v in values]),
-                rv.CYCLE_TIME: np.array([_float(v.get("cycle_time_s")) for v in values]),
+                rv.TRACKING_POSITION: np.array([parse_float(v.get("position_error_m")) for v in values]),
+                rv.TRACKING_ORIENTATION: np.array([parse_float(v.get("orientation_error_rad")) for v in values]),
+                rv.SOLVE_TIME: np.array([parse_float(v.get("solve_time_s")) for v in values]),
+                rv.CYCLE_TIME: np.array([parse_float(v.get("cycle_time_s")) for v in values]),
             }, rec)
             self.status = rv.log_statuses(stamps, [v["status"] for v in values], self.status, rec)
         self.states, self.commands, self.targets, self.cycles = [], [], [], []
