@@ -57,11 +57,11 @@ def first_state_delay() -> float:
     run = Launch(echo=False)
     node = run.start("trajectory_node", node_command("trajectory_node", REAL_TIME), LOG_FORMAT)
     try:
-        wait_for(node, "trajectory:")
+        wait_for(node, "targets:")
     finally:
         run.stop()
-    # "scenario 'assembly': ... waiting for /joint_states" ends __init__; "trajectory: ..." is the first state
-    return log_time(node.lines, "trajectory:") - log_time(node.lines, "scenario '")
+    # "scenario 'assembly': ... waiting for /joint_states" ends __init__; "targets: ..." is the first state
+    return log_time(node.lines, "targets:") - log_time(node.lines, "scenario '")
 
 
 def test_a_node_joining_a_running_cell_gets_its_first_joint_state_within_half_a_second() -> None:

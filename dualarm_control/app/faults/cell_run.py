@@ -96,7 +96,7 @@ class CellRun:
         for rec in recorders:
             if not rec.ready.wait(max(0.0, end - time.monotonic())):
                 raise RunError(f"recorder {rec.name} not ready after {START_TIMEOUT_S:.0f} s:\n" + self.tail(rec.name))
-        self.wait_line("trajectory_node", "trajectory: ", timeout=max(1.0, end - time.monotonic()))
+        self.wait_line("trajectory_node", "targets: ", timeout=max(1.0, end - time.monotonic()))
         self.t0 = time.monotonic()
 
     def process(self, name: str) -> Process:
