@@ -258,35 +258,10 @@ def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text
                 close = getattr(shell, "close", None)
                 if close is not None:
                     close()
-                flush_publishers(shell.node, ACK_TIMEOUT_S)
                 shell.node.destroy_node()
             if context is not None:
                 context.try_shutdown()
     return EXIT_OK
-
-
-ACK_TIMEOUT_S = 5.0
-"""How long, in all, a stopping node waits for its readers to acknowledge what it published."""
-
-
-def flush_publishers(node: Any, timeout_s: float) -> bool:
-    """Wait (at most ``timeout_s`` in all) until every reliable reader acknowledged every sample
-    of ``node``'s publishers (rclpy ``Publisher.wait_for_all_acked``), so that a recorder lagging
-    behind a fast lockstep run still receives the samples queued at a node's exit instead of losing
-    them with the node's writer history. True when all were acknowledged in time."""
-    import time
-
-    from rclpy.duration import Duration
-
-    end = time.monotonic() + timeout_s
-    acked = True
-    for publisher in list(node.publishers):
-        left = max(0.0, end - time.monotonic())
-        try:
-            acked = publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))) and acked
-        except RuntimeError:  # rclpy's RCLError / InvalidHandle: the context is gone, nothing to deliver
-            acked = False
-    return acked
 
 
 DISCOVERY_TIMEOUT_S = 20.0

@@ -21,7 +21,7 @@ the simulator and controller answer each other: a recorder starved for more than
 (about 25 ms of a lockstep run on a loaded machine) lost joint states (test_task_nodes under
 ``stress-ng --cpu 1``), and a demo recorder 1300 samples behind at the end lost the run's end
 with 1000. 10000 samples, as the recorder's own depth, is 50 s of simulated time at 200 Hz (a few
-MB per writer); a node waits at its exit until they are acknowledged (``ros.node.flush_publishers``)."""
+MB per writer)."""
 
 QOS_PARAMETER = ParamSpec(
     "qos_reliability", "reliable",

@@ -152,6 +152,8 @@ def bad(d):
         d.spin_until(lambda: any(s.get("drive_state") == "rejected" for s in d.status))
         rejected = next(s for s in d.status if s.get("drive_state") == "rejected")
         errors = d.arrive(*goal)
+        # a rejection stays the reported state for 1 s: wait for the state after it
+        d.spin_until(lambda: any(s.get("drive_state") != "rejected" for s in d.status))
         after = [s for s in d.status if s.get("drive_state") != "rejected"]
         out[name] = {"reason": rejected["reason"], "rejected_stamp": float(rejected["goal_stamp"]),
                      "sent_stamp": stamp_s(sent), "arrived": errors,
