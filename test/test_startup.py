@@ -30,7 +30,12 @@ from dualarm_control.ros.env import (
 )
 
 STARTS = 10
-FIRST_STATE_WITHIN_S = 0.5
+FIRST_STATE_WITHIN_S = 1.0
+"""The stall this test catches (a lost discovery reply) lasts until the next periodic announcement:
+2.6-3.3 s with Fast DDS's default 3 s. Measured with the package's profile: at most 0.41 s in 78 full
+launches and 60 joins on a loaded machine, but one of 10 joins took 0.515 s in a fresh clone under
+``stress-ng --cpu 1`` (the node itself starved of CPU), so the bound is 1 s, not the 0.5 s target
+that docs/bench.md reports against."""
 REAL_TIME = ["-p", "lockstep:=false", "-p", "scenario:=assembly"]
 LOG_FORMAT = {"RCUTILS_CONSOLE_OUTPUT_FORMAT": "[{severity}] [{time}] [{name}]: {message}"}
 LOG_LINE = re.compile(r"\[INFO\] \[(\d+\.\d+)\] \[trajectory_node\]: (.*)")
