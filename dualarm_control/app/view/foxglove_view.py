@@ -205,12 +205,12 @@ def serve_live(port: int = DEFAULT_PORT, host: str = "127.0.0.1", *, stop: threa
     """
     import foxglove
     from rclpy.node import Node
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
     from dualarm_control.ros.cdr import JointStateReader
     from dualarm_control.ros.computed_tf import string_data
     from dualarm_control.ros.graph import message_class
     from dualarm_control.ros.node import init_rclpy
+    from dualarm_control.ros.qos import latched_qos
 
     stop = stop or threading.Event()
     context = init_rclpy([])
@@ -220,13 +220,12 @@ def serve_live(port: int = DEFAULT_PORT, host: str = "127.0.0.1", *, stop: threa
 
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
-        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         description: list[str] = []
 
         def on_description(data: Any) -> None:
             description.append(string_data(bytes(data)))
 
-        node.create_subscription(message_class("std_msgs/msg/String"), "/robot_description", on_description, latched,
+        node.create_subscription(message_class("std_msgs/msg/String"), "/robot_description", on_description, latched_qos(),
                                  raw=True)
         end = time.monotonic() + wait_s
         while not description and not stop.is_set():
