@@ -321,9 +321,9 @@ def _solve_segment(
     inp.target_velocity = [0.0]
     inp.target_acceleration = [0.0]
     speed = np.abs(rates[moving])
-    # An axis with a subnormal displacement has a subnormal speed and its ratio overflows to inf;
+    # An axis with a subnormal displacement has a subnormal (or zero) speed and its ratio is inf;
     # the dominant axis's ratio (speed = vmax there) is finite and <= it, so the minima are right.
-    with np.errstate(over="ignore"):
+    with np.errstate(over="ignore", divide="ignore"):
         inp.max_velocity = [float(np.min(vmax[moving] / speed))]
         inp.max_acceleration = [float(np.min(amax[moving] / speed))]
         inp.max_jerk = [float(np.min(jmax[moving] / speed))]

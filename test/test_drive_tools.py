@@ -101,13 +101,23 @@ def start_subscriber(answer: str) -> subprocess.Popen[str]:
 def reached_subscriber() -> Iterator[subprocess.Popen[str]]:
     proc = start_subscriber("reached")
     yield proc
+    if proc.poll() is None:
+        stop(proc)
+
+
+def stop(proc: subprocess.Popen[str]) -> str:
+    """SIGTERM, then SIGKILL after 10 s: the script prints each message flushed, so nothing is lost."""
     proc.terminate()
-    proc.wait(timeout=10)
+    try:
+        out, _ = proc.communicate(timeout=10)
+    except subprocess.TimeoutExpired:  # rclpy's shutdown can stall on a loaded machine (CI, 2026-12-02)
+        proc.kill()
+        out, _ = proc.communicate(timeout=10)
+    return out
 
 
 def received(proc: subprocess.Popen[str]) -> list[dict]:
-    proc.terminate()
-    out, _ = proc.communicate(timeout=10)
+    out = stop(proc)
     return [json.loads(line) for line in out.splitlines() if line.startswith("{")]
 
 
