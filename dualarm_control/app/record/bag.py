@@ -476,28 +476,20 @@ def _task_record(path: Path, bag: Bag) -> tuple[list[RunRecord], Scenario]:
     return [with_task_values(record, scenario, model, gain, force)], scenario
 
 
-def report(path: Path, output: Path) -> tuple[dict[str, dict[str, Any]], Scenario | None]:
+def report(path: Path, output: Path) -> tuple[dict[str, dict[str, Any]], str, list[str]]:
     """``dualarm report``: ``output/metrics.json`` ({label: record}, the keys of ``dualarm
-    experiment``) and the figures of the run's kind (relative motion: velocity_norms.png; tasks:
-    the tool path, task values and joint velocities). Returns the records and, for a task run,
-    its scenario; BagError when the bag lacks what the report needs.
+    experiment``) and the figures of the run's kind. Returns the records, the kind and the
+    figures' file names; BagError when the bag lacks what the report needs.
     """
     from dualarm_control.app.record.report import (
-        plot_velocity_norms,
         summarize_run,
         write_figures,
-        write_metrics,
+        write_json,
     )
 
     runs, scenario = read_run(Path(path))
     if not runs:
         raise BagError(f"bag {path}: no {COMMANDS_TOPIC} message could be attributed to a solver")
     results = {r.label: summarize_run(r, scenario) for r in runs}
-    output = Path(output)
-    write_metrics(output / "metrics.json", results)
-    if scenario is not None:
-        write_figures(scenario, runs, output, Path(path).name, contact=False)
-    else:
-        plot_velocity_norms({r.label: (r.time, r.commands) for r in runs}, output / "velocity_norms.png",
-                            title=f"{Path(path).name}: |qd_i| and active joints")
-    return results, scenario
+    write_json(Path(output) / "metrics.json", results)
+    return results, runs[0].kind, write_figures(runs[0].kind, Path(output), Path(path).name, runs, scenario)
