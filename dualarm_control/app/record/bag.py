@@ -199,6 +199,11 @@ class Status:
     message: str
     values: dict[str, str]
 
+    @property
+    def is_cycle(self) -> bool:
+        """A controller cycle (not a safe command): it carries the per-cycle timing."""
+        return "state_interval_s" in self.values
+
 
 @dataclass
 class Bag:
@@ -386,15 +391,16 @@ def pose_error(pose: npt.ArrayLike, target: npt.ArrayLike) -> tuple[float, float
     return float(np.linalg.norm(p[:3] - q[:3])), quaternion_angle(p[3:], q[3:])
 
 
-def nearest_labels(t: IntArray, ref_t: IntArray, labels: Sequence[str]) -> npt.NDArray[np.str_]:
-    """For each time in ``t``, the label of the nearest time in ``ref_t`` (sorted, non-empty)."""
-    lab = np.asarray(labels, dtype=str)
-    if t.size == 0:
-        return np.zeros(0, dtype=lab.dtype)
+def nearest_index(t: IntArray, ref_t: IntArray) -> IntArray:
+    """For each time in ``t``, the index of the nearest time in ``ref_t`` (sorted, non-empty)."""
     right = np.clip(np.searchsorted(ref_t, t), 0, len(ref_t) - 1)
     left = np.clip(right - 1, 0, len(ref_t) - 1)
-    use_left = np.abs(t - ref_t[left]) <= np.abs(ref_t[right] - t)
-    return lab[np.where(use_left, left, right)]
+    return np.where(np.abs(t - ref_t[left]) <= np.abs(ref_t[right] - t), left, right)
+
+
+def nearest_labels(t: IntArray, ref_t: IntArray, labels: Sequence[str]) -> npt.NDArray[np.str_]:
+    """For each time in ``t``, the label of the nearest time in ``ref_t`` (sorted, non-empty)."""
+    return np.asarray(labels, dtype=str)[nearest_index(t, ref_t)]
 
 
 def _last_in(series: TimedSeries, mask: npt.NDArray[np.bool_]) -> FloatArray:
