@@ -16,14 +16,14 @@ MS = 1_000_000
 
 
 def cycle(t: int, watchdog: str = "ok", trips: int = 0) -> Status:
-    return Status(t, 0, "solved", {"state_interval_s": "5e-3", "watchdog": watchdog, "watchdog_trips": str(trips),
+    return Status(t, "controller_node", 0, "solved", {"state_interval_s": "5e-3", "watchdog": watchdog, "watchdog_trips": str(trips),
                                    "cycles": "1", "position_error_m": "1e-5", "orientation_error_rad": "1e-4",
                                    "state_to_command_latency_s": "1e-3"})
 
 
 def test_safe_episode_figures() -> None:
     rec = GraphStreams()
-    rec.controller = [cycle(0), Status(120 * MS, 2, "joint_states stale by 16.2 ms", {"watchdog_trips": "1"}),
+    rec.controller = [cycle(0), Status(120 * MS, "controller_node", 2, "joint_states stale by 16.2 ms", {"watchdog_trips": "1"}),
                       cycle(620 * MS, trips=1)]
     rec.command_t = [10 * MS, 125 * MS, 200 * MS, 300 * MS, 630 * MS]
     rec.command_max = [0.3, 0.2, 0.0, 0.0, 0.4]  # 125 ms: within 10 ms of the ERROR, not counted
@@ -55,6 +55,6 @@ def test_arm_stop_never_at_rest() -> None:
 
 def test_completion_reads_the_last_cycle() -> None:
     rec = GraphStreams(controller=[cycle(0), cycle(5 * MS)],
-                    trajectory=[Status(6 * MS, 0, "complete", {})])
+                    trajectory=[Status(6 * MS, "trajectory_node", 0, "complete", {})])
     done = completion(rec)
     assert done.complete and done.position_error_m == 1e-5 and done.latency_p50_ms == 1.0

@@ -89,7 +89,7 @@ def test_interactive_demo_lockstep_bag_metrics_equal_in_process(demo: tuple, tmp
     scenario, model = demo
     bag = tmp_path / "bag"
     assert launch_scenario("interactive_demo", [], ["-p", "solver:=sparse_qp"], True, bag, timeout=400.0) == 0
-    from_bag = report(bag, tmp_path / "report")["sparse_qp"]
+    from_bag = report(bag, tmp_path / "report")[0]["sparse_qp"]
     in_process = summarize_run(run_scenario(scenario, controller_params({"solver": "sparse_qp"}), model), scenario,
                                model)
     for key in ("l0_mean", "l1_mean", "l2_mean", "duration_s"):

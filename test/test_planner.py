@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from dualarm_control.app.plan.optimise import PlanResult, distinct_best, optimise, plan
-from dualarm_control.app.plan.report import plan_record
+from dualarm_control.app.record.report import plan_record
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.planning.baseline import BaselineParams, run_baseline
@@ -313,10 +313,10 @@ def small_plan() -> PlanResult:
 
 
 def test_plan_record_is_self_describing(small_plan: PlanResult, model: DualArmModel, tmp_path: Path) -> None:
-    from dualarm_control.app.plan.report import write_plan
+    from dualarm_control.app.record.report import write_json
 
     doc = plan_record(small_plan, model, None)
-    path = write_plan(tmp_path, doc)
+    path = write_json(tmp_path / "plan.json", doc, indent=1)
     back = load_plan(path)
     assert back["format"] == PLAN_FORMAT and back["joint_names"] == model.joint_names
     for key in ("average_index", "baseline_average_index", "max_closure_error_m", "max_closure_error_rad",

@@ -67,8 +67,8 @@ def test_lockstep_bag_metrics_equal_in_process(tmp_path: Path) -> None:
     bag = tmp_path / "bag"
     assert launch_scenario("pan_cleaning", [PARAMS], ["-p", f"duration:={DURATION!r}"], True, bag,
                            timeout=120.0) == 0
-    results, scenario = report(bag, tmp_path / "report")
-    assert scenario is not None and scenario.tasks is not None  # read as a task run
+    results, kind, _ = report(bag, tmp_path / "report")
+    assert kind == "tasks"  # read as a task run
     assert (tmp_path / "report" / "metrics.json").is_file()
     assert (tmp_path / "report" / "tool_path.png").is_file()
     from_bag = results["k=1"]

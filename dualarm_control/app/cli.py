@@ -287,13 +287,12 @@ def cmd_bag_info(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     """Metrics of a recorded run: DIR/metrics.json, the figures of its kind and the table."""
     from dualarm_control.app.record.bag import report
-    from dualarm_control.app.record.report import format_table, format_task_table
+    from dualarm_control.app.record.report import format_table
 
     out = Path(args.output)
-    results, scenario = report(Path(args.bag), out)
-    print(format_table(results) if scenario is None else format_task_table(results))
-    figures = "velocity_norms.png" if scenario is None else "tool_path.png, task_values.png, joint_velocities.png"
-    print(f"\nwrote {out / 'metrics.json'} and {figures} in {out}")
+    results, kind, figures = report(Path(args.bag), out)
+    print(format_table(results, kind))
+    print(f"\nwrote {out / 'metrics.json'} and {', '.join(figures)} in {out}")
     return 0
 
 

@@ -25,6 +25,7 @@ from dualarm_control.errors import ScenarioError
 from dualarm_control.params import ParameterError, read_params_file
 from dualarm_control.planning.baseline import BaselineParams
 from dualarm_control.planning.path import CornerPath
+from dualarm_control.references.base import number
 from dualarm_control.scenario import scenario_file
 
 
@@ -89,13 +90,6 @@ class PlanConfig:
         return tuple(k - 1 for k in self.key_points)
 
 
-def _number(flat: dict[str, Any], key: str, default: float) -> float:
-    value = flat.get("scenario." + key, default)
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise ScenarioError(f"scenario parameter 'scenario.{key}': got {value!r}, expected a number")
-    return float(value)
-
-
 def _ints(flat: dict[str, Any], key: str, default: tuple[int, ...]) -> tuple[int, ...]:
     value = flat.get("scenario." + key, list(default))
     if not isinstance(value, list) or not all(isinstance(v, int) and not isinstance(v, bool) for v in value):
@@ -125,9 +119,9 @@ def load_plan_config(name_or_path: str) -> PlanConfig:
         raise ScenarioError(f"scenario parameter 'scenario.corner.samples': got {list(samples)}, expected [h1, h2, h3]")
     try:
         corner = CornerPath(
-            side=_number(flat, "corner.side", d.corner.side),
-            fillet_radius=_number(flat, "corner.fillet_radius", d.corner.fillet_radius),
-            height=_number(flat, "corner.height", d.corner.height),
+            side=number(flat, "corner.side", d.corner.side),
+            fillet_radius=number(flat, "corner.fillet_radius", d.corner.fillet_radius),
+            height=number(flat, "corner.height", d.corner.height),
             samples=(samples[0], samples[1], samples[2]),
             rpy=(math.radians(rpy[0]), math.radians(rpy[1]), math.radians(rpy[2])),
         )
@@ -137,21 +131,21 @@ def load_plan_config(name_or_path: str) -> PlanConfig:
         name=str(flat.get("scenario.name", path.stem)),
         corner=corner,
         key_points=_ints(flat, "plan.key_points", d.key_points),
-        lambda_key=_number(flat, "plan.lambda_key", d.lambda_key),
-        lambda_inner=_number(flat, "plan.lambda_inner", d.lambda_inner),
-        starts=int(_number(flat, "plan.starts", d.starts)),
-        inner_starts=int(_number(flat, "plan.inner_starts", d.inner_starts)),
-        candidates=int(_number(flat, "plan.candidates", d.candidates)),
-        seed=int(_number(flat, "plan.seed", d.seed)),
-        inner_spread=_number(flat, "plan.inner_spread_rad", d.inner_spread),
+        lambda_key=number(flat, "plan.lambda_key", d.lambda_key),
+        lambda_inner=number(flat, "plan.lambda_inner", d.lambda_inner),
+        starts=int(number(flat, "plan.starts", d.starts)),
+        inner_starts=int(number(flat, "plan.inner_starts", d.inner_starts)),
+        candidates=int(number(flat, "plan.candidates", d.candidates)),
+        seed=int(number(flat, "plan.seed", d.seed)),
+        inner_spread=number(flat, "plan.inner_spread_rad", d.inner_spread),
         baseline=BaselineParams(
-            k0=_number(flat, "baseline.k0", d.baseline.k0),
-            gain=_number(flat, "baseline.gain", d.baseline.gain),
-            speed=_number(flat, "baseline.speed", d.baseline.speed),
+            k0=number(flat, "baseline.k0", d.baseline.k0),
+            gain=number(flat, "baseline.gain", d.baseline.gain),
+            speed=number(flat, "baseline.speed", d.baseline.speed),
         ),
-        execution_gain=_number(flat, "execution.gain", d.execution_gain),
-        execution_velocity_scale=_number(flat, "execution.velocity_scale", d.execution_velocity_scale),
-        execution_settle=_number(flat, "execution.settle_time", d.execution_settle),
-        execution_subdivisions=int(_number(flat, "execution.subdivisions", d.execution_subdivisions)),
+        execution_gain=number(flat, "execution.gain", d.execution_gain),
+        execution_velocity_scale=number(flat, "execution.velocity_scale", d.execution_velocity_scale),
+        execution_settle=number(flat, "execution.settle_time", d.execution_settle),
+        execution_subdivisions=int(number(flat, "execution.subdivisions", d.execution_subdivisions)),
         source=path,
     )

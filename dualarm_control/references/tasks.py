@@ -192,16 +192,12 @@ class TasksController:
         self.controller = RelativeController(model, params)
         self.tasks: list[Task] = spec.build_variant(gain, force)
         _check_frames(model, self.tasks)
-        index = [i for i, t in enumerate(self.tasks) if isinstance(t, CircleTask)]
-        if force and len(index) != 1:
-            raise ValueError(f"the force variant needs exactly one circle task, the scenario has {len(index)}")
-        self._circle_index = index[0] if index else -1
+        circles = [(i, t) for i, t in enumerate(self.tasks) if isinstance(t, CircleTask)]
+        if force and len(circles) != 1:
+            raise ValueError(f"the force variant needs exactly one circle task, the scenario has {len(circles)}")
+        self.circle: CircleTask | None = circles[0][1] if circles else None  # as built (normal offset 0)
+        self._circle_index = circles[0][0] if circles else -1
         self.reset()
-
-    @property
-    def circle(self) -> CircleTask | None:
-        """The circle task as built (normal offset 0), or None."""
-        return self._circle
 
     def circle_error(self, cycle: Cycle) -> float:
         """|value| of the circle task in a cycle of this controller [m] (NaN without a circle task)."""
@@ -211,8 +207,6 @@ class TasksController:
     def reset(self) -> None:
         """Forget the solver's warm start, the filter state and the force integral."""
         self.controller.reset()
-        circle = self.tasks[self._circle_index] if self._circle_index >= 0 else None
-        self._circle: CircleTask | None = circle if isinstance(circle, CircleTask) else None
         self._sensor = ForceSensorModel(self.spec.force, self.period)
         self._pi = ForcePI(self.spec.force)
         self._offset = 0.0
@@ -238,16 +232,15 @@ class TasksController:
                 raise ValueError("the force variant needs the F/T reading every cycle")
             wrench = np.asarray(wrench, dtype=float)
             q = self.model.check_q(q)
+            circle = self.circle
+            assert circle is not None
             if wrench.shape == (6,) and math.isfinite(wrench.sum()) and math.isfinite(q.sum()):
-                circle = self._circle
-                assert circle is not None
                 pan, tool = self.model.frame_poses(q, (circle.pan_frame, circle.tool_frame))
                 measured = contact_normal_force(self._sensor.filter(wrench), tool.rotation, pan.rotation[:, 2],
                                                 self.spec.force.tool_mass)
                 self._offset = self._pi.step(measured, self.period)
             tasks = list(self.tasks)
-            assert self._circle is not None
-            tasks[self._circle_index] = dataclasses.replace(self._circle, normal_offset=self._offset)
+            tasks[self._circle_index] = dataclasses.replace(circle, normal_offset=self._offset)
         out = self.controller.solve_tasks(q, tasks, t)
         out.measured_force, out.normal_offset, out.stage = measured, self._offset, "circle"
         return out

@@ -16,6 +16,13 @@ from typing import Any
 
 import numpy as np
 
+from dualarm_control.app.record.bag import (
+    COMMANDS_TOPIC,
+    BagError,
+    Status,
+    open_reader,
+    read_bag,
+)
 from dualarm_control.metrics import percentiles
 from dualarm_control.ros.convert import stamp_ns
 
@@ -23,19 +30,6 @@ STOPPED_SPEED = 1e-3
 """A joint is at rest below this speed [rad/s] (the papers' activity threshold)."""
 AFTER_ERROR_NS = 10_000_000
 """Commands within 10 ms after the first ERROR may be a cycle computed just before it (topics are not ordered)."""
-
-
-@dataclass(frozen=True)
-class Status:
-    t: int
-    level: int
-    message: str
-    values: dict[str, str]
-
-    @property
-    def is_cycle(self) -> bool:
-        """A controller cycle (not a safe command): it carries the per-cycle timing."""
-        return "state_interval_s" in self.values
 
 
 @dataclass
@@ -58,13 +52,11 @@ class GraphStreams:
 
 def read_record(bag: Path) -> GraphStreams:
     """The graph streams of a fault run's bag, from the one bag reader (:func:`~dualarm_control.app.record.bag.read_bag`)."""
-    from dualarm_control.app.record.bag import COMMANDS_TOPIC, read_bag
-
     data, rec = read_bag(bag), GraphStreams()
     statuses = {"controller_node": rec.controller, "sim_node": rec.sim, "trajectory_node": rec.trajectory}
     for s in data.statuses:
         if s.name in statuses:
-            statuses[s.name].append(Status(s.t, s.level, s.message, s.values))
+            statuses[s.name].append(s)
     for t, command in data.rows[COMMANDS_TOPIC]:
         rec.command_t.append(t)
         rec.command_max.append(float(np.max(np.abs(command))) if len(command) else 0.0)
@@ -204,8 +196,6 @@ SIGNAL_MARGIN_NS = 1_000_000
 
 def check_signalled_bag(bag: Path, reference: GraphStreams, signal_ns: int) -> BagCheck:
     """Every /joint_states of the reference stamped from the bag's first to 1 ms before the signal is in the bag."""
-    from dualarm_control.app.record.bag import BagError, open_reader
-
     try:
         reader = open_reader(bag)
     except BagError as exc:

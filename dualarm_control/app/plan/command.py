@@ -40,12 +40,7 @@ def add_plan_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser],
 def run_plan_command(args: argparse.Namespace, progress: ProgressFactory = progress_bar) -> int:
     """Body of ``dualarm plan`` (see :func:`add_plan_parser`)."""
     from dualarm_control.app.plan.optimise import default_workers, plan
-    from dualarm_control.app.plan.report import (
-        plan_record,
-        plot_indices,
-        plot_initial_configurations,
-        write_plan,
-    )
+    from dualarm_control.app.record.report import plan_record, write_figures, write_json
     from dualarm_control.kinematics import DualArmModel
     from dualarm_control.planning.config import load_plan_config
 
@@ -75,9 +70,8 @@ def run_plan_command(args: argparse.Namespace, progress: ProgressFactory = progr
 
         execution = execute_plan(config, result.configurations, model, progress("execute"))
     doc = plan_record(result, model, execution)
-    path = write_plan(out, doc)
-    plot_indices(result, out / "index_along_path.png")
-    plot_initial_configurations(result, out / "initial_configuration.png")
+    path = write_json(out / "plan.json", doc, indent=1)
+    figures = [str(out / f) for f in write_figures("plan", out, config.name, plan=result)]
     print(f"average index            {doc['average_index']:.4f}")
     print(f"baseline average index   {doc['baseline_average_index']:.4f}")
     print(f"ratio                    {doc['index_ratio']:.3f}")
@@ -87,5 +81,5 @@ def run_plan_command(args: argparse.Namespace, progress: ProgressFactory = progr
     if execution is not None:
         print(f"executed path error      max {execution.max_error_m * 1e3:.3f} mm, {execution.max_error_rad:.2e} rad; "
               f"rms {execution.rms_error_m * 1e3:.3f} mm, {execution.rms_error_rad:.2e} rad")
-    print(f"\nwrote {path}, {out / 'index_along_path.png'} and {out / 'initial_configuration.png'}")
+    print(f"\nwrote {path}, {' and '.join(figures)}")
     return 0

@@ -199,6 +199,11 @@ class Status:
     message: str
     values: dict[str, str]
 
+    @property
+    def is_cycle(self) -> bool:
+        """A controller cycle (not a safe command): it carries the per-cycle timing."""
+        return "state_interval_s" in self.values
+
 
 @dataclass
 class Bag:
@@ -386,15 +391,16 @@ def pose_error(pose: npt.ArrayLike, target: npt.ArrayLike) -> tuple[float, float
     return float(np.linalg.norm(p[:3] - q[:3])), quaternion_angle(p[3:], q[3:])
 
 
-def nearest_labels(t: IntArray, ref_t: IntArray, labels: Sequence[str]) -> npt.NDArray[np.str_]:
-    """For each time in ``t``, the label of the nearest time in ``ref_t`` (sorted, non-empty)."""
-    lab = np.asarray(labels, dtype=str)
-    if t.size == 0:
-        return np.zeros(0, dtype=lab.dtype)
+def nearest_index(t: IntArray, ref_t: IntArray) -> IntArray:
+    """For each time in ``t``, the index of the nearest time in ``ref_t`` (sorted, non-empty)."""
     right = np.clip(np.searchsorted(ref_t, t), 0, len(ref_t) - 1)
     left = np.clip(right - 1, 0, len(ref_t) - 1)
-    use_left = np.abs(t - ref_t[left]) <= np.abs(ref_t[right] - t)
-    return lab[np.where(use_left, left, right)]
+    return np.where(np.abs(t - ref_t[left]) <= np.abs(ref_t[right] - t), left, right)
+
+
+def nearest_labels(t: IntArray, ref_t: IntArray, labels: Sequence[str]) -> npt.NDArray[np.str_]:
+    """For each time in ``t``, the label of the nearest time in ``ref_t`` (sorted, non-empty)."""
+    return np.asarray(labels, dtype=str)[nearest_index(t, ref_t)]
 
 
 def _last_in(series: TimedSeries, mask: npt.NDArray[np.bool_]) -> FloatArray:
@@ -476,28 +482,20 @@ def _task_record(path: Path, bag: Bag) -> tuple[list[RunRecord], Scenario]:
     return [with_task_values(record, scenario, model, gain, force)], scenario
 
 
-def report(path: Path, output: Path) -> tuple[dict[str, dict[str, Any]], Scenario | None]:
+def report(path: Path, output: Path) -> tuple[dict[str, dict[str, Any]], str, list[str]]:
     """``dualarm report``: ``output/metrics.json`` ({label: record}, the keys of ``dualarm
-    experiment``) and the figures of the run's kind (relative motion: velocity_norms.png; tasks:
-    the tool path, task values and joint velocities). Returns the records and, for a task run,
-    its scenario; BagError when the bag lacks what the report needs.
+    experiment``) and the figures of the run's kind. Returns the records, the kind and the
+    figures' file names; BagError when the bag lacks what the report needs.
     """
     from dualarm_control.app.record.report import (
-        plot_velocity_norms,
         summarize_run,
         write_figures,
-        write_metrics,
+        write_json,
     )
 
     runs, scenario = read_run(Path(path))
     if not runs:
         raise BagError(f"bag {path}: no {COMMANDS_TOPIC} message could be attributed to a solver")
     results = {r.label: summarize_run(r, scenario) for r in runs}
-    output = Path(output)
-    write_metrics(output / "metrics.json", results)
-    if scenario is not None:
-        write_figures(scenario, runs, output, Path(path).name, contact=False)
-    else:
-        plot_velocity_norms({r.label: (r.time, r.commands) for r in runs}, output / "velocity_norms.png",
-                            title=f"{Path(path).name}: |qd_i| and active joints")
-    return results, scenario
+    write_json(Path(output) / "metrics.json", results)
+    return results, runs[0].kind, write_figures(runs[0].kind, Path(output), Path(path).name, runs, scenario)

@@ -1,10 +1,18 @@
-"""The report of a run: summaries (metrics.json), tables and the figures that fit the scenario's kind.
+"""The report of a run: summaries (metrics.json, plan.json), tables and the figures that fit its kind.
 
-Relative motion (paper 000): Table I and the Fig. 5-style velocity norms. Tasks (paper 001):
-Fig. 4/6/10: tool path in the pan frame; Fig. 5/7/11: f_i over time with their bounds;
-Fig. 8/12: the 14 joint velocities; Fig. 11 (last row): the contact force. The same functions
-summarise an in-process experiment and a recorded bag (:class:`RunRecord`), so both give the
-same keys computed the same way.
+One module for the three papers' scenarios. Relative motion (paper 000): Table I and the
+Fig. 5-style velocity norms. Tasks (paper 001): Fig. 4/6/10: tool path in the pan frame;
+Fig. 5/7/11: f_i over time with their bounds; Fig. 8/12: the 14 joint velocities; Fig. 11
+(last row): the contact force. Plans (paper 003): plan.json, Fig. 4 (the index along the path)
+and Fig. 5 (the baseline from other initial configurations). The same functions summarise an
+in-process experiment and a recorded bag (:class:`RunRecord`), so both give the same keys
+computed the same way; :func:`write_figures` is the one place that picks the figures by kind.
+
+plan.json is self-describing (``format``, ``units``, ``joint_names``, the sampled path and
+the planner settings travel with the configurations), so a node can execute it without this
+package's planner: ``configurations`` are the joint positions [rad] at the path samples
+``path.positions_m`` (in the left tool frame F1, orientation ``path.rotation``), in the
+order of ``joint_names``.
 """
 
 from __future__ import annotations
@@ -13,11 +21,11 @@ import json
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from dualarm_control.app.run.experiment import RunRecord, TaskValues, tasks_source
+from dualarm_control.app.run.experiment import RunRecord, TaskValues
 from dualarm_control.kinematics import DualArmModel, FloatArray, rotation_angle
 from dualarm_control.metrics import (
     active_set_switches_per_s,
@@ -26,6 +34,7 @@ from dualarm_control.metrics import (
     percentiles,
     velocity_norm_metrics,
 )
+from dualarm_control.planning.plan_file import PLAN_FORMAT
 from dualarm_control.scenario import Scenario
 from dualarm_control.solvers.base import ACTIVITY_THRESHOLD, FAILURE_STATUSES
 from dualarm_control.tasks import (
@@ -34,6 +43,10 @@ from dualarm_control.tasks import (
     ManipulabilityTask,
     TablePlaneTask,
 )
+
+if TYPE_CHECKING:  # the planner and the simulator are only imported where a plan is made or executed
+    from dualarm_control.app.plan.execute import ExecutionResult
+    from dualarm_control.app.plan.optimise import PlanResult
 
 POSITION_TOLERANCE = 1e-6
 """rad: a measured position beyond a limit by more than this counts as a violation."""
@@ -50,59 +63,13 @@ TRACKING_KEYS = ("max_tracking_error_m", "rms_tracking_error_m", "max_tracking_e
 """Added when per-cycle tracking errors are known (in-process runs, bags with controller diagnostics)."""
 
 
-def summarize(
-    *,
-    commands: FloatArray,
-    positions: FloatArray,
-    velocities: FloatArray,
-    period: float,
-    statuses: Sequence[str],
-    cycle_times: FloatArray,
-    final_errors: tuple[float, float],
-    q_limits: tuple[FloatArray, FloatArray],
-    qd_max: FloatArray,
-    tracking_errors: tuple[FloatArray, FloatArray] | None = None,
-) -> dict[str, float | int]:
-    """The metrics.json record of one run.
-
-    Args:
-        commands: commanded joint velocities per cycle [rad/s], (N, n) (Table I uses these).
-        positions, velocities: measured joint state per cycle, (N, n).
-        period: control period [s].
-        statuses: solver status per cycle (N,).
-        cycle_times: controller cycle wall times [s], (N,).
-        final_errors: (position [m], orientation [rad]) error at the end.
-        q_limits: (q_min, q_max) [rad]; qd_max: velocity limits [rad/s].
-        tracking_errors: per-cycle relative (position [m], orientation [rad]) error against the
-            cycle's target, (N,) each; gives max/rms tracking errors when given.
-    """
-    norms = velocity_norm_metrics(commands, period)
-    vel_violations = limit_violations(np.vstack((commands, velocities)), -qd_max, qd_max, VELOCITY_TOLERANCE)
-    p50, p99 = percentiles(cycle_times[np.isfinite(cycle_times)])  # a bag's unparsable times are NaN
-    out: dict[str, float | int] = dict(asdict(norms))
-    out.update(
-        final_position_error_m=float(final_errors[0]),
-        final_orientation_error_rad=float(final_errors[1]),
-        joint_position_limit_violations=limit_violations(positions, *q_limits, POSITION_TOLERANCE),
-        joint_velocity_limit_violations=vel_violations,
-        solver_failures=int(sum(s in FAILURE_STATUSES for s in statuses)),
-        cycle_time_p50_s=p50,
-        cycle_time_p99_s=p99,
-        max_joint_acceleration=max_joint_acceleration(commands, period),
-        active_set_switches_per_s=active_set_switches_per_s(commands, period),
-    )
-    if tracking_errors is not None:
-        pos, rot = (np.asarray(e, dtype=float)[np.isfinite(e)] for e in tracking_errors)
-        if pos.size and rot.size:
-            out.update(max_tracking_error_m=float(pos.max()), rms_tracking_error_m=float(np.sqrt(np.mean(pos**2))),
-                       max_tracking_error_rad=float(rot.max()))
-    return out
-
-
 def summarize_run(record: RunRecord, scenario: Scenario | None,
                   model: DualArmModel | None = None) -> dict[str, float | int | str]:
-    """The metrics.json record of a run, in-process or from a bag: Table I's keys for relative
-    motion (:func:`summarize`), paper 001's for tasks (:func:`task_metrics`). The scenario may be
+    """The metrics.json record of a run, in-process or from a bag: paper 001's keys for tasks
+    (:func:`task_metrics`), else Table I's (``METRIC_KEYS``; ``TRACKING_KEYS`` too where the
+    record has per-cycle tracking errors). The velocity norms are those of the commanded
+    velocities (Table I uses these); the velocity limits are checked on the commanded and the
+    measured velocities, the position limits on the measured positions. The scenario may be
     None for a relative-motion record that holds its ``final_errors`` (a bag's)."""
     if record.tasks is not None:
         assert scenario is not None
@@ -112,18 +79,27 @@ def summarize_run(record: RunRecord, scenario: Scenario | None,
     if errors is None:
         assert scenario is not None, "a run without recorded final errors needs its scenario"
         errors = final_errors(record, scenario, model)
-    return dict(summarize(
-        commands=record.commands,
-        positions=np.vstack((record.positions, record.final_positions)),
-        velocities=record.velocities,
-        period=record.period,
-        statuses=record.status,
-        cycle_times=record.cycle_time,
-        final_errors=errors,
-        q_limits=(model.q_min, model.q_max),
-        qd_max=model.qd_max,
-        tracking_errors=(record.position_error, record.orientation_error),
-    ))
+    commands, period = record.commands, record.period
+    positions = np.vstack((record.positions, record.final_positions))
+    velocities = np.vstack((commands, record.velocities))
+    p50, p99 = percentiles(record.cycle_time[np.isfinite(record.cycle_time)])  # a bag's unparsable times are NaN
+    out: dict[str, float | int | str] = dict(asdict(velocity_norm_metrics(commands, period)))
+    out.update(
+        final_position_error_m=float(errors[0]),
+        final_orientation_error_rad=float(errors[1]),
+        joint_position_limit_violations=limit_violations(positions, model.q_min, model.q_max, POSITION_TOLERANCE),
+        joint_velocity_limit_violations=limit_violations(velocities, -model.qd_max, model.qd_max, VELOCITY_TOLERANCE),
+        solver_failures=int(sum(s in FAILURE_STATUSES for s in record.status)),
+        cycle_time_p50_s=p50,
+        cycle_time_p99_s=p99,
+        max_joint_acceleration=max_joint_acceleration(commands, period),
+        active_set_switches_per_s=active_set_switches_per_s(commands, period),
+    )
+    pos, rot = (e[np.isfinite(e)] for e in (record.position_error, record.orientation_error))
+    if pos.size and rot.size:
+        out.update(max_tracking_error_m=float(pos.max()), rms_tracking_error_m=float(np.sqrt(np.mean(pos**2))),
+                   max_tracking_error_rad=float(rot.max()))
+    return out
 
 
 def final_errors(record: RunRecord, scenario: Scenario, model: DualArmModel) -> tuple[float, float]:
@@ -131,120 +107,6 @@ def final_errors(record: RunRecord, scenario: Scenario, model: DualArmModel) -> 
     end_position, end_rotation = scenario.end_pose(record.positions[0], model, record.period)
     p, r = model.relative_pose(record.final_positions)
     return float(np.linalg.norm(p - end_position)), rotation_angle(r, end_rotation)
-
-
-def write_figures(scenario: Scenario, logs: Sequence[RunRecord], out: Path, title: str,
-                  contact: bool = True) -> list[str]:
-    """The figures that fit the scenario's kind, in ``out``; returns their file names.
-
-    Relative motion: velocity_norms.png (Fig. 5 of paper 000) of every run. Tasks (paper 001):
-    tool_path.png and task_values.png of every run, joint_velocities.png of the first, and in the
-    force variant (with ``contact``) contact_force.png of the first.
-    """
-    spec = scenario.tasks
-    if spec is None:
-        plot_velocity_norms({log.label: (log.time, log.commands) for log in logs}, out / "velocity_norms.png",
-                            title=f"{title}: |qd_i| and active joints")
-        return ["velocity_norms.png"]
-    circle = next(t for t in spec.build(1.0) if isinstance(t, CircleTask))
-    plot_tool_paths(logs, circle.radius, out / "tool_path.png")
-    plot_task_values(logs, out / "task_values.png")
-    plot_joint_velocities(logs[0], out / "joint_velocities.png")
-    files = ["tool_path.png", "task_values.png", "joint_velocities.png"]
-    if contact and _tasks(logs[0]).force:
-        plot_contact_force(logs[0], out / "contact_force.png")
-        files.append("contact_force.png")
-    return files
-
-
-def format_results(scenario: Scenario, results: Mapping[str, Mapping[str, Any]]) -> str:
-    """The table of the scenario's kind: Table I (relative motion) or paper 001's metrics (tasks)."""
-    return format_table(results) if scenario.tasks is None else format_task_table(results)
-
-
-def write_metrics(path: Path, results: Mapping[str, Mapping[str, Any]]) -> None:
-    """Write ``{solver: record}`` as indented JSON (creating the directory)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(results, indent=2, sort_keys=False) + "\n")
-
-
-def format_table(results: Mapping[str, Mapping[str, Any]]) -> str:
-    """Table I of paper 000 for the given runs, plus errors, limits and timings."""
-    names = list(results)
-    rows = [
-        ("mean ||qd||_0 (active joints)", "l0_mean", "{:.3f}"),
-        ("mean ||qd||_1 [rad/s]", "l1_mean", "{:.3f}"),
-        ("mean ||qd||_2 [rad/s]", "l2_mean", "{:.3f}"),
-        ("int ||qd||_0 dt [joint s]", "l0_integral", "{:.2f}"),
-        ("int ||qd||_1 dt [rad]", "l1_integral", "{:.3f}"),
-        ("int ||qd||_2 dt [rad]", "l2_integral", "{:.3f}"),
-        ("duration [s]", "duration_s", "{:.2f}"),
-        ("final position error [m]", "final_position_error_m", "{:.2e}"),
-        ("final orientation error [rad]", "final_orientation_error_rad", "{:.2e}"),
-        ("max tracking error [m]", "max_tracking_error_m", "{:.2e}"),
-        ("rms tracking error [m]", "rms_tracking_error_m", "{:.2e}"),
-        ("max tracking error [rad]", "max_tracking_error_rad", "{:.2e}"),
-        ("position limit violations", "joint_position_limit_violations", "{:d}"),
-        ("velocity limit violations", "joint_velocity_limit_violations", "{:d}"),
-        ("solver failures", "solver_failures", "{:d}"),
-        ("cycle time p50 [ms]", "cycle_time_p50_s", "ms"),
-        ("cycle time p99 [ms]", "cycle_time_p99_s", "ms"),
-        ("max joint acceleration [rad/s^2]", "max_joint_acceleration", "{:.2f}"),
-        ("active-set switches per s", "active_set_switches_per_s", "{:.2f}"),
-    ]
-    width = max(len(r[0]) for r in rows)
-    cols = [max(len(n), 12) for n in names]
-    lines = ["metric".ljust(width) + "".join(f"  {n:>{c}}" for n, c in zip(names, cols, strict=True))]
-    lines.append("-" * len(lines[0]))
-    for label, key, fmt in rows:
-        cells = []
-        for name, c in zip(names, cols, strict=True):
-            value = results[name].get(key)
-            if value is None:
-                text = "n/a"
-            elif fmt == "ms":
-                text = f"{value * 1e3:.3f}"
-            else:
-                text = fmt.format(value)
-            cells.append(f"  {text:>{c}}")
-        lines.append(label.ljust(width) + "".join(cells))
-    return "\n".join(lines)
-
-
-def plot_velocity_norms(runs: Mapping[str, tuple[FloatArray, FloatArray]], path: Path, title: str = "") -> None:
-    """Fig. 5-style PNG: per solver, per-joint |qd| over time and the active-joint count.
-
-    Args:
-        runs: ``{solver: (time (N,), commands (N, n))}``.
-        path: output PNG.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    n = len(runs)
-    fig, axes = plt.subplots(2, n, figsize=(5.0 * n, 6.0), sharex="col", squeeze=False)
-    for col, (name, (t, qd)) in enumerate(runs.items()):
-        top, bottom = axes[0][col], axes[1][col]
-        for j in range(qd.shape[1]):
-            top.plot(t, np.abs(qd[:, j]), lw=0.8, label=f"q{j + 1}")
-        top.set_title(name)
-        top.set_ylabel("|qd_i| [rad/s]")
-        top.grid(alpha=0.3)
-        active = np.count_nonzero(np.abs(qd) > ACTIVITY_THRESHOLD, axis=1)
-        bottom.step(t, active, where="post", color="k", lw=1.0)
-        bottom.set_ylim(-0.5, qd.shape[1] + 0.5)
-        bottom.set_ylabel(f"||qd||_0 (|qd_i| > {ACTIVITY_THRESHOLD:g})")
-        bottom.set_xlabel("time [s]")
-        bottom.grid(alpha=0.3)
-    axes[0][-1].legend(ncol=2, fontsize=6, loc="upper right")
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def convergence_time(time: FloatArray, error: FloatArray, threshold: float) -> float:
@@ -258,7 +120,8 @@ def convergence_time(time: FloatArray, error: FloatArray, threshold: float) -> f
 
 def task_metrics(log: RunRecord, part: TaskValues, scenario: Scenario) -> dict[str, float | int | str]:
     """The metrics.json record of one task run (keys in docs/constraint_based.md)."""
-    spec = tasks_source(scenario)
+    spec = scenario.tasks
+    assert spec is not None, f"scenario {scenario.name!r} has no tasks"
     after = log.time >= spec.convergence_time
     circle_name = next(s.name for s in spec.tasks if s.type == "circle")
     circle_error = np.linalg.norm(part.values[circle_name], axis=1)
@@ -324,6 +187,180 @@ def force_metrics(log: RunRecord, set_point: float, settle: float, threshold: fl
         "contact_force_peak_n": float(log.contact_force.max()),
         "normal_offset_final_m": float(log.normal_offset[-1]),
     }
+
+
+def plan_record(result: PlanResult, model: DualArmModel, execution: ExecutionResult | None) -> dict[str, Any]:
+    """The plan.json document of paper 003's plan (see the module docstring)."""
+    cfg = result.config
+    path = cfg.corner.sample()
+    c = cfg.corner
+    points = []
+    for i in range(len(path)):
+        points.append({
+            "index": i + 1,
+            "key_point": (i + 1) in cfg.key_points,
+            "position_m": path.positions[i].tolist(),
+            "tangent": path.tangents[i].tolist(),
+            "index_value": float(result.indices[i]),
+            "baseline_index_value": float(result.baseline.indices[i]),
+            "closure_error_m": float(result.closure_position_errors[i]),
+            "closure_error_rad": float(result.closure_rotation_errors[i]),
+            "configuration_rad": result.configurations[i].tolist(),
+            "baseline_configuration_rad": result.baseline.configurations[i].tolist(),
+        })
+    doc: dict[str, Any] = {
+        "format": PLAN_FORMAT,
+        "description": "Global manipulability plan of a relative path (Faroni et al., eq 14-20) and the "
+                       "pseudo-inverse baseline (eq 12-13) from the same first configuration.",
+        "scenario": cfg.name,
+        "scenario_file": str(cfg.source) if cfg.source else None,
+        "units": {"configurations": "rad", "positions": "m (right tool in the left tool frame F1)",
+                  "index": "m^2/rad^2, c = u^T J_r J_r^T u with u = [t; 0] (eq 14), lower is better",
+                  "runtime_s": "s wall clock"},
+        "joint_names": model.joint_names,
+        "average_index": result.average_index,
+        "baseline_average_index": result.baseline_average_index,
+        "index_ratio": result.average_index / result.baseline_average_index,
+        "max_closure_error_m": float(np.max(result.closure_position_errors)),
+        "max_closure_error_rad": float(np.max(result.closure_rotation_errors)),
+        "joint_limit_violations": result.joint_limit_violations,
+        "baseline_joint_limit_violations": int(np.sum((result.baseline.configurations < model.q_min)
+                                                      | (result.baseline.configurations > model.q_max))),
+        "baseline_max_closure_error_m": float(np.max(result.baseline.position_errors)),
+        "runtime_s": result.runtime_s,
+        "baseline_runtime_s": result.baseline_runtime_s,
+        "starts": cfg.starts,
+        "inner_starts": min(cfg.starts, cfg.inner_starts),
+        "seed": cfg.seed,
+        "workers": result.workers,
+        "path": {
+            "kind": "corner",
+            "side_m": c.side, "fillet_radius_m": c.fillet_radius, "height_m": c.height,
+            "samples": list(c.samples), "rpy_rad": list(c.rpy),
+            "rotation": path.rotation.tolist(),
+            "positions_m": path.positions.tolist(),
+            "tangents": path.tangents.tolist(),
+            "key_points": list(cfg.key_points),
+        },
+        "parameters": {
+            "lambda_key": cfg.lambda_key, "lambda_inner": cfg.lambda_inner, "candidates": cfg.candidates,
+            "inner_spread_rad": cfg.inner_spread,
+            "baseline": asdict(cfg.baseline),
+            "execution": {"gain": cfg.execution_gain, "velocity_scale": cfg.execution_velocity_scale,
+                          "subdivisions": cfg.execution_subdivisions, "settle_time": cfg.execution_settle},
+        },
+        "indices": result.indices.tolist(),
+        "baseline_indices": result.baseline.indices.tolist(),
+        "configurations": result.configurations.tolist(),
+        "points": points,
+        "key_stage": {"best_start": result.best_key_start, "values": result.key_values.tolist(),
+                      "start_values": result.key_start_values.tolist(),
+                      "candidates": cfg.candidates, "candidate_starts": result.candidate_starts,
+                      "candidate_whole_path_costs": result.candidate_costs},
+        "inner_stage": {"best_starts": result.best_inner_starts, "values": result.inner_values.tolist()},
+        "initial_configuration_study": {
+            "planned_first_configuration_average_index": result.baseline_average_index,
+            "random_first_configurations_average_index": [float(np.mean(b.indices)) for b in result.random_baselines],
+            "random_first_configurations_rad": [b.configurations[0].tolist() for b in result.random_baselines],
+        },
+    }
+    if execution is not None:
+        doc["executed_max_error_m"] = execution.max_error_m
+        doc["executed_max_error_rad"] = execution.max_error_rad
+        doc["execution"] = asdict(execution)
+    return doc
+
+
+def write_json(path: Path, doc: Mapping[str, Any], indent: int = 2) -> Path:
+    """Write ``doc`` (metrics.json: ``{run: record}``; plan.json) as indented JSON, creating the directory."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(doc, indent=indent) + "\n")
+    return path
+
+
+TABLE_I_ROWS = (
+    ("mean ||qd||_0 (active joints)", "l0_mean", 1.0, "{:.3f}"),
+    ("mean ||qd||_1 [rad/s]", "l1_mean", 1.0, "{:.3f}"),
+    ("mean ||qd||_2 [rad/s]", "l2_mean", 1.0, "{:.3f}"),
+    ("int ||qd||_0 dt [joint s]", "l0_integral", 1.0, "{:.2f}"),
+    ("int ||qd||_1 dt [rad]", "l1_integral", 1.0, "{:.3f}"),
+    ("int ||qd||_2 dt [rad]", "l2_integral", 1.0, "{:.3f}"),
+    ("duration [s]", "duration_s", 1.0, "{:.2f}"),
+    ("final position error [m]", "final_position_error_m", 1.0, "{:.2e}"),
+    ("final orientation error [rad]", "final_orientation_error_rad", 1.0, "{:.2e}"),
+    ("max tracking error [m]", "max_tracking_error_m", 1.0, "{:.2e}"),
+    ("rms tracking error [m]", "rms_tracking_error_m", 1.0, "{:.2e}"),
+    ("max tracking error [rad]", "max_tracking_error_rad", 1.0, "{:.2e}"),
+    ("position limit violations", "joint_position_limit_violations", 1.0, "{:.0f}"),
+    ("velocity limit violations", "joint_velocity_limit_violations", 1.0, "{:.0f}"),
+    ("solver failures", "solver_failures", 1.0, "{:.0f}"),
+    ("cycle time p50 [ms]", "cycle_time_p50_s", 1e3, "{:.3f}"),
+    ("cycle time p99 [ms]", "cycle_time_p99_s", 1e3, "{:.3f}"),
+    ("max joint acceleration [rad/s^2]", "max_joint_acceleration", 1.0, "{:.2f}"),
+    ("active-set switches per s", "active_set_switches_per_s", 1.0, "{:.2f}"),
+)
+"""Table I of paper 000, plus errors, limits and timings: (label, key, scale, format)."""
+TASK_ROWS = (
+    ("circle RMS error after convergence [mm]", "circle_rms_error_m", 1e3, "{:.4f}"),
+    ("circle max error after convergence [mm]", "circle_max_error_after_convergence_m", 1e3, "{:.4f}"),
+    ("time to circle error < 1 mm [s]", "convergence_time_1mm_s", 1.0, "{:.2f}"),
+    ("max inequality violation f-b", "max_inequality_violation", 1.0, "{:.4g}"),
+    ("min table distance [m]", "min_table_distance_m", 1.0, "{:.3f}"),
+    ("table contact points", "table_contacts", 1.0, "{:.0f}"),
+    ("min singularity margin b5-f5", "min_singularity_margin", 1.0, "{:.4g}"),
+    ("solver failures", "solver_failures", 1.0, "{:.0f}"),
+    ("cycle time p50 [ms]", "cycle_time_p50_s", 1e3, "{:.3f}"),
+    ("cycle time p99 [ms]", "cycle_time_p99_s", 1e3, "{:.3f}"),
+    ("first contact [s]", "first_contact_s", 1.0, "{:.2f}"),
+    ("contact lost cycles after first touch", "contact_lost_cycles", 1.0, "{:.0f}"),
+    ("force RMS error [N]", "force_rms_error_n", 1.0, "{:.3f}"),
+    ("force RMS error from first touch [N]", "force_rms_error_from_first_touch_n", 1.0, "{:.3f}"),
+    ("peak contact force [N]", "contact_force_peak_n", 1.0, "{:.2f}"),
+    ("measured force RMS error [N]", "measured_force_rms_error_n", 1.0, "{:.3f}"),
+)
+"""Paper 001's metrics (task runs): (label, key, scale, format)."""
+
+
+def format_table(results: Mapping[str, Mapping[str, Any]], kind: str) -> str:
+    """A Markdown table of ``{run: record}``, one column per run: paper 001's metrics for the
+    ``tasks`` kind, Table I of paper 000 otherwise (rows that no run has are left out)."""
+    names = list(results)
+    lines = ["| metric | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
+    for label, key, scale, fmt in TASK_ROWS if kind == "tasks" else TABLE_I_ROWS:
+        if any(key in results[n] for n in names):
+            cells = [fmt.format(results[n][key] * scale) if key in results[n] else "n/a" for n in names]
+            lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def write_figures(kind: str, out: Path, title: str, runs: Sequence[RunRecord] = (),
+                  scenario: Scenario | None = None, plan: PlanResult | None = None) -> list[str]:
+    """The figures of a run's kind, in ``out`` (the one place that picks them); their file names.
+
+    ``segments``, ``goals`` (paper 000): velocity_norms.png (Fig. 5) of every run. ``tasks``
+    (paper 001, needs the ``scenario``): tool_path.png and task_values.png of every run,
+    joint_velocities.png of the first and, in the force variant, contact_force.png of the first
+    (where its contact force is known). ``plan`` (paper 003): index_along_path.png (Fig. 4) and
+    initial_configuration.png (Fig. 5) of the ``plan`` result.
+    """
+    if kind == "plan":
+        assert plan is not None, "the plan figures need the plan result"
+        plot_indices(plan, out / "index_along_path.png")
+        plot_initial_configurations(plan, out / "initial_configuration.png")
+        return ["index_along_path.png", "initial_configuration.png"]
+    if kind != "tasks":
+        plot_velocity_norms(runs, out / "velocity_norms.png", title=f"{title}: |qd_i| and active joints")
+        return ["velocity_norms.png"]
+    assert scenario is not None and scenario.tasks is not None, "the task figures need the task scenario"
+    circle = next(t for t in scenario.tasks.build(1.0) if isinstance(t, CircleTask))
+    plot_tool_paths(runs, circle.radius, out / "tool_path.png")
+    plot_task_values(runs, out / "task_values.png")
+    plot_joint_velocities(runs[0], out / "joint_velocities.png")
+    files = ["tool_path.png", "task_values.png", "joint_velocities.png"]
+    if _tasks(runs[0]).force and np.isfinite(runs[0].contact_force).any():
+        plot_contact_force(runs[0], out / "contact_force.png")
+        files.append("contact_force.png")
+    return files
 
 
 def _tasks(log: RunRecord) -> TaskValues:
@@ -422,33 +459,63 @@ def plot_contact_force(log: RunRecord, path: Path) -> None:
     _save(fig, path)
 
 
-TABLE_ROWS = (
-    ("circle RMS error after convergence [mm]", "circle_rms_error_m", 1e3, "{:.4f}"),
-    ("circle max error after convergence [mm]", "circle_max_error_after_convergence_m", 1e3, "{:.4f}"),
-    ("time to circle error < 1 mm [s]", "convergence_time_1mm_s", 1.0, "{:.2f}"),
-    ("max inequality violation f-b", "max_inequality_violation", 1.0, "{:.4g}"),
-    ("min table distance [m]", "min_table_distance_m", 1.0, "{:.3f}"),
-    ("table contact points", "table_contacts", 1.0, "{:.0f}"),
-    ("min singularity margin b5-f5", "min_singularity_margin", 1.0, "{:.4g}"),
-    ("solver failures", "solver_failures", 1.0, "{:.0f}"),
-    ("cycle time p50 [ms]", "cycle_time_p50_s", 1e3, "{:.3f}"),
-    ("cycle time p99 [ms]", "cycle_time_p99_s", 1e3, "{:.3f}"),
-    ("first contact [s]", "first_contact_s", 1.0, "{:.2f}"),
-    ("contact lost cycles after first touch", "contact_lost_cycles", 1.0, "{:.0f}"),
-    ("force RMS error [N]", "force_rms_error_n", 1.0, "{:.3f}"),
-    ("force RMS error from first touch [N]", "force_rms_error_from_first_touch_n", 1.0, "{:.3f}"),
-    ("peak contact force [N]", "contact_force_peak_n", 1.0, "{:.2f}"),
-    ("measured force RMS error [N]", "measured_force_rms_error_n", 1.0, "{:.3f}"),
-)
+def plot_velocity_norms(runs: Sequence[RunRecord], path: Path, title: str = "") -> None:
+    """Fig. 5-style PNG: per run (column), per-joint |qd| of the commands over time and the active-joint count."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(2, len(runs), figsize=(5.0 * len(runs), 6.0), sharex="col", squeeze=False)
+    for col, run in enumerate(runs):
+        top, bottom = axes[0][col], axes[1][col]
+        t, qd = run.time, run.commands
+        for j in range(qd.shape[1]):
+            top.plot(t, np.abs(qd[:, j]), lw=0.8, label=f"q{j + 1}")
+        top.set_title(run.label)
+        top.set_ylabel("|qd_i| [rad/s]")
+        top.grid(alpha=0.3)
+        active = np.count_nonzero(np.abs(qd) > ACTIVITY_THRESHOLD, axis=1)
+        bottom.step(t, active, where="post", color="k", lw=1.0)
+        bottom.set_ylim(-0.5, qd.shape[1] + 0.5)
+        bottom.set_ylabel(f"||qd||_0 (|qd_i| > {ACTIVITY_THRESHOLD:g})")
+        bottom.set_xlabel("time [s]")
+        bottom.grid(alpha=0.3)
+    axes[0][-1].legend(ncol=2, fontsize=6, loc="upper right")
+    if title:
+        fig.suptitle(title)
+    _save(fig, path)
 
 
-def format_task_table(results: Mapping[str, Mapping[str, Any]]) -> str:
-    """A Markdown table of the task-run metrics, one column per run (rows absent everywhere are left out)."""
-    names = list(results)
-    lines = ["| metric | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
-    for label, key, scale, fmt in TABLE_ROWS:
-        if not any(key in results[n] for n in names):
-            continue
-        cells = [fmt.format(results[n][key] * scale) if key in results[n] else "n/a" for n in names]
-        lines.append(f"| {label} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+def plot_indices(result: PlanResult, out: Path) -> None:
+    """Fig. 4: c along the path for the global method and the baseline from the same start."""
+    plt = _pyplot()
+    i = np.arange(1, len(result.indices) + 1)
+    fig, ax = plt.subplots(figsize=(7, 3.6))
+    ax.plot(i, result.indices, "b.-", label=f"global method (mean {result.average_index:.3f})")
+    ax.plot(i, result.baseline.indices, "r.-", label=f"pseudo-inverse + null-space gradient (mean "
+            f"{result.baseline_average_index:.3f})")
+    for k in result.config.key_points:
+        ax.axvline(k, color="0.85", lw=0.8, zorder=0)
+    h1, h2, _ = result.config.corner.samples
+    ax.axvspan(h1 + 0.5, h1 + h2 + 0.5, color="y", alpha=0.15, label="fillet")
+    ax.set_xlabel("path point i (grey: key points)")
+    ax.set_ylabel(r"$c = u^T J_r J_r^T u$ [m$^2$/rad$^2$]")
+    ax.set_title(f"{result.config.name}: index along the path (paper Fig. 4), {result.config.starts} starts, "
+                 f"{result.config.candidates} candidates")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    _save(fig, out)
+
+
+def plot_initial_configurations(result: PlanResult, out: Path) -> None:
+    """Fig. 5: the baseline from the planned first configuration vs random feasible ones."""
+    plt = _pyplot()
+    i = np.arange(1, len(result.indices) + 1)
+    fig, ax = plt.subplots(figsize=(7, 3.6))
+    ax.plot(i, result.baseline.indices, "b.-",
+            label=f"from the planned q_1 (mean {result.baseline_average_index:.3f})")
+    for b, color in zip(result.random_baselines, ("r", "g", "m", "c", "k"), strict=False):
+        ax.plot(i, b.indices, color + ".-", label=f"from a random feasible q_1 (mean {np.mean(b.indices):.3f})")
+    ax.set_xlabel("path point i")
+    ax.set_ylabel(r"$c$ [m$^2$/rad$^2$]")
+    ax.set_title("pseudo-inverse baseline: effect of the initial configuration (paper Fig. 5)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    _save(fig, out)

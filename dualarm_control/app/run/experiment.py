@@ -32,7 +32,6 @@ from dualarm_control.controller import ControllerParams
 from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import Configuration, DualArmModel, FloatArray
 from dualarm_control.references.base import RunOptions
-from dualarm_control.references.tasks import TasksSource
 from dualarm_control.scenario import Scenario
 from dualarm_control.tasks import CircleTask, evaluate_tasks
 from dualarm_sim.cell import CellConfig, DualArmCell
@@ -206,13 +205,6 @@ def with_task_values(record: RunRecord, scenario: Scenario, model: DualArmModel,
     return dataclasses.replace(record, tasks=part)
 
 
-def tasks_source(scenario: Scenario) -> TasksSource:
-    """The scenario's tasks; ValueError for a scenario without (a segment scenario)."""
-    if scenario.tasks is None:
-        raise ValueError(f"scenario {scenario.name!r} has no tasks (a segment scenario: use 'dualarm experiment')")
-    return scenario.tasks
-
-
 def nan_column(n: int) -> FloatArray:
     """(n,) NaN: a field a source or a bag does not give."""
     return np.full(n, math.nan)
@@ -224,10 +216,12 @@ def experiment_command(scenario_name: str, solver_names: str | None, params_file
     variant with ``force``); write ``out/metrics.json`` and the figures of the scenario's kind,
     print the table. Returns the exit code (130 when interrupted)."""
     from dualarm_control.app.record.report import (
-        format_results,
+        format_table,
         summarize_run,
         write_figures,
+        write_json,
     )
+    from dualarm_control.app.run.progress import progress_bar
     from dualarm_control.controller import controller_params
     from dualarm_control.params import read_params_files
     from dualarm_control.scenario import load_scenario
@@ -262,46 +256,23 @@ def experiment_command(scenario_name: str, solver_names: str | None, params_file
         print(f"scenario {scenario.name!r} ({scenario.source}); solver {solver}; gains {gains}"
               f"{'; force feedback' if force else ''}; output: {out}", file=sys.stderr)
 
-    def job(params: Any, gain: float | None) -> Callable[[Any], tuple[str, dict[str, Any], Any]]:
-        def run(progress: Any) -> tuple[str, dict[str, Any], Any]:
-            log = run_scenario(scenario, params, model, progress, gain=gain, force=force, duration=duration)
-            return log.label, summarize_run(log, scenario, model), log
-        return run
-
-    done = run_all([(label, job(params, gain)) for label, params, gain in runs], out)
-    if done is None:
-        return EXIT_INTERRUPTED
-    results, logs = done
-    files = ["metrics.json", *write_figures(scenario, logs, out, scenario.name)]
-    print(format_results(scenario, results))
-    paths = [str(out / f) for f in files]
-    print(f"\nwrote {' and '.join(paths) if len(paths) == 2 else ', '.join(paths)}")
-    return 0
-
-
-def run_all(jobs: list[tuple[str, Callable[[Any], tuple[str, dict[str, Any], Any]]]],
-            out: Path) -> tuple[dict[str, dict[str, Any]], list[Any]] | None:
-    """Run each (label, run) in order; ``run(progress)`` returns (metrics key, metrics, log).
-
-    Prints a progress bar and the wall time per run and writes ``out/metrics.json``. On
-    Ctrl-C the metrics of the runs completed so far are written and None is returned.
-    """
-    from dualarm_control.app.record.report import write_metrics
-    from dualarm_control.app.run.progress import progress_bar
-
     results: dict[str, dict[str, Any]] = {}
-    logs: list[Any] = []
+    logs: list[RunRecord] = []
     try:
-        for label, run in jobs:
+        for label, params, gain in runs:
             start = time.perf_counter()
-            key, metrics, log = run(progress_bar(label))
-            results[key] = metrics
+            log = run_scenario(scenario, params, model, progress_bar(label), gain=gain, force=force, duration=duration)
+            results[log.label] = summarize_run(log, scenario, model)
             logs.append(log)
             print(f"[{label}] done: {len(log.time)} cycles in {time.perf_counter() - start:.1f} s wall", file=sys.stderr)
     except KeyboardInterrupt:
         print("\ninterrupted: writing what is complete", file=sys.stderr)
         if results:
-            write_metrics(out / "metrics.json", results)
-        return None
-    write_metrics(out / "metrics.json", results)
-    return results, logs
+            write_json(out / "metrics.json", results)
+        return EXIT_INTERRUPTED
+    write_json(out / "metrics.json", results)
+    kind = scenario.reference.kind
+    paths = [str(out / f) for f in ("metrics.json", *write_figures(kind, out, scenario.name, logs, scenario))]
+    print(format_table(results, kind))
+    print(f"\nwrote {' and '.join(paths) if len(paths) == 2 else ', '.join(paths)}")
+    return 0

@@ -39,13 +39,6 @@ class RunArrays:
                    statuses=self.statuses, recording=recording)
 
 
-def _nearest(t: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    """For each time in ``ref``, the index of the nearest time in the sorted, non-empty ``t``."""
-    right = np.clip(np.searchsorted(t, ref), 0, len(t) - 1)
-    left = np.clip(right - 1, 0, len(t) - 1)
-    return np.where(np.abs(ref - t[left]) <= np.abs(t[right] - ref), left, right)
-
-
 def _seconds(ns: np.ndarray) -> FloatArray:
     return (ns - ns[0]).astype(float) * 1e-9
 
@@ -55,6 +48,7 @@ def relative_run_arrays(path: Path, model: DualArmModel, bag: Bag | None = None)
     from dualarm_control.app.record.bag import (
         COMMANDS_TOPIC,
         TARGET_TOPIC,
+        nearest_index,
         parse_float,
         parse_int,
         read_bag,
@@ -74,13 +68,13 @@ def relative_run_arrays(path: Path, model: DualArmModel, bag: Bag | None = None)
         return np.array([parse_float(v.get(key)) for v in cycles])
 
     series = {
-        **rv.velocity_norm_series(commands.values[_nearest(commands.t, diag_t)]),
+        **rv.velocity_norm_series(commands.values[nearest_index(diag_t, commands.t)]),
         rv.TRACKING_POSITION: column("position_error_m"),
         rv.TRACKING_ORIENTATION: column("orientation_error_rad"),
         rv.CYCLE_TIME: column("cycle_time_s"),
     }
-    return RunArrays(model.urdf, t, positions.values[_nearest(positions.t, diag_t)], list(model.joint_names),
-                     series, {"relative_target": targets.values[_nearest(targets.t, diag_t)]},
+    return RunArrays(model.urdf, t, positions.values[nearest_index(diag_t, positions.t)], list(model.joint_names),
+                     series, {"relative_target": targets.values[nearest_index(diag_t, targets.t)]},
                      [v.get("status", "") for v in cycles])
 
 

@@ -169,22 +169,6 @@ def render_video(bag_path: Path, out_path: Path, fps: float = DEFAULT_FPS, size:
     return render_recording(read_joint_recording(Path(bag_path)), Path(out_path), fps, size, log)
 
 
-def render_still(bag_path: Path, out_path: Path, fraction: float = 0.5,
-                 size: tuple[int, int] = DEFAULT_SIZE) -> Path:
-    """A PNG of the cell at ``fraction`` of the run recorded in ``bag_path`` (0: start, 1: end)."""
-    import matplotlib.pyplot as plt
-
-    recording = read_joint_recording(Path(bag_path))
-    camera = CellCamera(recording.urdf_text, size)
-    try:
-        image = camera.render(recording.at(np.array([fraction * recording.duration_s]))[0])
-    finally:
-        camera.close()
-    Path(out_path).parent.mkdir(parents=True, exist_ok=True)
-    plt.imsave(out_path, image)
-    return Path(out_path)
-
-
 def parse_size(text: str) -> tuple[int, int]:
     """``WIDTHxHEIGHT`` -> (width, height)."""
     try:
