@@ -33,15 +33,25 @@ The three coordinates get per-coordinate limits in an orthonormal basis ``Q`` (c
 
     (3)  ||s'|| <= vmax,  ||s''|| <= amax,  ||s'''|| <= jmax      (a box inside the ball).
 
-``Q``'s first column is the motion's direction (the goal's rotation axis, the commanded
-angular velocity), and ``b`` is the largest box along it that still contains the current
-``w/vmax`` and ``alpha/amax`` (:func:`rotation_box`); from rest ``b = (1, 0, 0)``: the
-orientation turns about the fixed goal axis with the full scalar limits, the profile of
-today's rest-to-rest segment (:class:`~dualarm_control.trajectory.RelativeTrajectory`).
+``Q``'s first column is the motion's direction (the goal's rotation vector, the commanded
+angular velocity), and ``b`` (:func:`rotation_box`) gives each sideways coordinate the least
+share that holds its state (4) (:func:`least_shares`: the speed it still reaches while its
+acceleration falls to zero), the rest of the ball to the first. From rest, or whenever the
+state is parallel to the direction, the sideways coordinates are at rest and ``b = (1, 0, 0)``:
+the orientation turns about the goal axis with the full scalar limits, the first coordinate
+time-optimal on its own (``Synchronization.No``): the profile of today's rest-to-rest segment
+(:class:`~dualarm_control.trajectory.RelativeTrajectory`), so a goal from rest takes no
+longer than the segment, +1 cycle (the online run ends on a cycle). When no box along the
+direction holds the state (a preemption turning the axis while the motion accelerates
+sideways), last cycle's box is kept until one does: ruckig put the state in that box, so it
+holds it (a box that does not hold the state makes ruckig overshoot its velocity limit while
+it brings the acceleration down: up to 1.4 % over ``vmax`` before this rule).
 
 What is guaranteed for the angular motion (vmax, amax, jmax the angular limits):
 
-* ``||w|| <= vmax`` always: ``J_l(s)`` has singular values 1 and ``|sinc(th/2)| <= 1``.
+* ``||w|| <= vmax`` always (up to rounding): each cycle's ruckig plan starts from a state its
+  box holds (4), so ``||s'|| <= ||b|| vmax <= vmax``, and ``J_l(s)`` has singular values 1 and
+  ``|sinc(th/2)| <= 1``.
 * Motions whose ``w``, ``alpha`` and direction stay parallel (every goal or jog started from
   rest, or along the current motion's axis): ``s`` stays on a line through 0, ``J_l(s) s' = s'``
   and the curvature terms of (2) vanish: ``||alpha|| <= amax`` and ``||dalpha/dt|| <= jmax``
@@ -51,11 +61,10 @@ What is guaranteed for the angular motion (vmax, amax, jmax the angular limits):
   ``||s|| <= vmax T``: 2e-4 rad/s^2 with the default limits at T = 5 ms), and each cycle's
   change ``||alpha_k+1 - alpha_k|| <= (jmax + vmax amax / 2 + vmax^3 / 3) T`` (from
   ``dalpha/dt = s''' + 1/2 s' x s'' + 1/3 s' x (s' x s')`` at ``s = 0``; +5.8 % of jmax with
-  the defaults). The box changes from cycle to cycle, so ruckig's velocity bound holds for
-  each cycle's plan, not across plans: measured ``||w||`` up to 1.001 vmax in such
-  preemptions (a known gap, see docs/driving.md). A state outside every box (e.g. produced
-  under larger limits) is first braked back by ruckig. Coordinates without motion get a
-  1e-3 share, not 0 (ruckig refuses zero limits): they only move by rounding.
+  the defaults). A state outside every box (after a limit change) is first braked back by
+  ruckig. Sideways coordinates that move get at least a 1e-3 share (ruckig refuses zero
+  limits), counted in ``||b||``; those at rest get 1e-3 uncounted and a zero target: they
+  move by rounding only.
 
 Position and orientation are each time-optimal and not synchronized with each other, so a
 goal from rest takes ``max(position time, rotation time)``, which is the duration of a
@@ -112,6 +121,7 @@ _ROUNDING = 1e-9  # relative excess of a limit counted as rounding
 _SIDE_SHARE = 0.3  # least box share of a sideways coordinate that moves (its braking room)
 _SNAP = 1e-9  # m or rad: a remaining distance a near-rest state may snap over (see _near_rest)
 _SIDE_STATE = 1e-3  # sideways state share below which the least share (1e-3) is room enough
+_IDLE = 1e-9  # sideways state share below which a coordinate is at rest (it moves by rounding only)
 
 
 @dataclass(frozen=True)
@@ -204,27 +214,67 @@ def _basis(first: FloatArray, hint: FloatArray | None) -> FloatArray:
     return np.column_stack((first, e2, _cross(first, e2)))
 
 
-def rotation_box(direction: FloatArray, x: FloatArray, y: FloatArray,
-                 braking: float = 0.0) -> tuple[FloatArray, FloatArray]:
-    """Basis ``Q`` (3, 3) and box shares ``b`` (3,) for the rotation coordinates (see (3)).
+def least_shares(x: FloatArray, y: FloatArray, braking: float) -> FloatArray:
+    """Per coordinate, the least box share ``b_i`` in which the state ``(x_i, y_i)`` stays (4).
+
+    A coordinate with velocity share ``x_i = v_i / vmax`` and acceleration share
+    ``y_i = a_i / amax`` needs ``b_i >= |y_i|`` and, when its acceleration still raises its speed
+    (``x_i y_i > 0``), the speed it reaches while that acceleration falls to zero at the jerk
+    limit ``b_i jmax``: ``|x_i| + braking y_i^2 / b_i <= b_i``, ``braking = amax^2 / (2 jmax vmax)``:
+
+        (4)  b_i >= max(|y_i|, (|x_i| + sqrt(x_i^2 + 4 braking y_i^2)) / 2)     (rising)
+             b_i >= max(|y_i|, |x_i|)                                           (otherwise)
+
+    Ruckig started from such a state keeps ``|v_i| <= b_i vmax``; from a state beyond it, it
+    overshoots (the speed rises while the acceleration is brought down). Shapes (3,), [-].
+    """
+    ax = np.abs(x)
+    rising = x * y > 0.0
+    speed = np.where(rising, 0.5 * (ax + np.sqrt(ax * ax + 4.0 * braking * y * y)), ax)
+    return np.maximum(speed, np.abs(y))
+
+
+def _fits(b: FloatArray, need: FloatArray) -> bool:
+    """The state whose least shares are ``need`` stays in the box ``b`` (up to rounding)."""
+    return bool(np.all(need <= b * (1.0 + _ROUNDING)))
+
+
+def _at_the_limit(velocity: FloatArray, acceleration: FloatArray, vmax: FloatArray,
+                  amax: float) -> tuple[FloatArray, FloatArray]:
+    """Rounding at a velocity limit removed: a coordinate at its limit ``vmax`` (3,) [rad/s] up to
+    a relative 1e-9 is put on it, and an acceleration [rad/s^2] below ``1e-9 amax`` that pushes it
+    further is set to 0 (ruckig brakes for one cycle on ``v = vmax``, ``a = 3e-26``: measured
+    6e-5 rad/s dips while cruising, 0.03 cycle lost per goal)."""
+    speed = np.abs(velocity)
+    at = (speed >= vmax * (1.0 - _ROUNDING)) & (speed <= vmax * (1.0 + _ROUNDING))
+    velocity = np.where(at, np.sign(velocity) * vmax, velocity)
+    pushing = at & (velocity * acceleration > 0.0) & (np.abs(acceleration) <= _ROUNDING * amax)
+    return velocity, np.where(pushing, 0.0, acceleration)
+
+
+def rotation_box(direction: FloatArray, x: FloatArray, y: FloatArray, braking: float = 0.0,
+                 previous: tuple[FloatArray, FloatArray] | None = None) -> tuple[FloatArray, FloatArray]:
+    """Basis ``Q`` (3, 3) and box shares ``b`` (3,) for the rotation coordinates (see (3), (4)).
 
     Args:
         direction: the motion's direction (goal rotation vector, commanded angular velocity),
             (3,), any norm (zero: none).
-        x: current ``w / vmax`` (3,), norm <= 1 when the limits were respected.
-        y: current ``alpha / amax`` (3,), norm <= 1 likewise.
-        braking: ``amax^2 / (2 jmax vmax)`` [-]: a coordinate whose acceleration still raises
-            its speed needs the velocity share ``|x_i| + braking y_i^2 / b_i`` (the speed it
-            reaches before its acceleration, jerk-limited, falls to zero), else ruckig
-            overshoots its velocity limit.
+        x: current ``w / vmax`` (3,).
+        y: current ``alpha / amax`` (3,).
+        braking: ``amax^2 / (2 jmax vmax)`` [-] of (4).
+        previous: the box ``(Q, b)`` of the last cycle: the state, ruckig's output in it, stays in it.
 
     Returns:
-        ``Q`` with first column along ``direction`` (else along ``x``, ``y``), and ``b >= 0``
-        with ``||b|| = 1`` and ``|Q^T x| <= b``, ``|Q^T y| <= b`` componentwise: a sideways
-        coordinate (2, 3) that moves gets at least a 0.3 share to brake in (without a floor its
-        box would shrink with its state and it would never stop), the rest goes to ``b_1``. When no box along ``direction`` contains both (``x`` and ``y`` large
-        and apart), the basis bisects ``x`` and ``y`` instead: ``b = max(|x|, |y|) (cos(phi/2),
-        sin(phi/2), 0)`` scaled to unit norm, which contains both while ``||x||, ||y|| <= 1``.
+        ``Q`` with first column along ``direction`` (else along ``x``, ``y``) and ``b >= 0`` with
+        ``||max(b, 1e-3 on moving coordinates)|| <= 1`` that holds the state (4): a sideways
+        coordinate (2, 3) that moves gets at least a 0.3 share to brake in when it fits (without
+        a floor its box would shrink with its state and it would never stop), a sideways
+        coordinate at rest (state below 1e-9) gets none (ruckig's least share 1e-3 moves it by
+        rounding only), the rest of the ball goes to ``b_1``: from rest ``b = (1, 0, 0)``, the
+        full scalar limits about the goal axis, as a rest-to-rest segment. When no box along
+        ``direction`` holds the state (fast and accelerating sideways), the ``previous`` box is
+        kept (it holds it: ruckig put it there) until one does; without one (a state beyond the
+        limits, after a limit change) the largest box ``need / ||need||``: ruckig brakes the excess.
     """
     first = _unit(direction)
     if first is None:
@@ -233,40 +283,21 @@ def rotation_box(direction: FloatArray, x: FloatArray, y: FloatArray,
         return np.eye(3), np.array([1.0, 0.0, 0.0])
     hint = x if float(np.linalg.norm(_cross(first, x))) > float(np.linalg.norm(_cross(first, y))) else y
     q = _basis(first, hint)
-    xq, yq = q.T @ x, q.T @ y
-    rising = xq * yq > 0.0
-    b = np.maximum(np.abs(xq), np.abs(yq))
-    for _ in range(3):  # the braking share depends on b: a fixed point in a few rounds
-        need = np.abs(xq) + np.where(rising, braking * yq * yq / np.maximum(b, _MIN_SHARE), 0.0)
-        c = np.maximum(need, np.abs(yq))
-        c = np.where(c <= 1.0 + _ROUNDING, np.minimum(c, 1.0), c)  # at the limit up to rounding: at it
-        side = np.where(c[1:] > _SIDE_STATE, np.maximum(c[1:], _SIDE_SHARE), c[1:])  # room to brake sideways
-        for sides in (side, c[1:]):
-            rest = float(sides @ sides)
-            if rest + float(c[0]) ** 2 <= 1.0:
-                b = np.array([math.sqrt(1.0 - rest), *sides])
-                break
-        else:
-            break
-    else:
-        return q, b
-    ux, uy = _unit(x), _unit(y)
-    if ux is None or uy is None:  # the braking share alone overflows: the largest box, ruckig brakes the excess
-        c = np.maximum(c, _MIN_SHARE)
-        return q, c / float(np.linalg.norm(c))
-    if ux @ uy < 0.0:
-        uy = -uy
-    q = _basis(_unit(ux + uy), ux - uy)  # type: ignore[arg-type]
-    c = np.maximum(np.abs(q.T @ x), np.abs(q.T @ y))
-    c[2] = math.sqrt(max(1.0 - float(c[:2] @ c[:2]), 0.0))  # the rest of the ball: room toward the goal
-    c = np.maximum(c, _MIN_SHARE)
-    return q, c / max(float(np.linalg.norm(c)), 1.0)
-
-
-def _in_ball(v: FloatArray) -> FloatArray:
-    """``v`` scaled into the unit ball (a state beyond the limits by rounding, or by a limit change)."""
-    n = float(np.linalg.norm(v))
-    return v / n if n > 1.0 else v
+    need = least_shares(q.T @ x, q.T @ y, braking)
+    need = np.where(need <= 1.0 + _ROUNDING, np.minimum(need, 1.0), need)  # at the limit up to rounding: at it
+    moving = need[1:] > _IDLE
+    counted = np.where(moving, np.maximum(need[1:], _MIN_SHARE), 0.0)
+    roomy = np.where(need[1:] > _SIDE_STATE, np.maximum(counted, _SIDE_SHARE), counted)
+    for sides in (roomy, counted):
+        rest = float(sides @ sides)
+        if rest < 1.0:
+            b = np.array([math.sqrt(1.0 - rest), *np.where(moving, sides, need[1:])])
+            if b[0] >= _MIN_SHARE and _fits(b, need):
+                return q, b
+    if previous is not None:
+        return previous
+    need = np.maximum(need, _MIN_SHARE)
+    return q, need / float(np.linalg.norm(need))
 
 
 class OnlineTrajectory:
@@ -315,6 +346,7 @@ class OnlineTrajectory:
         self._rout = ruckig.OutputParameter(3)
         self._pos_done = self._rot_done = True
         self._pos_left = self._rot_left = 0.0  # s, time to go of each plan
+        self._box: tuple[FloatArray, FloatArray] | None = None  # last cycle's rotation box (Q, b)
         self.set_limits(self.limits)
         self._reset_position_input()
 
@@ -392,6 +424,7 @@ class OnlineTrajectory:
         self.state = IDLE
         self._pos_done = self._rot_done = True
         self._pos_left = self._rot_left = 0.0
+        self._box = None
         self._reset_position_input()
 
     def _accept(self, stamp: float | None) -> None:
@@ -482,18 +515,24 @@ class OnlineTrajectory:
             self._finish_rotation()
             return
         braking = amax**2 / (2.0 * jmax * vmax)
-        q, b = rotation_box(direction, _in_ball(self.w / vmax), _in_ball(self.alpha / amax), braking)
+        q, b = rotation_box(direction, self.w / vmax, self.alpha / amax, braking, self._box)
+        self._box = (q, b)
         share = np.maximum(b, _MIN_SHARE)
+        idle = b <= _IDLE  # at rest, outside the norm budget: it stays there (a kept box's old sides)
         inp = self._rin
+        # a straight motion (sides at rest): the first coordinate alone, time-optimal as the segment
+        # (time synchronization would give the sides odd profiles of their 1e-17 rad targets)
+        inp.synchronization = ruckig.Synchronization.No if np.all(idle[1:]) else ruckig.Synchronization.Time
         inp.current_position = [0.0] * 3
-        inp.current_velocity = (q.T @ self.w).tolist()
-        inp.current_acceleration = (q.T @ self.alpha).tolist()
+        velocity, acceleration = _at_the_limit(q.T @ self.w, q.T @ self.alpha, vmax * share, amax)
+        inp.current_velocity = velocity.tolist()
+        inp.current_acceleration = acceleration.tolist()
         inp.max_velocity = (vmax * share).tolist()
         inp.max_acceleration = (amax * share).tolist()
         inp.max_jerk = (jmax * share).tolist()
         if self.goal is not None:
             inp.control_interface = ruckig.ControlInterface.Position
-            inp.target_position = (q.T @ direction).tolist()
+            inp.target_position = np.where(idle, 0.0, q.T @ direction).tolist()
             inp.target_velocity = [0.0] * 3
         else:
             inp.control_interface = ruckig.ControlInterface.Velocity
@@ -526,6 +565,7 @@ class OnlineTrajectory:
         if self.goal is not None:
             self.r = self.goal.rotation.copy()
         self.w, self.alpha = np.zeros(3), np.zeros(3)
+        self._box = None
         self._rot_done, self._rot_left = True, 0.0
 
     # ------------------------------------------------------------------ outputs

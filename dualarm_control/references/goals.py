@@ -105,7 +105,9 @@ class GoalsSource(SourceDefaults):
             if gen.time > last + MAX_SCRIPT_TIME:
                 raise RuntimeError(f"goals script not at rest {MAX_SCRIPT_TIME} s after its last command")
             stream.advance(gen.time + period)
-        return gen.time + options.settle_time
+        # on the nanosecond grid the trajectory node's clock gives (elapsed ns / 1e9): 2606 * 0.005 + 1.0 is
+        # 14.030000000000001 > 14.03, one more cycle over ROS than in one process
+        return round((gen.time + options.settle_time) * 1e9) / 1e9
 
     def end_pose(self, model: DualArmModel, q0: FloatArray, limits: MotionLimits,
                  period: float) -> tuple[FloatArray, FloatArray]:
