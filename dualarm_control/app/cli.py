@@ -25,15 +25,6 @@ def cmd_experiment(args: argparse.Namespace) -> int:
                               args.duration)
 
 
-def check_params_files(paths: list[str]) -> None:
-    """Every ``--params`` file exists and is a ROS-style parameter file; ParameterFileError (exit 2,
-    naming the file and the problem) before any node starts."""
-    from dualarm_control.params import read_params_files
-
-    for path in paths:
-        read_params_files([path], "_check_")
-
-
 def cmd_launch(args: argparse.Namespace) -> int:
     """Start the three nodes as processes on a scenario; optionally record a bag."""
     from dualarm_control.app.run.launcher import (
@@ -41,6 +32,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         INTERACTIVE_CELL,
         launch_scenario,
     )
+    from dualarm_control.params import read_params_files
     from dualarm_control.scenario import load_scenario, scenario_file
 
     interactive = args.scenario == INTERACTIVE
@@ -49,7 +41,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         if args.lockstep or args.plan:
             raise DualArmError("'dualarm launch interactive' runs in real time (no --lockstep, no --plan)")
     scenario_file(args.scenario)  # fail early (exit 2) on an unknown scenario
-    check_params_files(args.params)
+    read_params_files(args.params, "_check_")  # exit 2 naming a missing or bad --params file before any node starts
     extra = []
     if args.solver:
         extra += ["-p", f"solver:={args.solver}"]
@@ -176,10 +168,11 @@ def cmd_bench(args: argparse.Namespace) -> int:
             run_realtime,
             write_realtime,
         )
+        from dualarm_control.params import read_params_files
         from dualarm_control.scenario import scenario_file
 
         scenario_file(args.scenario)
-        check_params_files(args.params)
+        read_params_files(args.params, "_check_")  # exit 2 on a bad --params file before any node starts
         rows = run_realtime(args.scenario, solvers, [float(r) for r in args.rates.split(",") if r.strip()],
                             params=args.params, with_view=args.with_view)
         write_realtime(Path(args.output), rows, args.scenario)
