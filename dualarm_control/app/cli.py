@@ -254,8 +254,7 @@ def cmd_bag_record(args: argparse.Namespace) -> int:
 
 def cmd_bag_info(args: argparse.Namespace) -> int:
     """Print a ``ros2 bag info``-style summary."""
-    from dualarm_control.app.record.bag import bag_info
-    from dualarm_control.app.record.notes import format_notes
+    from dualarm_control.app.record.bag import bag_info, format_notes
 
     print(bag_info(Path(args.bag)))
     notes = format_notes(Path(args.bag))

@@ -103,6 +103,18 @@ def _bag_metadata(path: Path) -> dict[str, Any]:
     return info if isinstance(info, dict) else {}
 
 
+NOTE_PREFIX = "dualarm."
+"""``custom_data`` keys of metadata.yaml that are the package recorder's notes (e.g. that /tf was
+computed from /joint_states, ``ros/computed_tf.NOTE``); ``dualarm bag info`` prints them."""
+
+
+def format_notes(path: Path) -> str:
+    """``bag info``'s lines for the recorder's notes, sorted by key, in its column layout ('' without any)."""
+    custom = _bag_metadata(Path(path)).get("custom_data") or {}
+    notes = [note for key, note in sorted(custom.items()) if str(key).startswith(NOTE_PREFIX)]
+    return "\n".join(f"{'Note:':<19}{note}" for note in notes)
+
+
 def open_reader(path: Path) -> AnyReader:
     """An opened AnyReader on a rosbag2 directory (Jazzy typestore as fallback); BagError if unreadable."""
     path = Path(path)
