@@ -19,13 +19,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from chromium import Chromium, free_port
 
 rr = pytest.importorskip("rerun", reason="rerun-sdk not installed (the view extra)")
 
 from dualarm_control.app import cli
 from dualarm_control.app.run.experiment import run_scenario
 from dualarm_control.app.view import rerun_view as rv
-from dualarm_control.app.view.browser import Chromium, free_port
 from dualarm_control.app.view.from_bag import (
     RunArrays,
     record_arrays,

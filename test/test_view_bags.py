@@ -20,7 +20,7 @@ import pinocchio as pin
 import pytest
 
 from dualarm_control.app import cli
-from dualarm_control.app.record.notes import format_notes
+from dualarm_control.app.record.bag import format_notes
 from dualarm_control.app.run.launcher import launch_scenario
 from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel

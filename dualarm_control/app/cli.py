@@ -25,15 +25,6 @@ def cmd_experiment(args: argparse.Namespace) -> int:
                               args.duration)
 
 
-def check_params_files(paths: list[str]) -> None:
-    """Every ``--params`` file exists and is a ROS-style parameter file; ParameterFileError (exit 2,
-    naming the file and the problem) before any node starts."""
-    from dualarm_control.params import read_params_files
-
-    for path in paths:
-        read_params_files([path], "_check_")
-
-
 def cmd_launch(args: argparse.Namespace) -> int:
     """Start the three nodes as processes on a scenario; optionally record a bag."""
     from dualarm_control.app.run.launcher import (
@@ -41,6 +32,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         INTERACTIVE_CELL,
         launch_scenario,
     )
+    from dualarm_control.params import read_params_files
     from dualarm_control.scenario import load_scenario, scenario_file
 
     interactive = args.scenario == INTERACTIVE
@@ -49,7 +41,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         if args.lockstep or args.plan:
             raise DualArmError("'dualarm launch interactive' runs in real time (no --lockstep, no --plan)")
     scenario_file(args.scenario)  # fail early (exit 2) on an unknown scenario
-    check_params_files(args.params)
+    read_params_files(args.params, "_check_")  # exit 2 naming a missing or bad --params file before any node starts
     extra = []
     if args.solver:
         extra += ["-p", f"solver:={args.solver}"]
@@ -147,64 +139,52 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_bench_realtime(args: argparse.Namespace) -> int:
-    """Real-time runs over ROS per solver and rate; write DIR/realtime.md and DIR/realtime.json."""
-    from dualarm_control.app.bench.realtime import (
-        format_realtime,
-        run_realtime,
-        write_realtime,
-    )
-    from dualarm_control.scenario import scenario_file
-    from dualarm_control.solvers import make_solver
-
-    scenario_file(args.scenario)
-    solvers = [s.strip() for s in args.solver.split(",") if s.strip()]
-    for name in solvers:
-        make_solver(name)
-    rates = [float(r) for r in args.rates.split(",") if r.strip()]
-    check_params_files(args.params)
-    rows = run_realtime(args.scenario, solvers, rates, params=args.params, with_view=args.with_view)
-    write_realtime(Path(args.output), rows, args.scenario)
-    print(format_realtime(rows))
-    print(f"\nwrote {Path(args.output) / 'realtime.md'} and realtime.json")
-    return 0
-
-
-def cmd_bench_messages(args: argparse.Namespace) -> int:
-    """Per-period messages through rclpy objects and as CDR bytes; write DIR/messages.md and messages.json."""
-    from dualarm_control.ros.message_bench import (
-        format_message_bench,
-        run_message_bench,
-        write_message_bench,
-    )
-
-    rows = run_message_bench()
-    write_message_bench(Path(args.output), rows)
-    print(format_message_bench(rows))
-    print(f"\nwrote {Path(args.output) / 'messages.md'} and messages.json")
-    return 0
-
-
 def cmd_bench(args: argparse.Namespace) -> int:
     """Solver x QP back-end timings (random set, scenario), pink, exactness, scaling: DIR/bench.md and bench.json."""
     if args.realtime and args.messages:
         raise DualArmError("--realtime and --messages are separate benchmarks: choose one")
     if args.with_view and not args.realtime:
         raise DualArmError("--with-view belongs to --realtime")
-    if args.realtime:
-        return cmd_bench_realtime(args)
-    if args.messages:
-        return cmd_bench_messages(args)
+    from dualarm_control.solvers import make_solver
+
+    solvers = [s.strip() for s in args.solver.split(",") if s.strip()]
+    if args.messages:  # per-period messages through rclpy objects and as CDR bytes
+        from dualarm_control.ros.message_bench import (
+            format_message_bench,
+            run_message_bench,
+            write_message_bench,
+        )
+
+        rows = run_message_bench()
+        write_message_bench(Path(args.output), rows)
+        print(format_message_bench(rows))
+        print(f"\nwrote {Path(args.output) / 'messages.md'} and messages.json")
+        return 0
+    for name in solvers:
+        make_solver(name)  # unknown names exit 2 before any run
+    if args.realtime:  # real-time runs over ROS per solver and rate
+        from dualarm_control.app.bench.realtime import (
+            format_realtime,
+            run_realtime,
+            write_realtime,
+        )
+        from dualarm_control.params import read_params_files
+        from dualarm_control.scenario import scenario_file
+
+        scenario_file(args.scenario)
+        read_params_files(args.params, "_check_")  # exit 2 on a bad --params file before any node starts
+        rows = run_realtime(args.scenario, solvers, [float(r) for r in args.rates.split(",") if r.strip()],
+                            params=args.params, with_view=args.with_view)
+        write_realtime(Path(args.output), rows, args.scenario)
+        print(format_realtime(rows))
+        print(f"\nwrote {Path(args.output) / 'realtime.md'} and realtime.json")
+        return 0
     from dualarm_control.app.bench.suite import format_bench, run_bench, write_bench
     from dualarm_control.qp import make_backend
     from dualarm_control.scenario import load_scenario
-    from dualarm_control.solvers import make_solver
 
     scenario = None if args.scenario == "none" else load_scenario(args.scenario)
-    solvers = [s.strip() for s in args.solver.split(",") if s.strip()]
     backends = [b.strip() for b in args.backend.split(",") if b.strip()]
-    for name in solvers:
-        make_solver(name)  # unknown names exit 2 before any run
     for name in backends:
         make_backend(name)
     record = run_bench(scenario, solvers, backends, count=args.cases, seed=args.seed,
@@ -274,8 +254,7 @@ def cmd_bag_record(args: argparse.Namespace) -> int:
 
 def cmd_bag_info(args: argparse.Namespace) -> int:
     """Print a ``ros2 bag info``-style summary."""
-    from dualarm_control.app.record.bag import bag_info
-    from dualarm_control.app.record.notes import format_notes
+    from dualarm_control.app.record.bag import bag_info, format_notes
 
     print(bag_info(Path(args.bag)))
     notes = format_notes(Path(args.bag))
@@ -439,29 +418,15 @@ def _add_param_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     timeout = {"type": float, "default": DISCOVERY_TIMEOUT_S, "metavar": "S",
                "help": "wait up to S s for the node's parameter services, and as long for its answer "
                "(default: %(default)s)"}
-    lst = verbs.add_parser("list", help="parameter names")
-    lst.add_argument("node", help="node name, e.g. /controller_node")
-    lst.add_argument("--timeout", **timeout)
-    for verb, helptext in (("get", "a parameter's value"), ("describe", "type, description, constraints")):
+    for verb, helptext in (("list", "parameter names"), ("get", "a parameter's value"),
+                           ("describe", "type, description, constraints"),
+                           ("set", "set a parameter (value read as YAML: 10.0 double, 10 integer)")):
         v = verbs.add_parser(verb, help=helptext)
-        v.add_argument("node")
-        v.add_argument("name")
+        v.add_argument("node", help="node name, e.g. /controller_node")
+        for name in {"list": (), "set": ("name", "value")}.get(verb, ("name",)):
+            v.add_argument(name)
         v.add_argument("--timeout", **timeout)
-    st = verbs.add_parser("set", help="set a parameter (value read as YAML: 10.0 double, 10 integer)")
-    st.add_argument("node")
-    st.add_argument("name")
-    st.add_argument("value")
-    st.add_argument("--timeout", **timeout)
     par.set_defaults(func=cmd_param)
-
-
-def _add_report_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    rep = sub.add_parser("report", help="metrics of a recorded run (metrics.json, velocity_norms.png, table)",
-                         description="Read a bag of a run (commands, joint states, diagnostics, relative pose "
-                         "and target) and write DIR/metrics.json and DIR/velocity_norms.png like 'experiment'.")
-    rep.add_argument("bag", help="rosbag2 directory")
-    rep.add_argument("--output", default="out/report", metavar="DIR", help="output directory (default: %(default)s)")
-    rep.set_defaults(func=cmd_report)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -592,7 +557,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_bag_parser(sub)
     _add_topic_parser(sub)
     _add_param_parser(sub)
-    _add_report_parser(sub)
+    rep = sub.add_parser("report", help="metrics of a recorded run (metrics.json, velocity_norms.png, table)",
+                         description="Read a bag of a run (commands, joint states, diagnostics, relative pose "
+                         "and target) and write DIR/metrics.json and DIR/velocity_norms.png like 'experiment'.")
+    rep.add_argument("bag", help="rosbag2 directory")
+    rep.add_argument("--output", default="out/report", metavar="DIR", help="output directory (default: %(default)s)")
+    rep.set_defaults(func=cmd_report)
     from dualarm_control.app.plan.command import add_plan_parser
 
     add_plan_parser(sub, cmd_plan)

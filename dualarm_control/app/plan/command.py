@@ -45,16 +45,11 @@ def run_plan_command(args: argparse.Namespace, progress: ProgressFactory = progr
     from dualarm_control.planning.config import load_plan_config
 
     config = load_plan_config(args.scenario)
-    if args.starts is not None:
-        if args.starts < 1:
-            raise DualArmError(f"--starts: got {args.starts}, expected >= 1")
-        config = dataclasses.replace(config, starts=args.starts)
-    if args.candidates is not None:
-        if args.candidates < 1:
-            raise DualArmError(f"--candidates: got {args.candidates}, expected >= 1")
-        config = dataclasses.replace(config, candidates=args.candidates)
-    if args.seed is not None:
-        config = dataclasses.replace(config, seed=args.seed)
+    given = {key: getattr(args, key) for key in ("starts", "candidates", "seed") if getattr(args, key) is not None}
+    for key in ("starts", "candidates"):
+        if given.get(key, 1) < 1:
+            raise DualArmError(f"--{key}: got {given[key]}, expected >= 1")
+    config = dataclasses.replace(config, **given)
     workers = default_workers() if args.workers is None else args.workers
     if workers < 1:
         raise DualArmError(f"--workers: got {workers}, expected >= 1")

@@ -61,6 +61,7 @@ SCENARIO_KEY = "scenario"
 """The task scenario's name or path in a task cycle's status."""
 SIM_STATUS = "sim_node"
 CONTACT_TOPIC = "/contact_force"
+DESCRIPTION_TOPIC = "/robot_description"
 
 
 class BagError(DualArmError):
@@ -100,6 +101,18 @@ def _bag_metadata(path: Path) -> dict[str, Any]:
     data = yaml.safe_load(meta_file.read_text()) or {}
     info = data.get("rosbag2_bagfile_information", {})
     return info if isinstance(info, dict) else {}
+
+
+NOTE_PREFIX = "dualarm."
+"""``custom_data`` keys of metadata.yaml that are the package recorder's notes (e.g. that /tf was
+computed from /joint_states, ``ros/computed_tf.NOTE``); ``dualarm bag info`` prints them."""
+
+
+def format_notes(path: Path) -> str:
+    """``bag info``'s lines for the recorder's notes, sorted by key, in its column layout ('' without any)."""
+    custom = _bag_metadata(Path(path)).get("custom_data") or {}
+    notes = [note for key, note in sorted(custom.items()) if str(key).startswith(NOTE_PREFIX)]
+    return "\n".join(f"{'Note:':<19}{note}" for note in notes)
 
 
 def open_reader(path: Path) -> AnyReader:
@@ -217,10 +230,13 @@ class Bag:
     pose_stamps: list[int] = field(default_factory=list)  # /relative_pose header stamps
     contact: dict[int, float] = field(default_factory=dict)  # /contact_force by header stamp
     missing: list[str] = field(default_factory=list)  # the relative report's topics the bag lacks
+    description: str | None = None  # the first /robot_description (the cell's URDF)
 
     def add(self, topic: str, t: int, msg: Any) -> None:
         if topic == JOINT_STATES_TOPIC:
             self.states.append((t, stamp_ns(msg.header.stamp), list(msg.name), msg))
+        elif topic == DESCRIPTION_TOPIC:
+            self.description = self.description if self.description is not None else msg.data
         elif topic == CONTACT_TOPIC:
             self.contact.setdefault(stamp_ns(msg.header.stamp), float(msg.vector.z))
         elif topic == COMMANDS_TOPIC:
@@ -281,11 +297,11 @@ class Bag:
 
 
 def read_bag(path: Path) -> Bag:
-    """Every message a report or a fault analysis reads, in one pass."""
+    """Every message a report, a viewer or a fault analysis reads, in one pass."""
     reader = open_reader(path)
     bag = Bag(missing=missing_topics(reader))
     try:
-        connections = [c for c in reader.connections if c.topic in (*REPORT_TOPICS, CONTACT_TOPIC)]
+        connections = [c for c in reader.connections if c.topic in (*REPORT_TOPICS, CONTACT_TOPIC, DESCRIPTION_TOPIC)]
         for conn, t, raw in reader.messages(connections=connections):
             bag.add(conn.topic, t, reader.deserialize(raw, conn.msgtype))
     finally:

@@ -78,10 +78,6 @@ def yield_to_the_cell() -> None:
     os.nice(max(0, LIVE_VIEW_NICENESS - os.nice(0)))
 
 
-def _has_display() -> bool:
-    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
-
-
 def cmd_view(args: argparse.Namespace) -> int:
     """``dualarm view``: a video (``--video``), a Foxglove server (``--foxglove``), or else Rerun."""
     if args.video and args.foxglove:
@@ -113,7 +109,7 @@ def _rerun_view(args: argparse.Namespace) -> int:
     from dualarm_control.app.view import rerun_view as rv
     from dualarm_control.app.view.server import WebViewer
 
-    if not args.web and not args.save and not _has_display():
+    if not args.web and not args.save and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         print("dualarm view: no display for the native viewer. Use --web (open the printed URL in a browser) or "
               "--save FILE.rrd (then: rerun FILE.rrd on a machine with a display).", file=sys.stderr)
         return NO_VIEWER

@@ -39,10 +39,6 @@ class RunArrays:
                    statuses=self.statuses, recording=recording)
 
 
-def _seconds(ns: np.ndarray) -> FloatArray:
-    return (ns - ns[0]).astype(float) * 1e-9
-
-
 def relative_run_arrays(path: Path, model: DualArmModel, bag: Bag | None = None) -> RunArrays:
     """A relative-pose run's bag, per controller cycle (time: the cycles' joint-state stamps)."""
     from dualarm_control.app.record.bag import (
@@ -60,7 +56,8 @@ def relative_run_arrays(path: Path, model: DualArmModel, bag: Bag | None = None)
     cycles = [v for _, v in bag.cycles]
     stamps = [parse_int(v.get("stamp_ns")) for v in cycles]
     by_stamp = all(s is not None for s in stamps) and bool(np.all(np.diff(np.array(stamps, dtype=float)) >= 0))
-    t = _seconds(np.array(stamps, dtype=np.int64) if by_stamp else diag_t)
+    ns = np.array(stamps, dtype=np.int64) if by_stamp else diag_t
+    t = (ns - ns[0]).astype(float) * 1e-9
     commands, targets = bag.series(COMMANDS_TOPIC, model.nq), bag.series(TARGET_TOPIC, 7)
     positions, _ = bag.joint_states(model.joint_names)
 

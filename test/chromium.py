@@ -1,6 +1,6 @@
-"""Headless Chromium driven over the DevTools protocol: open a page, take screenshots.
+"""Test helper: headless Chromium driven over the DevTools protocol: open a page, take screenshots.
 
-Used by the browser test of ``dualarm view --web`` and to take the screenshot in
+Used by the browser test of ``dualarm view --web`` (test_view.py) and to take the screenshot in
 docs/visualization.md. Chromium's one-shot ``--screenshot`` captures before a WebGL page has
 drawn anything; over the DevTools websocket the page is loaded with ``Page.navigate`` and
 captured with ``Page.captureScreenshot`` when wanted. With software rendering (SwiftShader)
