@@ -45,6 +45,7 @@ from std_msgs.msg import Float64MultiArray, String
 from dualarm_control.params import ParamSpec, non_negative, positive
 from dualarm_control.ros import convert
 from dualarm_control.ros.inputs import Throttle, subscribe_checked
+from dualarm_control.ros.local_bus import LocalBus, local_publisher
 from dualarm_control.ros.node import (
     declare,
     priority_from_args,
@@ -96,7 +97,7 @@ def plan_start(path: str) -> np.ndarray:
 class SimNode:
     """Node shell around :class:`DualArmCell`."""
 
-    def __init__(self, context: Any, priority_note: str = "disabled") -> None:
+    def __init__(self, context: Any, priority_note: str = "disabled", bus: LocalBus | None = None) -> None:
         self.node = Node("sim_node", context=context)
         p = declare(self.node, PARAMETERS)
         scenario = load_scenario(p["scenario"])
@@ -120,8 +121,9 @@ class SimNode:
         n = self.node
         qos = stream_qos(p["qos_reliability"])
         depth = publisher_depth(self.lockstep)
-        self.pub_js = n.create_publisher(JointState, "/joint_states", stream_qos(p["qos_reliability"], depth))
-        self.pub_wrench = n.create_publisher(WrenchStamped, "/wrench", depth)
+        self.pub_js = local_publisher(bus, n.create_publisher(
+            JointState, "/joint_states", stream_qos(p["qos_reliability"], depth)), "/joint_states")
+        self.pub_wrench = local_publisher(bus, n.create_publisher(WrenchStamped, "/wrench", depth), "/wrench")
         self.pub_clock = n.create_publisher(Clock, "/clock", depth)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.pub_description = n.create_publisher(String, "/robot_description", latched_qos())
@@ -129,7 +131,7 @@ class SimNode:
         self.pub_contact = (n.create_publisher(Vector3Stamped, "/contact_force", depth) if self.contact is not None
                             else None)
         subscribe_checked(n, Float64MultiArray, "/velocity_controller/commands", self.on_command, qos, self.reject,
-                          convert.CommandInput(len(self.cell.joint_names)))
+                          convert.CommandInput(len(self.cell.joint_names)), bus)
         self.log = n.get_logger()
         self.throttle = Throttle(1.0)
         self.steps = 0

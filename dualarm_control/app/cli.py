@@ -48,6 +48,9 @@ def cmd_launch(args: argparse.Namespace) -> int:
         args.scenario = INTERACTIVE_CELL
         if args.lockstep or args.plan:
             raise DualArmError("'dualarm launch interactive' runs in real time (no --lockstep, no --plan)")
+    if args.processes != 3 and args.lockstep:
+        raise DualArmError(f"--processes {args.processes} runs in real time: --lockstep runs the nodes in "
+                           "separate processes (--processes 3)")
     scenario_file(args.scenario)  # fail early (exit 2) on an unknown scenario
     check_params_files(args.params)
     extra = []
@@ -70,7 +73,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         if planned != args.scenario:
             raise DualArmError(f"--plan {plan} was planned on scenario {planned!r}, not {args.scenario!r}")
     return launch_scenario(args.scenario, args.params, extra, args.lockstep, record, args.timeout, args.rate,
-                           plan=plan, force=args.force, interactive=interactive)
+                           plan=plan, force=args.force, interactive=interactive, processes=args.processes)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -568,6 +571,11 @@ def build_parser() -> argparse.ArgumentParser:
     lau.add_argument("--duration", type=float, metavar="S",
                      help="task scenario: run S seconds of task time (-p duration:=S; default: the scenario's)")
     lau.add_argument("--timeout", type=float, default=None, metavar="S", help="stop after S seconds")
+    lau.add_argument("--processes", type=int, choices=(1, 2, 3), default=3, metavar="N",
+                     help="3: each node its own process (default); 2: the simulator alone, the controller and the "
+                     "trajectory node in one; 1: all in one. Nodes sharing a process run as cell_container (one "
+                     "executor, one DDS participant, their per-cycle samples passed in the process and published for "
+                     "every other tool); real time only. What each costs: docs/bench.md, 'Processes'")
     lau.set_defaults(func=cmd_launch)
     fau = sub.add_parser("faults", help="fault matrix against real processes (watchdogs, kills, signals, links)",
                          description="Inject faults into real-time runs of the three nodes (loopback, and private "

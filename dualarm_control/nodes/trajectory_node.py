@@ -45,7 +45,13 @@ from dualarm_control.references.base import (
 from dualarm_control.references.goals import GoalsSource, GoalsStream
 from dualarm_control.references.plan import PlanSource
 from dualarm_control.ros import convert
-from dualarm_control.ros.inputs import StampGate, Throttle, subscribe_checked
+from dualarm_control.ros.inputs import (
+    StampGate,
+    Throttle,
+    subscribe_checked,
+    unsubscribe,
+)
+from dualarm_control.ros.local_bus import LocalBus, local_publisher
 from dualarm_control.ros.node import (
     declare,
     priority_from_args,
@@ -79,7 +85,7 @@ PARAMETERS = (
 class TrajectoryNode:
     """Node shell around a reference source's :class:`~dualarm_control.references.base.TargetStream`."""
 
-    def __init__(self, context: Any, priority_note: str = "disabled") -> None:
+    def __init__(self, context: Any, priority_note: str = "disabled", bus: LocalBus | None = None) -> None:
         from dualarm_control.nodes.interactive import (
             LIMIT_PREFIX,
             InteractiveDrive,
@@ -87,6 +93,7 @@ class TrajectoryNode:
         )
 
         self.node = Node("trajectory_node", context=context)
+        self.bus = bus
         p = declare(self.node, PARAMETERS)
         self.scenario = load_scenario(p["scenario"])
         self.lockstep = bool(p["lockstep"])
@@ -108,9 +115,10 @@ class TrajectoryNode:
                 **{k[len(LIMIT_PREFIX):]: v for k, v in limits.items()}), self.qos)
         self.order = {name: i for i, name in enumerate(self.model.joint_names)}
         depth = stream_qos(p["qos_reliability"], publisher_depth(self.lockstep))
-        self.pub = n.create_publisher(MultiDOFJointTrajectory, RELATIVE_TARGET, depth)
-        self.pub_joint = (n.create_publisher(JointTrajectory, JOINT_REFERENCE, depth)
-                          if JOINT_REFERENCE in self.source.streams else None)
+        self.pub = local_publisher(bus, n.create_publisher(MultiDOFJointTrajectory, RELATIVE_TARGET, depth),
+                                   RELATIVE_TARGET)
+        self.pub_joint = (local_publisher(bus, n.create_publisher(JointTrajectory, JOINT_REFERENCE, depth),
+                                          JOINT_REFERENCE) if JOINT_REFERENCE in self.source.streams else None)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.states: Any = None  # the /joint_states subscription while one is needed
         self.subscribe_states()
@@ -129,7 +137,7 @@ class TrajectoryNode:
 
     def subscribe_states(self) -> None:
         self.states = subscribe_checked(self.node, JointState, "/joint_states", self.on_joint_state, self.qos,
-                                        self.reject, convert.JointStateInput(self.order))
+                                        self.reject, convert.JointStateInput(self.order), self.bus)
 
     def on_joint_state(self, sample: tuple[int, tuple[np.ndarray, np.ndarray] | str]) -> None:
         if self.finished:
@@ -165,7 +173,7 @@ class TrajectoryNode:
     def on_tick(self) -> None:
         if self.stream is not None:
             if self.states is not None and self.drive is None:  # started: the timer drives the stream
-                self.node.destroy_subscription(self.states)  # (not destroyed in its own callback)
+                unsubscribe(self.node, self.states)  # (not destroyed in its own callback)
                 self.states = None
             now = self.node.get_clock().now().nanoseconds
             self.publish(now, now - self.start_ns)

@@ -219,7 +219,8 @@ def wants_help(argv: Sequence[str]) -> bool:
 def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text: str = "") -> int:
     """A node's main: build the shell with ``make(context)``, spin it, shut down cleanly.
 
-    ``make`` returns a shell object with a ``node`` attribute, an optional ``finished`` flag
+    ``make`` returns a shell object with a ``node`` attribute (or ``nodes``, several nodes in
+    one process on one executor: ``cell_container``), an optional ``finished`` flag
     that ends spinning normally when a callback sets it (e.g. scenario complete), and an
     optional ``close()`` (called once on the way out, while the node can still log).
     ``-h``/``--help`` prints ``help_text`` and exits 0.
@@ -237,7 +238,8 @@ def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text
             context = init_rclpy(argv)
             shell = make(context)
             executor = make_executor(context)
-            executor.add_node(shell.node)
+            for node in shell_nodes(shell):
+                executor.add_node(node)
             apply_requested_priority()
             spin_until_stopped(executor, stop, lambda: bool(getattr(shell, "finished", False)))
         except ParameterError as exc:
@@ -258,10 +260,16 @@ def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text
                 close = getattr(shell, "close", None)
                 if close is not None:
                     close()
-                shell.node.destroy_node()
+                for node in shell_nodes(shell):
+                    node.destroy_node()
             if context is not None:
                 context.try_shutdown()
     return EXIT_OK
+
+
+def shell_nodes(shell: Any) -> list[Any]:
+    """The rclpy nodes of a shell given to :func:`run`: its ``nodes``, else its ``node``."""
+    return list(getattr(shell, "nodes", None) or [shell.node])
 
 
 DISCOVERY_TIMEOUT_S = 20.0
@@ -308,7 +316,8 @@ def log_priority(log: Any, note: str, priority: int) -> None:
 def priority_from_args(argv: Sequence[str], default: int, node_name: str) -> int:
     """``thread_priority`` as the node will declare it, read before rclpy exists (its permission is
     checked before the node starts): ``-p thread_priority:=N`` in ``argv`` wins
-    over the node's entry in ``--params-file`` files (later files win), as in ROS 2; ``default``
+    over the node's entry in ``--params-file`` files (later files win), as in ROS 2 (also
+    ``-p NODE:thread_priority:=N``, rcl's node-scoped form, which the container's command uses); ``default``
     when absent or malformed (:func:`declare` then reports a malformed value with exit 2)."""
     priority = default
     try:
@@ -318,7 +327,7 @@ def priority_from_args(argv: Sequence[str], default: int, node_name: str) -> int
     if isinstance(value, int) and not isinstance(value, bool):
         priority = value
     for i, arg in enumerate(argv[:-1]):
-        if arg == "-p" and argv[i + 1].startswith("thread_priority:="):
+        if arg == "-p" and argv[i + 1].startswith(("thread_priority:=", f"{node_name}:thread_priority:=")):
             try:
                 priority = int(argv[i + 1].split(":=", 1)[1])
             except ValueError:
