@@ -29,11 +29,11 @@ Physics choices (all measured on ``urdf/dualarm_cell.urdf``):
   step under gravity; at 10x the joints are within 1e-4 rad/s of a 0.5 rad/s step after one
   5 ms period (right joint 2 saturates in the first 1 ms substep and catches up its 1.5e-4
   rad lag in the next).
-* The constraint solver runs 10 iterations per substep (``CellConfig.solver_iterations``;
-  pybullet's default 50): a step takes 0.06 instead of 0.11 ms here, and the figures stay:
-  Table I l0 12.524 / 3.998 / 5.398 (5.396 at 50), tracking errors within 1 %, the
-  pan-cleaning force variant's force and circle metrics equal to the printed digits
-  (docs/bench.md, "Cost per cycle").
+* The constraint solver runs 20 iterations per substep (``CellConfig.solver_iterations``;
+  pybullet's default 50): a step takes 0.07 instead of 0.10 ms here. The figures stay: the
+  velocity step above, Table I l0 12.524 / 3.998 / 5.397 (5.396 at 50), tracking errors
+  within 1 %, the pan-cleaning force variant's force and circle metrics equal in the printed
+  digits. At 10 iterations a 0.5 rad/s step reached only 0.485 rad/s after 5 ms (joint 6).
 * Link linear/angular damping (pybullet defaults 0.04) is set to 0; the URDF joint damping
   (0.5 N m s/rad) is kept, the motors overcome it.
 * Inertias come from the URDF (``URDF_USE_INERTIA_FROM_FILE``), as in pinocchio.

@@ -23,7 +23,7 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-from dualarm_control.errors import ParameterError
+from dualarm_control.errors import DualArmError
 from dualarm_control.references.base import JOINT_REFERENCE, RELATIVE_TARGET, WRENCH
 from dualarm_control.ros.local_bus import LocalBus
 from dualarm_control.ros.node import priority_from_args, request_realtime_priority, run
@@ -55,7 +55,7 @@ class Container:
                                             bus=bus))
         if any(getattr(shell, "lockstep", False) for shell in self.shells):
             self.close()
-            raise ParameterError("cell_container runs in real time: lockstep:=true needs the nodes in separate "
+            raise DualArmError("cell_container runs in real time: lockstep:=true needs the nodes in separate "
                                  "processes (dualarm launch --lockstep)")
         self.nodes = [shell.node for shell in self.shells]
 
@@ -79,7 +79,7 @@ def node_names(argv: Sequence[str]) -> list[str]:
     names = [n for n in (head[i + 1] if i + 1 < len(head) else "").split(",") if n]
     bad = [n for n in names if n not in NODE_TOPICS] or ([] if names else ["(none)"])
     if bad:
-        raise ParameterError(f"cell_container --nodes: unknown node {bad[0]!r}; valid: {', '.join(NODE_TOPICS)}")
+        raise DualArmError(f"cell_container --nodes: unknown node {bad[0]!r}; valid: {', '.join(NODE_TOPICS)}")
     return names
 
 
@@ -87,7 +87,7 @@ def main(args: list[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
     try:
         names = node_names(argv[1:])
-    except ParameterError as exc:
+    except DualArmError as exc:
         print(f"error: {exc}\n{USAGE}", file=sys.stderr)
         return 2
     from dualarm_control.nodes.controller_node import DEFAULT_PRIORITY

@@ -64,9 +64,12 @@ def container_command(node_args: Mapping[str, Sequence[str]]) -> list[str]:
     """Command line of ``cell_container`` running the nodes of ``node_args`` (name -> its ROS arguments)."""
     ros_args: list[str] = []
     for node, args in node_args.items():
-        for arg in scoped(node, args):  # a params file once (it is keyed by node name)
-            if arg not in ros_args or not arg.endswith((".yaml", ".yml")):
-                ros_args.append(arg)
+        args = scoped(node, args)
+        for i, arg in enumerate(args):
+            pair = args[i - 1: i + 1] if i and args[i - 1] == "--params-file" else args[i: i + 2]
+            if pair[0] == "--params-file" and any(ros_args[j: j + 2] == pair for j in range(len(ros_args))):
+                continue  # a params file once: it is keyed by node name
+            ros_args.append(arg)
     return [sys.executable, "-u", "-m", CONTAINER_MODULE, "--nodes", ",".join(node_args), "--ros-args", *ros_args]
 
 
