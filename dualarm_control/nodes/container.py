@@ -34,6 +34,7 @@ NODE_TOPICS = {
     "trajectory_node": (RELATIVE_TARGET, JOINT_REFERENCE),
 }
 """The topics each node publishes every cycle: local to the container when it runs the node."""
+TICK_ORDER = ("trajectory_node", "sim_node", "controller_node")
 USAGE = ("usage: cell_container [--nodes NAME,...] [--ros-args [-p [NODE:]NAME:=VALUE] [--params-file FILE] ...]\n"
          f"  --nodes: which of {', '.join(NODE_TOPICS)} run in the process (default: all three; a task "
          "scenario runs sim_node,controller_node)")
@@ -58,6 +59,10 @@ class Container:
             raise DualArmError("cell_container runs in real time: lockstep:=true needs the nodes in separate "
                                  "processes (dualarm launch --lockstep)")
         self.nodes = [shell.node for shell in self.shells]
+        # One period: the target first, then the physics (its state delivers the controller's cycle at once,
+        # with that target), then the controller's watchdog.
+        order = [name for name in TICK_ORDER if name in names]
+        self.ticks = [tick for name in order for tick in self.shells[list(names).index(name)].ticks]
 
     @property
     def finished(self) -> bool:

@@ -3,10 +3,11 @@
 Subscribes ``/joint_states`` and the streams of what it follows: ``/relative_target`` (default),
 also a planned joint trajectory on ``/joint_reference`` (``reference:=joint``: qd_ref + joint_gain
 (q_ref - q), eq 23 bounds), or none for the tasks of a task scenario (``scenario:=pan_cleaning``,
-paper 001; ``/wrench`` with ``force:=true``, eq 9). Publishes ``/velocity_controller/commands``,
-``/relative_pose`` and ``/diagnostics`` (one per cycle). The control math is the core's.
+paper 001; ``/wrench`` with ``force:=true``, eq 9). Publishes ``/velocity_controller/commands``
+and ``/diagnostics`` (one per cycle), and ``/relative_pose`` every cycle while it has a reader.
+The control math is the core's.
 
-Real time: a command per joint state (read -> update -> write, as ros2_control); a timer at the
+Real time: a command per joint state (read -> update -> write, as ros2_control); a tick at the
 control period (at most 200 Hz) is the watchdog. Lockstep: one command per joint-state stamp,
 once every stream's sample of that stamp has arrived. Watchdogs (real time, docs/safety.md):
 joint states (with force: a /wrench) older than ``stale_timeout``; a target stream silent for
@@ -49,7 +50,11 @@ from dualarm_control.references.segments import SegmentsSource
 from dualarm_control.references.tasks import TasksController, TasksSource
 from dualarm_control.ros import convert, inputs
 from dualarm_control.ros import node as shell
-from dualarm_control.ros.local_bus import LocalBus, local_publisher
+from dualarm_control.ros.local_bus import (
+    LocalBus,
+    local_publisher,
+    publish_if_subscribed,
+)
 from dualarm_control.ros.output import CommandOutput
 from dualarm_control.ros.qos import QOS_PARAMETER, publisher_depth, stream_qos
 from dualarm_control.scenario import load_scenario
@@ -133,8 +138,8 @@ class ControllerNode:
                 WRENCH, convert.stamp_ns(msg.header.stamp), convert.wrench_vector(msg)), 10)
         self.live = shell.LiveParameters(n, {s.name: s for s in ALL_PARAMETERS}, self.values, lambda merged: (
             core.RelativeController(self.model, core.controller_params(merged, n.get_name()))))
-        if not self.lockstep:
-            n.create_timer(max(self.params.period, WATCHDOG_MIN_PERIOD_S), self.on_watchdog)
+        self.ticks: list[shell.Tick] = ([] if self.lockstep else  # ros.node.Ticker, not an rclpy timer
+                                        [(max(self.params.period, WATCHDOG_MIN_PERIOD_S), self.on_watchdog)])
         tracked = "joint reference" if self.joint_mode else f"solver '{self.params.solver}'"
         if self.task is not None:
             tracked += (f" on task scenario '{self.values['scenario']}' (k={self.task.gain:g}"
@@ -228,7 +233,7 @@ class ControllerNode:
                  if ref is not None else self.controller.step(q, target))
         latency = self.finish_cycle(cycle)
         if np.all(np.isfinite(cycle.position)):
-            self.pub_pose.publish(convert.pose_stamped(stamp, cycle.position, cycle.rotation))
+            publish_if_subscribed(self.pub_pose, lambda: convert.pose_stamped(stamp, cycle.position, cycle.rotation))
         self.publish_cycle(stamp, cycle, "joint_tracking" if self.joint_mode else self.params.solver, {
             "cycle_time_s": f"{cycle.cycle_time:.6e}", "position_error_m": f"{cycle.position_error:.6e}",
             "orientation_error_rad": f"{cycle.orientation_error:.6e}",

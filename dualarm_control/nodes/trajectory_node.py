@@ -5,8 +5,8 @@ What it publishes is the reference source's (:meth:`ReferenceSource.stream
 goals scenario on ``/relative_target``; with ``plan:=FILE`` a plan's joint reference on
 ``/joint_reference`` and its relative pose on ``/relative_target``. The stream starts from the
 first ``/joint_states`` (measured start configuration). Real-time mode: one target per control
-period on a timer, timed from the first joint state on the node's clock (simulation time with
-``use_sim_time``). Lockstep mode: one target per joint state, stamped with the joint state's
+period on a tick of the spin loop (``ros.node.Ticker``), timed from the first joint state on the
+node's clock (simulation time with ``use_sim_time``). Lockstep mode: one target per joint state, stamped with the joint state's
 stamp, so the controller can pair them. When the stream's end (trajectory plus the scenario's
 settle time) has come the node logs completion, publishes a final ``/diagnostics`` status
 "complete" and exits 0; with ``repeat:=true`` (soak runs) it starts the scenario again from the
@@ -53,6 +53,7 @@ from dualarm_control.ros.inputs import (
 )
 from dualarm_control.ros.local_bus import LocalBus, local_publisher
 from dualarm_control.ros.node import (
+    Tick,
     declare,
     priority_from_args,
     request_realtime_priority,
@@ -128,8 +129,7 @@ class TrajectoryNode:
         self.start_ns = 0
         self.stage = ""
         self.finished = False
-        if not self.lockstep:
-            n.create_timer(self.period, self.on_tick)
+        self.ticks: list[Tick] = [] if self.lockstep else [(self.period, self.on_tick)]  # ros.node.Ticker
         self.log.info(f"scenario '{self.scenario.name}': {self.source.describe()}, "
                       f"{'lockstep' if self.lockstep else 'real-time'}; waiting for /joint_states")
         if priority_note and priority_note != "disabled":

@@ -94,3 +94,18 @@ class LocalBus:
 def local_publisher(bus: LocalBus | None, wire: Any, topic: str) -> Any:
     """``wire`` itself without a bus (a node in its own process), else :meth:`LocalBus.publisher`."""
     return wire if bus is None else bus.publisher(wire, topic)
+
+
+def publish_if_subscribed(pub: Any, build: Callable[[], bytes]) -> bool:
+    """Publish ``build()`` on ``pub`` only while a subscription matches it (local or on the wire), as
+    lazy ROS publishers do: a sample nobody reads is neither computed nor sent. Returns whether it was.
+
+    For the per-cycle topics that no node of the cell needs in every run (/wrench, /relative_pose,
+    /clock in real time, /contact_force): a recorder, ``dualarm topic echo`` or the view subscribes
+    and gets them from the next cycle on (the lockstep runs start once their readers matched).
+    """
+    if pub.get_subscription_count() == 0:
+        return False
+    pub.publish(build())
+    return True
+
