@@ -142,6 +142,7 @@ def launch_scenario(
     plan: Path | None = None,
     force: bool = False,
     interactive: bool = False,
+    env: Mapping[str, str] | None = None,
 ) -> int:
     """Run the three nodes (and a recorder of ``record_topics``) on ``scenario``; ``rate_hz`` sets every
     node's control period. Returns 0 if the scenario completed cleanly, 130 on Ctrl-C.
@@ -154,6 +155,8 @@ def launch_scenario(
     ``interactive`` (issue 18): the trajectory node in ``mode:=interactive`` on the scenario's
     cell and limits: it holds the measured relative pose and follows /relative_goal and
     /relative_twist, in real time, until Ctrl-C or ``timeout``.
+
+    ``env`` adds to the environment of every process started (``dualarm bench --realtime --baseline``).
     """
     from dualarm_control.scenario import load_scenario
 
@@ -190,13 +193,13 @@ def launch_scenario(
             # Real-time task runs start once the recorder reads /diagnostics (task_start_readers); it
             # subscribes that topic last, once the others deliver: the bag then holds the run from t = 0.
             gate = ("/diagnostics",) if tasks and not lockstep else ()
-            launch.start("bag", recorder_command(record, record_topics, lockstep, gate))
+            launch.start("bag", recorder_command(record, record_topics, lockstep, gate), env)
         readers = (1 if tasks else 2) + (record is not None)
-        launch.start("controller_node", node_command("controller_node", [*common, *sim_time, *controller_args]))
+        launch.start("controller_node", node_command("controller_node", [*common, *sim_time, *controller_args]), env)
         if not tasks:
-            launch.start("trajectory_node", node_command("trajectory_node", [*common, *sim_time, *trajectory_args]))
+            launch.start("trajectory_node", node_command("trajectory_node", [*common, *sim_time, *trajectory_args]), env)
         launch.start("sim_node", node_command("sim_node", [*common, *with_scenario,
-                                                            "-p", f"lockstep_subscribers:={readers}"]))
+                                                            "-p", f"lockstep_subscribers:={readers}"]), env)
         codes = launch.wait_until(finisher, timeout)
     except KeyboardInterrupt:
         interrupted = True
