@@ -151,6 +151,12 @@ def test_a_child_is_named_by_the_module_it_runs_tools_left_out() -> None:
     assert thread_kind("dds.udp.7412") == "dds.udp" and thread_kind("dds.ev") == "dds.ev"
 
 
+def test_scheduling_names() -> None:
+    from dualarm_control.app.bench.cpu import scheduling_name
+
+    assert scheduling_name(os.SCHED_FIFO, 50) == "fifo 50" and scheduling_name(os.SCHED_OTHER, 0) == "other"
+
+
 def _proc(pid: int, total: int, **threads: int) -> object:
     from dualarm_control.app.bench.cpu import ProcessSample
 
@@ -322,10 +328,20 @@ def test_cpu_table_has_a_column_pair_per_node_and_all_nodes() -> None:
     assert "no steady window" in lines[3]
 
 
+def fifo_permitted() -> bool:
+    """Whether a process may take SCHED_FIFO here (root or an rtprio limit; not on a CI runner)."""
+    import subprocess
+    import sys
+
+    probe = "import os; os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))"
+    return subprocess.run([sys.executable, "-S", "-c", probe], check=False, capture_output=True).returncode == 0
+
+
 def test_realtime_bench_measures_every_nodes_cpu(tmp_path: Path) -> None:
-    """A real launch at 200 Hz, cut after 12 s: CPU figures for the three node processes, finite and
-    positive, main + other threads = the process's total within the tick truncation of each thread's
-    counter; the tables and the JSON are written (no timing thresholds)."""
+    """Two real launches at 200 Hz, each cut after 12 s, with the default and with normal scheduling:
+    CPU figures for the three node processes, finite and positive, main + other threads = the
+    process's total within the tick truncation of each thread's counter, the scheduling each node
+    ran under; the tables and the JSON are written (no timing thresholds)."""
     from dualarm_control.app.bench.cpu import CLOCK_TICKS
     from dualarm_control.app.bench.realtime import (
         format_cpu,
@@ -333,16 +349,21 @@ def test_realtime_bench_measures_every_nodes_cpu(tmp_path: Path) -> None:
         write_realtime,
     )
 
-    rows = run_realtime("assembly", ["hierarchical_sparse_qp"], [200.0], timeout=12.0)
-    cpu = rows[0]["cpu"]
-    assert set(cpu["nodes"]) == {"controller_node", "sim_node", "trajectory_node"}
-    assert cpu["window_s"] > 0 and cpu["window_cycles"] > 0
-    for name, node in cpu["nodes"].items():
-        for key in ("cores", "cpu_ms_per_cycle", "main_ms_per_cycle", "other_ms_per_cycle"):
-            assert np.isfinite(node[key]) and node[key] > 0, (name, key, node)
-        assert abs(node["main_s"] + node["other_s"] - node["cpu_s"]) <= node["threads"] / CLOCK_TICKS, (name, node)
-    assert np.isfinite(cpu["control_math_ms_per_cycle"]) and cpu["control_math_ms_per_cycle"] > 0
-    assert cpu["all_nodes_cores"] == pytest.approx(sum(n["cores"] for n in cpu["nodes"].values()))
+    rows = run_realtime("assembly", ["hierarchical_sparse_qp"], [200.0], timeout=12.0, schedulings=["rt", "normal"])
+    fifo = fifo_permitted()
+    for row in rows:
+        cpu = row["cpu"]
+        assert set(cpu["nodes"]) == {"controller_node", "sim_node", "trajectory_node"}
+        assert cpu["window_s"] > 0 and cpu["window_cycles"] > 0
+        for name, node in cpu["nodes"].items():
+            for key in ("cores", "cpu_ms_per_cycle", "main_ms_per_cycle", "other_ms_per_cycle"):
+                assert np.isfinite(node[key]) and node[key] > 0, (name, key, node)
+            assert abs(node["main_s"] + node["other_s"] - node["cpu_s"]) <= node["threads"] / CLOCK_TICKS, node
+            default = "fifo 40" if name == "trajectory_node" else "fifo 50"
+            assert node["scheduling"] == (default if fifo and row["scheduling"] == "rt" else "other"), (row, name)
+        assert np.isfinite(cpu["control_math_ms_per_cycle"]) and cpu["control_math_ms_per_cycle"] > 0
+        assert cpu["all_nodes_cores"] == pytest.approx(sum(n["cores"] for n in cpu["nodes"].values()))
     write_realtime(tmp_path, rows, "assembly")
     assert format_cpu(rows) in (tmp_path / "realtime.md").read_text()
-    assert json.loads((tmp_path / "realtime.json").read_text())[0]["cpu"]["nodes"].keys() == cpu["nodes"].keys()
+    assert [r["cpu"]["nodes"].keys() for r in json.loads((tmp_path / "realtime.json").read_text())] == \
+        [r["cpu"]["nodes"].keys() for r in rows]

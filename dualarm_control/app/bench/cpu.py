@@ -85,6 +85,13 @@ def module_of(argv: Sequence[str]) -> str | None:
     return NODE_MODULES.get(module, module)
 
 
+def scheduling_name(policy: int, priority: int) -> str:
+    """``fifo 50``, ``rr 50``, ``other``... for ``os.sched_getscheduler`` / ``sched_getparam`` values."""
+    names = {getattr(os, f"SCHED_{n.upper()}", -1): n for n in ("other", "fifo", "rr", "batch", "idle")}
+    name = names.get(policy, str(policy))
+    return f"{name} {priority}" if name in ("fifo", "rr") else name
+
+
 def thread_kind(name: str) -> str:
     """A thread's name without its trailing number (``dds.udp.7412`` -> ``dds.udp``), to add up
     threads of one kind."""
@@ -103,6 +110,8 @@ class ProcessSample:
     threads: Mapping[int, int]
     names: Mapping[int, str] = field(default_factory=dict)
     """Thread id -> thread name (``/proc/PID/task/TID/comm``)."""
+    scheduling: str = ""
+    """The main thread's scheduling (:func:`scheduling_name`)."""
 
 
 @dataclass(frozen=True)
@@ -183,7 +192,8 @@ def cpu_figures(samples: Sequence[Sample], stamps: np.ndarray, cycles: np.ndarra
 
     ``stamps`` [s, wall clock], ``cycles`` (cumulative count) and ``cycle_time`` [s] are the
     controller's per-cycle /diagnostics. Per node: cores = CPU s / wall s; CPU per cycle [ms] =
-    CPU s / cycles in the window, in total, main thread and other threads. Control math per cycle
+    CPU s / cycles in the window, in total, main thread and other threads; the main thread's
+    scheduling at the window's end (e.g. ``fifo 50``, ``other``). Control math per cycle
     [ms]: the mean of the controller's ``cycle_time_s`` (a wall time: kinematics and solve,
     preemption included) over the cycles reported in the window."""
     if not len(stamps):
@@ -205,7 +215,8 @@ def cpu_figures(samples: Sequence[Sample], stamps: np.ndarray, cycles: np.ndarra
         nodes[name] = {"cores": split.total_s / wall, "cpu_ms_per_cycle": split.total_s / n * 1e3,
                        "main_ms_per_cycle": split.main_s / n * 1e3, "other_ms_per_cycle": split.other_s / n * 1e3,
                        "cpu_s": split.total_s, "main_s": split.main_s, "other_s": split.other_s,
-                       "other_threads_s": split.kinds, "threads": split.threads}
+                       "other_threads_s": split.kinds, "threads": split.threads,
+                       "scheduling": samples[b].nodes[name].scheduling}
     total = sum(float(v["cpu_s"]) for v in nodes.values())
     return {"window_s": wall, "window_cycles": int(n), "nodes": nodes, "all_nodes_cores": total / wall,
             "all_nodes_ms_per_cycle": total / n * 1e3,
@@ -249,7 +260,11 @@ def read_process(pid: int) -> ProcessSample | None:
         return None
     if not stat_running(stat):
         return None
-    return ProcessSample(pid, stat_ticks(stat), threads, names)
+    try:
+        scheduling = scheduling_name(os.sched_getscheduler(pid), os.sched_getparam(pid).sched_priority)
+    except OSError:
+        scheduling = "?"
+    return ProcessSample(pid, stat_ticks(stat), threads, names, scheduling)
 
 
 class CpuSampler:
