@@ -234,10 +234,13 @@ def run_variant(scenario: str, v: Variant, params: Sequence[str], timeout: float
         finally:
             view_exit = stop_live_view(view) if view is not None else None
         cycles = controller_cycles(bag)
+        samples = sampler.samples
+        first_cycle = (float(cycles["stamp"][0]) - samples[0].wall) if len(cycles["stamp"]) and samples else None
         row = {"solver": v.solver, "rate_hz": v.rate_hz, "load": v.load, "scheduling": v.scheduling,
                "tree": v.tree, "baseline": v.baseline is not None, "exit": code,
                **summarize_cycles(cycles, 1.0 / v.rate_hz),
-               "cpu": cpu_figures(sampler.samples, cycles["stamp"], cycles["cycles"], cycles["cycle_time"])}
+               "cpu": cpu_figures(samples, cycles["stamp"], cycles["cycles"], cycles["cycle_time"]),
+               "cpu_samples": len(samples), "first_cycle_s": first_cycle}
         if v.view is not None:
             rrd = Path(tmp) / "view.rrd"
             row.update(view="rerun" if v.view else "none", view_exit=view_exit,
