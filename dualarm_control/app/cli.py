@@ -151,10 +151,17 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_bench_realtime(args: argparse.Namespace) -> int:
-    """Real-time runs over ROS per solver and rate; write DIR/realtime.md and DIR/realtime.json."""
+    """Real-time runs over ROS per solver, rate, load and scheduling (and tree, with --baseline), the
+    nodes' CPU sampled from /proc; write DIR/realtime.md and DIR/realtime.json."""
     from dualarm_control.app.bench.realtime import (
+        LOADS,
+        PROCESSES,
+        SCHEDULINGS,
+        baseline_tree,
+        format_cpu,
         format_realtime,
         run_realtime,
+        split_choices,
         write_realtime,
     )
     from dualarm_control.scenario import scenario_file
@@ -165,10 +172,19 @@ def cmd_bench_realtime(args: argparse.Namespace) -> int:
     for name in solvers:
         make_solver(name)
     rates = [float(r) for r in args.rates.split(",") if r.strip()]
+    loads = split_choices(args.load or "none", LOADS, "--load")
+    schedulings = split_choices(args.scheduling or "rt", SCHEDULINGS, "--scheduling")
+    processes = [int(n) for n in split_choices(args.processes or "3", PROCESSES, "--processes")]
+    baseline = Path(args.baseline) if args.baseline else None
+    if baseline is not None:
+        baseline_tree(baseline)
     check_params_files(args.params)
-    rows = run_realtime(args.scenario, solvers, rates, params=args.params, with_view=args.with_view)
+    rows = run_realtime(args.scenario, solvers, rates, params=args.params, with_view=args.with_view,
+                        loads=loads, schedulings=schedulings, baseline=baseline, processes=processes)
     write_realtime(Path(args.output), rows, args.scenario)
     print(format_realtime(rows))
+    print()
+    print(format_cpu(rows))
     print(f"\nwrote {Path(args.output) / 'realtime.md'} and realtime.json")
     return 0
 
@@ -192,8 +208,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
     """Solver x QP back-end timings (random set, scenario), pink, exactness, scaling: DIR/bench.md and bench.json."""
     if args.realtime and args.messages:
         raise DualArmError("--realtime and --messages are separate benchmarks: choose one")
-    if args.with_view and not args.realtime:
-        raise DualArmError("--with-view belongs to --realtime")
+    for option in ("with_view", "load", "scheduling", "baseline", "processes"):
+        if getattr(args, option) and not args.realtime:
+            raise DualArmError(f"--{option.replace('_', '-')} belongs to --realtime")
     if args.realtime:
         return cmd_bench_realtime(args)
     if args.messages:
@@ -526,7 +543,9 @@ def build_parser() -> argparse.ArgumentParser:
     ben.add_argument("--output", default="out/bench", metavar="DIR", help="output directory (default: %(default)s)")
     ben.add_argument("--realtime", action="store_true",
                      help="instead: the three nodes over ROS in real time per solver and --rates; missed deadlines, "
-                     "period jitter and state-to-command latency over every cycle (realtime.md/json)")
+                     "period jitter and state-to-command latency over every cycle, and each node's CPU (cores, CPU "
+                     "per control cycle in its main thread and its other threads, the control math per cycle) over "
+                     "the steady motion, read from /proc (realtime.md/json)")
     ben.add_argument("--messages", action="store_true",
                      help="instead: the per-period messages (joint states, target, diagnostics, command) built and "
                      "read through rclpy message objects and as CDR bytes, in one process (messages.md/json)")
@@ -538,6 +557,20 @@ def build_parser() -> argparse.ArgumentParser:
     ben.add_argument("--with-view", action="store_true",
                      help="--realtime: run each launch twice, without and with 'dualarm view --save' (the live "
                      "Rerun view, its own process) beside it (needs the view extra)")
+    ben.add_argument("--load", metavar="none,busy",
+                     help="--realtime: what else runs during each launch, one row each: none, or busy (one core kept "
+                     "busy by a normal-priority process: stress-ng --cpu 1, else a Python spin loop) (default: none)")
+    ben.add_argument("--scheduling", metavar="rt,normal",
+                     help="--realtime: rt (the nodes' SCHED_FIFO thread_priority defaults) or normal (thread_priority "
+                     "0 for every node, passed after the --params files: a machine without rtprio), one row each "
+                     "(default: rt)")
+    ben.add_argument("--processes", metavar="3,2,1",
+                     help="--realtime: the process layouts of 'dualarm launch --processes', one row each: 3 (each node "
+                     "its own process), 2 (the simulator alone), 1 (all in one cell_container) (default: 3)")
+    ben.add_argument("--baseline", metavar="DIR",
+                     help="--realtime: a source checkout of another commit (git worktree add --detach DIR REV); each "
+                     "row is also run with the nodes and the recorder importing DIR (PYTHONPATH, same venv), right "
+                     "before the current tree's, labelled with DIR's short commit")
     ben.set_defaults(func=cmd_bench)
 
     run = sub.add_parser("run", help="run one node (like ros2 run dualarm_control NODE)",

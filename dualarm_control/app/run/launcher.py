@@ -169,6 +169,7 @@ def launch_scenario(
     force: bool = False,
     interactive: bool = False,
     processes: int = 3,
+    env: Mapping[str, str] | None = None,
 ) -> int:
     """Run the three nodes (and a recorder of ``record_topics``) on ``scenario``; ``rate_hz`` sets every
     node's control period. Returns 0 if the scenario completed cleanly, 130 on Ctrl-C.
@@ -185,6 +186,7 @@ def launch_scenario(
     ``processes`` (:data:`LAYOUTS`): 3, each node its own process (the default); 2, the simulator
     alone and the controller with the trajectory node in one ``cell_container``; 1, every node in
     one ``cell_container`` (nodes/container.py). Fewer than 3 runs in real time only.
+    ``env`` adds to the environment of every process started (``dualarm bench --realtime --baseline``).
     """
     from dualarm_control.scenario import load_scenario
 
@@ -225,7 +227,7 @@ def launch_scenario(
             # Real-time task runs start once the recorder reads /diagnostics (task_start_readers); it
             # subscribes that topic last, once the others deliver: the bag then holds the run from t = 0.
             gate = ("/diagnostics",) if tasks and not lockstep else ()
-            launch.start("bag", recorder_command(record, record_topics, lockstep, gate))
+            launch.start("bag", recorder_command(record, record_topics, lockstep, gate), env)
         readers = (1 if tasks else 2) + (record is not None)
         node_args = {"controller_node": [*common, *sim_time, *controller_args]}
         if not tasks:
@@ -235,11 +237,11 @@ def launch_scenario(
             members = {node: node_args[node] for node in group if node in node_args}
             if len(members) > 1:
                 name = CONTAINER if len(members) == len(node_args) else f"{CONTAINER}_{len(members)}"
-                launch.start(name, container_command(members))
+                launch.start(name, container_command(members), env)
                 finisher = name if finisher in members else finisher
             elif members:
                 (node, args), = members.items()
-                launch.start(node, node_command(node, args))
+                launch.start(node, node_command(node, args), env)
         codes = launch.wait_until(finisher, timeout)
     except KeyboardInterrupt:
         interrupted = True
