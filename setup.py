@@ -69,6 +69,7 @@ setup(
             "controller_node = dualarm_control.nodes.controller_node:main",
             "trajectory_node = dualarm_control.nodes.trajectory_node:main",
             "sim_node = dualarm_sim.sim_node:main",
+            "cell_container = dualarm_control.nodes.container:main",
         ],
     },
 )

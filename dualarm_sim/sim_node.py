@@ -1,7 +1,8 @@
 """sim_node: the pybullet cell as a velocity-controlled robot (FRI / ros2_control stand-in).
 
-Publishes ``/joint_states``, ``/wrench`` and ``/clock`` (simulation time, steps x period)
-every control period; applies
+Publishes ``/joint_states`` every control period, and ``/wrench`` and ``/clock`` (simulation
+time, steps x period) every period while a subscription reads them (lazy, as image pipelines
+publish); applies
 ``/velocity_controller/commands`` (Float64MultiArray, 14 values, controller joint order).
 A command older than ``command_timeout`` (simulation time, counted in steps, as a robot's
 own cycle counts it) brings the arms to rest, in both modes. A malformed command (bad CDR,
@@ -21,8 +22,8 @@ truth for the report's force metrics.
 ``/robot_description`` (std_msgs/String, keep-last 1, reliable, transient local, as
 robot_state_publisher offers it) carries the text of the URDF the cell loaded, published once.
 
-Real-time mode: a drift-free timer steps the physics one control period per tick, stamps
-are the wall clock. Lockstep mode (``lockstep:=true``): the state of step k (stamped with
+Real-time mode: a drift-free tick of the spin loop (``ros.node.Ticker``) steps the physics one
+control period per tick, stamps are the wall clock. Lockstep mode (``lockstep:=true``): the state of step k (stamped with
 sim time k*T) is published, and the physics advances only when the command for it arrives;
 the first state is sent once ``lockstep_subscribers`` readers of /joint_states are matched.
 """
@@ -45,7 +46,13 @@ from std_msgs.msg import Float64MultiArray, String
 from dualarm_control.params import ParamSpec, non_negative, positive
 from dualarm_control.ros import convert
 from dualarm_control.ros.inputs import Throttle, subscribe_checked
+from dualarm_control.ros.local_bus import (
+    LocalBus,
+    local_publisher,
+    publish_if_subscribed,
+)
 from dualarm_control.ros.node import (
+    Tick,
     declare,
     priority_from_args,
     request_realtime_priority,
@@ -96,7 +103,7 @@ def plan_start(path: str) -> np.ndarray:
 class SimNode:
     """Node shell around :class:`DualArmCell`."""
 
-    def __init__(self, context: Any, priority_note: str = "disabled") -> None:
+    def __init__(self, context: Any, priority_note: str = "disabled", bus: LocalBus | None = None) -> None:
         self.node = Node("sim_node", context=context)
         p = declare(self.node, PARAMETERS)
         scenario = load_scenario(p["scenario"])
@@ -120,8 +127,9 @@ class SimNode:
         n = self.node
         qos = stream_qos(p["qos_reliability"])
         depth = publisher_depth(self.lockstep)
-        self.pub_js = n.create_publisher(JointState, "/joint_states", stream_qos(p["qos_reliability"], depth))
-        self.pub_wrench = n.create_publisher(WrenchStamped, "/wrench", depth)
+        self.pub_js = local_publisher(bus, n.create_publisher(
+            JointState, "/joint_states", stream_qos(p["qos_reliability"], depth)), "/joint_states")
+        self.pub_wrench = local_publisher(bus, n.create_publisher(WrenchStamped, "/wrench", depth), "/wrench")
         self.pub_clock = n.create_publisher(Clock, "/clock", depth)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.pub_description = n.create_publisher(String, "/robot_description", latched_qos())
@@ -129,7 +137,7 @@ class SimNode:
         self.pub_contact = (n.create_publisher(Vector3Stamped, "/contact_force", depth) if self.contact is not None
                             else None)
         subscribe_checked(n, Float64MultiArray, "/velocity_controller/commands", self.on_command, qos, self.reject,
-                          convert.CommandInput(len(self.cell.joint_names)))
+                          convert.CommandInput(len(self.cell.joint_names)), bus)
         self.log = n.get_logger()
         self.throttle = Throttle(1.0)
         self.steps = 0
@@ -138,10 +146,11 @@ class SimNode:
         self.rejected = self.received = self.timeouts = 0
         self.timed_out = False
         n.create_timer(STATUS_PERIOD_S, self.publish_status)
+        self.ticks: list[Tick] = []  # real time: the physics tick (ros.node.Ticker, not an rclpy timer)
         if self.lockstep:
             n.create_timer(0.05, self.lockstep_watchdog)
         else:
-            n.create_timer(p["control_period"], self.on_tick)
+            self.ticks.append((p["control_period"], self.on_tick))
         self.log.info(f"scenario '{scenario.name}', {'lockstep' if self.lockstep else 'real-time'} at "
                       f"{1.0 / p['control_period']:.0f} Hz, physics {p['physics_rate_hz']:.0f} Hz "
                       f"(known scenarios: {', '.join(scenario_names())})")
@@ -159,11 +168,12 @@ class SimNode:
     def publish_state(self) -> None:
         sample = self.cell.state()
         ns = self._stamp_ns()
-        self.pub_clock.publish(convert.clock(self.steps * self.period_ns))
+        publish_if_subscribed(self.pub_clock, lambda: convert.clock(self.steps * self.period_ns))
         self.pub_js.publish(convert.joint_state(self.cell.joint_names, ns, sample.positions, sample.velocities))
-        self.pub_wrench.publish(convert.wrench_stamped(ns, self.cell.wrench()))
+        publish_if_subscribed(self.pub_wrench, lambda: convert.wrench_stamped(ns, self.cell.wrench()))
         if self.pub_contact is not None and self.contact is not None:
-            self.pub_contact.publish(convert.contact_force(ns, self.cell.contact_force(*self.contact)))
+            contact = self.contact
+            publish_if_subscribed(self.pub_contact, lambda: convert.contact_force(ns, self.cell.contact_force(*contact)))
         self.last_publish = time.monotonic()
 
     def reject(self, reason: str) -> None:

@@ -40,6 +40,9 @@ def cmd_launch(args: argparse.Namespace) -> int:
         args.scenario = INTERACTIVE_CELL
         if args.lockstep or args.plan:
             raise DualArmError("'dualarm launch interactive' runs in real time (no --lockstep, no --plan)")
+    if args.processes != 3 and args.lockstep:
+        raise DualArmError(f"--processes {args.processes} runs in real time: --lockstep runs the nodes in "
+                           "separate processes (--processes 3)")
     scenario_file(args.scenario)  # fail early (exit 2) on an unknown scenario
     read_params_files(args.params, "_check_")  # exit 2 naming a missing or bad --params file before any node starts
     extra = []
@@ -62,7 +65,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         if planned != args.scenario:
             raise DualArmError(f"--plan {plan} was planned on scenario {planned!r}, not {args.scenario!r}")
     return launch_scenario(args.scenario, args.params, extra, args.lockstep, record, args.timeout, args.rate,
-                           plan=plan, force=args.force, interactive=interactive)
+                           plan=plan, force=args.force, interactive=interactive, processes=args.processes)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -143,8 +146,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
     """Solver x QP back-end timings (random set, scenario), pink, exactness, scaling: DIR/bench.md and bench.json."""
     if args.realtime and args.messages:
         raise DualArmError("--realtime and --messages are separate benchmarks: choose one")
-    if args.with_view and not args.realtime:
-        raise DualArmError("--with-view belongs to --realtime")
+    for option in ("with_view", "load", "scheduling", "baseline", "processes"):
+        if getattr(args, option) and not args.realtime:
+            raise DualArmError(f"--{option.replace('_', '-')} belongs to --realtime")
     from dualarm_control.solvers import make_solver
 
     solvers = [s.strip() for s in args.solver.split(",") if s.strip()]
@@ -162,21 +166,36 @@ def cmd_bench(args: argparse.Namespace) -> int:
         return 0
     for name in solvers:
         make_solver(name)  # unknown names exit 2 before any run
-    if args.realtime:  # real-time runs over ROS per solver and rate
+    if args.realtime:  # real-time runs over ROS per solver, rate, load, scheduling, layout (and tree)
         from dualarm_control.app.bench.realtime import (
+            LOADS,
+            PROCESSES,
+            SCHEDULINGS,
+            baseline_tree,
+            format_cpu,
             format_realtime,
             run_realtime,
+            split_choices,
             write_realtime,
         )
         from dualarm_control.params import read_params_files
         from dualarm_control.scenario import scenario_file
 
         scenario_file(args.scenario)
+        loads = split_choices(args.load or "none", LOADS, "--load")
+        schedulings = split_choices(args.scheduling or "rt", SCHEDULINGS, "--scheduling")
+        processes = [int(n) for n in split_choices(args.processes or "3", PROCESSES, "--processes")]
+        baseline = Path(args.baseline) if args.baseline else None
+        if baseline is not None:
+            baseline_tree(baseline)
         read_params_files(args.params, "_check_")  # exit 2 on a bad --params file before any node starts
         rows = run_realtime(args.scenario, solvers, [float(r) for r in args.rates.split(",") if r.strip()],
-                            params=args.params, with_view=args.with_view)
+                            params=args.params, with_view=args.with_view, loads=loads, schedulings=schedulings,
+                            baseline=baseline, processes=processes)
         write_realtime(Path(args.output), rows, args.scenario)
         print(format_realtime(rows))
+        print()
+        print(format_cpu(rows))
         print(f"\nwrote {Path(args.output) / 'realtime.md'} and realtime.json")
         return 0
     from dualarm_control.app.bench.suite import format_bench, run_bench, write_bench
@@ -488,7 +507,9 @@ def build_parser() -> argparse.ArgumentParser:
     ben.add_argument("--output", default="out/bench", metavar="DIR", help="output directory (default: %(default)s)")
     ben.add_argument("--realtime", action="store_true",
                      help="instead: the three nodes over ROS in real time per solver and --rates; missed deadlines, "
-                     "period jitter and state-to-command latency over every cycle (realtime.md/json)")
+                     "period jitter and state-to-command latency over every cycle, and each node's CPU (cores, CPU "
+                     "per control cycle in its main thread and its other threads, the control math per cycle) over "
+                     "the steady motion, read from /proc (realtime.md/json)")
     ben.add_argument("--messages", action="store_true",
                      help="instead: the per-period messages (joint states, target, diagnostics, command) built and "
                      "read through rclpy message objects and as CDR bytes, in one process (messages.md/json)")
@@ -500,6 +521,20 @@ def build_parser() -> argparse.ArgumentParser:
     ben.add_argument("--with-view", action="store_true",
                      help="--realtime: run each launch twice, without and with 'dualarm view --save' (the live "
                      "Rerun view, its own process) beside it (needs the view extra)")
+    ben.add_argument("--load", metavar="none,busy",
+                     help="--realtime: what else runs during each launch, one row each: none, or busy (one core kept "
+                     "busy by a normal-priority process: stress-ng --cpu 1, else a Python spin loop) (default: none)")
+    ben.add_argument("--scheduling", metavar="rt,normal",
+                     help="--realtime: rt (the nodes' SCHED_FIFO thread_priority defaults) or normal (thread_priority "
+                     "0 for every node, passed after the --params files: a machine without rtprio), one row each "
+                     "(default: rt)")
+    ben.add_argument("--processes", metavar="3,2,1",
+                     help="--realtime: the process layouts of 'dualarm launch --processes', one row each: 3 (each node "
+                     "its own process), 2 (the simulator alone), 1 (all in one cell_container) (default: 3)")
+    ben.add_argument("--baseline", metavar="DIR",
+                     help="--realtime: a source checkout of another commit (git worktree add --detach DIR REV); each "
+                     "row is also run with the nodes and the recorder importing DIR (PYTHONPATH, same venv), right "
+                     "before the current tree's, labelled with DIR's short commit")
     ben.set_defaults(func=cmd_bench)
 
     run = sub.add_parser("run", help="run one node (like ros2 run dualarm_control NODE)",
@@ -533,6 +568,11 @@ def build_parser() -> argparse.ArgumentParser:
     lau.add_argument("--duration", type=float, metavar="S",
                      help="task scenario: run S seconds of task time (-p duration:=S; default: the scenario's)")
     lau.add_argument("--timeout", type=float, default=None, metavar="S", help="stop after S seconds")
+    lau.add_argument("--processes", type=int, choices=(1, 2, 3), default=3, metavar="N",
+                     help="3: each node its own process (default); 2: the simulator alone, the controller and the "
+                     "trajectory node in one; 1: all in one. Nodes sharing a process run as cell_container (one "
+                     "executor, one DDS participant, their per-cycle samples passed in the process and published for "
+                     "every other tool); real time only. What each costs: docs/bench.md, 'Processes'")
     lau.set_defaults(func=cmd_launch)
     fau = sub.add_parser("faults", help="fault matrix against real processes (watchdogs, kills, signals, links)",
                          description="Inject faults into real-time runs of the three nodes (loopback, and private "

@@ -3,10 +3,11 @@
 Subscribes ``/joint_states`` and the streams of what it follows: ``/relative_target`` (default),
 also a planned joint trajectory on ``/joint_reference`` (``reference:=joint``: qd_ref + joint_gain
 (q_ref - q), eq 23 bounds), or none for the tasks of a task scenario (``scenario:=pan_cleaning``,
-paper 001; ``/wrench`` with ``force:=true``, eq 9). Publishes ``/velocity_controller/commands``,
-``/relative_pose`` and ``/diagnostics`` (one per cycle). The control math is the core's.
+paper 001; ``/wrench`` with ``force:=true``, eq 9). Publishes ``/velocity_controller/commands``
+and ``/diagnostics`` (one per cycle), and ``/relative_pose`` every cycle while it has a reader.
+The control math is the core's.
 
-Real time: a command per joint state (read -> update -> write, as ros2_control); a timer at the
+Real time: a command per joint state (read -> update -> write, as ros2_control); a tick at the
 control period (at most 200 Hz) is the watchdog. Lockstep: one command per joint-state stamp,
 once every stream's sample of that stamp has arrived. Watchdogs (real time, docs/safety.md):
 joint states (with force: a /wrench) older than ``stale_timeout``; a target stream silent for
@@ -49,11 +50,17 @@ from dualarm_control.references.segments import SegmentsSource
 from dualarm_control.references.tasks import TasksController, TasksSource
 from dualarm_control.ros import convert, inputs
 from dualarm_control.ros import node as shell
+from dualarm_control.ros.local_bus import (
+    LocalBus,
+    local_publisher,
+    publish_if_subscribed,
+)
 from dualarm_control.ros.output import CommandOutput
 from dualarm_control.ros.qos import QOS_PARAMETER, publisher_depth, stream_qos
 from dualarm_control.scenario import load_scenario
 
 DEFAULT_PRIORITY = 50
+COMMANDS = "/velocity_controller/commands"
 WATCHDOG_MIN_PERIOD_S = 0.005  # the watchdog ticks at the control rate, at most 200 Hz
 STATS_EVERY = 200  # cycles between percentile updates
 MOVING = 1e-9  # a target twist / reference velocity norm above this is motion [m/s, rad/s]
@@ -88,7 +95,7 @@ class ControllerNode:
     """Node shell: parameters -> topics -> the core's cycle (:class:`~dualarm_control.controller.
     RelativeController`, or :class:`TasksController` for a task scenario)."""
 
-    def __init__(self, context: Any, priority_note: str = "disabled") -> None:
+    def __init__(self, context: Any, priority_note: str = "disabled", bus: LocalBus | None = None) -> None:
         self.node = n = Node("controller_node", context=context)
         self.log = n.get_logger()
         self.values = shell.declare(n, ALL_PARAMETERS)
@@ -111,28 +118,28 @@ class ControllerNode:
         qos = stream_qos(self.values["qos_reliability"])
         depth = publisher_depth(self.lockstep)
         self.pub_pose = n.create_publisher(PoseStamped, "/relative_pose", depth)
-        self.out = CommandOutput("controller_node", self.log, n.create_publisher(
-            Float64MultiArray, "/velocity_controller/commands", stream_qos(self.values["qos_reliability"], depth)),
+        self.out = CommandOutput("controller_node", self.log, local_publisher(bus, n.create_publisher(
+            Float64MultiArray, COMMANDS, stream_qos(self.values["qos_reliability"], depth)), COMMANDS),
             n.create_publisher(DiagnosticArray, "/diagnostics", depth), self.model.nq, self.timing)
         self.out.solver = self.params.solver
         order = {name: i for i, name in enumerate(self.model.joint_names)}
-        subscribe = inputs.subscribe_checked
-        subscribe(n, JointState, "/joint_states", self.on_joint_state, qos, self.on_malformed,
-                  convert.JointStateInput(order))
+        def subscribe(msg_type: Any, topic: str, callback: Any, qos: Any, decoder: Any = None) -> None:
+            inputs.subscribe_checked(n, msg_type, topic, callback, qos, self.on_malformed, decoder, bus)
+
+        subscribe(JointState, "/joint_states", self.on_joint_state, qos, convert.JointStateInput(order))
         if RELATIVE_TARGET in self.streams:
-            subscribe(n, MultiDOFJointTrajectory, RELATIVE_TARGET, lambda s: self.on_input(RELATIVE_TARGET, *s),
-                      qos, self.on_malformed, convert.TargetInput(self.model.relative_reach()))
+            subscribe(MultiDOFJointTrajectory, RELATIVE_TARGET, lambda s: self.on_input(RELATIVE_TARGET, *s),
+                      qos, convert.TargetInput(self.model.relative_reach()))
         if JOINT_REFERENCE in self.streams:
-            subscribe(n, JointTrajectory, JOINT_REFERENCE, lambda msg: self.on_input(
-                JOINT_REFERENCE, convert.stamp_ns(msg.header.stamp), convert.joint_reference(msg, order)),
-                qos, self.on_malformed)
+            subscribe(JointTrajectory, JOINT_REFERENCE, lambda msg: self.on_input(
+                JOINT_REFERENCE, convert.stamp_ns(msg.header.stamp), convert.joint_reference(msg, order)), qos)
         if WRENCH in self.streams:
-            subscribe(n, WrenchStamped, WRENCH, lambda msg: self.on_input(
-                WRENCH, convert.stamp_ns(msg.header.stamp), convert.wrench_vector(msg)), 10, self.on_malformed)
+            subscribe(WrenchStamped, WRENCH, lambda msg: self.on_input(
+                WRENCH, convert.stamp_ns(msg.header.stamp), convert.wrench_vector(msg)), 10)
         self.live = shell.LiveParameters(n, {s.name: s for s in ALL_PARAMETERS}, self.values, lambda merged: (
             core.RelativeController(self.model, core.controller_params(merged, n.get_name()))))
-        if not self.lockstep:
-            n.create_timer(max(self.params.period, WATCHDOG_MIN_PERIOD_S), self.on_watchdog)
+        self.ticks: list[shell.Tick] = ([] if self.lockstep else  # ros.node.Ticker, not an rclpy timer
+                                        [(max(self.params.period, WATCHDOG_MIN_PERIOD_S), self.on_watchdog)])
         tracked = "joint reference" if self.joint_mode else f"solver '{self.params.solver}'"
         if self.task is not None:
             tracked += (f" on task scenario '{self.values['scenario']}' (k={self.task.gain:g}"
@@ -226,7 +233,7 @@ class ControllerNode:
                  if ref is not None else self.controller.step(q, target))
         latency = self.finish_cycle(cycle)
         if np.all(np.isfinite(cycle.position)):
-            self.pub_pose.publish(convert.pose_stamped(stamp, cycle.position, cycle.rotation))
+            publish_if_subscribed(self.pub_pose, lambda: convert.pose_stamped(stamp, cycle.position, cycle.rotation))
         self.publish_cycle(stamp, cycle, "joint_tracking" if self.joint_mode else self.params.solver, {
             "cycle_time_s": f"{cycle.cycle_time:.6e}", "position_error_m": f"{cycle.position_error:.6e}",
             "orientation_error_rad": f"{cycle.orientation_error:.6e}",

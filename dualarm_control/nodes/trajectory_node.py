@@ -5,8 +5,8 @@ What it publishes is the reference source's (:meth:`ReferenceSource.stream
 goals scenario on ``/relative_target``; with ``plan:=FILE`` a plan's joint reference on
 ``/joint_reference`` and its relative pose on ``/relative_target``. The stream starts from the
 first ``/joint_states`` (measured start configuration). Real-time mode: one target per control
-period on a timer, timed from the first joint state on the node's clock (simulation time with
-``use_sim_time``). Lockstep mode: one target per joint state, stamped with the joint state's
+period on a tick of the spin loop (``ros.node.Ticker``), timed from the first joint state on the
+node's clock (simulation time with ``use_sim_time``). Lockstep mode: one target per joint state, stamped with the joint state's
 stamp, so the controller can pair them. When the stream's end (trajectory plus the scenario's
 settle time) has come the node logs completion, publishes a final ``/diagnostics`` status
 "complete" and exits 0; with ``repeat:=true`` (soak runs) it starts the scenario again from the
@@ -45,8 +45,15 @@ from dualarm_control.references.base import (
 from dualarm_control.references.goals import GoalsSource, GoalsStream
 from dualarm_control.references.plan import PlanSource
 from dualarm_control.ros import convert
-from dualarm_control.ros.inputs import StampGate, Throttle, subscribe_checked
+from dualarm_control.ros.inputs import (
+    StampGate,
+    Throttle,
+    subscribe_checked,
+    unsubscribe,
+)
+from dualarm_control.ros.local_bus import LocalBus, local_publisher
 from dualarm_control.ros.node import (
+    Tick,
     declare,
     priority_from_args,
     request_realtime_priority,
@@ -79,7 +86,7 @@ PARAMETERS = (
 class TrajectoryNode:
     """Node shell around a reference source's :class:`~dualarm_control.references.base.TargetStream`."""
 
-    def __init__(self, context: Any, priority_note: str = "disabled") -> None:
+    def __init__(self, context: Any, priority_note: str = "disabled", bus: LocalBus | None = None) -> None:
         from dualarm_control.nodes.interactive import (
             LIMIT_PREFIX,
             InteractiveDrive,
@@ -87,6 +94,7 @@ class TrajectoryNode:
         )
 
         self.node = Node("trajectory_node", context=context)
+        self.bus = bus
         p = declare(self.node, PARAMETERS)
         self.scenario = load_scenario(p["scenario"])
         self.lockstep = bool(p["lockstep"])
@@ -108,9 +116,10 @@ class TrajectoryNode:
                 **{k[len(LIMIT_PREFIX):]: v for k, v in limits.items()}), self.qos)
         self.order = {name: i for i, name in enumerate(self.model.joint_names)}
         depth = stream_qos(p["qos_reliability"], publisher_depth(self.lockstep))
-        self.pub = n.create_publisher(MultiDOFJointTrajectory, RELATIVE_TARGET, depth)
-        self.pub_joint = (n.create_publisher(JointTrajectory, JOINT_REFERENCE, depth)
-                          if JOINT_REFERENCE in self.source.streams else None)
+        self.pub = local_publisher(bus, n.create_publisher(MultiDOFJointTrajectory, RELATIVE_TARGET, depth),
+                                   RELATIVE_TARGET)
+        self.pub_joint = (local_publisher(bus, n.create_publisher(JointTrajectory, JOINT_REFERENCE, depth),
+                                          JOINT_REFERENCE) if JOINT_REFERENCE in self.source.streams else None)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.states: Any = None  # the /joint_states subscription while one is needed
         self.subscribe_states()
@@ -120,8 +129,7 @@ class TrajectoryNode:
         self.start_ns = 0
         self.stage = ""
         self.finished = False
-        if not self.lockstep:
-            n.create_timer(self.period, self.on_tick)
+        self.ticks: list[Tick] = [] if self.lockstep else [(self.period, self.on_tick)]  # ros.node.Ticker
         self.log.info(f"scenario '{self.scenario.name}': {self.source.describe()}, "
                       f"{'lockstep' if self.lockstep else 'real-time'}; waiting for /joint_states")
         if priority_note and priority_note != "disabled":
@@ -129,7 +137,7 @@ class TrajectoryNode:
 
     def subscribe_states(self) -> None:
         self.states = subscribe_checked(self.node, JointState, "/joint_states", self.on_joint_state, self.qos,
-                                        self.reject, convert.JointStateInput(self.order))
+                                        self.reject, convert.JointStateInput(self.order), self.bus)
 
     def on_joint_state(self, sample: tuple[int, tuple[np.ndarray, np.ndarray] | str]) -> None:
         if self.finished:
@@ -165,7 +173,7 @@ class TrajectoryNode:
     def on_tick(self) -> None:
         if self.stream is not None:
             if self.states is not None and self.drive is None:  # started: the timer drives the stream
-                self.node.destroy_subscription(self.states)  # (not destroyed in its own callback)
+                unsubscribe(self.node, self.states)  # (not destroyed in its own callback)
                 self.states = None
             now = self.node.get_clock().now().nanoseconds
             self.publish(now, now - self.start_ns)

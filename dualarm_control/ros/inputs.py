@@ -29,6 +29,7 @@ import numpy as np
 
 from dualarm_control.metrics import percentiles
 from dualarm_control.ros.cdr import CdrError
+from dualarm_control.ros.local_bus import LocalBus, LocalSubscription
 
 DESERIALIZE_ERRORS = (RuntimeError, ValueError, TypeError, OverflowError, MemoryError)
 """What deserialize_message raises on a bad payload (rclpy's RMWError is a RuntimeError)."""
@@ -118,7 +119,8 @@ class Decoder(Protocol[T_co]):
 
 
 def subscribe_checked(node: Any, msg_type: Any, topic: str, callback: Callable[[Any], None], qos: Any,
-                      on_malformed: Callable[[str], None], decoder: Decoder[Any] | None = None) -> Any:
+                      on_malformed: Callable[[str], None], decoder: Decoder[Any] | None = None,
+                      bus: LocalBus | None = None) -> Any:
     """A subscription on ``topic`` that never lets a malformed sample reach ``callback`` or kill the node.
 
     Subscribes raw (serialized CDR bytes). With a ``decoder``, ``callback`` receives
@@ -127,7 +129,8 @@ def subscribe_checked(node: Any, msg_type: Any, topic: str, callback: Callable[[
     what is malformed. Without one, ``callback`` receives the deserialized message (~16 us
     per 14-joint JointState). A sample that fails to deserialize is reported through
     ``on_malformed("malformed message on /topic: <reason>")`` and dropped (a typed
-    subscription would drop it silently inside the middleware).
+    subscription would drop it silently inside the middleware). With a ``bus`` that carries
+    ``topic`` (nodes in one process), the samples come from the bus, not the wire.
     """
     from rclpy.serialization import deserialize_message
 
@@ -147,7 +150,17 @@ def subscribe_checked(node: Any, msg_type: Any, topic: str, callback: Callable[[
             return
         callback(msg if decoder is None else decoder.from_message(msg))
 
+    if bus is not None and bus.carries(topic):
+        return bus.subscribe(topic, receive)
     return node.create_subscription(msg_type, topic, receive, qos, raw=True)
+
+
+def unsubscribe(node: Any, sub: Any) -> None:
+    """Remove a subscription made by :func:`subscribe_checked` (on the wire or on a local bus)."""
+    if isinstance(sub, LocalSubscription):
+        sub.close()
+    else:
+        node.destroy_subscription(sub)
 
 
 class StreamInputs:

@@ -15,24 +15,31 @@ the control loop.
 from __future__ import annotations
 
 import json
+import os
+import shutil
 import signal
 import subprocess
 import sys
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from dualarm_control.errors import DualArmError
 from dualarm_control.metrics import percentiles
 
 
 def controller_cycles(bag: Path) -> dict[str, np.ndarray]:
-    """Per-cycle controller figures from a bag's /diagnostics (status ``controller_node`` with a solver status)."""
+    """Per-cycle controller figures from a bag's /diagnostics (status ``controller_node`` with a solver status);
+    ``stamp`` is the message's header stamp [s] (wall clock in real time)."""
     from dualarm_control.app.record.bag import open_reader
 
-    rows: dict[str, list[float]] = {"interval": [], "latency": [], "missed": [], "cycles": [], "failures": []}
+    rows: dict[str, list[float]] = {"interval": [], "latency": [], "missed": [], "cycles": [], "failures": [],
+                                    "stamp": [], "cycle_time": []}
     reader = open_reader(bag)
     try:
         conns = [c for c in reader.connections if c.topic == "/diagnostics"]
@@ -47,6 +54,8 @@ def controller_cycles(bag: Path) -> dict[str, np.ndarray]:
                 rows["missed"].append(float(values["missed_deadlines"]))
                 rows["cycles"].append(float(values["cycles"]))
                 rows["failures"].append(float(values["solver_failures"]))
+                rows["stamp"].append(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
+                rows["cycle_time"].append(float(values.get("cycle_time_s", "nan")))
     finally:
         reader.close()
     return {k: np.array(v) for k, v in rows.items()}
@@ -94,44 +103,199 @@ def stop_live_view(view: subprocess.Popen[bytes]) -> int:
         return view.wait()
 
 
-def run_realtime(scenario: str, solvers: Sequence[str], rates: Sequence[float],
-                 timeout: float = 300.0, params: Sequence[str] = (), with_view: bool = False) -> list[dict[str, Any]]:
-    """One real-time launch per (solver, rate), ``params`` files passed to every node; the rows of the table.
-    ``with_view``: each launch twice in a row, without and with the live Rerun view beside it (row key "view")."""
+LOADS = ("none", "busy")
+"""``--load``: nothing else running, or one core kept busy by a normal-priority process."""
+SCHEDULINGS = ("rt", "normal")
+PROCESSES = ("3", "2", "1")
+"""``--processes``: the process layouts of ``dualarm launch --processes`` (3: each node its own)."""
+"""``--scheduling``: the nodes' SCHED_FIFO ``thread_priority`` defaults, or normal scheduling (0)."""
+NORMAL_SCHEDULING = "".join(f"{key}:\n  ros__parameters:\n    thread_priority: 0\n"
+                            for key in ("/**", "controller_node", "sim_node", "trajectory_node"))
+"""The parameter file of ``--scheduling normal``, passed after the user's ``--params`` files. rclpy
+applies a node's sections in the order they first appear over all files (later files overwrite the
+values), so a ``/**`` section alone would lose to a node's own section in an earlier user file; the
+node sections make it win in rclpy and in :func:`dualarm_control.params.read_params_files` alike."""
+
+
+def split_choices(text: str, valid: Sequence[str], option: str) -> list[str]:
+    """Comma-separated values of ``option``, each one of ``valid`` (DualArmError naming the first that is not)."""
+    values = [v.strip() for v in text.split(",") if v.strip()]
+    for value in values or [""]:
+        if value not in valid:
+            raise DualArmError(f"{option}: unknown value {value!r}; valid choices: {', '.join(valid)}")
+    return values
+
+
+def tree_label(path: Path) -> str | None:
+    """``git rev-parse --short HEAD`` of the checkout at ``path``, "+" appended when tracked files
+    differ from it; None when ``path`` is not a git checkout."""
+    def git(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(["git", "-C", str(path), *args], capture_output=True, text=True, check=False)
+
+    try:
+        head = git("rev-parse", "--short", "HEAD")
+    except OSError:  # no git
+        return None
+    if head.returncode != 0:
+        return None
+    modified = git("status", "--porcelain", "--untracked-files=no").stdout.strip()
+    return head.stdout.strip() + ("+" if modified else "")
+
+
+def baseline_tree(path: Path) -> str:
+    """The label of ``--baseline`` ``path``: a git checkout holding the dualarm_control and dualarm_sim
+    packages (DualArmError naming the path otherwise)."""
+    label = tree_label(path) if path.is_dir() else None
+    if label is None or not all((path / pkg / "__init__.py").is_file() for pkg in ("dualarm_control", "dualarm_sim")):
+        raise DualArmError(f"--baseline {path}: not a source checkout of dualarm_control "
+                           "(e.g. git worktree add --detach /tmp/base REV)")
+    return label
+
+
+def current_tree() -> str:
+    """The label of the tree this package is imported from ("installed" outside a checkout)."""
+    return tree_label(Path(__file__).resolve().parents[3]) or "installed"
+
+
+def tree_environment(path: Path) -> dict[str, str]:
+    """Environment that makes a node process import the packages of the checkout at ``path``:
+    first on PYTHONPATH, and no current directory ahead of it (``python -m`` puts it first)."""
+    rest = os.environ.get("PYTHONPATH", "")
+    return {"PYTHONPATH": str(path.resolve()) + (os.pathsep + rest if rest else ""), "PYTHONSAFEPATH": "1"}
+
+
+def busy_command() -> list[str]:
+    """A process keeping one core busy: ``stress-ng --cpu 1`` if installed, else a Python spin loop."""
+    if shutil.which("stress-ng"):
+        return ["stress-ng", "--cpu", "1", "--quiet"]
+    return [sys.executable, "-S", "-c", "while True: pass"]
+
+
+@contextmanager
+def busy_core(on: bool) -> Iterator[None]:
+    """While in the block, :func:`busy_command` runs at normal priority (when ``on``); killed after."""
+    if not on:
+        yield
+        return
+    proc = subprocess.Popen(busy_command(), stdout=subprocess.DEVNULL, start_new_session=True)
+    try:
+        yield
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+
+
+@dataclass(frozen=True)
+class Variant:
+    """The settings of one launch: one row of the tables."""
+
+    solver: str
+    rate_hz: float
+    load: str = "none"
+    scheduling: str = "rt"
+    tree: str = "current"
+    baseline: Path | None = None
+    """The checkout the node processes import (None: this one)."""
+    view: bool | None = None
+    """With the live view beside it (None: not a ``--with-view`` run)."""
+    processes: int = 3
+    """The nodes' process layout (``dualarm launch --processes``)."""
+
+    def describe(self) -> str:
+        view = " with dualarm view --save" if self.view else ""
+        return (f"{self.solver} at {self.rate_hz:g} Hz, real time, {self.processes} processes, load {self.load}, "
+                f"scheduling {self.scheduling}, tree {self.tree}{' (baseline)' if self.baseline else ''}{view}")
+
+
+def variants(solvers: Sequence[str], rates: Sequence[float], loads: Sequence[str] = ("none",),
+             schedulings: Sequence[str] = ("rt",), with_view: bool = False,
+             baseline: tuple[str, Path] | None = None, current: str = "current",
+             processes: Sequence[int] = (3,)) -> list[Variant]:
+    """Every launch in run order: per (solver, rate, load, scheduling, view), the baseline tree's
+    launch (separate processes: an older tree may have no container) right before the current tree's
+    in each of the ``processes`` layouts, so all meet the same machine state."""
+    trees: list[tuple[str, Path | None, int]] = [*([(*baseline, 3)] if baseline else []),
+                                                  *((current, None, n) for n in processes)]
+    return [Variant(solver, rate, load, sched, tree, base, view, n)
+            for solver in solvers for rate in rates for load in loads for sched in schedulings
+            for view in ((False, True) if with_view else (None,)) for tree, base, n in trees]
+
+
+def run_variant(scenario: str, v: Variant, params: Sequence[str], timeout: float) -> dict[str, Any]:
+    """One real-time launch of ``v`` recording /diagnostics, its node processes' CPU sampled; its row."""
+    from dualarm_control.app.bench.cpu import cpu_figures, sampling
     from dualarm_control.app.run.launcher import launch_scenario
 
+    with tempfile.TemporaryDirectory() as tmp:
+        bag = Path(tmp) / "diagnostics"
+        files = list(params)
+        if v.scheduling == "normal":
+            (Path(tmp) / "normal_scheduling.yaml").write_text(NORMAL_SCHEDULING)
+            files.append(str(Path(tmp) / "normal_scheduling.yaml"))
+        env = tree_environment(v.baseline) if v.baseline is not None else None
+        view = start_live_view(Path(tmp) / "view.rrd") if v.view else None
+        try:
+            with busy_core(v.load == "busy"), sampling() as sampler:
+                code = launch_scenario(scenario, files, ["-p", f"solver:={v.solver}"], False, bag, timeout,
+                                       rate_hz=v.rate_hz, record_topics=("/diagnostics",), env=env,
+                                       processes=v.processes)
+        finally:
+            view_exit = stop_live_view(view) if view is not None else None
+        cycles = controller_cycles(bag)
+        samples = sampler.samples
+        first_cycle = (float(cycles["stamp"][0]) - samples[0].wall) if len(cycles["stamp"]) and samples else None
+        row = {"solver": v.solver, "rate_hz": v.rate_hz, "load": v.load, "scheduling": v.scheduling,
+               "tree": v.tree, "baseline": v.baseline is not None, "processes": v.processes, "exit": code,
+               **summarize_cycles(cycles, 1.0 / v.rate_hz),
+               "cpu": cpu_figures(samples, cycles["stamp"], cycles["cycles"], cycles["cycle_time"]),
+               "cpu_samples": len(samples), "first_cycle_s": first_cycle}
+        if v.view is not None:
+            rrd = Path(tmp) / "view.rrd"
+            row.update(view="rerun" if v.view else "none", view_exit=view_exit,
+                       view_rrd_bytes=rrd.stat().st_size if v.view and rrd.exists() else None)
+    return row
+
+
+def run_realtime(scenario: str, solvers: Sequence[str], rates: Sequence[float],
+                 timeout: float = 300.0, params: Sequence[str] = (), with_view: bool = False,
+                 loads: Sequence[str] = ("none",), schedulings: Sequence[str] = ("rt",),
+                 baseline: Path | None = None, processes: Sequence[int] = (3,)) -> list[dict[str, Any]]:
+    """One real-time launch per (solver, rate, load, scheduling), ``params`` files passed to every node;
+    the rows of the tables. ``with_view``: each launch twice in a row, without and with the live Rerun
+    view beside it (row key "view"). ``baseline``: each launch also with the node processes importing
+    that checkout, right before the current tree's (row keys "tree", "baseline"). ``processes``: the
+    layouts of ``dualarm launch --processes`` to run (row key "processes")."""
+    runs = variants(solvers, rates, loads, schedulings, with_view,
+                    (baseline_tree(baseline), baseline) if baseline is not None else None, current_tree(), processes)
     rows = []
-    for solver in solvers:
-        for rate in rates:
-            for view_on in ((False, True) if with_view else (False,)):
-                with tempfile.TemporaryDirectory() as tmp:
-                    bag = Path(tmp) / "diagnostics"
-                    label = " with dualarm view --save" if view_on else ""
-                    print(f"=== {solver} at {rate:g} Hz, real time{label}", flush=True)
-                    view = start_live_view(Path(tmp) / "view.rrd") if view_on else None
-                    try:
-                        code = launch_scenario(scenario, list(params), ["-p", f"solver:={solver}"], False, bag,
-                                               timeout, rate_hz=rate, record_topics=("/diagnostics",))
-                    finally:
-                        view_exit = stop_live_view(view) if view is not None else None
-                    row = {"solver": solver, "rate_hz": rate, "exit": code,
-                           **summarize_cycles(controller_cycles(bag), 1.0 / rate)}
-                    if with_view:
-                        rrd = Path(tmp) / "view.rrd"
-                        row.update(view="rerun" if view_on else "none", view_exit=view_exit,
-                                   view_rrd_bytes=rrd.stat().st_size if view_on and rrd.exists() else None)
-                rows.append(row)
+    for k, v in enumerate(runs, 1):
+        print(f"=== [{k}/{len(runs)}] {v.describe()}", flush=True)
+        rows.append(run_variant(scenario, v, params, timeout))
     return rows
 
 
+def label_keys(rows: Sequence[dict[str, Any]]) -> list[str]:
+    """The label columns the rows need: load and scheduling when a row is not the default (none, rt),
+    tree when a row ran a ``--baseline``, view when the rows ran ``--with-view``."""
+    shown = {"processes": any(r.get("processes", 3) != 3 for r in rows),
+             "load": any(r.get("load", "none") != "none" for r in rows),
+             "scheduling": any(r.get("scheduling", "rt") != "rt" for r in rows),
+             "tree": any(r.get("baseline") for r in rows), "view": any("view" in r for r in rows)}
+    return [key for key, on in shown.items() if on]
+
+
+def _head(r: dict[str, Any], keys: Sequence[str]) -> str:
+    return f"| {r['solver']} | {r['rate_hz']:g} | " + "".join(f"{r.get(k, '')} | " for k in keys)
+
+
 def format_realtime(rows: Sequence[dict[str, Any]]) -> str:
-    """Markdown table of :func:`run_realtime` rows (a "view" column when they were run ``with_view``)."""
-    view = any("view" in r for r in rows)
-    lines = [("| solver | rate [Hz] | " + ("view | " if view else "") + "cycles | missed deadlines | "
+    """Markdown table of the timing figures of :func:`run_realtime` rows (label columns as :func:`label_keys`)."""
+    keys = label_keys(rows)
+    lines = [("| solver | rate [Hz] | " + "".join(f"{k} | " for k in keys) + "cycles | missed deadlines | "
               "jitter p50 / p99 [ms] | state-to-command latency p50 / p99 [ms] | solver failures |"),
-             "|" + "---|" * (8 if view else 7)]
+             "|" + "---|" * (7 + len(keys))]
     for r in rows:
-        head = f"| {r['solver']} | {r['rate_hz']:g} | " + (f"{r.get('view', '')} | " if view else "")
+        head = _head(r, keys)
         if not r.get("cycles"):
             lines.append(f"{head}0 (exit {r['exit']}) | | | | |")
             continue
@@ -141,7 +305,39 @@ def format_realtime(rows: Sequence[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def format_cpu(rows: Sequence[dict[str, Any]]) -> str:
+    """Markdown table of the CPU figures of :func:`run_realtime` rows: per node cores and CPU per
+    control cycle (total = main thread + other threads), the controller's control math per cycle,
+    all nodes together."""
+    from dualarm_control.app.bench.cpu import node_order
+
+    keys = label_keys(rows)
+    names = sorted({n for r in rows for n in r.get("cpu", {}).get("nodes", {})}, key=node_order)
+    header = ("| solver | rate [Hz] | " + "".join(f"{k} | " for k in keys) + "window [s] | cycles | "
+              "control math / cycle [ms, wall] | ")
+    for name in names:
+        short = name.removesuffix("_node")
+        header += f"{short} [core] | {short} CPU / cycle = main + other [ms] | "
+    header += "all nodes [core] | all nodes CPU / cycle [ms] |"
+    columns = header.count(" | ") + 1
+    lines = [header, "|" + "---|" * columns]
+    for r in rows:
+        cpu = r.get("cpu") or {}
+        if not cpu:
+            lines.append(_head(r, keys) + "no steady window |" + " |" * (columns - 3 - len(keys)))
+            continue
+        line = (_head(r, keys) + f"{cpu['window_s']:.1f} | {cpu['window_cycles']} | "
+                f"{cpu['control_math_ms_per_cycle']:.3f} | ")
+        for name in names:
+            n = cpu["nodes"].get(name)
+            line += (f"{n['cores']:.3f} | {n['cpu_ms_per_cycle']:.3f} = {n['main_ms_per_cycle']:.3f} + "
+                     f"{n['other_ms_per_cycle']:.3f} | " if n else " | | ")
+        lines.append(line + f"{cpu['all_nodes_cores']:.3f} | {cpu['all_nodes_ms_per_cycle']:.3f} |")
+    return "\n".join(lines)
+
+
 def write_realtime(out: Path, rows: Sequence[dict[str, Any]], scenario: str) -> None:
     out.mkdir(parents=True, exist_ok=True)
     (out / "realtime.json").write_text(json.dumps(list(rows), indent=2) + "\n")
-    (out / "realtime.md").write_text(f"# Real-time runs over ROS ({scenario})\n\n{format_realtime(rows)}\n")
+    (out / "realtime.md").write_text(f"# Real-time runs over ROS ({scenario})\n\n{format_realtime(rows)}\n\n"
+                                     f"## CPU of the nodes (steady window)\n\n{format_cpu(rows)}\n")

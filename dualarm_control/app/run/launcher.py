@@ -24,6 +24,13 @@ NODES = {
     "controller_node": "dualarm_control.nodes.controller_node",
     "trajectory_node": "dualarm_control.nodes.trajectory_node",
 }
+CONTAINER, CONTAINER_MODULE = "cell_container", "dualarm_control.nodes.container"
+LAYOUTS = {
+    3: (("controller_node",), ("trajectory_node",), ("sim_node",)),
+    2: (("controller_node", "trajectory_node"), ("sim_node",)),
+    1: (("controller_node", "trajectory_node", "sim_node"),),
+}
+"""Processes of ``dualarm launch --processes N``: which nodes share a process (started in this order)."""
 STOP_GRACE_S = 10.0
 INTERACTIVE = "interactive"
 """`dualarm launch interactive`: the trajectory node in mode:=interactive (issue 18)."""
@@ -45,6 +52,25 @@ def node_command(node: str, ros_args: Sequence[str]) -> list[str]:
     args = list(ros_args)
     return [sys.executable, "-u", "-m", NODES[node], *(args if args[:1] == ["--ros-args"] or not args
                                                          else ["--ros-args", *args])]
+
+
+def scoped(node: str, args: Sequence[str]) -> list[str]:
+    """A node's ``-p NAME:=VALUE`` arguments in rcl's node-scoped form ``-p NODE:NAME:=VALUE`` (other
+    arguments as they are): one command line for nodes sharing a process."""
+    return [f"{node}:{arg}" if i and args[i - 1] == "-p" else arg for i, arg in enumerate(args)]
+
+
+def container_command(node_args: Mapping[str, Sequence[str]]) -> list[str]:
+    """Command line of ``cell_container`` running the nodes of ``node_args`` (name -> its ROS arguments)."""
+    ros_args: list[str] = []
+    for node, args in node_args.items():
+        args = scoped(node, args)
+        for i, arg in enumerate(args):
+            pair = args[i - 1: i + 1] if i and args[i - 1] == "--params-file" else args[i: i + 2]
+            if pair[0] == "--params-file" and any(ros_args[j: j + 2] == pair for j in range(len(ros_args))):
+                continue  # a params file once: it is keyed by node name
+            ros_args.append(arg)
+    return [sys.executable, "-u", "-m", CONTAINER_MODULE, "--nodes", ",".join(node_args), "--ros-args", *ros_args]
 
 
 def recorder_command(path: Path, topics: Sequence[str], use_sim_time: bool = False,
@@ -142,6 +168,8 @@ def launch_scenario(
     plan: Path | None = None,
     force: bool = False,
     interactive: bool = False,
+    processes: int = 3,
+    env: Mapping[str, str] | None = None,
 ) -> int:
     """Run the three nodes (and a recorder of ``record_topics``) on ``scenario``; ``rate_hz`` sets every
     node's control period. Returns 0 if the scenario completed cleanly, 130 on Ctrl-C.
@@ -154,12 +182,21 @@ def launch_scenario(
     ``interactive`` (issue 18): the trajectory node in ``mode:=interactive`` on the scenario's
     cell and limits: it holds the measured relative pose and follows /relative_goal and
     /relative_twist, in real time, until Ctrl-C or ``timeout``.
+
+    ``processes`` (:data:`LAYOUTS`): 3, each node its own process (the default); 2, the simulator
+    alone and the controller with the trajectory node in one ``cell_container``; 1, every node in
+    one ``cell_container`` (nodes/container.py). Fewer than 3 runs in real time only.
+    ``env`` adds to the environment of every process started (``dualarm bench --realtime --baseline``).
     """
     from dualarm_control.scenario import load_scenario
 
     tasks = load_scenario(scenario).tasks is not None
     if interactive and (tasks or lockstep or plan is not None):
         raise ValueError("interactive runs in real time on a relative motion scenario (no lockstep, plan or tasks)")
+    if processes not in LAYOUTS:
+        raise ValueError(f"processes must be one of {sorted(LAYOUTS)}, got {processes!r}")
+    if processes != 3 and lockstep:
+        raise ValueError(f"{processes} processes run in real time: lockstep runs use separate processes")
     if force and not tasks:
         raise ValueError(f"force feedback applies to task scenarios (pan_cleaning), not to {scenario!r}")
     common = ["-p", f"lockstep:={'true' if lockstep else 'false'}"]
@@ -190,13 +227,21 @@ def launch_scenario(
             # Real-time task runs start once the recorder reads /diagnostics (task_start_readers); it
             # subscribes that topic last, once the others deliver: the bag then holds the run from t = 0.
             gate = ("/diagnostics",) if tasks and not lockstep else ()
-            launch.start("bag", recorder_command(record, record_topics, lockstep, gate))
+            launch.start("bag", recorder_command(record, record_topics, lockstep, gate), env)
         readers = (1 if tasks else 2) + (record is not None)
-        launch.start("controller_node", node_command("controller_node", [*common, *sim_time, *controller_args]))
+        node_args = {"controller_node": [*common, *sim_time, *controller_args]}
         if not tasks:
-            launch.start("trajectory_node", node_command("trajectory_node", [*common, *sim_time, *trajectory_args]))
-        launch.start("sim_node", node_command("sim_node", [*common, *with_scenario,
-                                                            "-p", f"lockstep_subscribers:={readers}"]))
+            node_args["trajectory_node"] = [*common, *sim_time, *trajectory_args]
+        node_args["sim_node"] = [*common, *with_scenario, "-p", f"lockstep_subscribers:={readers}"]
+        for group in LAYOUTS[processes]:
+            members = {node: node_args[node] for node in group if node in node_args}
+            if len(members) > 1:
+                name = CONTAINER if len(members) == len(node_args) else f"{CONTAINER}_{len(members)}"
+                launch.start(name, container_command(members), env)
+                finisher = name if finisher in members else finisher
+            elif members:
+                (node, args), = members.items()
+                launch.start(node, node_command(node, args), env)
         codes = launch.wait_until(finisher, timeout)
     except KeyboardInterrupt:
         interrupted = True
