@@ -48,13 +48,8 @@ from dualarm_control.references.base import JOINT_REFERENCE, RELATIVE_TARGET, WR
 from dualarm_control.references.plan import PlanSource
 from dualarm_control.references.segments import SegmentsSource
 from dualarm_control.references.tasks import TasksController, TasksSource
-from dualarm_control.ros import convert, inputs
+from dualarm_control.ros import convert, inputs, local_bus
 from dualarm_control.ros import node as shell
-from dualarm_control.ros.local_bus import (
-    LocalBus,
-    local_publisher,
-    publish_if_subscribed,
-)
 from dualarm_control.ros.output import CommandOutput
 from dualarm_control.ros.qos import QOS_PARAMETER, publisher_depth, stream_qos
 from dualarm_control.scenario import load_scenario
@@ -95,7 +90,7 @@ class ControllerNode:
     """Node shell: parameters -> topics -> the core's cycle (:class:`~dualarm_control.controller.
     RelativeController`, or :class:`TasksController` for a task scenario)."""
 
-    def __init__(self, context: Any, priority_note: str = "disabled", bus: LocalBus | None = None) -> None:
+    def __init__(self, context: Any, priority_note: str = "disabled", bus: local_bus.LocalBus | None = None) -> None:
         self.node = n = Node("controller_node", context=context)
         self.log = n.get_logger()
         self.values = shell.declare(n, ALL_PARAMETERS)
@@ -114,15 +109,15 @@ class ControllerNode:
         self.timing = inputs.CycleTiming(realtime=not self.lockstep)
         self.first_stamp: int | None = None  # task mode: stamp of the first joint state (t = 0)
         self.completed_at: float | None = None  # task mode: monotonic s at which the duration was reached
-
         qos = stream_qos(self.values["qos_reliability"])
         depth = publisher_depth(self.lockstep)
         self.pub_pose = n.create_publisher(PoseStamped, "/relative_pose", depth)
-        self.out = CommandOutput("controller_node", self.log, local_publisher(bus, n.create_publisher(
+        self.out = CommandOutput("controller_node", self.log, local_bus.local_publisher(bus, n.create_publisher(
             Float64MultiArray, COMMANDS, stream_qos(self.values["qos_reliability"], depth)), COMMANDS),
             n.create_publisher(DiagnosticArray, "/diagnostics", depth), self.model.nq, self.timing)
         self.out.solver = self.params.solver
         order = {name: i for i, name in enumerate(self.model.joint_names)}
+
         def subscribe(msg_type: Any, topic: str, callback: Any, qos: Any, decoder: Any = None) -> None:
             inputs.subscribe_checked(n, msg_type, topic, callback, qos, self.on_malformed, decoder, bus)
 
@@ -233,7 +228,7 @@ class ControllerNode:
                  if ref is not None else self.controller.step(q, target))
         latency = self.finish_cycle(cycle)
         if np.all(np.isfinite(cycle.position)):
-            publish_if_subscribed(self.pub_pose, lambda: convert.pose_stamped(stamp, cycle.position, cycle.rotation))
+            local_bus.publish_if_subscribed(self.pub_pose, lambda: convert.pose_stamped(stamp, cycle.position, cycle.rotation))
         self.publish_cycle(stamp, cycle, "joint_tracking" if self.joint_mode else self.params.solver, {
             "cycle_time_s": f"{cycle.cycle_time:.6e}", "position_error_m": f"{cycle.position_error:.6e}",
             "orientation_error_rad": f"{cycle.orientation_error:.6e}",
