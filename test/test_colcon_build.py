@@ -18,6 +18,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 NODES = ("sim_node", "controller_node", "trajectory_node")
+EXECUTABLES = (*NODES, "cell_container")
 COLCON = Path(sys.executable).parent / "colcon"
 
 
@@ -46,11 +47,11 @@ def test_ament_layout(workspace: Path) -> None:
         assert (share / "launch" / name).is_file()
     assert (share / "config" / "solvers" / "sparse_qp.yaml").is_file()
     assert (share / "config" / "scenarios" / "assembly.yaml").is_file()
-    for node in NODES:
+    for node in EXECUTABLES:
         assert os.access(prefix / "lib" / "dualarm_control" / node, os.X_OK)
 
 
-@pytest.mark.parametrize("node", NODES)
+@pytest.mark.parametrize("node", EXECUTABLES)
 def test_installed_nodes_start_from_the_sourced_workspace(workspace: Path, node: str) -> None:
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "AMENT_PREFIX_PATH")}
     script = f". install/setup.sh && {workspace}/install/dualarm_control/lib/dualarm_control/{node} --help"
