@@ -67,7 +67,7 @@ from dualarm_control.ros.qos import (
     stream_qos,
 )
 from dualarm_control.scenario import load_scenario, scenario_names
-from dualarm_sim.cell import CellConfig, DualArmCell
+from dualarm_sim.cell import CellConfig, DualArmCell, JointSample
 
 PARAMETERS = (
     ParamSpec("scenario", "assembly", "scenario name or YAML path (initial configuration)", read_only=True),
@@ -141,6 +141,7 @@ class SimNode:
         self.log = n.get_logger()
         self.throttle = Throttle(1.0)
         self.steps = 0
+        self.stepped: JointSample | None = None  # the state the last step returned, until published
         self.started = False
         self.last_publish = 0.0
         self.rejected = self.received = self.timeouts = 0
@@ -166,7 +167,7 @@ class SimNode:
         return self.steps * self.period_ns if self.lockstep else time.time_ns()
 
     def publish_state(self) -> None:
-        sample = self.cell.state()
+        sample, self.stepped = self.stepped or self.cell.state(), None  # the step's own state, else a read
         ns = self._stamp_ns()
         publish_if_subscribed(self.pub_clock, lambda: convert.clock(self.steps * self.period_ns))
         self.pub_js.publish(convert.joint_state(self.cell.joint_names, ns, sample.positions, sample.velocities))
@@ -213,7 +214,7 @@ class SimNode:
         elif self.timed_out and not timed_out:
             self.log.info("commands resumed")
         self.timed_out = timed_out
-        self.cell.step()
+        self.stepped = self.cell.step()
         self.steps += 1
         if self.table:
             self.table_contacts += self.cell.table_contacts()

@@ -236,3 +236,44 @@ def test_inputs_read_the_same_from_bytes_and_from_the_message() -> None:
         fast_c = command_input.from_bytes(raw)
         slow_c = command_input.from_message(deserialize_message(raw, Float64MultiArray))
         assert (fast_c == slow_c) if isinstance(slow_c, str) else np.array_equal(fast_c, slow_c)
+
+
+def _random_rotations(n: int, seed: int = 3) -> list[np.ndarray]:
+    """Random rotations, and ones near 180 degrees about each axis (every branch of Shepperd's method)."""
+    import pinocchio as pin
+
+    rng = np.random.default_rng(seed)
+    out = [pin.exp3(rng.normal(size=3) * rng.uniform(0.0, np.pi)) for _ in range(n)]
+    for axis in np.eye(3):
+        out += [pin.exp3(axis * (np.pi - 1e-9)), pin.exp3((axis + 1e-3 * rng.normal(size=3)) * (np.pi - 1e-3))]
+    return out + [np.eye(3)]
+
+
+def test_quaternion_of_a_rotation_equals_pinocchios_up_to_sign() -> None:
+    import pinocchio as pin
+
+    from dualarm_control.ros.convert import quaternion_xyzw, rotation_xyzw
+
+    for rot in _random_rotations(500):
+        ours = np.array(quaternion_xyzw(rot))
+        theirs = pin.SE3ToXYZQUAT(pin.SE3(rot, np.zeros(3)))[3:]
+        theirs = theirs / np.linalg.norm(theirs)
+        assert min(np.abs(ours - theirs).max(), np.abs(ours + theirs).max()) < 1e-12
+        np.testing.assert_allclose(rotation_xyzw(ours), rot, atol=1e-12)
+        np.testing.assert_allclose(rotation_xyzw(ours), pin.Quaternion(ours[3], *ours[:3]).toRotationMatrix(),
+                                   atol=1e-14)
+    assert np.isnan(quaternion_xyzw(np.full((3, 3), np.nan))).all()
+    assert np.isnan(rotation_xyzw(np.zeros(4))).all() and np.isnan(rotation_xyzw(np.array([0, 0, np.inf, 1]))).all()
+    np.testing.assert_allclose(rotation_xyzw(np.array([0.0, 0.0, 2.0, 0.0])), np.diag([-1.0, -1.0, 1.0]), atol=1e-15)
+
+
+def test_one_string_field_equals_a_sequence_of_one_without_its_count() -> None:
+    from dualarm_control.ros.cdr import Writer
+
+    for text in ("", "a", "ab", "abc", "abcd", "left_tool", "ü"):
+        one, seq = Writer(), Writer()
+        one.u32(7)
+        seq.u32(7)
+        one.string(text)
+        seq.strings([text], count=False)
+        assert one.bytes() == seq.bytes()

@@ -67,7 +67,10 @@ class Writer:
         self.buf += _TIME.pack(ns // NS, ns % NS)
 
     def string(self, text: str) -> None:
-        self.strings([text], count=False)
+        """One string field (as :meth:`strings` of one string without its count, in one append)."""
+        raw = text.encode()
+        self.align(4)
+        self.buf += _U32.pack(len(raw) + 1) + raw + b"\x00"
 
     def strings(self, texts: Sequence[str], count: bool = True) -> None:
         """sequence<string> (``count=False``: the strings alone, as consecutive string fields).

@@ -16,7 +16,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 from builtin_interfaces.msg import Duration, Time
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -138,23 +137,50 @@ def float_array(values: np.ndarray) -> bytes:
 
 
 def quaternion_xyzw(rotation: np.ndarray) -> tuple[float, float, float, float]:
-    """Unit quaternion (x, y, z, w) of a rotation matrix.
-
-    Through ``SE3ToXYZQUAT``: building a ``pin.Quaternion`` from a 3x3 matrix leaks about 80 bytes
-    per call (eigenpy 3.13 / pinocchio 4.1), which `dualarm soak` showed as RSS growing 1 MiB a
-    minute in every node publishing poses at 200 Hz.
+    """Unit quaternion (x, y, z, w) of a rotation matrix (3, 3), by Shepperd's method (the branch on
+    the largest of the trace and the diagonal, as Eigen's ``Quaternion(Matrix3)``), on Python floats:
+    a few µs per call where pinocchio's ``SE3ToXYZQUAT`` took about 5 (and building a
+    ``pin.Quaternion`` from a matrix leaked 80 bytes per call, eigenpy 3.13). ``q`` and ``-q`` are the
+    same rotation; NaN in gives NaN out. Tested against pinocchio on random rotations.
     """
-    xyzw = pin.SE3ToXYZQUAT(pin.SE3(np.asarray(rotation, dtype=float), np.zeros(3)))[3:]
-    x, y, z, w = (float(v) for v in xyzw / np.linalg.norm(xyzw))
-    return x, y, z, w
+    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = np.asarray(rotation, dtype=float).tolist()
+    trace = m00 + m11 + m22
+    if trace > 0.0:
+        s = _twice_root(trace + 1.0)  # 4 w
+        x, y, z, w = (m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s, 0.25 * s
+    elif m00 > m11 and m00 > m22:
+        s = _twice_root(1.0 + m00 - m11 - m22)  # 4 x
+        x, y, z, w = 0.25 * s, (m01 + m10) / s, (m02 + m20) / s, (m21 - m12) / s
+    elif m11 > m22:
+        s = _twice_root(1.0 + m11 - m00 - m22)  # 4 y
+        x, y, z, w = (m01 + m10) / s, 0.25 * s, (m12 + m21) / s, (m02 - m20) / s
+    else:
+        s = _twice_root(1.0 + m22 - m00 - m11)  # 4 z
+        x, y, z, w = (m02 + m20) / s, (m12 + m21) / s, 0.25 * s, (m10 - m01) / s
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    return x / norm, y / norm, z / norm, w / norm
+
+
+def _twice_root(r: float) -> float:
+    """2 sqrt(r), NaN for r <= 0 or NaN (a matrix that is no rotation)."""
+    return 2.0 * math.sqrt(r) if r > 0.0 else math.nan
 
 
 def rotation_xyzw(v: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a quaternion (x, y, z, w), (4,), normalised; NaN if non-finite or zero."""
-    if not finite(v) or np.linalg.norm(v) < 1e-9:
+    """Rotation matrix (3, 3) of a quaternion (x, y, z, w), (4,), normalised; NaN if non-finite or zero.
+    The closed form R = I + 2 w [u]x + 2 [u]x^2 with u = (x, y, z), as Eigen's ``toRotationMatrix``."""
+    if not finite(v):
         return np.full((3, 3), np.nan)
-    v = v / np.linalg.norm(v)
-    return pin.Quaternion(v[3], v[0], v[1], v[2]).toRotationMatrix()
+    x, y, z, w = (float(c) for c in v)
+    n2 = x * x + y * y + z * z + w * w
+    if n2 < 1e-18:
+        return np.full((3, 3), np.nan)
+    s = 2.0 / n2
+    xx, yy, zz, xy, xz, yz, wx, wy, wz = s * x * x, s * y * y, s * z * z, s * x * y, s * x * z, s * y * z, \
+        s * w * x, s * w * y, s * w * z
+    return np.array([[1.0 - yy - zz, xy - wz, xz + wy],
+                     [xy + wz, 1.0 - xx - zz, yz - wx],
+                     [xz - wy, yz + wx, 1.0 - xx - yy]])
 
 
 def pose_stamped(ns: int, position: np.ndarray, rot: np.ndarray) -> bytes:
