@@ -277,3 +277,16 @@ def test_one_string_field_equals_a_sequence_of_one_without_its_count() -> None:
         one.string(text)
         seq.strings([text], count=False)
         assert one.bytes() == seq.bytes()
+
+
+@pytest.mark.parametrize("values", [{}, {"a": 1}, {"solver": "sparse_qp", "cycles": 12, "x": 1.5e-3, "": ""},
+                                    {f"key_{i}": "v" * i for i in range(9)}])
+def test_diagnostics_writer_reads_back_in_rclpy_for_any_values(values: dict) -> None:
+    from rclpy.serialization import deserialize_message
+
+    from dualarm_control.ros.cdr import diagnostic_array
+
+    for _ in range(2):  # the second time from the cached keys
+        msg = deserialize_message(diagnostic_array(5, 1, "n", "m", "h", values), DiagnosticArray)
+        assert [(kv.key, kv.value) for kv in msg.status[0].values] == [(k, str(v)) for k, v in values.items()]
+        assert (msg.status[0].name, msg.status[0].message, msg.status[0].hardware_id) == ("n", "m", "h")

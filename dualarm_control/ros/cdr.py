@@ -22,6 +22,7 @@ so rclpy stays the judge of what is malformed. No rclpy import here.
 
 from __future__ import annotations
 
+import functools
 import struct
 from collections.abc import Iterable, Mapping, Sequence
 
@@ -202,15 +203,38 @@ def diagnostic_array(ns: int, level: int, name: str, message: str, hardware_id: 
     w.string(message)
     w.string(hardware_id)
     w.u32(len(values))
-    w.strings([text for key, value in values.items() for text in (key, str(value))], count=False)
+    if values:  # each key and value a string field; a key's bytes are made once (the keys repeat every cycle)
+        *pairs, (key, value) = values.items()
+        last = str(value).encode()
+        w.buf += (b"".join([_padded_key(k) + _padded(str(v)) for k, v in pairs]) + _padded_key(key)
+                  + _U32.pack(len(last) + 1) + last + b"\x00")  # the last string is not padded
     return w.bytes()
 
 
+def _padded(text: str) -> bytes:
+    """A string field and the zeros up to the next 4-byte boundary (where the next field starts)."""
+    raw = text.encode()
+    return _U32.pack(len(raw) + 1) + raw + _NUL_PAD[(len(raw) + 1) % 4]
+
+
+_padded_key = functools.lru_cache(maxsize=256)(_padded)
+
+
+@functools.lru_cache(maxsize=8)
+def _string_sequence(texts: tuple[str, ...]) -> bytes:
+    """The CDR of ``sequence<string>`` written from a 4-byte aligned position (it is position-free there)."""
+    w = Writer()
+    w.strings(texts)
+    return bytes(w.buf[len(ENCAPSULATION_LE):])
+
+
 def joint_state(ns: int, names: Sequence[str], position: np.ndarray, velocity: np.ndarray) -> bytes:
-    """sensor_msgs/JointState with positions [rad] and velocities [rad/s]; effort empty."""
+    """sensor_msgs/JointState with positions [rad] and velocities [rad/s]; effort empty. The names'
+    bytes are encoded once per list of names (a joint-state stream repeats them in every message)."""
     w = Writer()
     w.header(ns, "")
-    w.strings(names)
+    w.align(4)
+    w.buf += _string_sequence(tuple(names))
     w.double_seq(position)
     w.double_seq(velocity)
     w.u32(0)
