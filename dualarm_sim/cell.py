@@ -407,18 +407,20 @@ class DualArmCell:
         clip(q̇_cmd + position_gain (q_ref - q) / Δt_phys, ±q̇_max) (module docstring), then
         q_ref += q̇_cmd Δt_phys, kept inside the joint limits.
         """
-        cid = self._client
+        cid, body, idx = self._client, self._body, self._idx
         target = np.zeros_like(self._target) if self.timed_out else self._target
         dt = self.config.physics_dt
         gain = self.config.position_gain / dt
         reference = self._reference
-        for _ in range(self.config.substeps):
-            q = np.array([s[0] for s in p.getJointStates(self._body, self._idx, physicsClientId=cid)])
-            velocity = np.clip(target + gain * (reference - q), -self._qd_max, self._qd_max)
-            p.setJointMotorControlArray(self._body, self._idx, p.VELOCITY_CONTROL, targetVelocities=velocity.tolist(),
+        qd_max, qd_min = self._qd_max, -self._qd_max
+        advance = target * dt
+        for _ in range(self.config.substeps):  # np.minimum(np.maximum()) is np.clip, without its dispatch
+            q = np.array([s[0] for s in p.getJointStates(body, idx, physicsClientId=cid)])
+            velocity = np.minimum(np.maximum(target + gain * (reference - q), qd_min), qd_max)
+            p.setJointMotorControlArray(body, idx, p.VELOCITY_CONTROL, targetVelocities=velocity.tolist(),
                                         forces=self._forces, physicsClientId=cid)
             p.stepSimulation(physicsClientId=cid)
-            reference = np.clip(reference + target * dt, self._q_min, self._q_max)
+            reference = np.minimum(np.maximum(reference + advance, self._q_min), self._q_max)
         self._steps += 1
         self._stepped = True
         sample = self.state()
