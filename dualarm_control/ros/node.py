@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -137,9 +138,11 @@ def params_files(argv: Sequence[str]) -> list[str]:
     return files
 
 
-class _StopOnSignal:
-    """SIGINT/SIGTERM set a flag that the spin loop checks (rclpy's own handlers are off, so the
-    context stays valid until the node is destroyed)."""
+class StopOnSignal:
+    """SIGINT/SIGTERM set a flag that a loop checks instead of raising where they land (rclpy's own
+    handlers are off, so the context stays valid until the node is destroyed; the launcher never has
+    a KeyboardInterrupt inside a ``Popen.poll`` holding its lock). Outside the main thread, where
+    Python takes no signal handler, it installs none and the flag stays unset."""
 
     def __init__(self) -> None:
         self.signal: int | None = None
@@ -149,8 +152,9 @@ class _StopOnSignal:
         self.signal = signum
 
     def __enter__(self) -> Self:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            self._previous[sig] = signal.signal(sig, self._handle)
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._previous[sig] = signal.signal(sig, self._handle)
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -226,7 +230,7 @@ class Ticker:
                 callback()
 
 
-def spin_until_stopped(executor: Any, stop: _StopOnSignal, until: Callable[[], bool] = lambda: False,
+def spin_until_stopped(executor: Any, stop: StopOnSignal, until: Callable[[], bool] = lambda: False,
                        ticks: list[Tick] | None = None) -> None:
     """Run callbacks and the periodic ``ticks`` until a signal or ``until()``."""
     ticker = Ticker(ticks or [])
@@ -273,7 +277,7 @@ def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text
         return EXIT_OK
     shell = None
     context = None
-    with _StopOnSignal() as stop:
+    with StopOnSignal() as stop:
         stop_with_launcher()
         try:
             read_params_files(params_files(argv), "_check_")  # missing or malformed file: exit 2
@@ -324,14 +328,14 @@ waits for the next one, 3 s later), so a 5 s wait answered "not found" for a nod
 
 
 @contextmanager
-def tool_node(name: str) -> Iterator[tuple[Any, Any, _StopOnSignal]]:
+def tool_node(name: str) -> Iterator[tuple[Any, Any, StopOnSignal]]:
     """A node, its executor and a stop flag for a tool verb; torn down in the right order."""
     from rclpy.node import Node
 
     context = init_rclpy([])
     node = None
     try:
-        with _StopOnSignal() as stop:
+        with StopOnSignal() as stop:
             node = Node(name, context=context, start_parameter_services=False)
             executor = make_executor(context)
             executor.add_node(node)

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dualarm_control.ros.env import LAUNCHER_PID_VARIABLE, localhost_environment
+from dualarm_control.ros.node import StopOnSignal
 
 NODES = {
     "sim_node": "dualarm_sim.sim_node",
@@ -124,11 +125,16 @@ class Launch:
                 with self._lock:
                     print(f"[{proc.name}] {line}", flush=True)
 
-    def wait_until(self, finished: str, timeout: float | None = None) -> dict[str, int | None]:
-        """Wait until process ``finished`` exits, any process fails, or ``timeout`` [s]; then stop all."""
+    def wait_until(self, finished: str, timeout: float | None = None,
+                   stop: StopOnSignal | None = None) -> dict[str, int | None]:
+        """Wait until process ``finished`` exits, any process fails, ``timeout`` [s] or a signal
+        (``stop``, Ctrl-C); then stop all."""
         deadline = None if timeout is None else time.monotonic() + timeout
         try:
             while True:
+                if stop is not None and stop.signal is not None:
+                    print("[launch] Ctrl-C: stopping every node", flush=True)
+                    break
                 codes = {p.name: p.popen.poll() for p in self.procs}
                 if codes.get(finished) is not None or any(c not in (None, 0) for c in codes.values()):
                     break
@@ -220,34 +226,36 @@ def launch_scenario(
     finisher = "controller_node" if tasks else "trajectory_node"
     launch = Launch()
     interrupted = False
-    try:
-        if plan is not None and record_topics == GRAPH_TOPICS:
-            record_topics = PLAN_TOPICS
-        if record is not None:  # subscribes the graph's topics once they all have a publisher
-            # Real-time task runs start once the recorder reads /diagnostics (task_start_readers); it
-            # subscribes that topic last, once the others deliver: the bag then holds the run from t = 0.
-            gate = ("/diagnostics",) if tasks and not lockstep else ()
-            launch.start("bag", recorder_command(record, record_topics, lockstep, gate), env)
-        readers = (1 if tasks else 2) + (record is not None)
-        node_args = {"controller_node": [*common, *sim_time, *controller_args]}
-        if not tasks:
-            node_args["trajectory_node"] = [*common, *sim_time, *trajectory_args]
-        node_args["sim_node"] = [*common, *with_scenario, "-p", f"lockstep_subscribers:={readers}"]
-        for group in LAYOUTS[processes]:
-            members = {node: node_args[node] for node in group if node in node_args}
-            if len(members) > 1:
-                name = CONTAINER if len(members) == len(node_args) else f"{CONTAINER}_{len(members)}"
-                launch.start(name, container_command(members), env)
-                finisher = name if finisher in members else finisher
-            elif members:
-                (node, args), = members.items()
-                launch.start(node, node_command(node, args), env)
-        codes = launch.wait_until(finisher, timeout)
-    except KeyboardInterrupt:
-        interrupted = True
-        print("[launch] Ctrl-C: stopping every node", flush=True)
-        launch.stop()
-        codes = {p.name: p.popen.returncode for p in launch.procs}
+    with StopOnSignal() as stop:  # Ctrl-C / SIGTERM set a flag the wait checks: no exception mid-call
+        try:
+            if plan is not None and record_topics == GRAPH_TOPICS:
+                record_topics = PLAN_TOPICS
+            if record is not None:  # subscribes the graph's topics once they all have a publisher
+                # Real-time task runs start once the recorder reads /diagnostics (task_start_readers); it
+                # subscribes that topic last, once the others deliver: the bag then holds the run from t = 0.
+                gate = ("/diagnostics",) if tasks and not lockstep else ()
+                launch.start("bag", recorder_command(record, record_topics, lockstep, gate), env)
+            readers = (1 if tasks else 2) + (record is not None)
+            node_args = {"controller_node": [*common, *sim_time, *controller_args]}
+            if not tasks:
+                node_args["trajectory_node"] = [*common, *sim_time, *trajectory_args]
+            node_args["sim_node"] = [*common, *with_scenario, "-p", f"lockstep_subscribers:={readers}"]
+            for group in LAYOUTS[processes]:
+                members = {node: node_args[node] for node in group if node in node_args}
+                if len(members) > 1:
+                    name = CONTAINER if len(members) == len(node_args) else f"{CONTAINER}_{len(members)}"
+                    launch.start(name, container_command(members), env)
+                    finisher = name if finisher in members else finisher
+                elif members:
+                    (node, args), = members.items()
+                    launch.start(node, node_command(node, args), env)
+            codes = launch.wait_until(finisher, timeout, stop)
+            interrupted = stop.signal is not None
+        except KeyboardInterrupt:
+            interrupted = True
+            print("[launch] Ctrl-C: stopping every node", flush=True)
+            launch.stop()
+            codes = {p.name: p.popen.returncode for p in launch.procs}
     failed = {n: c for n, c in codes.items() if c != 0}
     if failed:
         print(f"[launch] failed: {', '.join(f'{n} (exit {c})' for n, c in failed.items())}", flush=True)
