@@ -314,6 +314,32 @@ def test_foxglove_server_sends_tf_and_robot_description(demo_bag: Path) -> None:
     _check_description_and_tf(description, tf)
 
 
+def test_live_view_logs_the_running_cell(sim_node: subprocess.Popen[str], tmp_path: Path) -> None:
+    """``dualarm view`` on the running cell (run_live, subscriptions of ros/listen.py): each joint state it
+    counts is one row of every joint's transform in the recording, none rejected."""
+    import re
+
+    import rerun as rr
+    from test_view import read_rrd
+
+    from dualarm_control.app.view import rerun_view as rv
+    from dualarm_control.app.view.live import run_live
+
+    path = tmp_path / "live.rrd"
+    rec = rr.RecordingStream(rv.APPLICATION_ID)
+    rec.save(str(path))
+    said: list[str] = []
+    assert run_live(DualArmModel(), rec, duration=8.0, report=said.append) == 0
+    rec.flush()
+    rec.disconnect()
+    logged = re.fullmatch(r"dualarm view: logged /joint_states (\d+), .* (\d+) samples rejected", said[-1])
+    assert logged is not None, said
+    states = int(logged.group(1))
+    assert states > 0 and int(logged.group(2)) == 0
+    rows, _ = read_rrd(path)
+    assert rows["/joint_tf/right_joint_7"] == rows["/joint_tf/left_joint_1"] == states
+
+
 def test_foxglove_server_of_the_running_cell(sim_node: subprocess.Popen[str]) -> None:
     """The live feed: the server reads the running sim_node's /robot_description and /joint_states."""
     from dualarm_control.app.view.foxglove_view import serve_live

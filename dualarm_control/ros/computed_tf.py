@@ -37,7 +37,6 @@ NOTE_KEY: Final = "dualarm.tf"
 """metadata.yaml ``custom_data`` key saying where the bag's /tf comes from (``dualarm bag info`` prints it)."""
 NOTE: Final = f"{TF_TOPIC}: computed by the recorder from {JOINT_STATES_TOPIC}"
 
-_ZERO = QosTime(sec=0, nsec=0)
 _INFINITE = QosTime(sec=2147483647, nsec=4294967295)
 
 

@@ -21,13 +21,12 @@ import argparse
 import math
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, TextIO
 
 import yaml
 
 from dualarm_control.drive_commands import (
-    CommandError,
     finite_vector,
     rotation_from_quaternion,
     rotation_from_rpy,
@@ -357,15 +356,24 @@ def _count(text: str) -> int:
     return value
 
 
-def cmd_topic_pub(args: argparse.Namespace) -> int:
+def _verb(run: Callable[[argparse.Namespace], int], interrupted: int = EXIT_OK) -> Callable[[argparse.Namespace], int]:
+    """A verb's ``func``: ``run(args)``, or ``interrupted`` when Ctrl-C lands before the tool node's
+    stop flag takes over (while rclpy starts). A refused command (CommandError) reaches ``dualarm``'s
+    main: "dualarm VERB: error: ...", exit 2."""
+    def func(args: argparse.Namespace) -> int:
+        try:
+            return run(args)
+        except KeyboardInterrupt:
+            return interrupted
+
+    return func
+
+
+def _topic_pub(args: argparse.Namespace) -> int:
     """``ros2 topic pub``."""
-    times = 1 if args.once else args.times
-    try:
-        return topic_pub(args.topic, args.message_type, args.values, rate=args.rate, times=times,
-                         wait_matching=args.wait_matching_subscriptions, max_wait=args.max_wait_time_secs,
-                         keep_alive=args.keep_alive)
-    except KeyboardInterrupt:
-        return EXIT_OK
+    return topic_pub(args.topic, args.message_type, args.values, rate=args.rate, times=1 if args.once else args.times,
+                     wait_matching=args.wait_matching_subscriptions, max_wait=args.max_wait_time_secs,
+                     keep_alive=args.keep_alive)
 
 
 def add_topic_pub_parser(verbs: Any) -> None:
@@ -389,24 +397,7 @@ def add_topic_pub_parser(verbs: Any) -> None:
                      help="give up waiting for subscriptions after S seconds (exit 1)")
     pub.add_argument("--keep-alive", type=float, default=KEEP_ALIVE_S, metavar="S",
                      help="stay alive S seconds after the last message (default: %(default)s)")
-    pub.set_defaults(func=cmd_topic_pub)
-
-
-def cmd_goal(args: argparse.Namespace) -> int:
-    try:
-        return send_goal(args.xyz, args.rpy, args.quat, wait=args.wait, timeout=args.timeout)
-    except CommandError as exc:
-        print(f"dualarm goal: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return EXIT_FAIL
-
-
-def cmd_jog(args: argparse.Namespace) -> int:
-    try:
-        return jog(args.linear, args.angular, args.seconds, args.rate)
-    except KeyboardInterrupt:
-        return EXIT_OK
+    pub.set_defaults(func=_verb(_topic_pub))
 
 
 def add_drive_parsers(sub: Any) -> None:
@@ -421,7 +412,8 @@ def add_drive_parsers(sub: Any) -> None:
     rot.add_argument("--quat", nargs=4, type=float, metavar=("X", "Y", "Z", "W"), help="quaternion")
     goal.add_argument("--wait", action="store_true", help="follow the goal until reached, rejected or stalled")
     goal.add_argument("--timeout", type=_positive, default=None, metavar="S", help="with --wait: give up after S s")
-    goal.set_defaults(func=cmd_goal)
+    goal.set_defaults(func=_verb(lambda a: send_goal(a.xyz, a.rpy, a.quat, wait=a.wait, timeout=a.timeout),
+                                EXIT_FAIL))
     jg = sub.add_parser("jog", help="stream a relative twist to the cell (/relative_twist)",
                         description="Publish geometry_msgs/TwistStamped (frame left_tool) on /relative_twist at "
                         "--rate Hz for --seconds; the cell brakes to rest 0.1 s (jog_timeout) after the last one.")
@@ -429,4 +421,4 @@ def add_drive_parsers(sub: Any) -> None:
     jg.add_argument("--angular", nargs=3, type=float, default=[0.0] * 3, metavar=("X", "Y", "Z"), help="rad/s")
     jg.add_argument("--seconds", type=_positive, default=1.0, metavar="S", help="duration (default: %(default)s s)")
     jg.add_argument("--rate", type=_positive, default=50.0, metavar="HZ", help="twists per second (default: %(default)s)")
-    jg.set_defaults(func=cmd_jog)
+    jg.set_defaults(func=_verb(lambda a: jog(a.linear, a.angular, a.seconds, a.rate)))

@@ -19,7 +19,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from types import FrameType
 from typing import Any, Generic, Self, TypeVar
 
@@ -328,14 +328,19 @@ waits for the next one, 3 s later), so a 5 s wait answered "not found" for a nod
 
 
 @contextmanager
-def tool_node(name: str) -> Iterator[tuple[Any, Any, StopOnSignal]]:
-    """A node, its executor and a stop flag for a tool verb; torn down in the right order."""
+def tool_node(name: str, signals: bool = True) -> Iterator[tuple[Any, Any, StopOnSignal]]:
+    """A node, its executor and a stop flag for a tool verb; torn down in the right order.
+
+    With ``signals`` (the default) Ctrl-C/SIGTERM set the flag (:class:`StopOnSignal`); without,
+    no handler is installed (a server run in any thread; Ctrl-C raises KeyboardInterrupt as usual)
+    and the flag stays unset."""
     from rclpy.node import Node
 
     context = init_rclpy([])
     node = None
+    stop = StopOnSignal()
     try:
-        with StopOnSignal() as stop:
+        with stop if signals else nullcontext(stop):
             node = Node(name, context=context, start_parameter_services=False)
             executor = make_executor(context)
             executor.add_node(node)

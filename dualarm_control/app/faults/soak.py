@@ -40,6 +40,7 @@ from typing import Any
 
 from dualarm_control.app.run.launcher import Launch, Process, node_command
 from dualarm_control.ros.convert import stamp_ns
+from dualarm_control.ros.listen import Topic, listen
 
 NODES = ("sim_node", "controller_node", "trajectory_node")
 SAMPLE_S = 1.0
@@ -119,18 +120,14 @@ def _stop(proc: Process) -> None:
 
 def run_soak(minutes: float, scenario: str = "assembly", say: Callable[[str], None] = print) -> dict[str, Any]:
     """Run the soak; the result document (samples, per-node RSS, bursts, accounting, pass flags)."""
-    from dualarm_control.ros.node import tool_node
-
     duration = minutes * 60.0
     launch = Launch(echo=False)
     counters = Counters()
     samples: list[dict[str, Any]] = []
     procs: dict[str, Process] = {}
     try:
-        with tool_node("_dualarm_soak_monitor") as (node, executor, stop):
-            from diagnostic_msgs.msg import DiagnosticArray
-
-            node.create_subscription(DiagnosticArray, "/diagnostics", counters.on_message, 100)
+        diagnostics = {"/diagnostics": Topic("diagnostic_msgs/msg/DiagnosticArray", counters.on_message, 100)}
+        with listen("_dualarm_soak_monitor", diagnostics) as listener:
             procs["sim_node"] = launch.start("sim_node", node_command("sim_node", ["-p", f"scenario:={scenario}"]))
             procs["controller_node"] = launch.start("controller_node", node_command("controller_node", []))
             procs["trajectory_node"] = launch.start("trajectory_node", node_command(
@@ -138,8 +135,8 @@ def run_soak(minutes: float, scenario: str = "assembly", say: Callable[[str], No
             start = time.monotonic()
             next_sample = start
             next_report = start + 30.0
-            while stop.signal is None and time.monotonic() - start < duration:
-                executor.spin_once(timeout_sec=0.05)
+            while not listener.signalled and time.monotonic() - start < duration:
+                listener.spin_once(0.05)
                 now = time.monotonic()
                 if now < next_sample:
                     continue

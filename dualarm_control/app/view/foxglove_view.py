@@ -201,38 +201,29 @@ def serve_live(port: int = DEFAULT_PORT, host: str = "127.0.0.1", *, stop: threa
     Subscribes /robot_description (transient local; waits up to ``wait_s`` for it), /joint_states
     and :data:`LIVE_SIGNALS`; each joint state is forwarded with its /tf (the movable joints),
     /robot_description and /tf_static are re-sent when a client subscribes to them.
-    No rclpy signal handlers: runs in any thread.
+    No signal handlers: runs in any thread (Ctrl-C in the main thread raises KeyboardInterrupt).
     """
     import foxglove
-    from rclpy.node import Node
 
     from dualarm_control.ros.cdr import JointStateReader
     from dualarm_control.ros.computed_tf import string_data
-    from dualarm_control.ros.graph import message_class
-    from dualarm_control.ros.node import init_rclpy
+    from dualarm_control.ros.listen import Topic, listen
     from dualarm_control.ros.qos import latched_qos
 
     stop = stop or threading.Event()
-    context = init_rclpy([])
-    try:
-        node = Node("_dualarm_foxglove", context=context, start_parameter_services=False)
-        from rclpy.executors import SingleThreadedExecutor
+    description: list[str] = []
 
-        executor = SingleThreadedExecutor(context=context)
-        executor.add_node(node)
-        description: list[str] = []
+    def on_description(data: bytes) -> None:
+        description.append(string_data(bytes(data)))
 
-        def on_description(data: Any) -> None:
-            description.append(string_data(bytes(data)))
-
-        node.create_subscription(message_class("std_msgs/msg/String"), "/robot_description", on_description, latched_qos(),
-                                 raw=True)
+    latched = {"/robot_description": Topic(STRING_TYPE, on_description, latched_qos(), raw=True)}
+    with listen("_dualarm_foxglove", latched, signals=False) as listener:
         end = time.monotonic() + wait_s
         while not description and not stop.is_set():
             if time.monotonic() > end:
                 raise DualArmError(f"no /robot_description within {wait_s:.0f} s: is the cell (sim_node) running "
                                    "in this ROS_DOMAIN_ID?")
-            executor.spin_once(timeout_sec=0.1)
+            listener.spin_once(0.1)
         if stop.is_set():
             return
         joint_names = tuple(LinkFrames(description[0]).joint_names)
@@ -263,21 +254,17 @@ def serve_live(port: int = DEFAULT_PORT, host: str = "127.0.0.1", *, stop: threa
             def forward(topic: str) -> Callable[[bytes], None]:
                 return lambda data: scene.channels[topic].log(data, log_time=time.time_ns())
 
-            node.create_subscription(message_class("sensor_msgs/msg/JointState"), "/joint_states", on_joint_state,
-                                     10, raw=True)
-            for topic, type_name in LIVE_SIGNALS.items():
-                node.create_subscription(message_class(type_name), topic, forward(topic), 10, raw=True)
+            listener.subscribe({"/joint_states": Topic(JOINT_STATE_TYPE, on_joint_state, raw=True),
+                                **{t: Topic(n, forward(t), raw=True) for t, n in LIVE_SIGNALS.items()}})
             if on_ready is not None:
                 on_ready(server.port)
             while not stop.is_set():
                 if resend.is_set() and started:
                     resend.clear()
                     scene.send_latched()
-                executor.spin_once(timeout_sec=0.05)
+                listener.spin_once(0.05)
         finally:
             server.stop()
-    finally:
-        context.try_shutdown()
 
 
 def add_foxglove_arguments(parser: Any) -> None:

@@ -3,9 +3,10 @@
 Runs in its own process (never in a control node). Subscriptions are best effort (they match
 reliable and best-effort publishers; a viewer may drop a sample rather than slow anyone
 down) and read the CDR bytes with the nodes' own readers (:mod:`dualarm_control.ros.convert`);
-``/diagnostics`` is deserialized by rclpy. Every ``FLUSH_PERIOD_S`` the buffered samples go
-to Rerun through the parts of :func:`.rerun_view.log_run` (one ``send_columns`` per joint and
-series: at 200 Hz one ``rr.log`` per joint and sample would not keep up). Time is the
+``/diagnostics`` is deserialized by rclpy (all through :mod:`dualarm_control.ros.listen`). Every
+``FLUSH_PERIOD_S`` the buffered samples go to Rerun through the parts of
+:func:`.rerun_view.log_run` (one ``send_columns`` per joint and series: at 200 Hz one ``rr.log``
+per joint and sample would not keep up). Time is the
 joint-state stamp [s] since the first one seen; a command takes the stamp of the last joint
 state (the one it answers), a controller status its ``stamp_ns``.
 """
@@ -22,6 +23,9 @@ import numpy as np
 from dualarm_control.app.record.bag import CONTROLLER_STATUS, parse_float
 from dualarm_control.app.view import rerun_view as rv
 from dualarm_control.kinematics import DualArmModel
+from dualarm_control.ros import convert
+from dualarm_control.ros.listen import Topic, listen
+from dualarm_control.ros.qos import stream_qos
 
 FLUSH_PERIOD_S = 0.1
 QUEUE_DEPTH = 1000
@@ -59,6 +63,10 @@ class LiveLog:
         self.last_state_ns = stamp
         self.states.append((self.seconds(stamp), vectors[0]))
 
+    def malformed(self, text: str) -> None:
+        """A sample that does not deserialize (counted with the rejected ones)."""
+        self.rejected += 1
+
     def command(self, value: np.ndarray | str) -> None:
         if isinstance(value, str) or self.last_state_ns is None:
             self.rejected += isinstance(value, str)
@@ -67,14 +75,12 @@ class LiveLog:
         self.commands.append((self.seconds(self.last_state_ns), value))
 
     def target(self, value: tuple[int, Any]) -> None:
-        from dualarm_control.ros.convert import quaternion_xyzw
-
         stamp, target = value
         if isinstance(target, str):
             self.rejected += 1
             return
         self.counts["/relative_target"] += 1
-        self.targets.append((self.seconds(stamp), np.array([*target.position, *quaternion_xyzw(target.rotation)])))
+        self.targets.append((self.seconds(stamp), np.array([*target.position, *convert.quaternion_xyzw(target.rotation)])))
 
     def diagnostics(self, msg: Any) -> None:
         for status in msg.status:
@@ -119,35 +125,24 @@ def live_groups() -> list[str]:
 def run_live(model: DualArmModel, recording: Any, duration: float | None = None,
              report: Callable[[str], None] = print) -> int:
     """Subscribe to the cell and log until Ctrl-C/SIGTERM (or ``duration`` [s]); returns 0."""
-    from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from sensor_msgs.msg import JointState
-    from std_msgs.msg import Float64MultiArray
-    from trajectory_msgs.msg import MultiDOFJointTrajectory
-
-    from dualarm_control.ros import convert
-    from dualarm_control.ros.inputs import subscribe_checked
-    from dualarm_control.ros.node import tool_node
-
     log = LiveLog(model, recording)
     rv.log_model(Path(model.urdf), recording)
     order = {name: i for i, name in enumerate(model.joint_names)}
-    qos = QoSProfile(depth=QUEUE_DEPTH, reliability=ReliabilityPolicy.BEST_EFFORT)
-    with tool_node("dualarm_view") as (node, executor, stop):
-        def malformed(text: str) -> None:
-            log.rejected += 1
-
-        subscribe_checked(node, JointState, "/joint_states", log.joint_state, qos, malformed,
-                          convert.JointStateInput(order))
-        subscribe_checked(node, Float64MultiArray, "/velocity_controller/commands", log.command, qos, malformed,
-                          convert.CommandInput(model.nq))
-        subscribe_checked(node, MultiDOFJointTrajectory, "/relative_target", log.target, qos, malformed,
-                          convert.TargetInput())
-        subscribe_checked(node, DiagnosticArray, "/diagnostics", log.diagnostics, qos, malformed)
+    qos = stream_qos("best_effort", QUEUE_DEPTH)
+    topics = {
+        "/joint_states": Topic("sensor_msgs/msg/JointState", log.joint_state, qos,
+                               decoder=convert.JointStateInput(order)),
+        "/velocity_controller/commands": Topic("std_msgs/msg/Float64MultiArray", log.command, qos,
+                                               decoder=convert.CommandInput(model.nq)),
+        "/relative_target": Topic("trajectory_msgs/msg/MultiDOFJointTrajectory", log.target, qos,
+                                  decoder=convert.TargetInput()),
+        "/diagnostics": Topic("diagnostic_msgs/msg/DiagnosticArray", log.diagnostics, qos),
+    }
+    with listen("dualarm_view", topics, on_malformed=log.malformed) as listener:
         report(f"dualarm view: logging {', '.join(TOPICS)} (Ctrl-C to stop)")
         start = last = time.monotonic()
-        while stop.signal is None and (duration is None or time.monotonic() - start < duration):
-            executor.spin_once(timeout_sec=FLUSH_PERIOD_S / 2)
+        while not listener.signalled and (duration is None or time.monotonic() - start < duration):
+            listener.spin_once(FLUSH_PERIOD_S / 2)
             if time.monotonic() - last >= FLUSH_PERIOD_S:
                 log.flush()
                 last = time.monotonic()
