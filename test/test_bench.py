@@ -374,3 +374,43 @@ def test_realtime_bench_measures_every_nodes_cpu(tmp_path: Path) -> None:
     assert format_cpu(rows) in (tmp_path / "realtime.md").read_text()
     assert [r["cpu"]["nodes"].keys() for r in json.loads((tmp_path / "realtime.json").read_text())] == \
         [r["cpu"]["nodes"].keys() for r in rows]
+
+
+def test_floor_probe_counts_a_loop_that_overruns_as_the_controller_does() -> None:
+    """8 ms of CPU per 5 ms period: every cycle ends more than a period after it was due (CycleTiming
+    counts one each) and each interval is over 1.5 periods (the lost periods count too)."""
+    from dualarm_control.app.bench.floor import probe
+
+    row = probe(0.005, 0.008, 0.3)
+    assert row["cycles"] >= 2
+    assert row["missed_deadlines"] >= 2 * row["cycles"] - 1
+    assert row["late_max_ms"] > 0.0
+
+
+def test_floor_probe_runs_in_its_own_process_and_says_whether_rt_was_granted() -> None:
+    from dualarm_control.app.bench.floor import run_floor
+
+    row = run_floor(200.0, 0.2, "none", "rt", seconds=0.5)
+    assert row["rate_hz"] == 200.0 and row["work_ms"] == 0.2 and row["scheduling"] == "rt"
+    assert 1 <= row["cycles"] <= 101  # 0.5 s at 200 Hz, fewer when a wake-up was over a period late
+    assert isinstance(row["priority_granted"], bool)
+    assert row["missed_deadlines"] >= 0 and row["late_p50_ms"] >= 0.0
+
+
+def test_floor_rows_take_the_leanest_launch_of_each_group(monkeypatch: pytest.MonkeyPatch) -> None:
+    from dualarm_control.app.bench import floor
+
+    calls: list[tuple[float, float, str, str]] = []
+    monkeypatch.setattr(floor, "run_floor", lambda rate, work, load, sched, seconds: calls.append(
+        (rate, work, load, sched)) or {"rate_hz": rate})
+    rows = [{"rate_hz": 200.0, "load": "busy", "scheduling": "normal", "cpu": {"all_nodes_ms_per_cycle": 2.5}},
+            {"rate_hz": 200.0, "load": "busy", "scheduling": "normal", "cpu": {"all_nodes_ms_per_cycle": 1.4}},
+            {"rate_hz": 1000.0, "cpu": {"all_nodes_ms_per_cycle": 0.9}},
+            {"rate_hz": 1000.0, "cpu": {}}]
+    assert len(floor.floor_rows(rows, seconds=1.0)) == 2
+    assert calls == [(200.0, 1.4, "busy", "normal"), (1000.0, 0.9, "none", "rt")]
+
+
+def test_floor_belongs_to_realtime(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench", "--floor", "--output", str(tmp_path)]) == 2
+    assert "--floor belongs to --realtime" in capsys.readouterr().err

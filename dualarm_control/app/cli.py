@@ -146,7 +146,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     """Solver x QP back-end timings (random set, scenario), pink, exactness, scaling: DIR/bench.md and bench.json."""
     if args.realtime and args.messages:
         raise DualArmError("--realtime and --messages are separate benchmarks: choose one")
-    for option in ("with_view", "load", "scheduling", "baseline", "processes"):
+    for option in ("with_view", "load", "scheduling", "baseline", "processes", "floor"):
         if getattr(args, option) and not args.realtime:
             raise DualArmError(f"--{option.replace('_', '-')} belongs to --realtime")
     from dualarm_control.solvers import make_solver
@@ -167,6 +167,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     for name in solvers:
         make_solver(name)  # unknown names exit 2 before any run
     if args.realtime:  # real-time runs over ROS per solver, rate, load, scheduling, layout (and tree)
+        from dualarm_control.app.bench.floor import floor_rows, format_floor
         from dualarm_control.app.bench.realtime import (
             LOADS,
             PROCESSES,
@@ -192,10 +193,14 @@ def cmd_bench(args: argparse.Namespace) -> int:
         rows = run_realtime(args.scenario, solvers, [float(r) for r in args.rates.split(",") if r.strip()],
                             params=args.params, with_view=args.with_view, loads=loads, schedulings=schedulings,
                             baseline=baseline, processes=processes)
-        write_realtime(Path(args.output), rows, args.scenario)
+        floor = floor_rows(rows) if args.floor else []
+        write_realtime(Path(args.output), rows, args.scenario, floor)
         print(format_realtime(rows))
         print()
         print(format_cpu(rows))
+        if floor:
+            print()
+            print(format_floor(floor))
         print(f"\nwrote {Path(args.output) / 'realtime.md'} and realtime.json")
         return 0
     from dualarm_control.app.bench.suite import format_bench, run_bench, write_bench
@@ -531,6 +536,10 @@ def build_parser() -> argparse.ArgumentParser:
     ben.add_argument("--processes", metavar="3,2,1",
                      help="--realtime: the process layouts of 'dualarm launch --processes', one row each: 3 (each node "
                      "its own process), 2 (the simulator alone), 1 (all in one cell_container) (default: 3)")
+    ben.add_argument("--floor", action="store_true",
+                     help="--realtime: after the launches, the machine's floor for each rate, load and scheduling: a "
+                     "process that only sleeps to each period and spins the CPU per cycle the leanest launch took, "
+                     "its missed deadlines counted as the controller's (the 'floor' table)")
     ben.add_argument("--baseline", metavar="DIR",
                      help="--realtime: a source checkout of another commit (git worktree add --detach DIR REV); each "
                      "row is also run with the nodes and the recorder importing DIR (PYTHONPATH, same venv), right "

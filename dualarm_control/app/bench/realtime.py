@@ -336,8 +336,16 @@ def format_cpu(rows: Sequence[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def write_realtime(out: Path, rows: Sequence[dict[str, Any]], scenario: str) -> None:
+def write_realtime(out: Path, rows: Sequence[dict[str, Any]], scenario: str,
+                   floor: Sequence[dict[str, Any]] = ()) -> None:
+    """realtime.md and realtime.json; with ``floor`` rows (``--floor``) also their table and floor.json."""
+    from dualarm_control.app.bench.floor import format_floor
+
     out.mkdir(parents=True, exist_ok=True)
     (out / "realtime.json").write_text(json.dumps(list(rows), indent=2) + "\n")
-    (out / "realtime.md").write_text(f"# Real-time runs over ROS ({scenario})\n\n{format_realtime(rows)}\n\n"
-                                     f"## CPU of the nodes (steady window)\n\n{format_cpu(rows)}\n")
+    text = (f"# Real-time runs over ROS ({scenario})\n\n{format_realtime(rows)}\n\n"
+            f"## CPU of the nodes (steady window)\n\n{format_cpu(rows)}\n")
+    if floor:
+        (out / "floor.json").write_text(json.dumps(list(floor), indent=2) + "\n")
+        text += f"\n## The machine's floor (no ROS: sleep to each period, spin the CPU per cycle)\n\n{format_floor(floor)}\n"
+    (out / "realtime.md").write_text(text)
