@@ -245,9 +245,9 @@ class SimNode:
 
 def main(args: list[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
-    why_not = request_realtime_priority(priority_from_args(argv, DEFAULT_PRIORITY, "sim_node"))
+    request = request_realtime_priority(priority_from_args(argv, DEFAULT_PRIORITY, "sim_node"))
     help_text = usage("sim_node", __doc__ or "", PARAMETERS)
-    return run(lambda context: SimNode(context, why_not), argv, help_text)
+    return run(lambda context: SimNode(context, request.note), argv, help_text, request.granted)
 
 
 if __name__ == "__main__":

@@ -97,10 +97,10 @@ def main(args: list[str] | None = None) -> int:
         return 2
     from dualarm_control.nodes.controller_node import DEFAULT_PRIORITY
 
-    why_not = request_realtime_priority(priority_from_args(argv, DEFAULT_PRIORITY, "controller_node"))
+    request = request_realtime_priority(priority_from_args(argv, DEFAULT_PRIORITY, "controller_node"))
     help_text = (f"{USAGE}\n\n{(__doc__ or '').strip()}\n\nparameters: each node's own (sim_node --help, "
                  "controller_node --help, trajectory_node --help), given as -p NODE:NAME:=VALUE or in a params file")
-    return run(lambda context: Container(context, names, why_not), argv, help_text)
+    return run(lambda context: Container(context, names, request.note), argv, help_text, request.granted)
 
 
 if __name__ == "__main__":

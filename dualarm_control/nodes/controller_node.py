@@ -340,9 +340,9 @@ class ControllerNode:
 def main(args: list[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
     # Applied to every thread (the middleware's too) once the node is built (ros/node.py).
-    why_not = shell.request_realtime_priority(shell.priority_from_args(argv, DEFAULT_PRIORITY, "controller_node"))
+    request = shell.request_realtime_priority(shell.priority_from_args(argv, DEFAULT_PRIORITY, "controller_node"))
     help_text = shell.usage("controller_node", __doc__ or "", ALL_PARAMETERS)
-    return shell.run(lambda context: ControllerNode(context, why_not), argv, help_text)
+    return shell.run(lambda context: ControllerNode(context, request.note), argv, help_text, request.granted)
 
 
 if __name__ == "__main__":

@@ -226,9 +226,9 @@ def main(args: list[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
     # Applied to every thread (the middleware's too) once the node is built: a starved target stream
     # stops the controller (target_timeout), as `dualarm soak` showed on a loaded machine.
-    why_not = request_realtime_priority(priority_from_args(argv, DEFAULT_PRIORITY, "trajectory_node"))
-    return run(lambda context: TrajectoryNode(context, why_not), argv,
-               usage("trajectory_node", __doc__ or "", PARAMETERS))
+    request = request_realtime_priority(priority_from_args(argv, DEFAULT_PRIORITY, "trajectory_node"))
+    return run(lambda context: TrajectoryNode(context, request.note), argv,
+               usage("trajectory_node", __doc__ or "", PARAMETERS), request.granted)
 
 
 if __name__ == "__main__":

@@ -20,6 +20,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager, nullcontext
+from dataclasses import dataclass
 from types import FrameType
 from typing import Any, Generic, Self, TypeVar
 
@@ -261,8 +262,10 @@ def wants_help(argv: Sequence[str]) -> bool:
     return "-h" in head or "--help" in head
 
 
-def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text: str = "") -> int:
-    """A node's main: build the shell with ``make(context)``, spin it, shut down cleanly.
+def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text: str = "",
+        priority: int = 0) -> int:
+    """A node's main: build the shell with ``make(context)``, spin it under SCHED_FIFO ``priority``
+    (0: normal scheduling; :attr:`PriorityRequest.granted`), shut down cleanly.
 
     ``make`` returns a shell object with a ``node`` attribute (or ``nodes``, several nodes in
     one process on one executor: ``cell_container``), optional ``ticks`` (its periodic
@@ -286,7 +289,7 @@ def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text
             executor = make_executor(context)
             for node in shell_nodes(shell):
                 executor.add_node(node)
-            apply_requested_priority()
+            apply_priority(priority)
             spin_until_stopped(executor, stop, lambda: bool(getattr(shell, "finished", False)),
                                list(getattr(shell, "ticks", ())))
         except ParameterError as exc:
@@ -387,11 +390,20 @@ def priority_from_args(argv: Sequence[str], default: int, node_name: str) -> int
     return priority
 
 
-_requested_priority = 0
-"""SCHED_FIFO priority that :func:`run` gives every thread of the process before spinning (0: none)."""
+@dataclass(frozen=True)
+class PriorityRequest:
+    """The outcome of :func:`request_realtime_priority`.
+
+    Attributes:
+        granted: the SCHED_FIFO priority :func:`run` gives every thread before spinning (0: none).
+        note: '' when granted, "disabled" (``thread_priority`` 0), else why not (the node warns).
+    """
+
+    granted: int
+    note: str
 
 
-def request_realtime_priority(priority: int) -> str:
+def request_realtime_priority(priority: int) -> PriorityRequest:
     """Ask for SCHED_FIFO ``priority`` (1-99) for this process, like ros2_control's ``thread_priority``.
 
     The permission is checked now (on this thread, then restored); :func:`run` applies the
@@ -399,30 +411,26 @@ def request_realtime_priority(priority: int) -> str:
     and right before it spins. Start-up (imports, participant, node) runs under normal
     scheduling: a node starting under SCHED_FIFO while another one still started took its
     first /joint_states 0.05-0.5 s after being up instead of 3-30 ms (docs/bench.md, "Start-up").
-    Returns '' when granted, else why not (callers warn and go on).
     """
     import os
 
-    global _requested_priority
-    _requested_priority = 0
     if priority <= 0:
-        return "disabled"
+        return PriorityRequest(0, "disabled")
     try:
         policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(min(priority, 99)))
         os.sched_setscheduler(0, policy, param)
     except (AttributeError, PermissionError, OSError) as exc:
-        return f"SCHED_FIFO {priority} not permitted ({exc}); running with normal priority"
-    _requested_priority = min(priority, 99)
-    return ""
+        return PriorityRequest(0, f"SCHED_FIFO {priority} not permitted ({exc}); running with normal priority")
+    return PriorityRequest(min(priority, 99), "")
 
 
-def apply_requested_priority() -> None:
-    """Put every thread of this process under the priority granted by :func:`request_realtime_priority`
-    (threads created later inherit it); nothing if none was."""
+def apply_priority(priority: int) -> None:
+    """Put every thread of this process under SCHED_FIFO ``priority`` (threads created later inherit
+    it); nothing for 0."""
     import os
 
-    if _requested_priority <= 0:
+    if priority <= 0:
         return
     try:
         threads = [int(tid) for tid in os.listdir("/proc/self/task")]
@@ -430,6 +438,6 @@ def apply_requested_priority() -> None:
         threads = [0]
     for tid in threads:
         try:
-            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(_requested_priority))
+            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
         except (ProcessLookupError, PermissionError, OSError):
             pass  # a thread that ended meanwhile
