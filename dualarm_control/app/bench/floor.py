@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from dualarm_control.errors import DualArmError
 from dualarm_control.metrics import percentiles
 from dualarm_control.ros.inputs import CycleTiming
 
@@ -96,7 +97,9 @@ def run_floor(rate_hz: float, work_ms: float, load: str, scheduling: str, second
     command = [sys.executable, "-m", __name__, repr(1.0 / rate_hz), repr(work_ms / 1e3), repr(seconds),
                str(PRIORITY if scheduling == "rt" else 0)]
     with busy_core(load == "busy"):
-        out = subprocess.run(command, capture_output=True, text=True, timeout=seconds + 60.0, check=True)
+        out = subprocess.run(command, check=False, capture_output=True, text=True, timeout=seconds + 60.0)
+    if out.returncode != 0:
+        raise DualArmError(f"floor probe at {rate_hz:g} Hz exited {out.returncode}: {out.stderr.strip()[-500:]}")
     return {"rate_hz": rate_hz, "load": load, "scheduling": scheduling, "work_ms": work_ms,
             **json.loads(out.stdout.splitlines()[-1])}
 
