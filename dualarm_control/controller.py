@@ -170,6 +170,35 @@ class RelativeController:
         self.solver.reset()
         self._previous = np.zeros(self.model.nq)
 
+    @property
+    def previous_command(self) -> FloatArray:
+        """The last command [rad/s], (n,): the centre of the next cycle's acceleration bound."""
+        return self._previous
+
+    def continue_from(self, old: RelativeController) -> RelativeController:
+        """Take over from ``old`` at a cycle boundary (a live parameter change); returns self.
+
+        This controller was built off the cycle with the new parameters; what it takes from
+        ``old`` is cheap, so the swap costs the cycle it lands in nothing measurable:
+
+        * the previous command, so that the acceleration bound ``|qd_k - qd_{k-1}| <= a_max T``
+          (:func:`~dualarm_control.limits.acceleration_bounds`) holds across the change;
+        * with the same solver and solver parameters, ``old``'s solver object itself: its QP
+          warm start and the sparse QPs' proximal memory z_prev go on unchanged;
+        * with another solver (or other solver parameters), the new solver starts from the
+          previous command (:meth:`~dualarm_control.solvers.base.Solver.seed`).
+
+        Raises ValueError when the two controllers do not control the same joints.
+        """
+        if old.model.nq != self.model.nq:
+            raise ValueError(f"continue_from: {old.model.nq} joints, expected {self.model.nq}")
+        self._previous = old._previous.copy()
+        if (old.params.solver, old.params.solver_params) == (self.params.solver, self.params.solver_params):
+            self.solver = old.solver
+        else:
+            self.solver.seed(self._previous)
+        return self
+
     def step(self, q: FloatArray, target: RelativeTarget) -> Cycle:
         """Compute the joint velocity command for measured positions q (n,) and a target.
 

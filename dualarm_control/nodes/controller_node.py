@@ -23,7 +23,9 @@ Task mode: t = joint-state stamp - first stamp (lockstep: t = k T, as the in-pro
 /diagnostics carries t, the normal offset and the filtered force at full precision (``dualarm
 report`` recomputes the task values from them); after ``duration`` it reports "complete", exits 0.
 Live parameters (those not read-only: ``solver``, ``gain``, ...): a value the core refuses is
-refused with its reason; an accepted one takes effect at the next cycle, logged and counted.
+refused with its reason; an accepted one takes effect at the next cycle, logged and counted, and
+the controller keeps its state across it (the previous command: the acceleration bound holds; the
+solver's warm start and proximal memory while the solver stays the same).
 """
 
 from __future__ import annotations
@@ -159,10 +161,14 @@ class ControllerNode:
         self.log.info(self.out.summary())
 
     def apply_pending(self) -> None:
-        """An accepted live parameter change takes effect at the cycle boundary."""
+        """An accepted live parameter change takes effect at the cycle boundary: the controller
+        built with the new values when they were set (off the cycle) continues from the running
+        one (:meth:`~dualarm_control.controller.RelativeController.continue_from`: the previous
+        command, so the acceleration bound holds; the solver's memory where the solver stays)."""
         change = self.live.take(f" at cycle {self.out.count['cycles']}")
         if change is not None:
-            self.values, self.controller = change
+            self.values, built = change
+            self.controller = built.continue_from(self.controller)
             self.params = self.controller.params
             self.out.solver = self.params.solver
             if self.task is not None:  # the task loop keeps its force state, solves with the new controller

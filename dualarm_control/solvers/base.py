@@ -246,6 +246,14 @@ class Solver:
     def reset(self) -> None:
         """Forget warm-start memory (e.g. after a discontinuity)."""
 
+    def seed(self, velocities: FloatArray) -> None:
+        """Start from ``velocities`` [rad/s], (n,), the command of the cycle before, as if this
+        solver had produced it (a live change of solver; :meth:`RelativeController.continue_from`).
+
+        Default: nothing, for a solver whose result does not depend on its memory (a closed form,
+        or a strictly convex QP whose warm start only changes the iteration count). The sparse QPs
+        take it as the centre z_prev of their proximal term."""
+
     def _backend(self):
         return make_backend(self.params.qp_backend, self.params.qp)
 

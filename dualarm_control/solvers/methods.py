@@ -199,6 +199,10 @@ class SparseQP(_QPSolver):
             self._dual.reset()
         self._previous = None
 
+    def seed(self, velocities: FloatArray) -> None:
+        """The proximal term's z_prev from the previous command (no effect with mu = 0)."""
+        self._previous = np.array(velocities, dtype=float)
+
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
         j = problem.jacobian
         n = j.shape[1]
@@ -305,6 +309,10 @@ class HierarchicalSparseQP(Solver):
     def reset(self) -> None:
         self._primary.reset()
         self._secondary.reset()
+
+    def seed(self, velocities: FloatArray) -> None:
+        """QP1's proximal memory (QP2 has none: its optimum is unique)."""
+        self._primary.seed(velocities)
 
     def _identity_of(self, n: int) -> FloatArray:
         if self._identity.shape != (n, n):
