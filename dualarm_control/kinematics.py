@@ -1,8 +1,10 @@
 """Dual-arm relative kinematics (paper 000, Sect. II) with pinocchio.
 
 Conventions: frame F1 is the left tool (the part with the hole), frame F2 the right tool
-(the peg). The relative pose is the right tool in the left tool frame, eq (1)-(2).
-Joint vector order: left joints 1..7 then right joints 1..7 (the URDF's order).
+(the peg): the links ``left_tool`` and ``right_tool`` of the robot's resolved URDF
+(:mod:`dualarm_control.robot`). The relative pose is the right tool in the left tool frame,
+eq (1)-(2). Joint vector order: the robot description's left joints then its right joints, as
+listed (the model is the arms' joints only; every other joint is locked).
 Twists are ``[v; w]`` (m/s; rad/s), both expressed in F1.
 """
 
@@ -17,12 +19,15 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from dualarm_control.errors import DimensionError
-from dualarm_control.paths import urdf_path
+from dualarm_control.robot import (
+    LEFT_TOOL,
+    RIGHT_TOOL,
+    RobotDescription,
+    RobotError,
+    load_robot,
+)
 
 FloatArray = npt.NDArray[np.float64]
-
-LEFT_TOOL = "left_tool"
-RIGHT_TOOL = "right_tool"
 
 
 def skew(v: FloatArray) -> FloatArray:
@@ -160,7 +165,7 @@ class RelativeState:
     Attributes:
         position: p_r^1 [m], (3,).
         rotation: R_r^1, (3, 3).
-        jacobian: relative Jacobian J of eq (5), (6, 14).
+        jacobian: relative Jacobian J of eq (5), (6, n).
     """
 
     position: FloatArray
@@ -170,16 +175,43 @@ class RelativeState:
 
 @dataclass
 class DualArmModel:
-    """Pinocchio model of the cell: joint names, limits and relative kinematics."""
+    """Pinocchio model of the robot's two arms: joint names, limits and relative kinematics.
 
-    urdf: Path = field(default_factory=urdf_path)
+    Built from a robot description (a name of ``config/robots/``, a YAML path, or a
+    :class:`~dualarm_control.robot.RobotDescription`; default ``lwr4_cell``): the resolved
+    URDF's model reduced to the arms' joints (``pin.buildReducedModel``, every other movable
+    joint locked at its description value), limits from the URDF. RobotError when the
+    URDF's joint order is not the description's (each arm listed base to tip, left first).
+    """
+
+    robot: RobotDescription | str = field(default_factory=load_robot)
 
     def __post_init__(self) -> None:
-        self.model = pin.buildModelFromUrdf(str(self.urdf))
+        self.robot = robot = load_robot(self.robot)
+        self.urdf: Path = robot.urdf_path
+        full = pin.buildModelFromUrdf(str(self.urdf))
+        locked = robot.locked_positions()
+        if locked:
+            q_ref = pin.neutral(full)
+            for name, value in locked.items():
+                joint = full.getJointId(name)
+                if full.nqs[joint] != 1:
+                    raise RobotError(f"robot {robot.name!r}: locked joint {name!r} has nq = {full.nqs[joint]}: "
+                                     "give its value as a revolute joint's")
+                q_ref[full.idx_qs[joint]] = value
+            self.model = pin.buildReducedModel(full, [full.getJointId(n) for n in locked], q_ref)
+        else:
+            self.model = full
         self.data = self.model.createData()
         self.joint_names: list[str] = [self.model.names[i] for i in range(1, self.model.njoints)]
+        if self.joint_names != robot.joint_names:
+            raise RobotError(f"robot {robot.name!r}: the URDF orders the arms' joints {self.joint_names}, the "
+                             f"description {robot.joint_names}: list each arm base to tip (pinocchio takes the "
+                             "left arm first only if its branch sorts first: docs/robots.md)")
+        if self.model.nq != self.model.nv:
+            raise RobotError(f"robot {robot.name!r}: a joint with nq != nv (continuous) among the arms")
         self.nq: int = self.model.nq
-        self.n_left: int = sum(1 for n in self.joint_names if n.startswith("left_"))
+        self.n_left: int = robot.n_left
         self.q_min: FloatArray = self.model.lowerPositionLimit.copy()
         self.q_max: FloatArray = self.model.upperPositionLimit.copy()
         self.qd_max: FloatArray = self.model.velocityLimit.copy()
@@ -188,12 +220,18 @@ class DualArmModel:
         self._frame_ids: dict[str, int] = {}
         self._owner: object | None = None  # the Configuration whose q is in self.data
 
+    @property
+    def description(self) -> RobotDescription:
+        """The robot description the model was built from."""
+        assert isinstance(self.robot, RobotDescription)
+        return self.robot
+
     def frame_id(self, name: str) -> int:
         """Pinocchio frame id of ``name``; KeyError naming the frames of the arms' links."""
         fid = self._frame_ids.get(name)
         if fid is None:
             if not self.model.existFrame(name):
-                links = sorted(f.name for f in self.model.frames if f.name.startswith(("left_", "right_")))
+                links = sorted(f.name for f in self.model.frames if f.type == pin.FrameType.BODY)
                 raise KeyError(f"unknown frame {name!r}; frames: {', '.join(links)}")
             fid = self._frame_ids[name] = self.model.getFrameId(name)
         return fid

@@ -22,8 +22,6 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
-from dualarm_control.kinematics import DualArmModel
-
 FloatArray = npt.NDArray[np.float64]
 
 TF_TYPE = "tf2_msgs/msg/TFMessage"
@@ -48,7 +46,7 @@ def urdf_joints(urdf_text: str) -> list[UrdfJoint]:
     """The joints of a URDF document, in file order."""
     root = ET.fromstring(urdf_text)
     out = []
-    for joint in root.iter("joint"):
+    for joint in root.findall("joint"):
         parent, child = joint.find("parent"), joint.find("child")
         if parent is None or child is None:
             raise ValueError(f"URDF joint {joint.get('name')!r} lacks its parent or child link")
@@ -67,12 +65,34 @@ class LinkTransform:
     quaternion: FloatArray
 
 
-def model_from_text(urdf_text: str) -> DualArmModel:
-    """The pinocchio model of a URDF given as text (e.g. a /robot_description)."""
-    with tempfile.TemporaryDirectory(prefix="dualarm_urdf_") as tmp:
-        path = Path(tmp) / "robot_description.urdf"
-        path.write_text(urdf_text)
-        return DualArmModel(urdf=path)
+class UrdfKinematics:
+    """The pinocchio model of a whole URDF given as text (e.g. a /robot_description): every movable
+    joint (the arms' and the locked ones, as a joint_state_broadcaster publishes them)."""
+
+    def __init__(self, urdf_text: str) -> None:
+        with tempfile.TemporaryDirectory(prefix="dualarm_urdf_") as tmp:
+            path = Path(tmp) / "robot_description.urdf"
+            path.write_text(urdf_text)
+            self.model = pin.buildModelFromUrdf(str(path))
+        self.data = self.model.createData()
+        self.joint_names: list[str] = [self.model.names[i] for i in range(1, self.model.njoints)]
+        self.nq = self.model.nq
+
+    def frame_id(self, link: str) -> int:
+        if not self.model.existFrame(link):
+            raise KeyError(f"unknown link {link!r} in the URDF")
+        return int(self.model.getFrameId(link))
+
+    def check_q(self, q: FloatArray) -> FloatArray:
+        q = np.asarray(q, dtype=float)
+        if q.shape != (self.nq,):
+            raise ValueError(f"joint positions: expected {self.nq} values (the URDF's movable joints), got {q.shape}")
+        return q
+
+
+def model_from_text(urdf_text: str) -> UrdfKinematics:
+    """The pinocchio model of a URDF given as text (:class:`UrdfKinematics`)."""
+    return UrdfKinematics(urdf_text)
 
 
 class LinkFrames:

@@ -5,9 +5,12 @@ node (initial configuration), the trajectory node (segments) and the in-process 
 read the same keys. Registry: every ``config/scenarios/<name>.yaml`` is scenario ``<name>``.
 
 Keys under ``scenario.`` (flattened names):
-  name, description, initial_positions_deg (14 doubles: left 1..7, right 1..7),
-  settle_time [s], limits.<MotionLimits field>; optional ``urdf``: the cell URDF's file name in
-  ``urdf/`` (default ``dualarm_cell.urdf``); and the keys of the reference source
+  name, description; ``robot``: a robot description's name (``config/robots/``) or a YAML path
+  (relative to the scenario file; default ``lwr4_cell``, :mod:`dualarm_control.robot`);
+  ``initial_positions_deg`` (one value per joint of the robot, left then right; default: the
+  robot's ready positions); ``robot_starts.<robot name>``: the start on another robot (used when
+  the run's robot, e.g. ``--robot``, is that one; else its ready positions); settle_time [s], limits.<MotionLimits field>; and the keys of the
+  reference source
   (:mod:`dualarm_control.references`): ``tasks`` (paper 001,
   :mod:`dualarm_control.references.tasks`) or else ``segments`` (paper 000,
   :mod:`dualarm_control.references.segments`) or ``goals`` (issue 18: timed relative goals and
@@ -19,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -27,15 +30,19 @@ import numpy as np
 
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import FloatArray
-from dualarm_control.params import ParameterError, read_params_file
-from dualarm_control.paths import config_path, share_dir
+from dualarm_control.params import ParameterError, ParamSpec, read_params_file
+from dualarm_control.paths import config_path
 from dualarm_control.references.base import PREFIX, ReferenceSource, get, number, vector
 from dualarm_control.references.goals import GoalsSource, parse_goals_source
 from dualarm_control.references.segments import SegmentsSource, parse_segments
 from dualarm_control.references.tasks import TasksSource, parse_tasks
+from dualarm_control.robot import (
+    DEFAULT_ROBOT,
+    RobotDescription,
+    RobotError,
+    load_robot,
+)
 from dualarm_control.trajectory import MotionLimits, RelativeTrajectory
-
-DEFAULT_URDF = "dualarm_cell.urdf"
 
 
 @dataclass(frozen=True)
@@ -44,12 +51,12 @@ class Scenario:
 
     Attributes:
         name, description: labels.
-        initial_positions: joint positions at start [rad], (14,).
+        initial_positions: joint positions at start [rad], (n,) (the robot's joints).
         reference: what the controller follows (:mod:`dualarm_control.references`).
         limits: ruckig limits of the relative motion.
         settle_time: control time after the trajectory ends [s] (error convergence).
         source: file it came from.
-        urdf: the cell URDF's file name in ``urdf/``.
+        robot: the robot description the scenario runs on.
     """
 
     name: str
@@ -59,7 +66,7 @@ class Scenario:
     limits: MotionLimits
     settle_time: float
     source: Path
-    urdf: str = DEFAULT_URDF
+    robot: RobotDescription = field(default_factory=load_robot)
 
     @property
     def tasks(self) -> TasksSource | None:
@@ -68,8 +75,8 @@ class Scenario:
 
     @property
     def urdf_path(self) -> Path:
-        """Path of the scenario's cell URDF."""
-        return share_dir() / "urdf" / self.urdf
+        """Path of the robot's resolved URDF (what pinocchio and pybullet load)."""
+        return self.robot.urdf_path
 
     def end_pose(self, start: FloatArray, model: Any, period: float) -> tuple[FloatArray, FloatArray]:
         """The relative pose (position [m] (3,), rotation (3, 3)) the reference ends at, from the
@@ -85,6 +92,10 @@ class Scenario:
             raise ScenarioError(f"scenario {self.name!r} is a task scenario (paper 001) without relative motion "
                                 "segments: run it with 'dualarm experiment' (constraint_based solver)")
         return self.reference.trajectory(start_position, start_rotation, self.limits)
+
+
+ROBOT_PARAMETER = ParamSpec("robot", "", "robot description (config/robots/<name>.yaml or a YAML path; '': the "
+                            "scenario's robot, docs/robots.md)", read_only=True)
 
 
 def scenario_names() -> list[str]:
@@ -105,14 +116,15 @@ def scenario_file(name_or_path: str) -> Path:
     return candidate
 
 
-def load_scenario(name_or_path: str) -> Scenario:
-    """Load and validate a scenario by registry name or path."""
+def load_scenario(name_or_path: str, robot: str | RobotDescription | None = None) -> Scenario:
+    """Load and validate a scenario by registry name or path, on its robot or on ``robot``
+    (``--robot``: a name or a YAML path; '' or None: the scenario's)."""
     path = scenario_file(name_or_path)
     try:
         flat = read_params_file(path, "trajectory_node")
     except ParameterError as exc:
         raise ScenarioError(str(exc)) from None
-    return scenario_from_parameters(flat, path)
+    return scenario_from_parameters(flat, path, robot or None)
 
 
 def _motion_limits(flat: Mapping[str, Any]) -> MotionLimits:
@@ -136,8 +148,30 @@ def _motion_limits(flat: Mapping[str, Any]) -> MotionLimits:
     return MotionLimits(**values)
 
 
-def scenario_from_parameters(flat: Mapping[str, Any], source: Path) -> Scenario:
-    """Build a Scenario from flattened parameters (as read from the file or declared in a node)."""
+def scenario_robot(flat: Mapping[str, Any], source: Path, robot: str | RobotDescription | None = None
+                   ) -> tuple[RobotDescription, bool]:
+    """The robot a scenario runs on, and whether it is the scenario's own (so that its
+    ``initial_positions_deg`` apply): ``robot`` (an override) or the file's ``scenario.robot``."""
+    own = get(flat, "robot", DEFAULT_ROBOT)
+    if not isinstance(own, str) or not own:
+        raise ScenarioError(f"scenario parameter '{PREFIX}robot': got {own!r}, expected a robot name or a YAML path")
+    if own.endswith((".yaml", ".yml")) and not Path(own).is_absolute():
+        own = str(source.parent / own)
+    try:
+        own_robot = load_robot(own)
+    except RobotError as exc:
+        raise ScenarioError(f"scenario parameter '{PREFIX}robot': {exc}") from None
+    try:
+        chosen = own_robot if robot is None else load_robot(robot)
+    except RobotError as exc:
+        raise ScenarioError(f"--robot: {exc}") from None
+    return chosen, chosen == own_robot
+
+
+def scenario_from_parameters(flat: Mapping[str, Any], source: Path,
+                             robot: str | RobotDescription | None = None) -> Scenario:
+    """Build a Scenario from flattened parameters (as read from the file or declared in a node),
+    on its own robot or on ``robot`` (its ready positions are then the start)."""
     reference: ReferenceSource
     if PREFIX + "tasks" in flat:
         reference = parse_tasks(flat)
@@ -149,17 +183,29 @@ def scenario_from_parameters(flat: Mapping[str, Any], source: Path) -> Scenario:
     settle = number(flat, "settle_time", 1.0)
     if settle < 0:
         raise ScenarioError(f"scenario parameter '{PREFIX}settle_time': got {settle}, expected >= 0")
-    urdf = get(flat, "urdf", DEFAULT_URDF)
-    if not isinstance(urdf, str) or not (share_dir() / "urdf" / urdf).is_file():
-        raise ScenarioError(f"scenario parameter '{PREFIX}urdf': got {urdf!r}, expected a file name in "
-                            f"{share_dir() / 'urdf'}")
+    if PREFIX + "urdf" in flat:
+        raise ScenarioError(f"scenario parameter '{PREFIX}urdf': a scenario names its robot now "
+                            f"('{PREFIX}robot: NAME|PATH', config/robots/; docs/robots.md)")
+    chosen, own = scenario_robot(flat, source, robot)
+    if own and PREFIX + "initial_positions_deg" in flat:
+        start = np.radians(vector(flat, "initial_positions_deg", chosen.nq))
+    elif PREFIX + f"robot_starts.{chosen.name}" in flat:
+        start = np.radians(vector(flat, f"robot_starts.{chosen.name}", chosen.nq))
+    else:
+        start = chosen.ready
+    outside = [f"{n} = {math.degrees(v):.4g} deg" for n, v, lo, hi in zip(
+        chosen.joint_names, start, chosen.resolved_limits[0], chosen.resolved_limits[1], strict=True)
+        if not lo - 1e-9 <= v <= hi + 1e-9]
+    if outside:
+        raise ScenarioError(f"scenario {source}: the start on robot {chosen.name!r} is outside the joint limits: "
+                            + ", ".join(outside))
     return Scenario(
         name=str(get(flat, "name")),
         description=str(get(flat, "description", "")),
-        initial_positions=np.radians(vector(flat, "initial_positions_deg", 14)),
+        initial_positions=start,
         reference=reference,
         limits=limits,
         settle_time=settle,
         source=source,
-        urdf=urdf,
+        robot=chosen,
     )

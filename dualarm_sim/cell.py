@@ -67,15 +67,21 @@ import numpy.typing as npt
 import pybullet as p
 
 from dualarm_control.errors import DimensionError
-from dualarm_control.paths import urdf_path
+from dualarm_control.robot import (
+    LEFT_TOOL,
+    RIGHT_TOOL,
+    TOOL_JOINTS,
+    RobotDescription,
+    load_robot,
+)
 
 if TYPE_CHECKING:  # typing.Self is 3.11+ but ROS Humble runs 3.10: type-checking only
     from typing import Self
 
 FloatArray = npt.NDArray[np.float64]
 
-SENSOR_JOINT = "right_tool_joint"
-TOOL_LINKS = ("left_flange", "left_tool", "right_flange", "right_tool")
+SENSOR_JOINT = TOOL_JOINTS[RIGHT_TOOL]
+"""The F/T sensor: the fixed joint of F2 (every resolved URDF has it, :mod:`dualarm_control.robot`)."""
 MIN_PHYSICS_RATE_HZ = 1000.0
 MAX_LAG = 0.01
 """Largest distance [rad] the position reference may run ahead of (or behind) a joint that does not
@@ -109,9 +115,13 @@ class CellConfig:
             link pairs of the cell never do).
         solver_iterations: iterations of pybullet's constraint solver per substep
             (``numSolverIterations``; pybullet's default is 50). See the module docstring.
+        joints: the commanded joints, in command order (the robot's arms); empty: every movable
+            joint of the URDF, in file order (a viewer's cell).
+        held: (joint, position) of the joints held still (the robot's locked joints), by
+            pybullet's joint position control at ``motor_force_scale`` times their effort.
     """
 
-    urdf: Path = field(default_factory=urdf_path)
+    urdf: Path = field(default_factory=lambda: load_robot().urdf_path)
     control_period: float = 0.005
     physics_rate_hz: float = 1000.0
     command_timeout: float = 0.05
@@ -121,6 +131,16 @@ class CellConfig:
     table_height: float | None = None
     contact_pairs: tuple[tuple[str, str], ...] = ()
     solver_iterations: int = 20
+    joints: tuple[str, ...] = ()
+    held: tuple[tuple[str, float], ...] = ()
+
+    @classmethod
+    def for_robot(cls, robot: RobotDescription | str, **settings: object) -> CellConfig:
+        """The cell of a robot description: its resolved URDF, its arms' joints commanded, its
+        locked joints held (``settings``: the other fields)."""
+        r = load_robot(robot)
+        return cls(urdf=r.urdf_path, joints=tuple(r.joint_names), held=tuple(r.locked_positions().items()),
+                   **settings)  # type: ignore[arg-type]
 
     def __post_init__(self) -> None:
         if self.table_height is not None and not math.isfinite(self.table_height):
@@ -244,6 +264,12 @@ class DualArmCell:
         self._joint_index = {info[1].decode(): j for j, info in enumerate(infos)}
         self._link_index = {info[12].decode(): j for j, info in enumerate(infos)}
         movable = [j for j, info in enumerate(infos) if info[2] != p.JOINT_FIXED]
+        if self.config.joints:
+            unknown = [n for n in self.config.joints if n not in self._joint_index
+                       or infos[self._joint_index[n]][2] == p.JOINT_FIXED]
+            if unknown:
+                raise ValueError(f"cell joints not movable in {self.config.urdf}: {', '.join(unknown)}")
+            movable = [self._joint_index[n] for n in self.config.joints]
         self.joint_names: list[str] = [infos[j][1].decode() for j in movable]
         self._idx = movable
         self._q_min = _readonly(np.array([infos[j][8] for j in movable]))
@@ -253,19 +279,42 @@ class DualArmCell:
         self._forces = (self.config.motor_force_scale * self._effort).tolist()
         for link in range(-1, len(infos)):
             p.changeDynamics(self._body, link, linearDamping=0.0, angularDamping=0.0, physicsClientId=cid)
+        self._hold(infos)
         self._filter_tool_collisions()
         self._table: int | None = None
         if self.config.contact_pairs:
             self._keep_only_contact_pairs(len(infos))
         if self.config.table_height is not None:
             self._table = self._add_table(self.config.table_height)
-        self._sensor = self._joint_index[SENSOR_JOINT]
-        p.enableJointForceTorqueSensor(self._body, self._sensor, True, physicsClientId=cid)
+        self._sensor = self._joint_index.get(SENSOR_JOINT)
+        if self._sensor is not None:
+            p.enableJointForceTorqueSensor(self._body, self._sensor, True, physicsClientId=cid)
+
+    def _hold(self, infos: list[tuple[object, ...]]) -> None:
+        """The held joints: teleported to their positions and held there by position control."""
+        names = [n for n, _ in self.config.held]
+        unknown = [n for n in names if n not in self._joint_index]
+        if unknown:
+            raise ValueError(f"held joints not in {self.config.urdf}: {', '.join(unknown)}")
+        self._held_idx = [self._joint_index[n] for n in names]
+        self._held_q = [float(v) for _, v in self.config.held]
+        self.held_names: list[str] = names
+        if not names:
+            return
+        forces = [max(self.config.motor_force_scale * float(infos[j][10]), 1.0) for j in self._held_idx]  # type: ignore[arg-type]
+        p.setJointMotorControlArray(self._body, self._held_idx, p.POSITION_CONTROL, targetPositions=self._held_q,
+                                    forces=forces, physicsClientId=self._client)
 
     def _filter_tool_collisions(self) -> None:
-        """Disable contacts between the left and right tools/flanges (see module docstring)."""
-        left = [self._link_index[n] for n in TOOL_LINKS if n.startswith("left_")]
-        right = [self._link_index[n] for n in TOOL_LINKS if n.startswith("right_")]
+        """Disable contacts between the two tools and their parent links (see module docstring)."""
+        def tool_links(tool: str) -> list[int]:
+            joint = self._joint_index.get(TOOL_JOINTS[tool])
+            if joint is None:
+                return []
+            parent = p.getJointInfo(self._body, joint, physicsClientId=self._client)[16]
+            return [self._link_index[tool]] + ([parent] if parent >= 0 else [])
+
+        left, right = tool_links(LEFT_TOOL), tool_links(RIGHT_TOOL)
         for a in left:
             for b in right:
                 p.setCollisionFilterPair(self._body, self._body, a, b, 0, physicsClientId=self._client)
@@ -370,6 +419,8 @@ class DualArmCell:
             raise ValueError(f"reset positions outside the joint limits or non-finite: {', '.join(bad)}")
         for j, qj in zip(self._idx, q):
             p.resetJointState(self._body, j, float(qj), 0.0, physicsClientId=self._client)
+        for j, qj in zip(self._held_idx, self._held_q):
+            p.resetJointState(self._body, j, qj, 0.0, physicsClientId=self._client)
         self._reference = q  # the integrated command the joint position controller holds [rad]
         self._target = np.zeros(len(self._idx))
         self._cmd_step: int | None = None
@@ -434,6 +485,13 @@ class DualArmCell:
         qd = np.array([s[1] for s in states])
         return JointSample(time=self.time, positions=_readonly(q), velocities=_readonly(qd))
 
+    def held_state(self) -> tuple[FloatArray, FloatArray]:
+        """Positions [rad or m] and velocities of the held joints (``held_names``), read from the physics."""
+        if not self._held_idx:
+            return np.zeros(0), np.zeros(0)
+        states = p.getJointStates(self._body, self._held_idx, physicsClientId=self._client)
+        return np.array([s[0] for s in states]), np.array([s[1] for s in states])
+
     def wrench(self) -> FloatArray:
         """Force/torque [Fx, Fy, Fz (N), Mx, My, Mz (N m)] measured at ``right_tool_joint``, (6,).
 
@@ -443,7 +501,7 @@ class DualArmCell:
         rest the reading is the tool link's weight (1 g, ~0.0098 N) pointing up. Zeros until
         the first step after a reset.
         """
-        if not self._stepped:
+        if not self._stepped or self._sensor is None:
             return np.zeros(6)
         return np.array(p.getJointState(self._body, self._sensor, physicsClientId=self._client)[2], dtype=float)
 

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -66,11 +65,12 @@ from dualarm_control.ros.qos import (
     publisher_depth,
     stream_qos,
 )
-from dualarm_control.scenario import load_scenario, scenario_names
+from dualarm_control.scenario import ROBOT_PARAMETER, load_scenario, scenario_names
 from dualarm_sim.cell import CellConfig, DualArmCell, JointSample
 
 PARAMETERS = (
     ParamSpec("scenario", "assembly", "scenario name or YAML path (initial configuration)", read_only=True),
+    ROBOT_PARAMETER,
     ParamSpec("force", False, "task scenario: its contact_links touch (the force variant of pan_cleaning)",
               read_only=True),
     ParamSpec("control_period", 0.005, "control period [s]", check=positive, read_only=True),
@@ -92,12 +92,11 @@ STATUS_PERIOD_S = 1.0
 DEFAULT_PRIORITY = 50
 
 
-def plan_start(path: str) -> np.ndarray:
-    """First planned configuration of a plan.json [rad], (14,)."""
-    from dualarm_control.kinematics import DualArmModel
+def plan_start(path: str, joint_names: list[str]) -> np.ndarray:
+    """First planned configuration of a plan.json [rad], (n,)."""
     from dualarm_control.planning.plan_file import read_plan
 
-    return read_plan(path, DualArmModel().joint_names).configurations[0]
+    return read_plan(path, joint_names).configurations[0]
 
 
 class SimNode:
@@ -106,15 +105,18 @@ class SimNode:
     def __init__(self, context: Any, priority_note: str = "disabled", bus: LocalBus | None = None) -> None:
         self.node = Node("sim_node", context=context)
         p = declare(self.node, PARAMETERS)
-        scenario = load_scenario(p["scenario"])
+        scenario = load_scenario(p["scenario"], p["robot"])
         tasks = scenario.tasks  # a task scenario: its cell (pan and brush), table and contact pair
+        robot = scenario.robot
         self.cell = DualArmCell(
-            CellConfig(urdf=scenario.urdf_path, control_period=p["control_period"],
-                       physics_rate_hz=p["physics_rate_hz"], command_timeout=p["command_timeout"],
-                       table_height=tasks.table_height if tasks is not None else None,
-                       contact_pairs=(tasks.contact_links,) if tasks is not None and p["force"] else ()),
-            initial_positions=plan_start(p["plan"]) if p["plan"] else scenario.initial_positions,
+            CellConfig.for_robot(robot, control_period=p["control_period"],
+                                 physics_rate_hz=p["physics_rate_hz"], command_timeout=p["command_timeout"],
+                                 table_height=tasks.table_height if tasks is not None else None,
+                                 contact_pairs=(tasks.contact_links,) if tasks is not None and p["force"] else ()),
+            initial_positions=plan_start(p["plan"], robot.joint_names) if p["plan"] else scenario.initial_positions,
         )
+        # /joint_states as joint_state_broadcaster gives them: the arms' joints, then the held (locked) ones
+        self.state_names = self.cell.joint_names + self.cell.held_names
         self.table = tasks is not None
         self.contact = tasks.contact_links if tasks is not None and p["force"] else None
         self.table_contacts = 0  # contact points with the table, summed over steps (as the in-process runner)
@@ -133,7 +135,7 @@ class SimNode:
         self.pub_clock = n.create_publisher(Clock, "/clock", depth)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.pub_description = n.create_publisher(String, "/robot_description", latched_qos())
-        self.pub_description.publish(String(data=Path(scenario.urdf_path).read_text()))
+        self.pub_description.publish(String(data=robot.urdf_xml))
         self.pub_contact = (n.create_publisher(Vector3Stamped, "/contact_force", depth) if self.contact is not None
                             else None)
         subscribe_checked(n, Float64MultiArray, "/velocity_controller/commands", self.on_command, qos, self.reject,
@@ -152,7 +154,8 @@ class SimNode:
             n.create_timer(0.05, self.lockstep_watchdog)
         else:
             self.ticks.append((p["control_period"], self.on_tick))
-        self.log.info(f"scenario '{scenario.name}', {'lockstep' if self.lockstep else 'real-time'} at "
+        self.log.info(f"scenario '{scenario.name}' on robot '{robot.name}' ({robot.nq} joints), "
+                      f"{'lockstep' if self.lockstep else 'real-time'} at "
                       f"{1.0 / p['control_period']:.0f} Hz, physics {p['physics_rate_hz']:.0f} Hz "
                       f"(known scenarios: {', '.join(scenario_names())})")
         if priority_note and priority_note != "disabled":
@@ -170,7 +173,11 @@ class SimNode:
         sample, self.stepped = self.stepped or self.cell.state(), None  # the step's own state, else a read
         ns = self._stamp_ns()
         publish_if_subscribed(self.pub_clock, lambda: convert.clock(self.steps * self.period_ns))
-        self.pub_js.publish(convert.joint_state(self.cell.joint_names, ns, sample.positions, sample.velocities))
+        positions, velocities = sample.positions, sample.velocities
+        if self.cell.held_names:
+            held_q, held_qd = self.cell.held_state()
+            positions, velocities = np.concatenate((positions, held_q)), np.concatenate((velocities, held_qd))
+        self.pub_js.publish(convert.joint_state(self.state_names, ns, positions, velocities))
         publish_if_subscribed(self.pub_wrench, lambda: convert.wrench_stamped(ns, self.cell.wrench()))
         if self.pub_contact is not None and self.contact is not None:
             contact = self.contact

@@ -17,12 +17,21 @@ from dualarm_control.errors import DualArmError
 EXIT_USAGE = 2
 
 
+ROBOT_HELP = ("robot description: a name of config/robots/ (lwr4_cell, baxter, panda_pair, ur5_pair, ...) or a "
+              "YAML path (docs/robots.md); default: the scenario's robot. Another robot than the scenario's "
+              "starts at its ready positions")
+
+
+def add_robot_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--robot", default=None, metavar="NAME|PATH", help=ROBOT_HELP)
+
+
 def cmd_experiment(args: argparse.Namespace) -> int:
     """Run a scenario in-process (lockstep): :func:`dualarm_control.app.run.experiment.experiment_command`."""
     from dualarm_control.app.run.experiment import experiment_command
 
     return experiment_command(args.scenario, args.solver, args.params, Path(args.output), args.gains, args.force,
-                              args.duration)
+                              args.duration, args.robot)
 
 
 def cmd_launch(args: argparse.Namespace) -> int:
@@ -65,7 +74,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
         if planned != args.scenario:
             raise DualArmError(f"--plan {plan} was planned on scenario {planned!r}, not {args.scenario!r}")
     return launch_scenario(args.scenario, args.params, extra, args.lockstep, record, args.timeout, args.rate,
-                           plan=plan, force=args.force, interactive=interactive, processes=args.processes)
+                           plan=plan, force=args.force, interactive=interactive, processes=args.processes,
+                           robot=args.robot)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -485,6 +495,7 @@ def build_parser() -> argparse.ArgumentParser:
                      "F/T sensor, PI force control, pan modelling error")
     exp.add_argument("--duration", type=float, default=None, metavar="S",
                      help="task scenarios: run time [s] (default: the scenario's)")
+    add_robot_argument(exp)
     exp.set_defaults(func=cmd_experiment)
 
     demo = sub.add_parser("demo", help="the main job: three nodes over ROS per solver, bags, reports",
@@ -582,6 +593,7 @@ def build_parser() -> argparse.ArgumentParser:
                      "trajectory node in one; 1: all in one. Nodes sharing a process run as cell_container (one "
                      "executor, one DDS participant, their per-cycle samples passed in the process and published for "
                      "every other tool); real time only. What each costs: docs/bench.md, 'Processes'")
+    add_robot_argument(lau)
     lau.set_defaults(func=cmd_launch)
     fau = sub.add_parser("faults", help="fault matrix against real processes (watchdogs, kills, signals, links)",
                          description="Inject faults into real-time runs of the three nodes (loopback, and private "

@@ -50,11 +50,12 @@ from dualarm_control.references.base import JOINT_REFERENCE, RELATIVE_TARGET, WR
 from dualarm_control.references.plan import PlanSource
 from dualarm_control.references.segments import SegmentsSource
 from dualarm_control.references.tasks import TasksController, TasksSource
+from dualarm_control.robot import load_robot
 from dualarm_control.ros import convert, inputs, local_bus
 from dualarm_control.ros import node as shell
 from dualarm_control.ros.output import CommandOutput
 from dualarm_control.ros.qos import QOS_PARAMETER, publisher_depth, stream_qos
-from dualarm_control.scenario import load_scenario
+from dualarm_control.scenario import ROBOT_PARAMETER, load_scenario
 
 DEFAULT_PRIORITY = 50
 COMMANDS = "/velocity_controller/commands"
@@ -84,6 +85,7 @@ NODE_PARAMETERS = (
               "readers (the launcher sets 1 when recording: the bag then holds the run from t = 0)",
               check=non_negative, read_only=True),
     ParamSpec("joint_gain", 30.0, "K of the joint-space tracking of reference:=joint [1/s]", check=positive),
+    ROBOT_PARAMETER,
 )
 ALL_PARAMETERS = core.CONTROLLER_PARAMETERS + NODE_PARAMETERS
 
@@ -99,7 +101,8 @@ class ControllerNode:
         self.params = core.controller_params(self.values, n.get_name())
         self.lockstep = bool(self.values["lockstep"])
         self.task = self.make_task_controller() if self.values["scenario"] else None
-        self.model = self.task.model if self.task else DualArmModel()
+        self.model = self.task.model if self.task else DualArmModel(load_robot(self.values["robot"] or "lwr4_cell"))
+        self.robot_ref = self.model.description.reference
         self.controller = self.task.controller if self.task else core.RelativeController(self.model, self.params)
         self.joint_mode = self.task is None and self.values["reference"] == "joint"
         # What a cycle consumes besides the joint state: the reference source's streams.
@@ -147,13 +150,14 @@ class ControllerNode:
 
     def make_task_controller(self) -> TasksController:
         """Task mode: the scenario's tasks on its URDF at gain ``task_gain`` (ScenarioError -> exit 2)."""
-        scenario, v, force = load_scenario(self.values["scenario"]), self.values, bool(self.values["force"])
+        v, force = self.values, bool(self.values["force"])
+        scenario = load_scenario(v["scenario"], v["robot"])
         spec = scenario.tasks
         if spec is None:
             raise ScenarioError(f"controller_node.scenario: {scenario.name!r} has no tasks (a segment scenario "
                                 "follows /relative_target: leave scenario empty)")
         gain = float(v["task_gain"]) or (spec.force.gain if force else spec.gains[0])
-        task = TasksController(DualArmModel(scenario.urdf_path), self.params, spec, gain, force)
+        task = TasksController(DualArmModel(scenario.robot), self.params, spec, gain, force)
         task.steps = int(np.ceil((float(v["duration"]) or spec.duration) / self.params.period - 1e-9))
         return task
 
@@ -314,7 +318,7 @@ class ControllerNode:
             "solver": solver, "status": r.status, "solve_time_s": f"{r.solve_time:.6e}",
             "iterations": r.iterations, "active_joints": r.active_joints, "control_period_s": self.params.period,
             "stamp_ns": stamp, **extra, **self.out.counters(), "watchdog": self.out.watchdog_text(),
-            "mode": "lockstep" if self.lockstep else "realtime"})
+            "mode": "lockstep" if self.lockstep else "realtime", "robot": self.robot_ref})
 
     def on_watchdog(self) -> None:
         """Real-time mode: zero command while there is no joint state yet, or a watchdog fault."""

@@ -62,7 +62,7 @@ from dualarm_control.ros.node import (
     usage,
 )
 from dualarm_control.ros.qos import QOS_PARAMETER, publisher_depth, stream_qos
-from dualarm_control.scenario import load_scenario
+from dualarm_control.scenario import ROBOT_PARAMETER, load_scenario
 from dualarm_control.trajectory import MotionLimits
 
 DEFAULT_PRIORITY = 40
@@ -80,6 +80,7 @@ PARAMETERS = (
     thread_priority_spec(DEFAULT_PRIORITY, "the target stream (below the simulator's and controller's 50)"),
     ParamSpec("repeat", False, "start the scenario again from the current pose when it completes (soak runs)",
               read_only=True),
+    ROBOT_PARAMETER,
 )
 
 
@@ -96,12 +97,12 @@ class TrajectoryNode:
         self.node = Node("trajectory_node", context=context)
         self.bus = bus
         p = declare(self.node, PARAMETERS)
-        self.scenario = load_scenario(p["scenario"])
+        self.scenario = load_scenario(p["scenario"], p["robot"])
         self.lockstep = bool(p["lockstep"])
         self.repeat = bool(p["repeat"])
         self.period = float(p["control_period"])
         self.repetitions = 0
-        self.model = DualArmModel(self.scenario.urdf_path)
+        self.model = DualArmModel(self.scenario.robot)
         n = self.node
         self.log = n.get_logger()
         self.qos = stream_qos(p["qos_reliability"])

@@ -40,6 +40,7 @@ from dualarm_control.ros.convert import stamp_ns
 
 if TYPE_CHECKING:
     from dualarm_control.app.run.experiment import RunRecord
+    from dualarm_control.robot import RobotDescription
     from dualarm_control.scenario import Scenario
 
 FloatArray = npt.NDArray[np.float64]
@@ -259,6 +260,14 @@ class Bag:
         return [(s.t, s.values) for s in self.statuses if s.name == CONTROLLER_STATUS]
 
     @property
+    def robot(self) -> RobotDescription:
+        """The robot of the run: the controller's ``robot`` on /diagnostics (a bag recorded before
+        robots were data: the LWR4 cell)."""
+        from dualarm_control.robot import DEFAULT_ROBOT, load_robot
+
+        return load_robot(next((v["robot"] for _, v in self.cycles if v.get("robot")), DEFAULT_ROBOT))
+
+    @property
     def table_contacts(self) -> int:
         """The simulator's running total of table contacts (its last 1 Hz status)."""
         return max((int(s.values["table_contacts"]) for s in self.statuses
@@ -343,9 +352,8 @@ def _relative_records(bag: Bag) -> list[RunRecord]:
     The final error is the last /relative_pose against the last /relative_target of the solver.
     """
     from dualarm_control.app.run.experiment import RunRecord, nan_column
-    from dualarm_control.kinematics import DualArmModel
 
-    joint_names = DualArmModel().joint_names
+    joint_names = bag.robot.joint_names
     n = len(joint_names)
     widths = {len(v) for _, v in bag.rows[COMMANDS_TOPIC]}
     if widths != {n}:
@@ -458,7 +466,7 @@ def _task_record(path: Path, bag: Bag) -> tuple[list[RunRecord], Scenario]:
     if not stamps:
         raise BagError(f"bag {path}: no controller task cycle at or after the first recorded {JOINT_STATES_TOPIC}")
     scenario = load_scenario(first[SCENARIO_KEY])
-    model = DualArmModel(scenario.urdf_path)
+    model = DualArmModel(scenario.robot)
     order: dict[tuple[str, ...], list[int]] = {}
     positions = np.zeros((len(stamps), model.nq))
     for k, stamp in enumerate(stamps):

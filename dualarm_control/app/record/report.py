@@ -74,7 +74,7 @@ def summarize_run(record: RunRecord, scenario: Scenario | None,
     if record.tasks is not None:
         assert scenario is not None
         return task_metrics(record, record.tasks, scenario)
-    model = model or (DualArmModel(scenario.urdf_path) if scenario is not None else DualArmModel())
+    model = model or (DualArmModel(scenario.robot) if scenario is not None else DualArmModel())
     errors = record.final_errors
     if errors is None:
         assert scenario is not None, "a run without recorded final errors needs its scenario"

@@ -127,12 +127,12 @@ def run_scenario(
     (:class:`~dualarm_control.references.base.RunOptions`).
     """
     source = scenario.reference
-    model = model or DualArmModel(scenario.urdf_path)
+    model = model or DualArmModel(scenario.robot)
     options = RunOptions(scenario.limits, scenario.settle_time, gain, force, duration)
     period = params.period
     cell_options = source.cell(options)
     pairs: tuple[tuple[str, str], ...] = cell_options.get("contact_pairs", ())
-    config = CellConfig(urdf=scenario.urdf_path, control_period=period, **cell_options)
+    config = CellConfig.for_robot(scenario.robot, control_period=period, **cell_options)
     with DualArmCell(config, initial_positions=source.initial_positions(scenario.initial_positions)) as cell:
         state = cell.state()
         follower = source.follower(model, params, state.positions, options)
@@ -211,7 +211,7 @@ def nan_column(n: int) -> FloatArray:
 
 
 def experiment_command(scenario_name: str, solver_names: str | None, params_files: list[str], out: Path,
-                       gain_values: str | None, force: bool, duration: float | None) -> int:
+                       gain_values: str | None, force: bool, duration: float | None, robot: str | None = None) -> int:
     """``dualarm experiment``: one run per solver, or for a task scenario one per gain k (force
     variant with ``force``); write ``out/metrics.json`` and the figures of the scenario's kind,
     print the table. Returns the exit code (130 when interrupted)."""
@@ -224,11 +224,12 @@ def experiment_command(scenario_name: str, solver_names: str | None, params_file
     from dualarm_control.app.run.progress import progress_bar
     from dualarm_control.controller import controller_params
     from dualarm_control.params import read_params_files
+    from dualarm_control.robot import robot_defaults
     from dualarm_control.scenario import load_scenario
 
-    scenario = load_scenario(scenario_name)
+    scenario = load_scenario(scenario_name, robot)
     spec = scenario.tasks
-    base = read_params_files(params_files, "controller_node")
+    base = {**robot_defaults(scenario.robot), **read_params_files(params_files, "controller_node")}
     runs: list[tuple[str, ControllerParams, float | None]]
     if spec is None:
         if gain_values or force or duration:
@@ -236,9 +237,9 @@ def experiment_command(scenario_name: str, solver_names: str | None, params_file
                                f"not to {scenario.name!r}")
         solvers = [s.strip() for s in (solver_names or DEFAULT_SOLVERS).split(",") if s.strip()]
         runs = [(name, controller_params({**base, "solver": name}), None) for name in solvers]  # validates all first
-        model: DualArmModel | None = DualArmModel()
-        print(f"scenario {scenario.name!r} ({scenario.source}); solvers: {', '.join(solvers)}; output: {out}",
-              file=sys.stderr)
+        model: DualArmModel | None = DualArmModel(scenario.robot)
+        print(f"scenario {scenario.name!r} ({scenario.source}) on robot {scenario.robot.name!r}; solvers: "
+              f"{', '.join(solvers)}; output: {out}", file=sys.stderr)
     else:
         solver = solver_names or "constraint_based"
         if "," in solver:

@@ -176,6 +176,7 @@ def launch_scenario(
     interactive: bool = False,
     processes: int = 3,
     env: Mapping[str, str] | None = None,
+    robot: str | None = None,
 ) -> int:
     """Run the three nodes (and a recorder of ``record_topics``) on ``scenario``; ``rate_hz`` sets every
     node's control period. Returns 0 if the scenario completed cleanly, 130 on Ctrl-C.
@@ -193,10 +194,13 @@ def launch_scenario(
     alone and the controller with the trajectory node in one ``cell_container``; 1, every node in
     one ``cell_container`` (nodes/container.py). Fewer than 3 runs in real time only.
     ``env`` adds to the environment of every process started (``dualarm bench --realtime --baseline``).
+    ``robot`` (``--robot``): the robot every node runs on instead of the scenario's (a name or a YAML path);
+    every node gets ``-p robot:=`` the robot's reference (the controller has no scenario in relative mode).
     """
     from dualarm_control.scenario import load_scenario
 
-    tasks = load_scenario(scenario).tasks is not None
+    loaded = load_scenario(scenario, robot)
+    tasks = loaded.tasks is not None
     if interactive and (tasks or lockstep or plan is not None):
         raise ValueError("interactive runs in real time on a relative motion scenario (no lockstep, plan or tasks)")
     if processes not in LAYOUTS:
@@ -205,7 +209,7 @@ def launch_scenario(
         raise ValueError(f"{processes} processes run in real time: lockstep runs use separate processes")
     if force and not tasks:
         raise ValueError(f"force feedback applies to task scenarios (pan_cleaning), not to {scenario!r}")
-    common = ["-p", f"lockstep:={'true' if lockstep else 'false'}"]
+    common = ["-p", f"lockstep:={'true' if lockstep else 'false'}", "-p", f"robot:={loaded.robot.reference}"]
     if rate_hz is not None:
         common += ["-p", f"control_period:={1.0 / rate_hz!r}"]
     with_scenario = ["-p", f"scenario:={scenario}"]

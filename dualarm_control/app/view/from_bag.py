@@ -107,7 +107,7 @@ def bag_run_arrays(path: Path) -> RunArrays:
 
     bag = read_bag(Path(path))
     if not bag.task_cycles:
-        return relative_run_arrays(path, DualArmModel(), bag)
+        return relative_run_arrays(path, DualArmModel(bag.robot), bag)
     (record,), scenario = read_run(Path(path), bag)
     assert scenario is not None
-    return record_arrays(record, DualArmModel(scenario.urdf_path))
+    return record_arrays(record, DualArmModel(scenario.robot))

@@ -77,7 +77,7 @@ def frame_times(duration_s: float, fps: float) -> npt.NDArray[np.float64]:
 class CellCamera:
     """The cell in a DIRECT pybullet client and a fixed camera looking at both arms."""
 
-    def __init__(self, urdf_text: str, size: tuple[int, int]) -> None:
+    def __init__(self, urdf_text: str, size: tuple[int, int], joint_names: tuple[str, ...] = ()) -> None:
         import pybullet as p
 
         from dualarm_sim.cell import CellConfig, DualArmCell
@@ -90,7 +90,7 @@ class CellCamera:
         with tempfile.TemporaryDirectory(prefix="dualarm_video_") as tmp:
             path = Path(tmp) / "robot_description.urdf"
             path.write_text(urdf_text)
-            self.cell = DualArmCell(CellConfig(urdf=path))
+            self.cell = DualArmCell(CellConfig(urdf=path, joints=joint_names))  # posed by name: q in that order
         self.lower, self.upper = self.cell.position_limits
         self._view = p.computeViewMatrix(CAMERA_EYE, CAMERA_TARGET, (0.0, 0.0, 1.0))
         self._projection = p.computeProjectionMatrixFOV(FIELD_OF_VIEW_DEG, width / height, 0.05, 20.0)
@@ -121,7 +121,7 @@ def render_recording(recording: JointRecording, out_path: Path, fps: float = DEF
     positions = recording.at(times)
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    camera = CellCamera(recording.urdf_text, size)
+    camera = CellCamera(recording.urdf_text, size, recording.joint_names)
     writer = imageio_ffmpeg.write_frames(str(out_path), size, fps=fps, codec="libx264", macro_block_size=2,
                                          ffmpeg_log_level="error")
     render_s = encode_s = 0.0

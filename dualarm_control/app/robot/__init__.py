@@ -1,0 +1,1 @@
+"""``dualarm robot``: list, show and check robot descriptions, and find ready positions."""
