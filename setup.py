@@ -39,6 +39,8 @@ BENCH_REQUIRES = ["pin-pink>=4.4,<5"]
 # Seeing the cell: `dualarm view` (the Rerun viewer, whose web viewer ships in the wheel and runs
 # offline; video via imageio-ffmpeg, whose ffmpeg ships in the wheel; the Foxglove WebSocket server
 # via foxglove-sdk).
+# Robots beyond the LWR4 cell (config/robots/baxter.yaml, panda_pair, ur5_pair): their URDFs and meshes.
+ROBOTS_REQUIRES = ["example-robot-data>=6,<7"]
 VIEW_REQUIRES = ["rerun-sdk>=0.41,<0.42", "imageio-ffmpeg>=0.5,<0.9", "foxglove-sdk>=0.30,<0.31"]
 
 setup(
@@ -51,12 +53,13 @@ setup(
         (f"share/{PACKAGE}/config", glob("config/*.yaml") + glob("config/*.xml")),
         (f"share/{PACKAGE}/config/solvers", glob("config/solvers/*.yaml")),
         (f"share/{PACKAGE}/config/scenarios", glob("config/scenarios/*.yaml")),
+        (f"share/{PACKAGE}/config/robots", glob("config/robots/*.yaml")),
         (f"share/{PACKAGE}/urdf", glob("urdf/*.urdf")),
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],
     install_requires=INSTALL_REQUIRES,
     extras_require={"ros": ROS_REQUIRES, "test": TEST_REQUIRES, "bench": BENCH_REQUIRES,
-                    "view": VIEW_REQUIRES},
+                    "view": VIEW_REQUIRES, "robots": ROBOTS_REQUIRES},
     python_requires=">=3.10",
     zip_safe=True,
     maintainer="dualarm_control developers",

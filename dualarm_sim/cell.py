@@ -235,7 +235,7 @@ class DualArmCell:
 
         Args:
             config: simulation settings (defaults to ``CellConfig()``).
-            initial_positions: joint positions [rad], (14,); zeros if None.
+            initial_positions: joint positions [rad], (n,); zeros (clipped into each joint's range) if None.
         """
         self.config = config if config is not None else CellConfig()
         if not Path(self.config.urdf).is_file():
@@ -246,7 +246,9 @@ class DualArmCell:
         self._cid: int | None = cid
         try:
             self._load()
-            self.reset(np.zeros(len(self.joint_names)) if initial_positions is None else initial_positions)
+            # default: zero, or the nearest point of a joint's range that excludes zero
+            self.reset(np.clip(np.zeros(len(self.joint_names)), self._q_min, self._q_max)
+                       if initial_positions is None else initial_positions)
         except BaseException:
             self.close()
             raise

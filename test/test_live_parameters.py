@@ -43,12 +43,12 @@ def reset_state(old: core.RelativeController, new: core.RelativeController) -> c
 def run_with_changes(swap: Swap) -> tuple[np.ndarray, list[str], core.RelativeController]:
     """Commands (CYCLES, n) [rad/s] and statuses of the run; the last controller."""
     scenario = load_scenario("assembly")
-    model = DualArmModel(scenario.urdf_path)
+    model = DualArmModel(scenario.robot)
     values: dict[str, object] = {"solver": "standard_qp", "acceleration_limit": [A_MAX]}
     params = core.controller_params(values)
     options = RunOptions(scenario.limits, scenario.settle_time)
     source = scenario.reference
-    config = CellConfig(urdf=scenario.urdf_path, control_period=params.period, **source.cell(options))
+    config = CellConfig.for_robot(scenario.robot, control_period=params.period, **source.cell(options))
     commands, statuses = [], []
     with DualArmCell(config, initial_positions=source.initial_positions(scenario.initial_positions)) as cell:
         state = cell.state()

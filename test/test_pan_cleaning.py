@@ -181,7 +181,7 @@ def test_task_controller_holds_the_force_loop_on_a_bad_reading(scenario, params)
     from dualarm_control.kinematics import DualArmModel
     from dualarm_control.references.tasks import TasksController
 
-    model = DualArmModel(scenario.urdf_path)
+    model = DualArmModel(scenario.robot)
     control = TasksController(model, params, scenario.tasks, 2.0, force=True)
     q = scenario.initial_positions
     tool = model.frame_poses(q, ("right_tool",))[0]

@@ -10,7 +10,6 @@ import pinocchio as pin
 import pytest
 
 from dualarm_control.kinematics import Configuration, DualArmModel, jacobian_derivatives
-from dualarm_control.paths import share_dir
 from dualarm_control.tasks import (
     EQUALITY,
     INEQUALITY,
@@ -30,7 +29,7 @@ H = 1e-6  # central differences: truncation O(h^2), round-off O(eps/h) ~ 1e-10
 
 @pytest.fixture(scope="module")
 def model() -> DualArmModel:
-    return DualArmModel(share_dir() / "urdf" / "dualarm_cell_pan.urdf")
+    return DualArmModel("lwr4_pan_cell")
 
 
 def configurations(model: DualArmModel, count: int, seed: int) -> list[np.ndarray]:

@@ -26,6 +26,17 @@ def add_robot_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--robot", default=None, metavar="NAME|PATH", help=ROBOT_HELP)
 
 
+def cmd_robot(args: argparse.Namespace) -> int:
+    """``dualarm robot list|show|ready``: :mod:`dualarm_control.app.robot.command`."""
+    from dualarm_control.app.robot import command
+
+    if args.robot_verb == "list":
+        return command.list_command()
+    if args.robot_verb == "show":
+        return command.show_command(args.robot)
+    return command.ready_command(args.robot, args.distance, args.center, args.starts, args.seed)
+
+
 def cmd_experiment(args: argparse.Namespace) -> int:
     """Run a scenario in-process (lockstep): :func:`dualarm_control.app.run.experiment.experiment_command`."""
     from dualarm_control.app.run.experiment import experiment_command
@@ -497,6 +508,25 @@ def build_parser() -> argparse.ArgumentParser:
                      help="task scenarios: run time [s] (default: the scenario's)")
     add_robot_argument(exp)
     exp.set_defaults(func=cmd_experiment)
+
+    rob = sub.add_parser("robot", help="robot descriptions: list, show, find ready positions (docs/robots.md)",
+                         description="The robot descriptions (config/robots/<name>.yaml, or a YAML of your own): "
+                         "list the shipped ones, show one resolved (joints, limits, tools, locked joints), or "
+                         "search ready positions in which the tools face each other.")
+    rverbs = rob.add_subparsers(dest="robot_verb", metavar="ROBOT_VERB")
+    rverbs.required = True
+    rverbs.add_parser("list", help="the shipped robots")
+    show = rverbs.add_parser("show", help="one robot, resolved")
+    show.add_argument("robot", help="name (config/robots/) or YAML path")
+    ready = rverbs.add_parser("ready", help="ready positions: the tools DISTANCE apart, facing each other (IK)")
+    ready.add_argument("robot", help="name (config/robots/) or YAML path")
+    ready.add_argument("--distance", type=float, default=0.3, metavar="M",
+                       help="distance between the tools [m] (default: %(default)s)")
+    ready.add_argument("--center", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
+                       help="the tools' midpoint in the world [m] (default: in front of the arms' first joints)")
+    ready.add_argument("--starts", type=int, default=24, help="IK starts (default: %(default)s)")
+    ready.add_argument("--seed", type=int, default=0, help="seed of the random starts (default: %(default)s)")
+    rob.set_defaults(func=cmd_robot)
 
     demo = sub.add_parser("demo", help="the main job: three nodes over ROS per solver, bags, reports",
                           description="For each solver: launch the three nodes over ROS in lockstep on the "

@@ -517,9 +517,13 @@ def report(path: Path, output: Path) -> tuple[dict[str, dict[str, Any]], str, li
         write_json,
     )
 
-    runs, scenario = read_run(Path(path))
+    from dualarm_control.kinematics import DualArmModel
+
+    bag = read_bag(Path(path))
+    runs, scenario = read_run(Path(path), bag)
     if not runs:
         raise BagError(f"bag {path}: no {COMMANDS_TOPIC} message could be attributed to a solver")
-    results = {r.label: summarize_run(r, scenario) for r in runs}
+    model = DualArmModel(scenario.robot if scenario is not None else bag.robot)  # the run's limits
+    results = {r.label: summarize_run(r, scenario, model) for r in runs}
     write_json(Path(output) / "metrics.json", results)
     return results, runs[0].kind, write_figures(runs[0].kind, Path(output), Path(path).name, runs, scenario)
