@@ -81,7 +81,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
         from dualarm_control.kinematics import DualArmModel
         from dualarm_control.planning.plan_file import read_plan
 
-        planned = read_plan(plan, DualArmModel().joint_names).scenario  # exit 2 on a bad plan file
+        joints = DualArmModel(load_scenario(args.scenario, args.robot).robot).joint_names
+        planned = read_plan(plan, joints).scenario  # exit 2 on a bad plan file
         if planned != args.scenario:
             raise DualArmError(f"--plan {plan} was planned on scenario {planned!r}, not {args.scenario!r}")
     return launch_scenario(args.scenario, args.params, extra, args.lockstep, record, args.timeout, args.rate,

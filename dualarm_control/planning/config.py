@@ -26,7 +26,8 @@ from dualarm_control.params import ParameterError, read_params_file
 from dualarm_control.planning.baseline import BaselineParams
 from dualarm_control.planning.path import CornerPath
 from dualarm_control.references.base import number
-from dualarm_control.scenario import scenario_file
+from dualarm_control.robot import RobotDescription, load_robot
+from dualarm_control.scenario import scenario_file, scenario_robot
 
 
 @dataclass(frozen=True)
@@ -51,6 +52,7 @@ class PlanConfig:
         execution_settle: simulated time after the trajectory [s].
         execution_subdivisions: knots per path interval of the executed trajectory (>= 1).
         source: the file.
+        robot: the robot planned for (the scenario's, or ``--robot``).
     """
 
     name: str = "corner_path"
@@ -69,6 +71,7 @@ class PlanConfig:
     execution_settle: float = 0.5
     execution_subdivisions: int = 8
     source: Path | None = None
+    robot: RobotDescription = field(default_factory=load_robot)
 
     def __post_init__(self) -> None:
         h = sum(self.corner.samples)
@@ -97,8 +100,9 @@ def _ints(flat: dict[str, Any], key: str, default: tuple[int, ...]) -> tuple[int
     return tuple(value)
 
 
-def load_plan_config(name_or_path: str) -> PlanConfig:
-    """Planner settings of a scenario (registry name or YAML path); missing keys take the defaults.
+def load_plan_config(name_or_path: str, robot: str | RobotDescription | None = None) -> PlanConfig:
+    """Planner settings of a scenario (registry name or YAML path) on its robot or on ``robot``;
+    missing keys take the defaults.
 
     Raises:
         ScenarioError: unknown scenario, no ``scenario.corner.*`` keys, or an invalid value.
@@ -148,4 +152,5 @@ def load_plan_config(name_or_path: str) -> PlanConfig:
         execution_settle=number(flat, "execution.settle_time", d.execution_settle),
         execution_subdivisions=int(number(flat, "execution.subdivisions", d.execution_subdivisions)),
         source=path,
+        robot=scenario_robot(flat, path, robot)[0],
     )

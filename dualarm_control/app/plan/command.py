@@ -34,6 +34,9 @@ def add_plan_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser],
     pl.add_argument("--seed", type=int, metavar="S", help="base seed (default: the scenario's plan.seed, 0)")
     pl.add_argument("--workers", type=int, metavar="W", help="processes (default: every core)")
     pl.add_argument("--no-execute", action="store_true", help="skip the execution in the simulator")
+    pl.add_argument("--robot", default=None, metavar="NAME|PATH",
+                    help="plan for this robot (config/robots/ name or YAML) instead of the scenario's; the path must "
+                    "be within its reach")
     pl.set_defaults(func=func)
 
 
@@ -44,7 +47,7 @@ def run_plan_command(args: argparse.Namespace, progress: ProgressFactory = progr
     from dualarm_control.kinematics import DualArmModel
     from dualarm_control.planning.config import load_plan_config
 
-    config = load_plan_config(args.scenario)
+    config = load_plan_config(args.scenario, args.robot)
     given = {key: getattr(args, key) for key in ("starts", "candidates", "seed") if getattr(args, key) is not None}
     for key in ("starts", "candidates"):
         if given.get(key, 1) < 1:
@@ -58,7 +61,7 @@ def run_plan_command(args: argparse.Namespace, progress: ProgressFactory = progr
           f"{min(config.starts, config.inner_starts)} inner starts per interval, seed {config.seed}, "
           f"{workers} workers; output {out}", file=sys.stderr)
     result = plan(config, workers, progress("plan"))
-    model = DualArmModel()
+    model = DualArmModel(config.robot)
     execution = None
     if not args.no_execute:
         from dualarm_control.app.plan.execute import execute_plan

@@ -69,11 +69,11 @@ def execute_plan(
     """Track the plan's joint trajectory in the simulated cell (the one runner,
     :func:`~dualarm_control.app.run.experiment.run_scenario`, on a
     :class:`~dualarm_control.references.plan.PlanSource`) and measure the relative path error."""
-    model = model or DualArmModel()
+    model = model or DualArmModel(config.robot)
     source = PlanSource(model, config, configurations)
     scenario = Scenario(name=config.name, description="plan execution", initial_positions=configurations[0],
                         reference=source, limits=MotionLimits(), settle_time=config.execution_settle,
-                        source=Path(config.name))
+                        source=Path(config.name), robot=config.robot)
     record = run_scenario(scenario, ControllerParams(period=CONTROL_PERIOD), model, progress)
     path = config.corner.sample()
     sub = config.execution_subdivisions

@@ -118,7 +118,7 @@ _WORKER: dict[str, Any] = {}
 
 def _init_worker(config: PlanConfig) -> None:
     """Pool initializer: model and sampled path for this worker process."""
-    _WORKER["model"] = DualArmModel()
+    _WORKER["model"] = DualArmModel(config.robot)
     _WORKER["path"] = config.corner.sample()
     _WORKER["config"] = config
 
@@ -264,7 +264,7 @@ def _both_stages(
         q_key = key_results[c].configurations
         calls += [(inner_task, (j, s, q_key[j], q_key[j + 1])) for j in range(n_intervals) for s in range(n_inner)]
     inner_flat = _run_tasks(calls, pool, tick("inner points"))
-    model = DualArmModel()
+    model = DualArmModel(config.robot)
     path = config.corner.sample()
     plans, costs, inner_values, best_inner = [], [], [], []
     per_candidate = n_intervals * n_inner
@@ -310,7 +310,7 @@ def plan(config: PlanConfig, workers: int | None = None, progress: Progress | No
     start = time.perf_counter()
     configurations, details = optimise(config, workers, progress)
     runtime = time.perf_counter() - start
-    model = DualArmModel()
+    model = DualArmModel(config.robot)
     path = config.corner.sample()
     errors = np.array([closure_errors(model, q, path.positions[i], path.rotation) for i, q in enumerate(configurations)])
     violations = int(np.sum((configurations < model.q_min) | (configurations > model.q_max)))

@@ -516,7 +516,6 @@ def report(path: Path, output: Path) -> tuple[dict[str, dict[str, Any]], str, li
         write_figures,
         write_json,
     )
-
     from dualarm_control.kinematics import DualArmModel
 
     bag = read_bag(Path(path))

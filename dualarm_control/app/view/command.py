@@ -62,6 +62,9 @@ See docs/visualization.md.""")
     rerun_group.add_argument("--web-port", type=int, default=DEFAULT_WEB_PORT,
                              help="--web: page port (default: %(default)s)")
     rerun_group.add_argument("--duration", type=float, metavar="S", help="live: stop after S seconds")
+    view.add_argument("--robot", default=None, metavar="NAME|PATH",
+                      help="live: the running cell's robot (config/robots/ name or YAML; default lwr4_cell); a bag "
+                      "names its own")
     add_video_arguments(view.add_argument_group("video of a bag (--video)"))
     add_foxglove_arguments(view.add_argument_group("Foxglove WebSocket server (--foxglove)"))
     view.set_defaults(func=cmd_view)
@@ -143,7 +146,7 @@ def _rerun_view(args: argparse.Namespace) -> int:
             from dualarm_control.app.view.live import live_groups, run_live
             from dualarm_control.kinematics import DualArmModel
 
-            model = DualArmModel()
+            model = DualArmModel(args.robot or "lwr4_cell")
             rec.send_blueprint(rv.blueprint(rv.robot_name(Path(model.urdf)), live_groups()))
             run_live(model, rec, args.duration)
         rec.flush()
