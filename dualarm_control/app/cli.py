@@ -610,7 +610,7 @@ def build_parser() -> argparse.ArgumentParser:
     lau.add_argument("--rate", type=float, metavar="HZ", help="control rate of every node (default: 200 Hz)")
     lau.add_argument("--plan", metavar="PLAN_JSON",
                      help="execute a plan of 'dualarm plan': the sim starts at its first configuration, the "
-                     "trajectory node streams its joint trajectory, the controller tracks it (reference:=joint)")
+                     "trajectory node streams its joint trajectory, the controller tracks it (plan:=FILE)")
     lau.add_argument("--force", action="store_true",
                      help="task scenario: force feedback variant (contact in the sim, -p force:=true on both nodes)")
     lau.add_argument("--gain", type=float, metavar="K",

@@ -1,11 +1,13 @@
 """controller_node: closed-loop control of the cell (paper 000, Fig. 3), 200 Hz by default.
 
-Subscribes ``/joint_states`` and the streams of what it follows: ``/relative_target`` (default),
-also a planned joint trajectory on ``/joint_reference`` (``reference:=joint``: qd_ref + joint_gain
-(q_ref - q), eq 23 bounds), or none for the tasks of a task scenario (``scenario:=pan_cleaning``,
-paper 001; ``/wrench`` with ``force:=true``, eq 9). Publishes ``/velocity_controller/commands``
-and ``/diagnostics`` (one per cycle), and ``/relative_pose`` every cycle while it has a reader.
-The control math is the core's.
+Runs the scenario's tracker (``scenario``, on its robot or ``robot``): the one the in-process
+runner runs, with the same model, gain and cycle count (``ReferenceSource.tracker``). Subscribes
+``/joint_states`` and the streams of what it follows: ``/relative_target`` (segments, goals),
+also a planned joint trajectory on ``/joint_reference`` (``plan:=FILE``: qd_ref + K (q_ref - q),
+K the plan's execution.gain, eq 23 bounds), or none for the tasks of a task scenario
+(``scenario:=pan_cleaning``, paper 001; ``/wrench`` with ``force:=true``, eq 9). Publishes
+``/velocity_controller/commands`` and ``/diagnostics`` (one per cycle), and ``/relative_pose``
+every cycle while it has a reader. The control math is the core's.
 
 Real time: a command per joint state (read -> update -> write, as ros2_control); a tick at the
 control period (at most 200 Hz) is the watchdog. Lockstep: one command per joint-state stamp,
@@ -30,6 +32,7 @@ solver's warm start and proximal memory while the solver stays the same).
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from typing import Any
@@ -43,14 +46,17 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
 from dualarm_control import controller as core
-from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import ParamSpec, non_negative, positive
-from dualarm_control.references.base import JOINT_REFERENCE, RELATIVE_TARGET, WRENCH
+from dualarm_control.references.base import (
+    JOINT_REFERENCE,
+    RELATIVE_TARGET,
+    WRENCH,
+    RunOptions,
+    StreamSample,
+    Tracker,
+)
 from dualarm_control.references.plan import PlanSource
-from dualarm_control.references.segments import SegmentsSource
-from dualarm_control.references.tasks import TasksController, TasksSource
-from dualarm_control.robot import load_robot
 from dualarm_control.ros import convert, inputs, local_bus
 from dualarm_control.ros import node as shell
 from dualarm_control.ros.output import CommandOutput
@@ -71,11 +77,11 @@ NODE_PARAMETERS = (
               "zero command [s] (10 periods, the simulator's command timeout)", check=positive),
     QOS_PARAMETER,
     shell.thread_priority_spec(DEFAULT_PRIORITY, "the control loop"),
-    ParamSpec("reference", "relative", "what is tracked: the relative target (the solvers) or a planned "
-              "joint trajectory on /joint_reference (qd_ref + joint_gain (q_ref - q), eq 23 bounds)",
-              choices=lambda: ["relative", "joint"], read_only=True),
-    ParamSpec("scenario", "", "task scenario (e.g. pan_cleaning, name or YAML path): run its tasks instead of "
-              "following /relative_target ('': relative mode)", read_only=True),
+    ParamSpec("scenario", "assembly", "scenario (name or YAML path): its robot and what a cycle tracks, as the "
+              "in-process runner (relative targets on /relative_target; a task scenario such as pan_cleaning: "
+              "its tasks)", read_only=True),
+    ParamSpec("plan", "", "plan.json of `dualarm plan`: track its joint trajectory on /joint_reference "
+              "(qd_ref + K (q_ref - q), K = the plan's execution.gain, eq 23 bounds)", read_only=True),
     ParamSpec("task_gain", 0.0, "task mode: gain k of every task [1/s] (0: the scenario's first gain, or "
               "force.gain with force)", check=non_negative, read_only=True),
     ParamSpec("force", False, "task mode: force feedback on /wrench (eq 9)", read_only=True),
@@ -84,15 +90,14 @@ NODE_PARAMETERS = (
     ParamSpec("task_start_readers", 0, "task mode, real time: zero commands until /diagnostics has this many "
               "readers (the launcher sets 1 when recording: the bag then holds the run from t = 0)",
               check=non_negative, read_only=True),
-    ParamSpec("joint_gain", 30.0, "K of the joint-space tracking of reference:=joint [1/s]", check=positive),
     ROBOT_PARAMETER,
 )
 ALL_PARAMETERS = core.CONTROLLER_PARAMETERS + NODE_PARAMETERS
 
 
 class ControllerNode:
-    """Node shell: parameters -> topics -> the core's cycle (:class:`~dualarm_control.controller.
-    RelativeController`, or :class:`TasksController` for a task scenario)."""
+    """Node shell: parameters -> topics -> the scenario's tracker
+    (:meth:`~dualarm_control.references.base.ReferenceSource.tracker`, the in-process runner's)."""
 
     def __init__(self, context: Any, priority_note: str = "disabled", bus: local_bus.LocalBus | None = None) -> None:
         self.node = n = Node("controller_node", context=context)
@@ -100,14 +105,16 @@ class ControllerNode:
         self.values = shell.declare(n, ALL_PARAMETERS)
         self.params = core.controller_params(self.values, n.get_name())
         self.lockstep = bool(self.values["lockstep"])
-        self.task = self.make_task_controller() if self.values["scenario"] else None
-        self.model = self.task.model if self.task else DualArmModel(load_robot(self.values["robot"] or "lwr4_cell"))
+        self.scenario = load_scenario(self.values["scenario"], self.values["robot"])
+        self.model = DualArmModel(self.scenario.robot)
         self.robot_ref = self.model.description.reference
-        self.controller = self.task.controller if self.task else core.RelativeController(self.model, self.params)
-        self.joint_mode = self.task is None and self.values["reference"] == "joint"
+        # The same tracker as the in-process runner's (source.tracker): model, gain and cycle count
+        source: Any = (PlanSource.from_file(self.model, self.values["plan"]) if self.values["plan"]
+                       else self.scenario.reference)
+        self.tracker: Tracker = source.tracker(self.model, self.params, self.run_options())
+        self.timed = self.tracker.steps is not None  # tasks: t from the stamps, the run ends after its steps
         # What a cycle consumes besides the joint state: the reference source's streams.
-        self.streams = (TasksSource.streams + ((WRENCH,) if self.task.uses_wrench else ()) if self.task
-                        else PlanSource.streams if self.joint_mode else SegmentsSource.streams)
+        self.streams: tuple[str, ...] = source.streams + ((WRENCH,) if self.tracker.uses_wrench else ())
         self.inputs = inputs.StreamInputs(self.streams, self.lockstep)
         self.state: tuple[int, np.ndarray, int] | None = None  # (stamp_ns, q, received monotonic ns)
         self.last_commanded_stamp: int | None = None
@@ -140,26 +147,21 @@ class ControllerNode:
             core.RelativeController(self.model, core.controller_params(merged, n.get_name()))))
         self.ticks: list[shell.Tick] = ([] if self.lockstep else  # ros.node.Ticker, not an rclpy timer
                                         [(max(self.params.period, WATCHDOG_MIN_PERIOD_S), self.on_watchdog)])
-        tracked = "joint reference" if self.joint_mode else f"solver '{self.params.solver}'"
-        if self.task is not None:
-            tracked += (f" on task scenario '{self.values['scenario']}' (k={self.task.gain:g}"
-                        f"{', force feedback' if self.task.force else ''}, {self.task.steps} cycles)")
-        self.log.info(f"{tracked} (K={self.params.gain}, T={self.params.period} s, "
-                      f"{'lockstep' if self.lockstep else 'real-time, event-driven'})")
+        self.log.info(f"{self.tracker.label} on scenario '{self.scenario.name}' ({source.describe()}"
+                      f"{f', {self.tracker.steps} cycles' if self.timed else ''}), robot '{self.model.description.name}'"
+                      f" ({self.model.nq} joints), solver '{self.params.solver}' (K={self.params.gain}, "
+                      f"T={self.params.period} s, {'lockstep' if self.lockstep else 'real-time, event-driven'})")
         shell.log_priority(self.log, priority_note, self.values["thread_priority"])
 
-    def make_task_controller(self) -> TasksController:
-        """Task mode: the scenario's tasks on its URDF at gain ``task_gain`` (ScenarioError -> exit 2)."""
-        v, force = self.values, bool(self.values["force"])
-        scenario = load_scenario(v["scenario"], v["robot"])
-        spec = scenario.tasks
-        if spec is None:
-            raise ScenarioError(f"controller_node.scenario: {scenario.name!r} has no tasks (a segment scenario "
-                                "follows /relative_target: leave scenario empty)")
-        gain = float(v["task_gain"]) or (spec.force.gain if force else spec.gains[0])
-        task = TasksController(DualArmModel(scenario.robot), self.params, spec, gain, force)
-        task.steps = int(np.ceil((float(v["duration"]) or spec.duration) / self.params.period - 1e-9))
-        return task
+    def run_options(self) -> RunOptions:
+        """The run options of the scenario and the task parameters (0: the scenario's)."""
+        v = self.values
+        return RunOptions(self.scenario.limits, self.scenario.settle_time, float(v["task_gain"]) or None,
+                          bool(v["force"]), float(v["duration"]) or None)
+
+    @property
+    def controller(self) -> core.RelativeController:
+        return self.tracker.controller
 
     def close(self) -> None:
         self.log.info(self.out.summary())
@@ -172,11 +174,10 @@ class ControllerNode:
         change = self.live.take(f" at cycle {self.out.count['cycles']}")
         if change is not None:
             self.values, built = change
-            self.controller = built.continue_from(self.controller)
+            # the tracker keeps its own state (tasks: the force loop) and solves with the new controller
+            self.tracker.controller = built.continue_from(self.controller)
             self.params = self.controller.params
             self.out.solver = self.params.solver
-            if self.task is not None:  # the task loop keeps its force state, solves with the new controller
-                self.task.controller = self.controller
             self.out.count["parameter_switches"] += 1
 
     def on_malformed(self, reason: str) -> None:
@@ -222,27 +223,28 @@ class ControllerNode:
         if self.state is None or self.completed_at is not None:
             return
         stamp, q, _ = self.state
-        if stamp == self.last_commanded_stamp and (self.lockstep or self.task is not None):
+        if stamp == self.last_commanded_stamp and (self.lockstep or self.timed):
             return
-        sample = self.inputs.at(stamp) if self.lockstep else self.fresh_inputs(stamp)
-        if sample is None:
+        inputs = self.inputs.at(stamp) if self.lockstep else self.fresh_inputs(stamp)
+        if inputs is None:
             return  # lockstep: a sample of this stamp is on the way; real time: a safe command was sent
-        if self.task is not None:
-            self.task_cycle(stamp, sample.get(WRENCH))
-            return
+        t = self.task_time(stamp) if self.timed else 0.0
+        if t is None:
+            return  # before the start (readers) or after the end (complete)
         if not self.lockstep:
             self.out.leave_safe_state()
         self.apply_pending()
-        target, ref = sample[RELATIVE_TARGET], sample.get(JOINT_REFERENCE)
-        cycle = (self.controller.track_joints(q, ref[1], ref[2], target, self.values["joint_gain"])
-                 if ref is not None else self.controller.step(q, target))
+        ref = inputs.get(JOINT_REFERENCE)
+        sample = (StreamSample(inputs[RELATIVE_TARGET], (ref[1], ref[2]) if ref is not None else None, "")
+                  if RELATIVE_TARGET in inputs else None)
+        cycle = self.tracker.track(q, sample, t, inputs.get(WRENCH))
         latency = self.finish_cycle(cycle)
-        if np.all(np.isfinite(cycle.position)):
+        if math.isfinite(cycle.position_error):
             local_bus.publish_if_subscribed(self.pub_pose, lambda: convert.pose_stamped(stamp, cycle.position, cycle.rotation))
-        self.publish_cycle(stamp, cycle, "joint_tracking" if self.joint_mode else self.params.solver, {
-            "cycle_time_s": f"{cycle.cycle_time:.6e}", "position_error_m": f"{cycle.position_error:.6e}",
-            "orientation_error_rad": f"{cycle.orientation_error:.6e}",
-            **self.timing.values(latency, refresh=self.out.count["cycles"] % STATS_EVERY == 1)})
+        extra = {"scenario": self.values["scenario"], **self.tracker.report(cycle, t)}
+        if not self.timed:
+            extra.update(self.timing.values(latency, refresh=self.out.count["cycles"] % STATS_EVERY == 1))
+        self.publish_cycle(stamp, cycle, self.params.solver, extra)
 
     def fresh_inputs(self, stamp: int) -> dict[str, Any] | None:
         """Real time: the latest sample of every stream, or None after a safe command (none yet,
@@ -264,31 +266,22 @@ class ControllerNode:
             return None
         return sample
 
-    def task_cycle(self, stamp: int, wrench: np.ndarray | None) -> None:
-        """Task mode: one cycle at task time t (lockstep: k T), until ``duration`` is over."""
-        assert self.task is not None and self.state is not None
+    def task_time(self, stamp: int) -> float | None:
+        """A timed tracker's t [s] at ``stamp`` (lockstep: k T, as the in-process runner), or None
+        before its start (waiting for the recorder's /diagnostics readers) or after its steps."""
+        assert self.tracker.steps is not None
         if self.first_stamp is None:
             readers = int(self.values["task_start_readers"])
             if not self.lockstep and self.out.pub_diag.get_subscription_count() < readers:
                 self.out.safe(stamp, f"waiting for {readers} /diagnostics reader(s) before the task starts")
-                return
+                return None
             self.first_stamp = stamp
         elapsed = stamp - self.first_stamp
         step = round(elapsed / (self.params.period * 1e9))
-        if step >= self.task.steps:
+        if step >= self.tracker.steps:
             self.complete(stamp)
-            return
-        t = step * self.params.period if self.lockstep else elapsed * 1e-9  # lockstep: as the in-process runner
-        if not self.lockstep:
-            self.out.leave_safe_state()
-        self.apply_pending()
-        cycle = self.task.step(self.state[1], t, wrench)
-        self.finish_cycle(cycle)
-        self.publish_cycle(stamp, cycle, self.params.solver, {
-            "cycle_time_s": repr(cycle.cycle_time), "scenario": self.values["scenario"],
-            "task_gain": repr(self.task.gain), "force": int(self.task.force), "task_time_s": repr(t),
-            "normal_offset_m": repr(cycle.normal_offset), "measured_force_n": repr(cycle.measured_force),
-            "circle_error_m": f"{self.task.circle_error(cycle):.6e}"})
+            return None
+        return step * self.params.period if self.lockstep else elapsed * 1e-9
 
     def complete(self, stamp: int) -> None:
         """Task time is over: report it, stop commanding (the simulator's command timeout brings the

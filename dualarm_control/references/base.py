@@ -14,10 +14,13 @@ follow. The kinds today:
   joint trajectory (/joint_reference) tracked in joint space.
 
 A source is parsed from the scenario file (frozen, no run state). For a run it makes a
-:class:`Follower` (:meth:`ReferenceSource.follower`): the source bound to a controller from
-the measured start configuration, giving one :class:`~dualarm_control.controller.Cycle` per control period. The
-in-process runner (:mod:`dualarm_control.app.run.experiment`) is one loop over a follower,
-whatever the kind.
+:class:`Tracker` (:meth:`ReferenceSource.tracker`): the source bound to a controller, giving one
+:class:`~dualarm_control.controller.Cycle` per control period from the measured joints and the
+cycle's :class:`StreamSample`. The controller node feeds it the samples it receives; the
+in-process runner (:mod:`dualarm_control.app.run.experiment`) is one loop over a
+:class:`StreamFollower` (:meth:`ReferenceSource.follower`): the same tracker fed by the source's
+own stream from the measured start configuration, whatever the kind. So the node and the runner
+run the same model, gain and cycle count (:func:`cycle_count`).
 
 * ``goals`` (issue 18, :class:`~dualarm_control.references.goals.GoalsSource`): timed relative
   goals and twists (or live ones), replanned online by ruckig, streamed on /relative_target.
@@ -41,7 +44,7 @@ from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.trajectory import MotionLimits
 
 if TYPE_CHECKING:
-    from dualarm_control.controller import ControllerParams, Cycle
+    from dualarm_control.controller import ControllerParams, Cycle, RelativeController
 
 PREFIX = "scenario."
 
@@ -69,23 +72,77 @@ class RunOptions:
     duration: float | None = None
 
 
-class Follower(Protocol):
-    """A reference source bound to a controller for one run.
+class Tracker(Protocol):
+    """A reference source bound to a controller: one cycle per received sample.
 
     Attributes:
         label: run name (the solver for relative motion, "k=1 force" for tasks).
-        steps: control periods of the run.
+        steps: control periods of the run where the tracker decides it (tasks: their duration),
+            else None (the stream's end decides: the trajectory node's, or :class:`StreamFollower`'s).
         uses_wrench: the cycle needs the F/T reading (force variant).
+        controller: the controller it solves with (a live parameter change replaces it).
     """
 
     label: str
-    steps: int
+    steps: int | None
     uses_wrench: bool
+    controller: RelativeController
+
+    def track(self, q: FloatArray, sample: StreamSample | None, t: float, wrench: FloatArray | None) -> Cycle:
+        """One cycle at measured joint positions q (n,) [rad] on the cycle's sample (None for a
+        source without a stream: tasks), at time t [s] since the start and, when ``uses_wrench``,
+        the raw F/T reading (6,)."""
+        ...
+
+    def report(self, cycle: Cycle, t: float) -> dict[str, Any]:
+        """What a cycle reports beyond the solver's figures (the controller node's /diagnostics values)."""
+        ...
+
+
+def cycle_count(end: float, period: float) -> int:
+    """Cycles at t = k T [s] before ``end`` [s], counted as the trajectory node counts them on its
+    nanosecond clock (``t = k T_ns / 1e9``, the first t >= end has no target)."""
+    if math.isinf(end):
+        raise ValueError("a stream without an end has no cycle count")
+    period_ns = round(period * 1e9)
+    k = max(math.ceil(end * 1e9 / period_ns) - 1, 0)
+    while k * period_ns / 1e9 < end:
+        k += 1
+    while k > 0 and (k - 1) * period_ns / 1e9 >= end:
+        k -= 1
+    return k
+
+
+class StreamFollower:
+    """A tracker fed by its source's own stream (the in-process runner's follower, paper 000's
+    Fig. 3 in one process): the sample at t is ``stream.sample(t)``, as the trajectory node
+    publishes it; ``steps`` is the tracker's, else :func:`cycle_count` of the stream's end."""
+
+    def __init__(self, tracker: Tracker, stream: TargetStream | None, period: float) -> None:
+        self.tracker = tracker
+        self.stream = stream
+        self.label = tracker.label
+        self.uses_wrench = tracker.uses_wrench
+        if tracker.steps is not None:
+            self.steps = tracker.steps
+        else:
+            assert stream is not None, "a tracker without its own cycle count needs a stream"
+            self.steps = cycle_count(stream.end, period)
+
+    @property
+    def controller(self) -> RelativeController:
+        return self.tracker.controller
+
+    @controller.setter
+    def controller(self, value: RelativeController) -> None:
+        self.tracker.controller = value
 
     def cycle(self, t: float, q: FloatArray, wrench: FloatArray | None) -> Cycle:
-        """One cycle at time t [s] since the start, measured joint positions q (n,) [rad] and,
-        when ``uses_wrench``, the raw F/T reading (6,)."""
-        ...
+        """One cycle at time t [s] since the start (the sample of the source's own stream at t)."""
+        return self.tracker.track(q, self.stream.sample(t) if self.stream is not None else None, t, wrench)
+
+
+Follower = StreamFollower
 
 
 @dataclass(frozen=True)
@@ -135,8 +192,9 @@ class ReferenceSource(Protocol):
             first configuration, else the scenario's ``default``).
         cell(options): extra :class:`~dualarm_sim.cell.CellConfig` fields of a run (tasks: the
             table height, the contact pair of the force variant), plain data.
-        follower(model, params, q0, options): the source bound to a new controller from the
-            measured start configuration q0 (n,).
+        tracker(model, params, options): the source bound to a new controller (:class:`Tracker`).
+        follower(model, params, q0, options): the tracker fed by the source's own stream from the
+            measured start configuration q0 (n,) (:class:`StreamFollower`).
         stream(model, q0, options, period): the targets the trajectory node publishes for a run
             from q0 (n,) at ``period`` [s] (:class:`TargetStream`); ScenarioError for a source
             without a target stream (tasks).
@@ -151,8 +209,10 @@ class ReferenceSource(Protocol):
 
     def cell(self, options: RunOptions) -> dict[str, Any]: ...
 
+    def tracker(self, model: DualArmModel, params: ControllerParams, options: RunOptions) -> Tracker: ...
+
     def follower(self, model: DualArmModel, params: ControllerParams, q0: FloatArray,
-                 options: RunOptions) -> Follower: ...
+                 options: RunOptions) -> StreamFollower: ...
 
     def stream(self, model: DualArmModel, q0: FloatArray, options: RunOptions, period: float) -> TargetStream: ...
 
@@ -186,10 +246,50 @@ def number(flat: Mapping[str, Any], key: str, default: float | None = None) -> f
 
 
 class SourceDefaults:
-    """What most sources share: the cell starts at the scenario's configuration, with no extra fields."""
+    """What most sources share: the cell starts at the scenario's configuration, with no extra
+    fields; the follower is the tracker on the source's own stream."""
+
+    def tracker(self, model: DualArmModel, params: ControllerParams, options: RunOptions) -> Tracker:
+        raise NotImplementedError
+
+    def stream(self, model: DualArmModel, q0: FloatArray, options: RunOptions, period: float) -> TargetStream:
+        raise NotImplementedError
+
+    def follower(self, model: DualArmModel, params: ControllerParams, q0: FloatArray,
+                 options: RunOptions) -> StreamFollower:
+        tracker = self.tracker(model, params, options)
+        stream = None if tracker.steps is not None else self.stream(model, q0, options, params.period)
+        return StreamFollower(tracker, stream, params.period)
 
     def initial_positions(self, default: FloatArray) -> FloatArray:
         return default
 
     def cell(self, options: RunOptions) -> dict[str, Any]:
         return {}
+
+
+class RelativeTracker:
+    """The relative pose task on the cycle's relative target (paper 000, eq 13): segments and
+    goals alike. Reports the tracking errors."""
+
+    uses_wrench = False
+    steps: int | None = None
+
+    def __init__(self, controller: RelativeController) -> None:
+        self.controller = controller
+        self.label = controller.params.solver
+
+    def track(self, q: FloatArray, sample: StreamSample | None, t: float, wrench: FloatArray | None) -> Cycle:
+        assert sample is not None, "the relative pose task needs a relative target"
+        out = self.controller.step(q, sample.relative)
+        out.stage = sample.stage
+        return out
+
+    def report(self, cycle: Cycle, t: float) -> dict[str, Any]:
+        return relative_report(cycle)
+
+
+def relative_report(cycle: Cycle) -> dict[str, Any]:
+    """A relative cycle's /diagnostics values: cycle time [s] and tracking errors [m, rad]."""
+    return {"cycle_time_s": f"{cycle.cycle_time:.6e}", "position_error_m": f"{cycle.position_error:.6e}",
+            "orientation_error_rad": f"{cycle.orientation_error:.6e}"}

@@ -21,7 +21,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import ClassVar
 
-from dualarm_control.controller import ControllerParams, Cycle, RelativeController
+from dualarm_control.controller import ControllerParams, RelativeController
 from dualarm_control.errors import ScenarioError
 from dualarm_control.goal_script import (
     ScriptDriver,
@@ -34,6 +34,7 @@ from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.online_trajectory import OnlineTrajectory
 from dualarm_control.references.base import (
     RELATIVE_TARGET,
+    RelativeTracker,
     RunOptions,
     SourceDefaults,
     StreamSample,
@@ -124,27 +125,8 @@ class GoalsSource(SourceDefaults):
         end = self.end_time(model, q0, options, period)
         return GoalsStream(self.generator(model, q0, options.limits, period), self.commands, end)
 
-    def follower(self, model: DualArmModel, params: ControllerParams, q0: FloatArray,
-                 options: RunOptions) -> GoalsFollower:
-        return GoalsFollower(RelativeController(model, params), self.stream(model, q0, options, params.period))
-
-
-class GoalsFollower:
-    """The online generator's target followed by the relative pose task (as the segments')."""
-
-    uses_wrench = False
-
-    def __init__(self, controller: RelativeController, stream: GoalsStream) -> None:
-        self.controller = controller
-        self.stream = stream
-        self.label = controller.params.solver
-        self.steps = round(stream.end / controller.params.period)
-
-    def cycle(self, t: float, q: FloatArray, wrench: FloatArray | None) -> Cycle:
-        sample = self.stream.sample(t)
-        out = self.controller.step(q, sample.relative)
-        out.stage = sample.stage
-        return out
+    def tracker(self, model: DualArmModel, params: ControllerParams, options: RunOptions) -> RelativeTracker:
+        return RelativeTracker(RelativeController(model, params))
 
 
 def parse_goals_source(items: object) -> GoalsSource:

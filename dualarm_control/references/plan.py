@@ -7,10 +7,9 @@ pose error against the reference's relative pose (eq 1-2 and 4-6 of paper 000 at
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -25,6 +24,7 @@ from dualarm_control.references.base import (
     RunOptions,
     SourceDefaults,
     StreamSample,
+    relative_report,
 )
 
 
@@ -83,9 +83,8 @@ class PlanSource(SourceDefaults):
     def initial_positions(self, default: FloatArray) -> FloatArray:
         return np.asarray(self.configurations[0])
 
-    def follower(self, model: DualArmModel, params: ControllerParams, q0: FloatArray,
-                 options: RunOptions) -> PlanFollower:
-        return PlanFollower(self, RelativeController(model, params))
+    def tracker(self, model: DualArmModel, params: ControllerParams, options: RunOptions) -> PlanTracker:
+        return PlanTracker(self, RelativeController(model, params))
 
     def describe(self) -> str:
         return f"plan {self.path}"
@@ -115,20 +114,24 @@ class PlanStream:
         return StreamSample(ref, (ref.joint_positions, ref.joint_velocities), "execute")
 
 
-class PlanFollower:
+class PlanTracker:
     """Joint-space tracking of the plan's trajectory (:meth:`RelativeController.track_joints`,
-    K = ``execution.gain``), the relative pose error measured against the reference's pose."""
+    K = the plan's ``execution.gain``) on the cycle's joint reference, the relative pose error
+    measured against the reference's relative pose."""
 
     uses_wrench = False
     label = "plan"
+    steps: int | None = None
 
     def __init__(self, source: PlanSource, controller: RelativeController) -> None:
         self.source = source
         self.controller = controller
-        self.steps = math.ceil((source.duration + source.settle_time) / controller.params.period)
 
-    def cycle(self, t: float, q: FloatArray, wrench: FloatArray | None) -> Cycle:
-        ref = self.source.sample(t)
-        out = self.controller.track_joints(q, ref.joint_positions, ref.joint_velocities, ref, self.source.gain)
+    def track(self, q: FloatArray, sample: StreamSample | None, t: float, wrench: FloatArray | None) -> Cycle:
+        assert sample is not None and sample.joints is not None, "joint tracking needs the joint reference"
+        out = self.controller.track_joints(q, *sample.joints, sample.relative, self.source.gain)
         out.stage = "execute"
         return out
+
+    def report(self, cycle: Cycle, t: float) -> dict[str, Any]:
+        return relative_report(cycle)

@@ -15,12 +15,13 @@ from typing import Any, ClassVar
 import numpy as np
 import pinocchio as pin
 
-from dualarm_control.controller import ControllerParams, Cycle, RelativeController
+from dualarm_control.controller import ControllerParams, RelativeController
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.references.base import (
     PREFIX,
     RELATIVE_TARGET,
+    RelativeTracker,
     RunOptions,
     SourceDefaults,
     StreamSample,
@@ -60,10 +61,8 @@ class SegmentsSource(SourceDefaults):
     def describe(self) -> str:
         return f"{len(self.segments)} segments"
 
-    def follower(self, model: DualArmModel, params: ControllerParams, q0: FloatArray,
-                 options: RunOptions) -> SegmentsFollower:
-        return SegmentsFollower(RelativeController(model, params),
-                                self.trajectory(*model.relative_pose(q0), options.limits), options.settle_time)
+    def tracker(self, model: DualArmModel, params: ControllerParams, options: RunOptions) -> RelativeTracker:
+        return RelativeTracker(RelativeController(model, params))
 
     def stream(self, model: DualArmModel, q0: FloatArray, options: RunOptions, period: float) -> SegmentsStream:
         return SegmentsStream(self.trajectory(*model.relative_pose(q0), options.limits), options.settle_time)
@@ -91,25 +90,6 @@ class SegmentsSource(SourceDefaults):
             p = np.asarray(seg.position)
             r = pin.exp3(seg.axis * seg.angle) @ r
         return RelativeTrajectory(start_position, start_rotation, segments, limits)
-
-
-class SegmentsFollower:
-    """The segments' ruckig trajectory (from the measured start pose) followed by the relative
-    pose task: each cycle samples the target at t and runs :meth:`RelativeController.step`."""
-
-    uses_wrench = False
-
-    def __init__(self, controller: RelativeController, trajectory: RelativeTrajectory, settle_time: float) -> None:
-        self.controller = controller
-        self.trajectory = trajectory
-        self.label = controller.params.solver
-        self.steps = math.ceil((trajectory.duration + settle_time) / controller.params.period)
-
-    def cycle(self, t: float, q: FloatArray, wrench: FloatArray | None) -> Cycle:
-        target = self.trajectory.sample(t)
-        out = self.controller.step(q, target)
-        out.stage = target.segment_name
-        return out
 
 
 class SegmentsStream:

@@ -39,6 +39,8 @@ from dualarm_control.references.base import (
     PREFIX,
     RunOptions,
     SourceDefaults,
+    StreamSample,
+    cycle_count,
     get,
     number,
 )
@@ -99,8 +101,7 @@ class TasksSource(SourceDefaults):
     def cell(self, options: RunOptions) -> dict[str, Any]:
         return {"table_height": self.table_height, "contact_pairs": (self.contact_links,) if options.force else ()}
 
-    def follower(self, model: DualArmModel, params: ControllerParams, q0: FloatArray,
-                 options: RunOptions) -> TasksController:
+    def tracker(self, model: DualArmModel, params: ControllerParams, options: RunOptions) -> TasksController:
         duration = options.duration if options.duration is not None else self.duration
         return TasksController(model, params, self, self.gain(options), options.force, duration)
 
@@ -185,7 +186,7 @@ class TasksController:
         self.gain = gain
         self.label = f"k={gain:g}" + (" force" if force else "")
         self.uses_wrench = force
-        self.steps = math.ceil((duration if duration is not None else spec.duration) / params.period)
+        self.steps: int | None = cycle_count(duration if duration is not None else spec.duration, params.period)
         self.spec = spec
         self.force = force
         self.period = params.period
@@ -211,9 +212,16 @@ class TasksController:
         self._pi = ForcePI(self.spec.force)
         self._offset = 0.0
 
-    def cycle(self, t: float, q: FloatArray, wrench: FloatArray | None) -> Cycle:
-        """:meth:`step` in the :class:`~dualarm_control.references.base.Follower` order of arguments."""
+    def track(self, q: FloatArray, sample: StreamSample | None, t: float, wrench: FloatArray | None) -> Cycle:
+        """:meth:`step` as a :class:`~dualarm_control.references.base.Tracker` (tasks have no stream)."""
         return self.step(q, t, wrench)
+
+    def report(self, cycle: Cycle, t: float) -> dict[str, Any]:
+        """The task cycle's /diagnostics values at full precision (``dualarm report`` recomputes
+        the task values from t, the normal offset and the filtered force)."""
+        return {"cycle_time_s": repr(cycle.cycle_time), "task_gain": repr(self.gain), "force": int(self.force),
+                "task_time_s": repr(t), "normal_offset_m": repr(cycle.normal_offset),
+                "measured_force_n": repr(cycle.measured_force), "circle_error_m": f"{self.circle_error(cycle):.6e}"}
 
     def step(self, q: FloatArray, t: float, wrench: FloatArray | None = None) -> Cycle:
         """One cycle at joint positions q (n,) [rad] and task time t [s]; the cycle's rows, the

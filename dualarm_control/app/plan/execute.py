@@ -3,7 +3,7 @@
 The cell starts at the plan's first configuration; every 5 ms control period the command is
 ``qd = qd_ref(t) + K (q_ref(t) - q)`` inside the eq (23) bounds (joint-space tracking,
 :func:`~dualarm_control.joint_tracking.joint_tracking_velocity`, K = ``execution.gain``; the
-controller node runs the same law with ``reference:=joint``) with the
+controller node runs the same tracker with ``plan:=FILE``) with the
 reference from :class:`~dualarm_control.planning.joint_trajectory.JointPathTrajectory`
 through the planned configurations and ``execution.subdivisions - 1`` closure-projected
 knots between each pair (:func:`~dualarm_control.planning.joint_trajectory.densify`).

@@ -216,13 +216,13 @@ def launch_scenario(
     sim_time = ["-p", "use_sim_time:=true"] if lockstep else []  # lockstep stamps are simulation time
     if plan is not None:  # execute a plan: joint reference from the trajectory node, tracked by the controller
         with_scenario += ["-p", f"plan:={Path(plan).resolve()}"]
-        controller_args = [*controller_args, "-p", "reference:=joint"]
     for f in params:
         common += ["--params-file", str(Path(f).resolve())]
     trajectory_args = [*with_scenario, "-p", "mode:=interactive"] if interactive else with_scenario
     if tasks:
         with_scenario += ["-p", f"force:={'true' if force else 'false'}"]
-        controller_args = [*with_scenario, *controller_args]
+    controller_args = [*with_scenario, *controller_args]  # the controller runs the scenario's tracker
+    if tasks:
         if record is not None:  # real time: the task starts once the recorder reads /diagnostics
             controller_args += ["-p", "task_start_readers:=1"]
         if record_topics == GRAPH_TOPICS:
