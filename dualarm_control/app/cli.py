@@ -18,8 +18,8 @@ EXIT_USAGE = 2
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
-    """Run a scenario in-process (lockstep): :func:`dualarm_control.app.run.experiment.experiment_command`."""
-    from dualarm_control.app.run.experiment import experiment_command
+    """Run a scenario in-process (lockstep): :func:`dualarm_control.app.run.command.experiment_command`."""
+    from dualarm_control.app.run.command import experiment_command
 
     return experiment_command(args.scenario, args.solver, args.params, Path(args.output), args.gains, args.force,
                               args.duration)
