@@ -38,8 +38,8 @@ def cmd_robot(args: argparse.Namespace) -> int:
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
-    """Run a scenario in-process (lockstep): :func:`dualarm_control.app.run.experiment.experiment_command`."""
-    from dualarm_control.app.run.experiment import experiment_command
+    """Run a scenario in-process (lockstep): :func:`dualarm_control.app.run.command.experiment_command`."""
+    from dualarm_control.app.run.command import experiment_command
 
     return experiment_command(args.scenario, args.solver, args.params, Path(args.output), args.gains, args.force,
                               args.duration, args.robot)
@@ -149,7 +149,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     if code != 0:
         return code
     experiment = json.loads((out / "experiment" / "metrics.json").read_text())
-    comparison = {}
+    comparison: dict[str, dict[str, dict[str, float]]] = {}
     print(f"\n{'solver':<24}{'metric':<9}{'bag (ROS)':>12}{'in-process':>12}{'rel. diff':>11}")
     for name in solvers:
         comparison[name] = {}
@@ -404,8 +404,11 @@ def _add_topic_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     from dualarm_control.ros.graph import DEFAULT_SPIN_TIME
     from dualarm_control.ros.node import DISCOVERY_TIMEOUT_S
 
-    spin = {"type": float, "default": DISCOVERY_TIMEOUT_S, "metavar": "S",
-            "help": "wait up to S s for the topic's discovery; answers as soon as it is found (default: %(default)s)"}
+    def add_spin_time(verb: argparse.ArgumentParser) -> None:
+        verb.add_argument("--spin-time", type=float, default=DISCOVERY_TIMEOUT_S, metavar="S",
+                          help="wait up to S s for the topic's discovery; answers as soon as it is found "
+                          "(default: %(default)s)")
+
     lst = verbs.add_parser("list", help="topics with publishers or subscriptions")
     lst.add_argument("-t", "--show-types", action="store_true", help="also print each topic's type")
     lst.add_argument("--spin-time", type=float, default=DEFAULT_SPIN_TIME, metavar="S",
@@ -416,18 +419,18 @@ def _add_topic_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     ech.add_argument("--once", action="store_true", help="print one message and exit")
     ech.add_argument("-n", "--count", type=int, metavar="N", help="print N messages and exit")
     ech.add_argument("--timeout", type=float, metavar="S", help="exit 1 if no message comes for S seconds")
-    ech.add_argument("--spin-time", **spin)
+    add_spin_time(ech)
     ech.set_defaults(func=cmd_topic_echo)
     hz_ = verbs.add_parser("hz", help="print the publishing rate")
     hz_.add_argument("topic")
     hz_.add_argument("-w", "--window", type=int, default=10_000, metavar="N",
                      help="messages in the rate window (default: %(default)s)")
     hz_.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
-    hz_.add_argument("--spin-time", **spin)
+    add_spin_time(hz_)
     hz_.set_defaults(func=cmd_topic_hz)
     inf = verbs.add_parser("info", help="type and endpoint counts")
     inf.add_argument("topic")
-    inf.add_argument("--spin-time", **spin)
+    add_spin_time(inf)
     inf.set_defaults(func=cmd_topic_info)
     from dualarm_control.ros.drive import add_topic_pub_parser
 
@@ -461,9 +464,6 @@ def _add_param_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
     verbs.required = True
     from dualarm_control.ros.node import DISCOVERY_TIMEOUT_S
 
-    timeout = {"type": float, "default": DISCOVERY_TIMEOUT_S, "metavar": "S",
-               "help": "wait up to S s for the node's parameter services, and as long for its answer "
-               "(default: %(default)s)"}
     for verb, helptext in (("list", "parameter names"), ("get", "a parameter's value"),
                            ("describe", "type, description, constraints"),
                            ("set", "set a parameter (value read as YAML: 10.0 double, 10 integer)")):
@@ -471,7 +471,9 @@ def _add_param_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) 
         v.add_argument("node", help="node name, e.g. /controller_node")
         for name in {"list": (), "set": ("name", "value")}.get(verb, ("name",)):
             v.add_argument(name)
-        v.add_argument("--timeout", **timeout)
+        v.add_argument("--timeout", type=float, default=DISCOVERY_TIMEOUT_S, metavar="S",
+                       help="wait up to S s for the node's parameter services, and as long for its answer "
+                       "(default: %(default)s)")
     par.set_defaults(func=cmd_param)
 
 

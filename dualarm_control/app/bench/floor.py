@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from dualarm_control.app.bench.load import busy_core
 from dualarm_control.errors import DualArmError
 from dualarm_control.metrics import percentiles
 from dualarm_control.ros.inputs import CycleTiming
@@ -92,8 +93,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 def run_floor(rate_hz: float, work_ms: float, load: str, scheduling: str, seconds: float = SECONDS) -> dict[str, Any]:
     """One probe in its own process at ``rate_hz`` with ``work_ms`` of CPU per cycle, one core kept busy
     when ``load`` is "busy", under SCHED_FIFO when ``scheduling`` is "rt"; its row."""
-    from dualarm_control.app.bench.realtime import busy_core
-
     command = [sys.executable, "-m", __name__, repr(1.0 / rate_hz), repr(work_ms / 1e3), repr(seconds),
                str(PRIORITY if scheduling == "rt" else 0)]
     with busy_core(load == "busy"):

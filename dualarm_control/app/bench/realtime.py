@@ -16,19 +16,18 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
 import tempfile
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from dualarm_control.app.bench.load import busy_core
 from dualarm_control.errors import DualArmError
 from dualarm_control.metrics import percentiles
 
@@ -162,27 +161,6 @@ def tree_environment(path: Path) -> dict[str, str]:
     first on PYTHONPATH, and no current directory ahead of it (``python -m`` puts it first)."""
     rest = os.environ.get("PYTHONPATH", "")
     return {"PYTHONPATH": str(path.resolve()) + (os.pathsep + rest if rest else ""), "PYTHONSAFEPATH": "1"}
-
-
-def busy_command() -> list[str]:
-    """A process keeping one core busy: ``stress-ng --cpu 1`` if installed, else a Python spin loop."""
-    if shutil.which("stress-ng"):
-        return ["stress-ng", "--cpu", "1", "--quiet"]
-    return [sys.executable, "-S", "-c", "while True: pass"]
-
-
-@contextmanager
-def busy_core(on: bool) -> Iterator[None]:
-    """While in the block, :func:`busy_command` runs at normal priority (when ``on``); killed after."""
-    if not on:
-        yield
-        return
-    proc = subprocess.Popen(busy_command(), stdout=subprocess.DEVNULL, start_new_session=True)
-    try:
-        yield
-    finally:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
 
 
 @dataclass(frozen=True)

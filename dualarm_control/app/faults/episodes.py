@@ -37,7 +37,7 @@ class GraphStreams:
     """The graph-level streams of a fault run, in receive order: every node's /diagnostics
     status (controller, simulator, trajectory node), the largest |command| per message, the
     joint-state and pose stamps. Not a per-cycle record (that is
-    :class:`dualarm_control.app.run.experiment.RunRecord`): a fault run is judged on what
+    :class:`dualarm_control.app.record.run_record.RunRecord`): a fault run is judged on what
     every node published and when, including safe commands and statuses outside cycles."""
 
     controller: list[Status] = field(default_factory=list)

@@ -2,7 +2,7 @@
 
 Recording is :mod:`dualarm_control.ros.recorder` (rclpy). :func:`read_run` reads a bag (one
 pass, ``rosbags.highlevel.AnyReader``) into the run records of the in-process runner
-(:class:`~dualarm_control.app.run.experiment.RunRecord`: one per solver of a relative-motion
+(:class:`~dualarm_control.app.record.run_record.RunRecord`: one per solver of a relative-motion
 run, the one of a task run); :func:`report` summarises them with the same
 :func:`~dualarm_control.app.record.report.summarize_run` and draws the figures of their kind.
 
@@ -10,7 +10,7 @@ Task bags (paper 001): A task run's bag holds ``/joint_states``, ``/velocity_con
 (``/wrench``, ``/clock``). The controller's per-cycle status names the scenario, the gain k,
 the force variant, and gives the cycle's joint-state stamp, task time, normal offset f_F,
 filtered force, solver status and cycle time. The task values f_i and bounds b_i are not
-recorded: :func:`~dualarm_control.app.run.experiment.with_task_values` recomputes them from the
+recorded: :func:`~dualarm_control.app.record.run_record.with_task_values` recomputes them from the
 joint state of each cycle's stamp and its task time -- the code the in-process runner uses --
 and :func:`~dualarm_control.app.record.report.summarize_run` gives the metrics. In
 lockstep the joint states, times and offsets are bit-identical to the in-process run, so are
@@ -39,7 +39,7 @@ from dualarm_control.errors import DualArmError
 from dualarm_control.ros.convert import stamp_ns
 
 if TYPE_CHECKING:
-    from dualarm_control.app.run.experiment import RunRecord
+    from dualarm_control.app.record.run_record import RunRecord
     from dualarm_control.robot import RobotDescription
     from dualarm_control.scenario import Scenario
 
@@ -351,7 +351,7 @@ def _relative_records(bag: Bag) -> list[RunRecord]:
     Messages are attributed to the solver of the nearest controller status in receive time.
     The final error is the last /relative_pose against the last /relative_target of the solver.
     """
-    from dualarm_control.app.run.experiment import RunRecord, nan_column
+    from dualarm_control.app.record.run_record import RunRecord, nan_column
 
     joint_names = bag.robot.joint_names
     n = len(joint_names)
@@ -443,7 +443,7 @@ def _time_axis(stamps: Sequence[int | None], n: int, period: float) -> FloatArra
 
 def _task_record(path: Path, bag: Bag) -> tuple[list[RunRecord], Scenario]:
     """The :class:`RunRecord` of a task-scenario bag (see the module docstring) and its scenario."""
-    from dualarm_control.app.run.experiment import (
+    from dualarm_control.app.record.run_record import (
         RunRecord,
         nan_column,
         with_task_values,

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from dualarm_control.app.run.experiment import RunRecord, TaskValues
+from dualarm_control.app.record.run_record import RunRecord, TaskValues
 from dualarm_control.kinematics import DualArmModel, FloatArray, rotation_angle
 from dualarm_control.metrics import (
     active_set_switches_per_s,

@@ -19,7 +19,7 @@ from dualarm_control.kinematics import DualArmModel, FloatArray
 
 if TYPE_CHECKING:
     from dualarm_control.app.record.bag import Bag
-    from dualarm_control.app.run.experiment import RunRecord
+    from dualarm_control.app.record.run_record import RunRecord
 
 
 @dataclass
