@@ -37,7 +37,8 @@ def params():
 
 def test_scenario_has_the_papers_tasks_and_cell(scenario) -> None:
     spec = scenario.tasks
-    assert spec is not None and scenario.urdf == "dualarm_cell_pan.urdf" and scenario.reference.kind == "tasks"
+    assert spec is not None and scenario.robot.name == "lwr4_pan_cell" and scenario.reference.kind == "tasks"
+    assert scenario.urdf_path.name == "dualarm_cell_pan.urdf"
     assert [t.type for t in spec.tasks] == ["circle", "cone", "singularity", "singularity", "table", "table"]
     assert spec.gains == (1.0, 0.5, 0.2) and spec.table_height == pytest.approx(0.4)
     assert [t.gain for t in spec.build(0.5)] == [0.5] * 6

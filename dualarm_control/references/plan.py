@@ -134,4 +134,5 @@ class PlanTracker:
         return out
 
     def report(self, cycle: Cycle, t: float) -> dict[str, Any]:
-        return relative_report(cycle)
+        """The tracking errors; ``solver`` names what ran (no solver: joint-space tracking)."""
+        return {**relative_report(cycle), "solver": "joint_tracking"}
