@@ -45,7 +45,7 @@ def wait_until(condition: Callable[[], T | None], seen: Callable[[], object], *,
                 return value
         waited = time.monotonic() - start
         if reason is None and waited > timeout:
-            reason = f"not within {timeout:.0f} s"
+            reason = f"not within {timeout:g} s"
         if reason is not None:
             raise AssertionError(f"waited {waited:.1f} s for {what}: {reason}; seen:\n{seen()}")
         if step is not None:
