@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-import queue
 import signal
 import subprocess
 import sys
@@ -24,6 +23,7 @@ import yaml
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
+from waiting import DEADLINE_S, exited, tail, wait_until
 
 from dualarm_control.app import cli
 from dualarm_control.app.record.bag import nearest_labels, pose_error, quaternion_angle
@@ -76,23 +76,20 @@ class Proc:
     def __init__(self, args: list[str], stderr_path: Path) -> None:
         self._stderr = stderr_path.open("w")
         self.popen = subprocess.Popen(args, cwd=REPO, stdout=subprocess.PIPE, stderr=self._stderr, text=True)
-        self.lines: queue.Queue[str] = queue.Queue()
+        self.lines: list[str] = []
         self.stderr_path = stderr_path
         threading.Thread(target=self._pump, daemon=True).start()
 
     def _pump(self) -> None:
         assert self.popen.stdout is not None
         for line in self.popen.stdout:
-            self.lines.put(line.rstrip("\n"))
+            self.lines.append(line.rstrip("\n"))
 
-    def wait_line(self, text: str, timeout: float) -> bool:
-        """Whether a stdout line equal to ``text`` arrives within ``timeout`` s."""
-        try:
-            while True:
-                if self.lines.get(timeout=timeout) == text:
-                    return True
-        except queue.Empty:
-            return False
+    def wait_line(self, text: str, timeout: float = DEADLINE_S) -> None:
+        """Wait for a stdout line equal to ``text``; fail with the output and stderr so far when
+        ``timeout`` [s] passes or the process exits first."""
+        wait_until(lambda: text in self.lines, lambda: tail(self.lines) + "\nstderr:\n" + self.stderr(),
+                   what=f"'{text}' on stdout", timeout=timeout, gone=exited(self.popen))
 
     def stop(self, sig: int, timeout: float = 15.0) -> int:
         """Send ``sig`` and wait for the exit code."""
@@ -123,8 +120,8 @@ def record_with_publisher(tmp_path: Path, name: str, sig: int, n: int = N_MSGS) 
     pub = Proc([sys.executable, str(script), str(n)], tmp_path / f"{name}.pub.err")
     try:
         # deadlines, not speeds: each process starts (imports, discovery) in seconds on a loaded machine
-        assert rec.wait_line("bag: ready", 120.0), f"recorder not ready: {rec.stderr()}"
-        assert pub.wait_line("published", 120.0), f"publisher failed: {pub.stderr()}"
+        rec.wait_line("bag: ready", 120.0)
+        pub.wait_line("published", 120.0)
         wait_for_progress(rec, n)
         code = rec.stop(sig)
         return bag, code, rec.stderr()
@@ -134,15 +131,11 @@ def record_with_publisher(tmp_path: Path, name: str, sig: int, n: int = N_MSGS) 
             pub.kill()
 
 
-def wait_for_progress(rec: Proc, n: int, timeout: float = 60.0) -> None:
-    """Wait until the recorder's progress shows 3 * n messages (progress every 2 s)."""
-    import time
-
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if f"{3 * n} messages" in rec.stderr():
-            return
-        time.sleep(0.1)
+def wait_for_progress(rec: Proc, n: int, timeout: float = DEADLINE_S) -> None:
+    """Wait until the recorder's progress (every 2 s on stderr) shows all 3 * n messages; fail with
+    its stderr when ``timeout`` [s] passes or it exits first."""
+    wait_until(lambda: f"recorded {3 * n} messages" in rec.stderr(), rec.stderr, what=f"{3 * n} messages recorded",
+               timeout=timeout, gone=exited(rec.popen, "the recorder"))
 
 
 def read_bag(bag: Path) -> dict[str, list[object]]:

@@ -10,11 +10,11 @@ import os
 import re
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import yaml
 from bound_ignoring import NAME
+from waiting import wait_for_line
 
 from dualarm_control.app.run.launcher import Launch, node_command
 
@@ -42,10 +42,7 @@ def test_bounds_violations_reach_diagnostics() -> None:
         launch.start("trajectory_node", node_command("trajectory_node", scenario))
         controller = launch.start("controller_node", [sys.executable, "-u", "-m", "bound_ignoring", "--ros-args",
                                                       "-p", f"solver:={NAME}"], env={"PYTHONPATH": path})
-        deadline = time.monotonic() + 60.0
-        while not any("solver bounds_violated" in line for line in controller.lines):
-            assert time.monotonic() < deadline and controller.popen.poll() is None, controller.lines[-20:]
-            time.sleep(0.1)
+        wait_for_line(controller.lines, "solver bounds_violated", controller.popen, name="controller_node")
         statuses = controller_diagnostics(5)
     finally:
         launch.stop()

@@ -27,6 +27,7 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from waiting import exited, tail, wait_until
 
 from dualarm_control.controller import CONTROLLER_PARAMETERS, controller_params
 from dualarm_control.errors import DualArmError
@@ -249,6 +250,18 @@ def bad_messages(names: list[str]) -> dict[str, list[Any]]:
     }
 
 
+REPORTED = (
+    ("controller_node", "malformed message on /joint_states"),
+    ("controller_node", "malformed message on /relative_target"),
+    ("sim_node", "malformed message on /velocity_controller/commands"),
+    *(("controller_node", f) for f in ("missing 1 of the 14", "duplicate joint names", "positions", "NaN or inf",
+                                       "older than the last accepted", "beyond the cell's reach",
+                                       "time source restarted")),
+    *(("sim_node", f) for f in ("13 values rejected", "NaN or inf")),
+)
+"""(node, fragment): each rejection a node must report on /diagnostics."""
+
+
 def test_garbled_cdr_and_bad_messages_on_running_nodes() -> None:
     """controller_node and sim_node survive random/garbled CDR and bad content on every subscribed topic:
     still running, "malformed message on /topic" and each rejection on /diagnostics, and still working
@@ -290,11 +303,15 @@ def test_garbled_cdr_and_bad_messages_on_running_nodes() -> None:
         while time.monotonic() < end:
             executor.spin_once(timeout_sec=0.01)
 
+    def both_tails() -> str:
+        return f"sim_node:\n{tail(sim.lines, 10)}\ncontroller_node:\n{tail(controller.lines, 10)}"
+
+    def died() -> str | None:
+        return exited(sim.popen, "sim_node")() or exited(controller.popen, "controller_node")()
+
     try:
-        end = time.monotonic() + 60.0
-        while not (all(p.get_subscription_count() >= 1 for p in pubs.values()) and commands):
-            assert time.monotonic() < end, "nodes not up:\n" + "\n".join(sim.lines[-10:] + controller.lines[-10:])
-            spin(0.1)
+        wait_until(lambda: all(p.get_subscription_count() >= 1 for p in pubs.values()) and commands, both_tails,
+                   what="the nodes up (every topic subscribed, a command)", step=lambda: spin(0.1), gone=died)
         rng = np.random.default_rng(11)
         for topic, pub in pubs.items():
             for _ in range(PAYLOADS_PER_TOPIC):
@@ -305,27 +322,21 @@ def test_garbled_cdr_and_bad_messages_on_running_nodes() -> None:
                 spin(0.01)
         future = convert.joint_state(names, time.time_ns() + 1000 * convert.NS, np.zeros(14), np.zeros(14))
         pubs["/joint_states"].publish(future)
-        spin(1.5)
+        wait_until(lambda: all(any(f in m for n, m in diagnostics if n == node) for node, f in REPORTED), lambda: [
+            (node, f) for node, f in REPORTED if not any(f in m for n, m in diagnostics if n == node)],
+                   what="every rejection on /diagnostics", step=lambda: spin(0.1), gone=died)
         after = time.monotonic()
-        end = after + 60.0  # a deadline for "still commanding", not a rate: 50 commands are 0.25 s at 200 Hz
-        while sum(t > after for t in commands) < 50:
-            assert time.monotonic() < end, "the controller stopped commanding"
-            spin(0.1)
-        assert sim.popen.poll() is None and controller.popen.poll() is None, "a node died:\n" + "\n".join(
-            sim.lines[-20:] + controller.lines[-20:])
+        # still commanding after it all: 50 commands more (0.25 s at 200 Hz; the deadline is not a rate)
+        wait_until(lambda: sum(t > after for t in commands) >= 50, lambda: f"{sum(t > after for t in commands)} "
+                   "commands\n" + both_tails(), what="50 more commands", step=lambda: spin(0.1), gone=died)
+        assert died() is None, "a node died:\n" + both_tails()
     finally:
         node.destroy_node()
         context.try_shutdown()
         codes = controller.stop(), sim.stop()
     by_node = {name: [m for n, m in diagnostics if n == name] for name in ("controller_node", "sim_node")}
-    for topic in ("/joint_states", "/relative_target"):
-        assert any(f"malformed message on {topic}" in m for m in by_node["controller_node"]), topic
-    assert any("malformed message on /velocity_controller/commands" in m for m in by_node["sim_node"])
-    for fragment in ("missing 1 of the 14", "duplicate joint names", "positions", "NaN or inf",
-                     "older than the last accepted", "beyond the cell's reach", "time source restarted"):
-        assert any(fragment in m for m in by_node["controller_node"]), fragment
-    for fragment in ("13 values rejected", "NaN or inf"):
-        assert any(fragment in m for m in by_node["sim_node"]), fragment
+    for node, fragment in REPORTED:  # waited for above; each one here again, named
+        assert any(fragment in m for m in by_node[node]), (node, fragment)
     assert any("time source restarted" in line for line in controller.lines)
     assert codes == (0, 0), (controller.lines[-20:], sim.lines[-20:])
     assert not any("Traceback" in line for line in controller.lines + sim.lines)

@@ -7,21 +7,22 @@ private ROS_DOMAIN_ID.
 
 from __future__ import annotations
 
-import queue
+import re
 import signal
 import subprocess
 import sys
 import threading
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
+from waiting import DEADLINE_S, exited, tail, wait_for_line, wait_until
 
 REPO = Path(__file__).resolve().parents[1]
 SLOW = Path(__file__).parent / "data" / "slow.yaml"
+STREAMS = ("/joint_states", "/velocity_controller/commands")
 
 
 class Launch:
@@ -31,25 +32,22 @@ class Launch:
         self.popen = subprocess.Popen([sys.executable, "-u", "-m", "dualarm_control.app.cli", "launch", *args],
                                       cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         self.lines: list[str] = []
-        self._new: queue.Queue[str] = queue.Queue()
-        threading.Thread(target=self._pump, daemon=True).start()
+        self._reader = threading.Thread(target=self._pump, daemon=True)
+        self._reader.start()
 
     def _pump(self) -> None:
         assert self.popen.stdout is not None
         for line in self.popen.stdout:
             self.lines.append(line.rstrip("\n"))
-            self._new.put(line)
 
-    def wait_for(self, text: str, timeout: float = 60.0) -> None:
-        end = time.monotonic() + timeout
-        while not any(text in line for line in self.lines):
-            if time.monotonic() > end or self.popen.poll() is not None:
-                raise AssertionError(f"'{text}' not seen; output:\n" + "\n".join(self.lines[-40:]))
-            time.sleep(0.05)
+    def wait_for(self, text: str, timeout: float = DEADLINE_S) -> None:
+        wait_for_line(self.lines, text, self.popen, timeout=timeout, name="dualarm launch")
 
     def finish(self, timeout: float = 120.0) -> int:
+        """The exit code, once the launch has exited and every line of its output is in ``lines``."""
         code = self.popen.wait(timeout=timeout)
-        time.sleep(0.2)
+        self._reader.join(timeout=DEADLINE_S)  # to the end of its output
+        assert not self._reader.is_alive(), "the launch's output did not end:\n" + tail(self.lines)
         return code
 
     def kill(self) -> None:
@@ -221,8 +219,24 @@ def test_plain_rclpy_script_drives_the_simulator(tmp_path: Path) -> None:
     assert code == 0
 
 
+RECORDED = re.compile(r"\[bag\] recorded \d+ messages in [0-9.]+ s \((.*)\)")
+MID_RUN = 300
+"""Messages of /joint_states and of /velocity_controller/commands the recorder reports before the Ctrl-C."""
+
+
+def recorded_counts(lines: list[str]) -> dict[str, int] | None:
+    """Per-topic counts of the recorder's latest progress line (``[bag] recorded N messages ...``)."""
+    for line in reversed(lines):
+        found = RECORDED.search(line)
+        if found:
+            items = found.group(1).split(", ") if found.group(1) else []
+            return {topic: int(n) for topic, n in (item.rsplit(" ", 1) for item in items)}
+    return None
+
+
 def test_ctrl_c_mid_recorded_launch(tmp_path: Path) -> None:
-    """SIGINT to ``dualarm launch`` mid-run: every node exits 0, no tracebacks, a whole bag."""
+    """SIGINT to ``dualarm launch`` mid-run, once the recorder has reported 300 joint states and 300
+    commands: every node exits 0, no tracebacks, a whole bag with at least what was reported."""
     from rosbags.highlevel import AnyReader
 
     bag = tmp_path / "bag"
@@ -230,7 +244,13 @@ def test_ctrl_c_mid_recorded_launch(tmp_path: Path) -> None:
     try:
         launch.wait_for("bag: ready")  # the recorder subscribes once every recorded topic has a publisher
         launch.wait_for("segment 1/1 'move'")
-        time.sleep(2.0)
+
+        def mid_run() -> dict[str, int] | None:
+            counts = recorded_counts(launch.lines)
+            return counts if counts and min(counts.get(t, 0) for t in STREAMS) >= MID_RUN else None
+
+        reported = wait_until(mid_run, lambda: tail(launch.lines), what=f"{MID_RUN} messages of {STREAMS} recorded",
+                              gone=exited(launch.popen, "dualarm launch"))
         launch.popen.send_signal(signal.SIGINT)
         code = launch.finish(timeout=60)
     finally:
@@ -242,7 +262,7 @@ def test_ctrl_c_mid_recorded_launch(tmp_path: Path) -> None:
         assert bad not in log, log
     with AnyReader([bag]) as reader:
         counts = {t: i.msgcount for t, i in reader.topics.items()}
-        assert counts["/joint_states"] > 300 and counts["/velocity_controller/commands"] > 300
+        assert all(counts[t] >= reported[t] for t in STREAMS), (counts, reported)  # nothing received is lost
         decoded = [reader.deserialize(raw, conn.msgtype) for conn, _, raw in reader.messages()]
         assert len(decoded) == reader.message_count  # every message readable, up to the signal
     commands = [m.data for m in decoded if hasattr(m, "layout")]

@@ -9,10 +9,10 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
+from waiting import exited, wait_until
 
 from dualarm_control.scenario import load_scenario
 from dualarm_sim.cell import DualArmCell
@@ -54,10 +54,11 @@ def test_sim_node_alone_holds_still_without_a_command() -> None:
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     try:
-        end = time.monotonic() + 120.0
-        while not (states and states[-1][0] - states[0][0] >= HOLD_SECONDS):
-            assert time.monotonic() < end and sim.poll() is None, "no joint states from sim_node"
-            executor.spin_once(timeout_sec=0.1)
+        wait_until(lambda: states and states[-1][0] - states[0][0] >= HOLD_SECONDS,
+                   lambda: f"{len(states)} joint states" + (f" over {states[-1][0] - states[0][0]:.3f} s of stamps"
+                                                            if states else ""),
+                   what=f"{HOLD_SECONDS:g} s of joint states from sim_node", timeout=120.0,
+                   step=lambda: executor.spin_once(timeout_sec=0.1), gone=exited(sim, "sim_node"))
     finally:
         node.destroy_node()
         context.try_shutdown()

@@ -1,4 +1,4 @@
-"""A dependable start (issue 20, point 6): a node that joins a running cell gets its topics at once.
+"""A dependable start (issue 20, point 6): a node that joins a running cell gets its topics.
 
 Fast DDS 2.14 sends a new participant's first announcement before it listens
 (``RTPSParticipantImpl::enable``): a peer that answers at once is not heard, and does not
@@ -7,17 +7,21 @@ periodic announcement, every 3 s by default. The nodes announce every 0.1 s
 (config/fastdds_discovery.xml, applied by dualarm_control/ros/env.py). The worst case is a
 node joining a cell that is already running (no later newcomer makes the peer announce
 itself again): here the trajectory node starts 10 times against one running sim_node, in
-real time, and must receive its first /joint_states within 0.5 s of being up each time.
-That is the suite's one timing assertion: a start-up property, 6x the normal 80 ms; before
-the profile, 21 of 30 such starts took over 0.5 s, up to 3.3 s (docs/bench.md, "Start-up").
+real time. The default test asserts what does not depend on the machine's load: every start
+receives its first /joint_states (waited for with a deadline), and prints how long each took. How long is a wall-clock figure: the bound
+(1 s, 6x the normal 80 ms and far below the 2.6-3.3 s stall it catches; before the profile, 21
+of 30 such starts took over 0.5 s, up to 3.3 s: docs/bench.md, "Start-up") is asserted by the
+``slow`` test on the same starts.
 """
 
 from __future__ import annotations
 
 import re
-import time
 from pathlib import Path
 from xml.etree import ElementTree
+
+import pytest
+from waiting import wait_for_line
 
 from dualarm_control.app.run.launcher import Launch, Process, node_command
 from dualarm_control.paths import config_path
@@ -31,11 +35,11 @@ from dualarm_control.ros.env import (
 
 STARTS = 10
 FIRST_STATE_WITHIN_S = 1.0
-"""The stall this test catches (a lost discovery reply) lasts until the next periodic announcement:
-2.6-3.3 s with Fast DDS's default 3 s. Measured with the package's profile: at most 0.41 s in 78 full
-launches and 60 joins on a loaded machine, but one of 10 joins took 0.515 s in a fresh clone under
-``stress-ng --cpu 1`` (the node itself starved of CPU), so the bound is 1 s, not the 0.5 s target
-that docs/bench.md reports against."""
+"""The slow test's bound. The stall it catches (a lost discovery reply) lasts until the next periodic
+announcement: 2.6-3.3 s with Fast DDS's default 3 s. Measured with the package's profile: at most
+0.41 s in 78 full launches and 60 joins on a loaded machine, but one of 10 joins took 0.515 s in a
+fresh clone under ``stress-ng --cpu 1`` (the node itself starved of CPU), so the bound is 1 s, not the
+0.5 s target that docs/bench.md reports against."""
 REAL_TIME = ["-p", "lockstep:=false", "-p", "scenario:=assembly"]
 LOG_FORMAT = {"RCUTILS_CONSOLE_OUTPUT_FORMAT": "[{severity}] [{time}] [{name}]: {message}"}
 LOG_LINE = re.compile(r"\[INFO\] \[(\d+\.\d+)\] \[trajectory_node\]: (.*)")
@@ -51,10 +55,7 @@ def log_time(lines: list[str], prefix: str) -> float:
 
 
 def wait_for(process: Process, text: str) -> None:
-    deadline = time.monotonic() + 120.0
-    while not any(text in line for line in process.lines):
-        assert time.monotonic() < deadline and process.popen.poll() is None, "\n".join(process.lines[-20:])
-        time.sleep(0.02)
+    wait_for_line(process.lines, text, process.popen, timeout=120.0, name=process.name)
 
 
 def first_state_delay() -> float:
@@ -69,7 +70,10 @@ def first_state_delay() -> float:
     return log_time(node.lines, "targets:") - log_time(node.lines, "scenario '")
 
 
-def test_a_node_joining_a_running_cell_gets_its_first_joint_state_within_half_a_second() -> None:
+@pytest.fixture(scope="module")
+def joins() -> list[float]:
+    """:data:`STARTS` joins of the trajectory node to one running sim_node: seconds from each node
+    being up to its first joint state."""
     cell = Launch(echo=False)
     try:
         sim = cell.start("sim_node", node_command("sim_node", REAL_TIME), LOG_FORMAT)
@@ -78,7 +82,21 @@ def test_a_node_joining_a_running_cell_gets_its_first_joint_state_within_half_a_
         assert sim.popen.poll() is None, "\n".join(sim.lines[-20:])
     finally:
         cell.stop()
-    assert max(delays) < FIRST_STATE_WITHIN_S, [round(d, 3) for d in delays]
+    print("first joint state after [s]:", [round(d, 3) for d in delays])
+    return delays
+
+
+def test_a_node_joining_a_running_cell_gets_its_first_joint_state(joins: list[float]) -> None:
+    """Each of the 10 joins got its first joint state after it was up (the wait for it fails after
+    120 s: a deadline, not a speed; how soon is the slow test's)."""
+    assert len(joins) == STARTS and all(delay >= 0.0 for delay in joins), joins
+
+
+@pytest.mark.slow
+def test_a_node_joining_a_running_cell_gets_its_first_joint_state_within_one_second(joins: list[float]) -> None:
+    """Each join's first joint state within 1 s of the node being up: a wall-clock bound (a starved
+    node misses it on a busy machine), hence ``slow``."""
+    assert max(joins) < FIRST_STATE_WITHIN_S, [round(d, 3) for d in joins]
 
 
 def announcement_period(profile: Path) -> float:

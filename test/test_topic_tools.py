@@ -20,6 +20,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header
 from trajectory_msgs.msg import MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint
+from waiting import wait_until
 
 from dualarm_control.ros.graph import (
     RateMeter,
@@ -108,15 +109,23 @@ def test_echo_count_nested_sequences(publisher: subprocess.Popen[str]) -> None:
     assert status["values"] == [{"key": "solver", "value": "sparse_qp"}]
 
 
+RATE_REPORT = r"average rate: (\S+)\n\tmin: (\S+)s max: (\S+)s std dev: (\S+)s window: (\d+)"
+
+
 def test_hz_reports_the_rate_of_what_it_received(publisher: subprocess.Popen[str]) -> None:
     """End to end: reports come, each self-consistent (the mean period 1/rate lies between the
     smallest and largest period of its window). The arithmetic against known arrival times is
     test_rate_meter_and_format; how close the rate is to the publisher's 50 Hz depends on how
     busy the machine is, which is not this test's subject."""
-    out = dualarm("topic", "hz", "/joint_states", "--duration", "2.5")
-    assert out.returncode == 0, out.stderr
-    reports = re.findall(r"average rate: (\S+)\n\tmin: (\S+)s max: (\S+)s std dev: (\S+)s window: (\d+)", out.stdout)
-    assert reports, out.stdout
+    runs: list[subprocess.CompletedProcess[str]] = []
+
+    def reported() -> list[tuple[str, ...]]:  # a run of 2.5 s reports once it received two messages
+        runs.append(dualarm("topic", "hz", "/joint_states", "--duration", "2.5"))
+        return re.findall(RATE_REPORT, runs[-1].stdout) if runs[-1].returncode == 0 else []
+
+    reports = wait_until(reported, lambda: f"{len(runs)} runs, the last: exit {runs[-1].returncode}\n"
+                         f"{runs[-1].stdout}{runs[-1].stderr}", what="a rate report of dualarm topic hz", interval=0.0)
+    out = runs[-1]
     for rate, low, high, std, window in reports:
         assert math.isfinite(float(rate)) and float(rate) > 0.0 and int(window) >= 2, out.stdout
         assert float(low) - 5e-4 <= 1.0 / float(rate) <= float(high) + 5e-4, out.stdout  # printed to 1 ms
@@ -133,14 +142,21 @@ def test_info_counts_publishers_and_subscriptions(publisher: subprocess.Popen[st
 
 
 def test_list_shows_topics_with_endpoints(publisher: subprocess.Popen[str]) -> None:
-    # list prints what discovery found within --spin-time (a snapshot): give a new participant time on a loaded machine
-    out = dualarm("topic", "list", "-t", "--spin-time", "10")
-    assert out.returncode == 0, out.stderr
-    lines = out.stdout.splitlines()
-    for expected in ("/joint_states [sensor_msgs/msg/JointState]",
-                     "/diagnostics [diagnostic_msgs/msg/DiagnosticArray]",
-                     "/velocity_controller/commands [std_msgs/msg/Float64MultiArray]"):
-        assert expected in lines
+    """list prints what discovery found within --spin-time (a snapshot): listed again until the
+    publisher's topics are there, and only they. 4 s: over the plain rclpy publisher's 3 s announcement
+    period (Fast DDS's default), the wait when its first answer to a new participant is lost
+    (docs/bench.md, "Start-up"); more on a loaded machine."""
+    expected = {"/joint_states [sensor_msgs/msg/JointState]", "/diagnostics [diagnostic_msgs/msg/DiagnosticArray]",
+                "/velocity_controller/commands [std_msgs/msg/Float64MultiArray]"}
+    runs: list[subprocess.CompletedProcess[str]] = []
+
+    def listed() -> list[str] | None:
+        runs.append(dualarm("topic", "list", "-t", "--spin-time", "4"))
+        lines = runs[-1].stdout.splitlines()
+        return lines if runs[-1].returncode == 0 and expected <= set(lines) else None
+
+    lines = wait_until(listed, lambda: f"{len(runs)} runs, the last: exit {runs[-1].returncode}\n"
+                       f"{runs[-1].stdout}{runs[-1].stderr}", what=f"{sorted(expected)} listed", interval=0.0)
     assert "/wrench [geometry_msgs/msg/WrenchStamped]" not in lines
 
 

@@ -8,9 +8,10 @@ against pinocchio's forward kinematics of the recorded joint state.
 
 from __future__ import annotations
 
-import subprocess
+import os
+import re
+import signal
 import sys
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -18,10 +19,11 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 import pytest
+from waiting import DEADLINE_S, exited, tail, wait_for_line, wait_until
 
 from dualarm_control.app import cli
 from dualarm_control.app.record.bag import format_notes
-from dualarm_control.app.run.launcher import launch_scenario
+from dualarm_control.app.run.launcher import Launch, Process, launch_scenario
 from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.link_frames import urdf_joints
@@ -109,28 +111,21 @@ def test_bag_info_says_tf_is_computed(demo_bag: Path, capsys: pytest.CaptureFixt
 
 
 @pytest.fixture
-def sim_node() -> Iterator[subprocess.Popen[str]]:
-    """sim_node in real time on the default scenario (no controller: it holds the arms)."""
-    proc = subprocess.Popen([sys.executable, "-m", "dualarm_control.app.cli", "run", "sim_node"],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+def sim_node() -> Iterator[Process]:
+    """sim_node in real time on the default scenario (no controller: it holds the arms), once it has
+    logged its scenario: the end of its ``__init__``, after it published /robot_description."""
+    launch = Launch(echo=False)
     try:
-        assert proc.stdout is not None
-        for line in proc.stdout:  # started once it logs its scenario
-            if "scenario 'assembly'" in line:
-                break
+        proc = launch.start("sim_node", [sys.executable, "-m", "dualarm_control.app.cli", "run", "sim_node"])
+        wait_for_line(proc.lines, "scenario 'assembly'", proc.popen, name="sim_node")
         yield proc
     finally:
-        proc.send_signal(2)
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        launch.stop()
 
 
-def late_description(wait_s: float) -> str | None:
+def late_description(wait_s: float) -> str:
     """Subscribe /robot_description (transient local, as a viewer does) in a fresh rclpy context
-    and return what arrives within ``wait_s`` [s]."""
+    and return the first message; fail if none arrives within ``wait_s`` [s]."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -145,41 +140,56 @@ def late_description(wait_s: float) -> str | None:
         node.create_subscription(String, "/robot_description", lambda m: received.append(m.data), qos)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
-        end = time.monotonic() + wait_s
-        while not received and time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.1)
+        wait_until(lambda: received, lambda: "nothing", what="/robot_description", timeout=wait_s,
+                   step=lambda: executor.spin_once(timeout_sec=0.1))
         node.destroy_node()
     finally:
         context.try_shutdown()
-    return received[0] if received else None
+    return received[0]
 
 
-def test_late_subscriber_gets_robot_description(sim_node: subprocess.Popen[str]) -> None:
-    """A subscriber created seconds after sim_node published /robot_description (once) gets it."""
-    time.sleep(2.0)
-    assert late_description(20.0) == urdf_path().read_text()
+def test_late_subscriber_gets_robot_description(sim_node: Process) -> None:
+    """A subscriber created after sim_node published /robot_description (once, before it logged its
+    scenario: the fixture waits for that line) gets it."""
+    assert late_description(DEADLINE_S) == urdf_path().read_text()
 
 
-def _record(bag: Path, *extra: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "dualarm_control.app.cli", "bag", "record", "-o", str(bag),
-                           "/joint_states", "-d", "4", *extra], check=False, capture_output=True, text=True,
-                          timeout=60)
+STATES = 10
+"""Joint states a recorder reports before it is stopped."""
 
 
-def test_late_recorder_keeps_description_and_no_tf_turns_tf_off(sim_node: subprocess.Popen[str],
-                                                                  tmp_path: Path) -> None:
+def _record(bag: Path, *extra: str) -> str:
+    """Record /joint_states (and what sim_node latches) until the recorder reports more than
+    :data:`STATES` of them, then Ctrl-C; its stderr."""
+    launch = Launch(echo=False)
+    try:
+        rec = launch.start("bag", [sys.executable, "-m", "dualarm_control.app.cli", "bag", "record", "-o", str(bag),
+                                   "/joint_states", *extra])
+
+        def states() -> int:  # from its progress lines, every 2 s: "recorded N messages in T s (/joint_states n, ...)"
+            counts = [int(m) for line in rec.lines for m in re.findall(r"/joint_states (\d+)", line)]
+            return max(counts, default=0)
+
+        wait_until(lambda: states() > STATES, lambda: tail(rec.lines), what=f"{STATES} joint states recorded",
+                   gone=exited(rec.popen, "the recorder"))
+        os.killpg(rec.popen.pid, signal.SIGINT)
+        assert rec.popen.wait(timeout=DEADLINE_S) == 0, tail(rec.lines)
+        return "\n".join(rec.lines)
+    finally:
+        launch.stop()
+
+
+def test_late_recorder_keeps_description_and_no_tf_turns_tf_off(sim_node: Process, tmp_path: Path) -> None:
     """A recorder started after sim_node keeps /robot_description (not named) and writes /tf from
     /joint_states; with --no-tf it writes no /tf and bag info says nothing about it."""
     with_tf, without = tmp_path / "with_tf", tmp_path / "no_tf"
-    out = _record(with_tf)
-    assert out.returncode == 0, out.stderr
+    _record(with_tf)
     topics = read_bag(with_tf)
     assert [m.data for _, m in topics["/robot_description"]] == [urdf_path().read_text()]  # type: ignore[attr-defined]
-    assert len(topics["/tf"]) == len(topics["/joint_states"]) > 10
-    out = _record(without, "--no-tf")
-    assert out.returncode == 0, out.stderr
+    assert len(topics["/tf"]) == len(topics["/joint_states"]) > STATES
+    _record(without, "--no-tf")
     topics = read_bag(without)
-    assert "/robot_description" in topics and len(topics["/joint_states"]) > 10
+    assert "/robot_description" in topics and len(topics["/joint_states"]) > STATES
     assert "/tf" not in topics and "/tf_static" not in topics
     assert NOTE not in format_notes(without)
 
@@ -262,25 +272,31 @@ def _foxglove_tf_and_description(serve: Any, **kwargs: Any) -> tuple[dict[str, d
     server = threading.Thread(target=run, daemon=True)
     server.start()
     try:
-        end = time.monotonic() + 30.0
-        while not ports and time.monotonic() < end and server.is_alive():
-            time.sleep(0.05)
-        assert ports, f"the server did not start: {errors}"
+        wait_until(lambda: ports, lambda: errors, what="the server's port",
+                   gone=lambda: None if server.is_alive() or ports else "the server thread ended")
         ws = websocket.create_connection(f"ws://127.0.0.1:{ports[0]}", subprotocols=["foxglove.sdk.v1"], timeout=10)
         channels: dict[str, dict[str, Any]] = {}
-        while not {"/tf", "/robot_description"} <= channels.keys():
+
+        def advertised() -> bool:  # one message a poll (each recv waits up to the socket's 10 s)
             text = ws.recv()
             if isinstance(text, str) and json.loads(text)["op"] == "advertise":
                 channels.update({c["topic"]: c for c in json.loads(text)["channels"]})
+            return {"/tf", "/robot_description"} <= channels.keys()
+
+        wait_until(advertised, lambda: sorted(channels), what="/tf and /robot_description advertised", interval=0.0)
         ws.send(json.dumps({"op": "subscribe", "subscriptions": [
             {"id": 1, "channelId": channels["/robot_description"]["id"]}, {"id": 2, "channelId": channels["/tf"]["id"]}]}))
         payloads: dict[int, bytes] = {}
-        while len(payloads) < 2:
+
+        def both() -> bool:
             data = ws.recv()
             if isinstance(data, bytes):
                 opcode, subscription, _ = struct.unpack_from("<BIQ", data)
                 assert opcode == 1
                 payloads.setdefault(subscription, data[13:])
+            return len(payloads) == 2
+
+        wait_until(both, lambda: sorted(payloads), what="a message of each subscription", interval=0.0)
         ws.close()
     finally:
         stop.set()
@@ -314,33 +330,44 @@ def test_foxglove_server_sends_tf_and_robot_description(demo_bag: Path) -> None:
     _check_description_and_tf(description, tf)
 
 
-def test_live_view_logs_the_running_cell(sim_node: subprocess.Popen[str], tmp_path: Path) -> None:
-    """``dualarm view`` on the running cell (run_live, subscriptions of ros/listen.py): each joint state it
-    counts is one row of every joint's transform in the recording, none rejected."""
-    import re
+LIVE_STATES = 200
+"""Joint states the live view logs before the test stops it with Ctrl-C (one second at 200 Hz)."""
 
+
+def test_live_view_logs_the_running_cell(sim_node: Process, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``dualarm view`` on the running cell (run_live, subscriptions of ros/listen.py), stopped by Ctrl-C
+    once it has logged 200 joint states (its duration, 60 s, only a deadline): each joint state it
+    counts is one row of every joint's transform in the recording, none rejected."""
     import rerun as rr
     from test_view import read_rrd
 
+    from dualarm_control.app.view import live
     from dualarm_control.app.view import rerun_view as rv
-    from dualarm_control.app.view.live import run_live
 
+    logged_states = live.LiveLog.joint_state
+
+    def joint_state(log: live.LiveLog, value: Any) -> None:
+        logged_states(log, value)
+        if log.counts["/joint_states"] == LIVE_STATES:
+            signal.raise_signal(signal.SIGINT)  # Ctrl-C: run_live's loop ends at its next check
+
+    monkeypatch.setattr(live.LiveLog, "joint_state", joint_state)
     path = tmp_path / "live.rrd"
     rec = rr.RecordingStream(rv.APPLICATION_ID)
     rec.save(str(path))
     said: list[str] = []
-    assert run_live(DualArmModel(), rec, duration=8.0, report=said.append) == 0
+    assert live.run_live(DualArmModel(), rec, duration=DEADLINE_S, report=said.append) == 0
     rec.flush()
     rec.disconnect()
     logged = re.fullmatch(r"dualarm view: logged /joint_states (\d+), .* (\d+) samples rejected", said[-1])
     assert logged is not None, said
     states = int(logged.group(1))
-    assert states > 0 and int(logged.group(2)) == 0
+    assert states >= LIVE_STATES and int(logged.group(2)) == 0, said  # stopped by the Ctrl-C, not at 60 s
     rows, _ = read_rrd(path)
     assert rows["/joint_tf/right_joint_7"] == rows["/joint_tf/left_joint_1"] == states
 
 
-def test_foxglove_server_of_the_running_cell(sim_node: subprocess.Popen[str]) -> None:
+def test_foxglove_server_of_the_running_cell(sim_node: Process) -> None:
     """The live feed: the server reads the running sim_node's /robot_description and /joint_states."""
     from dualarm_control.app.view.foxglove_view import serve_live
 

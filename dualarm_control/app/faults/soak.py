@@ -21,6 +21,11 @@ and their closing log lines give the final counters.
   :data:`IN_FLIGHT` commands are in doubt) and exactly at the end (the controller and
   trajectory node are stopped first, the simulator a second later). The final shortfall must
   equal the one at the end of the warm-up within :data:`IN_FLIGHT`: no command lost after it.
+
+RSS growth and the accounting are properties of the code; whether a second holds a burst of
+missed deadlines is also the machine's (its load, its other real-time tasks). The document keeps
+them apart: ``load_independent_ok`` is RSS growth and accounting, ``bursts_ok`` the deadline
+criterion, ``passed`` both (the verdict of ``dualarm soak``).
 """
 
 from __future__ import annotations
@@ -192,8 +197,8 @@ def summarize(samples: list[dict[str, Any]], controller: dict[str, int], sim: di
     expected = published - controller.get("unmatched", 0)
     final_shortfall = expected - sim["received"] if controller and sim else None
     at_warmup = samples[warm]["shortfall"] if warm is not None else None
-    accounted = (final_shortfall is not None and at_warmup is not None
-                 and abs(final_shortfall - at_warmup) <= IN_FLIGHT)
+    lost = final_shortfall - at_warmup if final_shortfall is not None and at_warmup is not None else None
+    accounted = lost is not None and abs(lost) <= IN_FLIGHT
     growth_ok = all(v["growth"] <= MAX_RSS_GROWTH for v in rss.values())  # nan (no warm-up) fails
     return {
         "scenario": scenario, "minutes": duration / 60.0, "samples": samples,
@@ -203,7 +208,9 @@ def summarize(samples: list[dict[str, Any]], controller: dict[str, int], sim: di
         "seconds_with_missed": sum(1 for d in per_window if d > 0), "bursts": bursts, "bursts_ok": bursts == 0,
         "startup_missed": startup_missed, "max_missed_per_s_after_warmup": max(steady, default=0),
         "controller": controller, "sim": sim, "commands_published": published, "commands_expected": expected,
-        "startup_shortfall": at_warmup, "final_shortfall": final_shortfall, "accounted": accounted,
+        "startup_shortfall": at_warmup, "final_shortfall": final_shortfall,
+        "lost_after_startup": lost, "accounted": accounted,
+        "load_independent_ok": growth_ok and accounted,
         "passed": growth_ok and bursts == 0 and accounted,
     }
 
@@ -211,7 +218,9 @@ def summarize(samples: list[dict[str, Any]], controller: dict[str, int], sim: di
 def format_soak(doc: dict[str, Any]) -> str:
     c, s = doc["controller"], doc["sim"]
     lines = [f"# Soak: '{doc['scenario']}' on repeat for {doc['minutes']:.1f} min at 200 Hz over ROS", "",
-             f"{doc['repetitions']} repetitions; {'PASS' if doc['passed'] else 'FAIL'}", "",
+             (f"{doc['repetitions']} repetitions; {'PASS' if doc['passed'] else 'FAIL'} (RSS growth and "
+              f"accounting: {'pass' if doc['load_independent_ok'] else 'FAIL'}; deadline bursts: "
+              f"{'pass' if doc['bursts_ok'] else 'FAIL'})"), "",
              "| node | RSS after warm-up [MiB] | largest after [MiB] | growth | ", "|---|---|---|---|"]
     for name, r in doc["rss"].items():
         lines.append(f"| {name} | {r['baseline_mib']:.1f} | {r['max_after_mib']:.1f} | {r['growth']:+.2%} |")
