@@ -40,3 +40,20 @@ def urdf_path() -> Path:
 def config_path(*parts: str) -> Path:
     """Path inside ``config/`` (e.g. ``config_path('solvers', 'sparse_qp.yaml')``)."""
     return share_dir().joinpath("config", *parts)
+
+
+def registry_names(folder: str) -> list[str]:
+    """Names of the YAML files shipped in ``config/<folder>/`` (the scenarios', the robots' registry)."""
+    return sorted(p.stem for p in config_path(folder).glob("*.yaml"))
+
+
+def registry_file(folder: str, name_or_path: str, what: str) -> Path | str:
+    """The YAML of ``name_or_path``: a file path (ending .yaml/.yml) or a name of ``config/<folder>/``;
+    a message for the caller's error (naming ``what`` and the valid names) when there is none."""
+    path = Path(name_or_path)
+    if path.suffix in (".yaml", ".yml"):
+        return path if path.is_file() else f"{what} file not found: {path}"
+    candidate = config_path(folder, f"{name_or_path}.yaml")
+    if candidate.is_file():
+        return candidate
+    return f"unknown {what} {name_or_path!r}; valid choices: {', '.join(registry_names(folder))}"

@@ -49,7 +49,7 @@ import numpy.typing as npt
 
 from dualarm_control.errors import DualArmError
 from dualarm_control.params import ParameterError, read_params_file
-from dualarm_control.paths import config_path, share_dir
+from dualarm_control.paths import config_path, registry_file, registry_names, share_dir
 
 PREFIX = "robot."
 DEFAULT_ROBOT = "lwr4_cell"
@@ -197,21 +197,15 @@ def robot_defaults(robot: RobotDescription) -> dict[str, Any]:
 
 def robot_names() -> list[str]:
     """Names of the robots shipped in config/robots/."""
-    return sorted(p.stem for p in config_path("robots").glob("*.yaml"))
+    return registry_names("robots")
 
 
 def robot_file(name_or_path: str) -> Path:
     """Path of a robot description by registry name or file path (RobotError if unknown)."""
-    path = Path(name_or_path)
-    if path.suffix in (".yaml", ".yml"):
-        if not path.is_file():
-            raise RobotError(f"robot description file not found: {path}")
-        return path
-    candidate = config_path("robots", f"{name_or_path}.yaml")
-    if not candidate.is_file():
-        raise RobotError(f"unknown robot {name_or_path!r}; valid choices: {', '.join(robot_names())} "
-                         "(or a YAML file of your own, docs/robots.md)")
-    return candidate
+    found = registry_file("robots", name_or_path, "robot")
+    if isinstance(found, str):
+        raise RobotError(found + (" (or a YAML file of your own, docs/robots.md)" if "unknown" in found else ""))
+    return found
 
 
 _LOADED: dict[Path, tuple[int, RobotDescription]] = {}

@@ -31,7 +31,7 @@ import numpy as np
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import FloatArray
 from dualarm_control.params import ParameterError, ParamSpec, read_params_file
-from dualarm_control.paths import config_path
+from dualarm_control.paths import registry_file, registry_names
 from dualarm_control.references.base import PREFIX, ReferenceSource, get, number, vector
 from dualarm_control.references.goals import GoalsSource, parse_goals_source
 from dualarm_control.references.segments import SegmentsSource, parse_segments
@@ -100,20 +100,15 @@ ROBOT_PARAMETER = ParamSpec("robot", "", "robot description (config/robots/<name
 
 def scenario_names() -> list[str]:
     """Names of the scenarios shipped in config/scenarios/."""
-    return sorted(p.stem for p in config_path("scenarios").glob("*.yaml"))
+    return registry_names("scenarios")
 
 
 def scenario_file(name_or_path: str) -> Path:
     """Path of a scenario given by registry name or file path (ScenarioError if unknown)."""
-    path = Path(name_or_path)
-    if path.suffix in (".yaml", ".yml"):
-        if not path.is_file():
-            raise ScenarioError(f"scenario file not found: {path}")
-        return path
-    candidate = config_path("scenarios", f"{name_or_path}.yaml")
-    if not candidate.is_file():
-        raise ScenarioError(f"unknown scenario {name_or_path!r}; valid choices: {', '.join(scenario_names())}")
-    return candidate
+    found = registry_file("scenarios", name_or_path, "scenario")
+    if isinstance(found, str):
+        raise ScenarioError(found)
+    return found
 
 
 def load_scenario(name_or_path: str, robot: str | RobotDescription | None = None) -> Scenario:
