@@ -34,7 +34,7 @@ def test_live_changes_keep_the_acceleration_bound(tmp_path: Path) -> None:
     try:
         launch.wait_for("segment 2/40", timeout=120.0)  # moving, the recorder running
         for name, value in CHANGES:
-            out = dualarm("param", "set", "/controller_node", name, value)
+            out = dualarm("param", "set", "/controller_node", name, value, "--timeout", "120", timeout=300)
             assert out.returncode == 0 and out.stdout.strip() == "Set parameter successful", out.stdout + out.stderr
         launch.wait_for("solver='sparse_qp'", timeout=120.0)  # the last change has landed
     finally:
