@@ -92,11 +92,17 @@ DEFAULT_MARGIN = 0.15
 """Broadphase margin [m]: pairs that can never come closer than this are not checked (1.5 times
 the default influence distance: a larger d_i up to 0.15 m needs no new model)."""
 DEFAULT_GJK_TOLERANCE = 1e-12
-"""coal's GJK tolerance (its default convergence criterion, absolute; coal's default is 1e-6
-relative). The rows' accuracy follows it: median FD error 2e-6 m/rad at 1e-9, 3e-8 at 1e-12 on the
-LWR4 cell; at 1e-12 GJK fails on about one shape pair in 1e5 (then :data:`FALLBACK_GJK_TOLERANCE`)."""
-FALLBACK_GJK_TOLERANCE = 1e-9
-"""The tolerance of a second try when GJK or EPA fails (a non-finite distance or witness point)."""
+"""coal's GJK tolerance: a bound on the duality gap ||x||^2 - x.w [m^2] (absolute), which
+certifies the distance (to about 1e-12 / d). Not coal's default criterion (relative, 1e-6): on
+cylinder rims it can stop with witness points up to 1e-8 m outside the shapes (a distance that
+much too small), and so can the duality gap below about 3e-13, where GJK cannot progress further.
+The rows' accuracy follows the tolerance: a witness point may slide by e along a rim for a change
+of d of order e^2 / r, so on the LWR4 cell the rows' median error is 2e-6 m/rad at 1e-9 and 6e-8
+at 1e-12 (99 % within 2e-6). GJK may fail instead (coal returns -DBL_MAX: about one shape pair in
+1e5 at 1e-12, one in 1e4 at 1e-13, mostly the large torso box against a link 0.3 m away): then
+the pair is tried again at :data:`FALLBACK_GJK_TOLERANCES`."""
+FALLBACK_GJK_TOLERANCES = (1e-11, 1e-10, 1e-9)
+"""The tolerances of the next tries when GJK or EPA fails (a non-finite distance or witness point)."""
 EPA_TOLERANCE = 1e-6
 """coal's EPA tolerance [m] (its default): the penetration depths' accuracy. Tighter (1e-9), EPA
 fails on some cylinder pairs (an infinite distance) instead of converging."""
@@ -249,7 +255,7 @@ class CollisionModel:
         self.geometry_data = pin.GeometryData(self.geometry)
         self.request = _request(gjk_tolerance)
         """The request of every shape pair (absolute tolerance, no warm start: module docstring)."""
-        self._fallback = _request(max(gjk_tolerance, FALLBACK_GJK_TOLERANCE))
+        self._fallbacks = [_request(t) for t in FALLBACK_GJK_TOLERANCES if t > gjk_tolerance]
         self._results = [coal.DistanceResult() for _ in self.geometry.collisionPairs]
         self._names = [g.name for g in self.geometry.geometryObjects]
         self._index_shape_pairs()
@@ -474,18 +480,20 @@ class CollisionModel:
         return out
 
     def _retry(self, k: int, tf_a: coal.Transform3s, tf_b: coal.Transform3s) -> float:
-        """Shape pair k again with the fallback request (GJK or EPA failed: coal then returns
-        -DBL_MAX or an infinite distance and NaN points); CollisionError if it fails too."""
+        """Shape pair k again with the fallback requests, tightest first (GJK or EPA failed: coal
+        then returns -DBL_MAX or an infinite distance and NaN points); CollisionError if all fail."""
         res = self._results[k]
-        res.clear()
         ga, gb = int(self._shape_a[k]), int(self._shape_b[k])
-        d = coal.distance(self._shapes[ga], tf_a, self._shapes[gb], tf_b, self._fallback, res)
-        if not (-_FAILED < d < _FAILED and np.all(np.isfinite(res.getNearestPoint1()))
-                and np.all(np.isfinite(res.getNearestPoint2())) and np.all(np.isfinite(res.normal))):
-            raise CollisionError(f"coal failed on the shapes {self._names[ga]!r} and {self._names[gb]!r} "
-                                 f"(distance {d!r}) at tolerances {self.request.gjk_tolerance:g} and "
-                                 f"{self._fallback.gjk_tolerance:g}")
-        return float(d)
+        d = math.nan
+        for request in self._fallbacks:
+            res.clear()
+            d = coal.distance(self._shapes[ga], tf_a, self._shapes[gb], tf_b, request, res)
+            if -_FAILED < d < _FAILED and all(np.isfinite(x).all() for x in (
+                    res.getNearestPoint1(), res.getNearestPoint2(), res.normal)):
+                return float(d)
+        raise CollisionError(f"coal failed on the shapes {self._names[ga]!r} and {self._names[gb]!r} (distance "
+                             f"{d!r}) at GJK tolerances {self.request.gjk_tolerance:g} to "
+                             f"{max(FALLBACK_GJK_TOLERANCES + (self.request.gjk_tolerance,)):g}")
 
     def _sphere_bounds(self, rotations: FloatArray, translations: FloatArray) -> FloatArray:
         """Lower bounds [m] of every shape pair's distance at the shapes' placements (rotations
@@ -546,18 +554,17 @@ def velocity_damper_rows(distances: Sequence[PairDistance], influence: float, sa
 
 
 def _request(gjk_tolerance: float) -> coal.DistanceRequest:
-    """A coal distance request: signed distances and witness points, coal's default convergence
-    criterion on an absolute tolerance, no warm start, 256 iterations for GJK and EPA."""
+    """A coal distance request: signed distances and witness points, the duality-gap criterion on
+    an absolute tolerance, no warm start, 256 iterations for GJK and EPA."""
     request = coal.DistanceRequest()
     request.gjk_tolerance = gjk_tolerance
     request.epa_tolerance = EPA_TOLERANCE
-    request.gjk_convergence_criterion = coal.GJKConvergenceCriterion.Default
+    request.gjk_convergence_criterion = coal.GJKConvergenceCriterion.DualityGap
     request.gjk_convergence_criterion_type = coal.GJKConvergenceCriterionType.Absolute
     request.gjk_initial_guess = coal.GJKInitialGuess.DefaultGuess
     request.gjk_max_iterations = GJK_MAX_ITERATIONS
     request.epa_max_iterations = GJK_MAX_ITERATIONS
     request.enable_signed_distance = True
-    request.enable_nearest_points = True
     return request
 
 
