@@ -138,7 +138,7 @@ def test_rows_are_the_derivative_of_the_distance(name: str) -> None:
 def test_rows_of_penetrating_pairs(name: str) -> None:
     """The same for penetrating pairs (-2 cm < d < -1 mm): EPA's depth is accurate to its 1e-6 m
     tolerance, so the steps are 10 times larger (0.5 to 2 x 1e-3 rad: noise about 1e-3 m/rad) and
-    the bound 1e-2 m/rad (observed worst 1.3e-3; the rows are 0.01 to 0.3 m/rad: a sign error in
+    the bound 1e-2 m/rad (observed worst 1.9e-3; the rows are 0.01 to 0.3 m/rad: a sign error in
     the normal's convention would give twice that)."""
     c = collision_model(name)
     m = c.kinematics
@@ -154,7 +154,9 @@ def test_rows_of_penetrating_pairs(name: str) -> None:
         fd, _ = finite_differences(c, q, v, STEPS * 10, pairs)
         errors += [abs(f - d.dd_dq @ v) for f, d in zip(fd, pairs, strict=True) if not math.isnan(f)]
     e = np.array(errors)
-    assert e.max() <= 1e-2, f"{name}: {len(e)} penetrating samples, max |fd - row| {e.max():.1e} m/rad"
+    summary = f"{name}: {len(e)} penetrating samples, |fd - row| median {np.median(e):.1e}, max {e.max():.1e} m/rad"
+    print(summary)
+    assert e.max() <= 1e-2, summary
 
 
 def test_distances_match_pybullet() -> None:
