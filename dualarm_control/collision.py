@@ -205,7 +205,8 @@ class CollisionModel:
         self_collision: check each arm against its own links (joint distance >= 3).
         margin: broadphase margin [m]: a pair whose distance is proven >= margin at every
             configuration is dropped; must be >= the influence distance it is used with.
-        gjk_tolerance: coal's GJK and EPA tolerance [m].
+        gjk_tolerance: coal's GJK tolerance, on the duality gap [m^2] (:data:`DEFAULT_GJK_TOLERANCE`;
+            EPA keeps :data:`EPA_TOLERANCE`).
 
     Attributes:
         pairs: the link pairs checked, (link_a, link_b): left before right, world before an arm.
@@ -324,7 +325,11 @@ class CollisionModel:
         return self._body(link).side
 
     def joint_distance(self, link_a: str, link_b: str) -> int:
-        """Number of arm joints on the kinematic tree's path between two links [-]."""
+        """Number of arm joints on the kinematic tree's path between two links [-] (KeyError for a
+        name that is not a link)."""
+        for name in (link_a, link_b):
+            if not self.model.existFrame(name):
+                raise KeyError(f"{name!r} is not a link of {self.kinematics.urdf.name}")
         ja, jb = (self.model.frames[self.model.getFrameId(n)].parentJoint for n in (link_a, link_b))
         chain_a, chain_b = self._chain(ja), self._chain(jb)
         common = len(set(chain_a) & set(chain_b))
@@ -384,9 +389,14 @@ class CollisionModel:
         bound = ||o_1A - o_1B|| - R_A - R_B, or the distance of A's shapes to B's sphere when A is
         the world. If B is on A's arm beyond A's joint k, B's sphere is about the origin of joint
         k + 1, which is fixed to A: bound = distance of A's shapes to that sphere (coal, in the
-        frame of joint k). Negative when the spheres overlap the shapes (the pair is kept).
+        frame of joint k). Two links on one joint (or both in the world) keep their distance: the
+        bound is that distance. Negative when the spheres overlap the shapes (the pair is kept).
+        KeyError for a link without collision shapes.
         """
         a, b = self._body(link_a), self._body(link_b)
+        if a.joint == b.joint:
+            return min(_shape_distance(self.geometry.geometryObjects[ka], self.geometry.geometryObjects[kb])
+                       for ka in a.geometries for kb in b.geometries)
         if a.side != WORLD and (b.side == WORLD or (a.side == b.side and len(self._chain(a.joint)) >
                                                     len(self._chain(b.joint)))):
             a, b = b, a
@@ -553,6 +563,14 @@ def velocity_damper_rows(distances: Sequence[PairDistance], influence: float, sa
     a = -np.stack([p.dd_dq for p in near])
     b = gain * (np.array([p.distance for p in near]) - safety) / (influence - safety)
     return a, b
+
+
+def _shape_distance(a: pin.GeometryObject, b: pin.GeometryObject) -> float:
+    """The distance [m] of two shapes placed in one frame (their ``placement``s)."""
+    result = coal.DistanceResult()
+    return float(coal.distance(a.geometry, coal.Transform3s(a.placement.rotation, a.placement.translation),
+                               b.geometry, coal.Transform3s(b.placement.rotation, b.placement.translation),
+                               coal.DistanceRequest(), result))
 
 
 def _request(gjk_tolerance: float) -> coal.DistanceRequest:
