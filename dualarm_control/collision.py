@@ -262,6 +262,8 @@ class CollisionModel:
         self._results = [coal.DistanceResult() for _ in self.geometry.collisionPairs]
         self._names = [g.name for g in self.geometry.geometryObjects]
         self._index_shape_pairs()
+        self._shape_pair_names = [(self._names[a], self._names[b]) for a, b in
+                                  zip(self._shape_a.tolist(), self._shape_b.tolist(), strict=True)]
 
     # ---- links and pairs -------------------------------------------------------------------
 
@@ -477,19 +479,18 @@ class CollisionModel:
             points[0, r] = res.getNearestPoint1()
             points[1, r] = res.getNearestPoint2()
             normals[r] = res.normal
-            if not (np.isfinite(points[:, r]).all() and np.isfinite(normals[r]).all()):
-                self._retry(k, tf[shape_a[k]], tf[shape_b[k]])
-                points[0, r], points[1, r], normals[r] = res.getNearestPoint1(), res.getNearestPoint2(), res.normal
             dist[r] = res.min_distance
+        bad = ~(np.isfinite(points).all(axis=(0, 2)) & np.isfinite(normals).all(axis=1))
+        for r in np.flatnonzero(bad).tolist():  # a finite distance with NaN points: GJK failed
+            k = chosen[r][1]
+            res = results[k]
+            dist[r] = self._retry(k, tf[shape_a[k]], tf[shape_b[k]])
+            points[0, r], points[1, r], normals[r] = res.getNearestPoint1(), res.getNearestPoint2(), res.normal
         normals /= np.linalg.norm(normals, axis=1)[:, None]
         rows = self._rows(np.array([k for _, k in chosen]), points, normals)
-        names, pairs, collision_pairs = self._names, self.pairs, self.geometry.collisionPairs
-        out = []
-        for r, (i, k) in enumerate(chosen):
-            shape_pair = collision_pairs[k]
-            out.append(PairDistance(pairs[i][0], pairs[i][1], names[shape_pair.first], names[shape_pair.second],
-                                    float(dist[r]), points[0, r], points[1, r], normals[r], rows[r]))
-        return out
+        pairs, shape_names = self.pairs, self._shape_pair_names
+        return [PairDistance(*pairs[i], *shape_names[k], d, points[0, r], points[1, r], normals[r], rows[r])
+                for r, ((i, k), d) in enumerate(zip(chosen, dist.tolist(), strict=True))]
 
     def _retry(self, k: int, tf_a: coal.Transform3s, tf_b: coal.Transform3s) -> float:
         """Shape pair k again with the fallback requests, tightest first (GJK or EPA failed: coal
