@@ -129,7 +129,8 @@ class CollisionParams:
             to brake to rest at 10 m/s^2, which fits in d_i - d_s = 7 cm.
         safety_distance: d_s [m]: the distance the damper keeps, >= 0. Default 0.03 m: it
             covers what the model does not see: the LWR4's collision cylinders are 6 mm thinner
-            than its visual ones (r 0.054 vs 0.060 m: 12 mm between two arms), one control period
+            than its visual ones (r 0.054 vs 0.060 m: 12 mm between two arms), pybullet's shapes
+            differ from coal's by up to 2 mm (docs/collision.md), one control period
             of motion at 1 m/s (5 mm at T = 5 ms) between two measurements, and the first-order
             prediction d(t + T) ~ d + d_dot T, whose error is O(T^2) (0.1 mm here).
         gain: xi [m/s]: the approach speed allowed at d = d_i (0 at d_s), > 0. Default 0.5 m/s:
