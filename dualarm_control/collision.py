@@ -1,0 +1,658 @@
+"""Collision distances between the robot's links and the velocity damper that keeps them apart.
+
+The ROS-free core of collision avoidance (issue 27, part 1; docs/collision.md). Not yet used by the
+solvers or the controller: :func:`velocity_damper_rows` gives rows ``A qd <= b`` that a QP can add.
+
+Geometry: the robot's COLLISION shapes from its resolved URDF (``pin.buildGeomFromUrdf``), reduced
+like :class:`~dualarm_control.kinematics.DualArmModel`'s model (``pin.buildReducedModel``, the same
+locked joints at the same values, the same joint order). Meshes are replaced by their convex hulls
+(as pybullet does for the links of a multibody): coal then returns a signed distance for every pair
+and the witness points are unique for strictly separated convex shapes, except on degenerate
+configurations (parallel faces or edges: the tests detect them).
+
+Distances (``coal.distance`` on the shapes placed by ``pin.updateGeometryPlacements``), for a pair
+of shapes A (on link a) and B (on link b) at the joint configuration q [rad], (n,):
+
+    d = n^T (p_b - p_a)                                   [m]
+
+with p_a, p_b [m], (3,), the witness points in the world (the nearest points of A and B) and n,
+(3,), the unit normal from A to B. When A and B are separate, d = ||p_b - p_a|| > 0 and n = (p_b -
+p_a) / d; when they touch d = 0; when they penetrate coal's EPA returns d < 0, minus the
+penetration depth (the shortest translation of B that separates them), p_b - p_a = d n then points
+against n (B's deepest point lies inside A). A link with several shapes (Baxter's fingers) keeps
+the pair of shapes with the smallest d. Accuracy (measured, docs/collision.md): d to about
+1e-12 / d m apart (certified by GJK's duality gap, :data:`DEFAULT_GJK_TOLERANCE`), to 1e-6 m in
+penetration (EPA); the rows to 3e-6 m/rad for 99 % of the pairs near contact (worst seen 5e-5:
+witness points sliding along a rim or an edge).
+Every call starts GJK afresh (no warm start): the same q gives the same distances bit for bit,
+whatever was computed before.
+
+Distance velocity: the witness points move with their links, so (for unique witness points)
+
+    d_dot = n^T (v(p_b) - v(p_a)) = dd_dq qd,   dd_dq = n^T (J_pb - J_pa)   (1, n)
+
+where J_p = J_v - S(p - o) J_w, (3, n), is the Jacobian of the point of the link at p [m/s per
+rad/s]: [J_v; J_w] the link's parent joint's Jacobian (pinocchio LOCAL_WORLD_ALIGNED: velocity of
+the joint origin o and angular velocity, world axes), S the cross-product matrix. A fixed part's
+J_p is zero. (The motion of the witness points over the surfaces and of n do not contribute: n
+is normal to both surfaces at the witness points and n^T dn = 0.)
+
+Velocity damper (Faverjon and Tournassoud 1987; Kanoun et al. 2011): for every pair closer than
+the influence distance d_i, the approach speed is bounded so that d decays at most exponentially
+towards the safety distance d_s:
+
+    d_dot >= -xi (d - d_s) / (d_i - d_s)        i.e.   -dd_dq qd <= xi (d - d_s) / (d_i - d_s)
+
+xi [m/s] is the approach speed allowed at d = d_i (it falls linearly to 0 at d = d_s, and d_dot
+must be positive below d_s: the pair is pushed back out). Along the boundary d(t) - d_s = (d_0 -
+d_s) exp(-t xi / (d_i - d_s)): d_s is never crossed in continuous time.
+
+Pairs (:class:`CollisionModel`), a link being the parent frame of a shape, "the world" every shape
+not moved by an arm joint (the torso, the pedestal, the arms' bases, a locked head), and the joint
+distance of two links the number of arm joints on the kinematic tree's path between them (links
+fixed to each other count as one body; two links at joint distance 1 are adjacent: their shapes
+touch or overlap at the joint, by design):
+
+* every link of the left arm (moved by a left joint: the flange, the tool, the fingers too)
+  against every link of the right arm;
+* every arm link against every shape of the world at joint distance >= 2 (the first link of an
+  arm, on its base, is adjacent to the world);
+* with ``self_collision``, each arm against its own links at joint distance >= 3 (links i and i+2
+  of an arm share link i+1 between them and are not checked: on the LWR4 link i's cylinder reaches
+  past joint i+1's origin, and on Baxter the elbow and forearm shapes overlap their neighbours');
+* minus the ``allowed`` link pairs (e.g. a peg and its hole), minus the pairs the broadphase proves
+  can never come within ``margin`` of each other (:meth:`CollisionModel.lower_bound`).
+
+No pair is chosen or dropped by looking at a configuration: a pair that overlaps in the robot's
+ready configuration is kept (and reported by :meth:`CollisionModel.distances` with d <= 0).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import coal
+import numpy as np
+import numpy.typing as npt
+import pinocchio as pin
+
+from dualarm_control.errors import DimensionError, DualArmError, ParameterError
+from dualarm_control.kinematics import DualArmModel
+from dualarm_control.robot import RobotError
+
+FloatArray = npt.NDArray[np.float64]
+WORLD = "world"
+"""The side of the shapes no arm joint moves (the torso, the pedestal, the arms' bases)."""
+SAME_ARM_JOINT_DISTANCE = 3
+"""Smallest joint distance of two links of one arm that are checked against each other."""
+WORLD_JOINT_DISTANCE = 2
+"""Smallest joint distance of an arm link and a world shape that are checked."""
+DEFAULT_MARGIN = 0.15
+"""Broadphase margin [m]: pairs that can never come closer than this are not checked (1.5 times
+the default influence distance: a larger d_i up to 0.15 m needs no new model)."""
+DEFAULT_GJK_TOLERANCE = 1e-12
+"""coal's GJK tolerance: a bound on the duality gap ||x||^2 - x.w [m^2] (absolute), which
+certifies the distance (to about 1e-12 / d). Not coal's default criterion (relative, 1e-6): on
+cylinder rims it can stop with witness points up to 1e-8 m outside the shapes (a distance that
+much too small), and so can the duality gap at 1e-13 (seen on Baxter's forearms), where GJK
+cannot progress further.
+The rows' accuracy follows the tolerance: a witness point may slide by e along a rim for a change
+of d of order e^2 / r, so on the LWR4 cell the rows' median error is 2e-6 m/rad at 1e-9 and 6e-8
+at 1e-12 (99 % within 2e-6). GJK may fail instead (coal returns -DBL_MAX: 3 of 131 000 shape
+pairs at 1e-12, 21 at 1e-13, over 1000 random LWR4 configurations, mostly the large torso box
+against a link 0.3 m away): then the pair is tried again at :data:`FALLBACK_GJK_TOLERANCES`."""
+FALLBACK_GJK_TOLERANCES = (1e-11, 1e-10, 1e-9)
+"""The tolerances of the next tries when GJK or EPA fails (a non-finite distance or witness point)."""
+EPA_TOLERANCE = 1e-6
+"""coal's EPA tolerance [m] (its default): the penetration depths' accuracy. Tighter (1e-9), EPA
+fails on some cylinder pairs (an infinite distance) instead of converging."""
+GJK_MAX_ITERATIONS = 256
+"""coal's GJK and EPA iteration limits (coal's defaults: 128 and 64)."""
+_FAILED = 1e6
+"""A distance [m] beyond this is coal's failure value (-DBL_MAX or inf), not a distance."""
+
+
+class CollisionError(DualArmError, RuntimeError):
+    """coal could not compute a distance (the message names the shapes)."""
+
+
+@dataclass(frozen=True)
+class CollisionParams:
+    """Settings of the velocity damper (module docstring), validated.
+
+    Attributes:
+        enabled: whether the damper's rows are added (a switch for the solvers, later).
+        influence_distance: d_i [m]: pairs closer than this get a row. Default 0.10 m: an arm
+            approaching at 1 m/s (a point 0.5-1 m from a joint turning at 1-2 rad/s) needs 5 cm
+            to brake to rest at 10 m/s^2, which fits in d_i - d_s = 7 cm.
+        safety_distance: d_s [m]: the distance the damper keeps, >= 0. Default 0.03 m: it
+            covers what the model does not see: the LWR4's collision cylinders are 6 mm thinner
+            than its visual ones (r 0.054 vs 0.060 m: 12 mm between two arms), pybullet's shapes
+            differ from coal's by up to 2 mm (docs/collision.md), one control period
+            of motion at 1 m/s (5 mm at T = 5 ms) between two measurements, and the first-order
+            prediction d(t + T) ~ d + d_dot T, whose error is O(T^2) (0.1 mm here).
+        gain: xi [m/s]: the approach speed allowed at d = d_i (0 at d_s), > 0. Default 0.5 m/s:
+            below the 1 m/s a fast arm reaches (so crossing d_i asks for braking, not a stop), and
+            the decay rate xi / (d_i - d_s) = 7.1 1/s gives xi T / (d_i - d_s) = 0.036 per period
+            at T = 5 ms, far below 1 (the discrete step d_{k+1} - d_s = (1 - xi T / (d_i - d_s))
+            (d_k - d_s) stays monotone; it would oscillate above 1 and diverge above 2).
+    """
+
+    enabled: bool = True
+    influence_distance: float = 0.10
+    safety_distance: float = 0.03
+    gain: float = 0.5
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.enabled, bool):
+            raise ParameterError("collision.enabled", self.enabled, "true or false")
+        for key in ("influence_distance", "safety_distance", "gain"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+                raise ParameterError(f"collision.{key}", value, "a finite number")
+        if self.safety_distance < 0.0:
+            raise ParameterError("collision.safety_distance", self.safety_distance, "a distance >= 0 [m]")
+        if self.influence_distance <= self.safety_distance:
+            raise ParameterError("collision.influence_distance", self.influence_distance,
+                                 f"a distance [m] > collision.safety_distance = {self.safety_distance}")
+        if self.gain <= 0.0:
+            raise ParameterError("collision.gain", self.gain, "a speed > 0 [m/s]")
+
+
+@dataclass(frozen=True, slots=True)
+class PairDistance:
+    """The distance of one link pair at one configuration (module docstring).
+
+    Attributes:
+        link_a, link_b: the links (parent frames of the shapes), as in :attr:`CollisionModel.pairs`.
+        geometry_a, geometry_b: the shapes that are closest (pinocchio geometry names).
+        distance: d [m]: > 0 apart, 0 touching, < 0 penetrating (minus the depth).
+        point_a, point_b: witness points p_a on A and p_b on B in the world [m], (3,).
+        normal: n, unit, from A to B, (3,): p_b - p_a = d n.
+        dd_dq: the row with d_dot = dd_dq @ qd, (n,) [m/rad].
+    """
+
+    link_a: str
+    link_b: str
+    geometry_a: str
+    geometry_b: str
+    distance: float
+    point_a: FloatArray
+    point_b: FloatArray
+    normal: FloatArray
+    dd_dq: FloatArray
+
+
+@dataclass(frozen=True)
+class _Body:
+    """A link with collision shapes: its joint (0 = the world) and its side ('left', 'right', WORLD)."""
+
+    name: str
+    joint: int
+    side: str
+    geometries: tuple[int, ...]
+
+
+class CollisionModel:
+    """The robot's collision shapes and the link pairs checked (module docstring).
+
+    Args:
+        model: the arms' kinematic model; the geometry is reduced like ``model.model`` (RobotError
+            if the reduced models differ).
+        allowed: link pairs never checked, in either order (e.g. ``("left_flange",
+            "right_flange")``, the LWR4 cell's hole block and peg); ValueError for an unknown link.
+        self_collision: check each arm against its own links (joint distance >= 3).
+        margin: broadphase margin [m]: a pair whose distance is proven >= margin at every
+            configuration is dropped; must be >= the influence distance it is used with.
+        gjk_tolerance: coal's GJK tolerance, on the duality gap [m^2] (:data:`DEFAULT_GJK_TOLERANCE`;
+            EPA keeps :data:`EPA_TOLERANCE`).
+
+    Attributes:
+        pairs: the link pairs checked, (link_a, link_b): left before right, world before an arm.
+        pruned: the pairs the broadphase dropped, with their distance lower bound [m].
+        geometry_pairs: how many shape pairs the link pairs hold (one link may have several shapes).
+    """
+
+    def __init__(self, model: DualArmModel, allowed: Sequence[tuple[str, str]] = (), self_collision: bool = True,
+                 margin: float = DEFAULT_MARGIN, gjk_tolerance: float = DEFAULT_GJK_TOLERANCE) -> None:
+        if not (math.isfinite(margin) and margin > 0.0):
+            raise ValueError(f"margin={margin!r} must be a distance > 0 [m]")
+        if not (math.isfinite(gjk_tolerance) and gjk_tolerance > 0.0):
+            raise ValueError(f"gjk_tolerance={gjk_tolerance!r} must be > 0 [m]")
+        self.kinematics = model
+        self.margin = float(margin)
+        self.self_collision = self_collision
+        self.model, self.geometry = _reduced_geometry(model)
+        self.data = self.model.createData()
+        self._bodies = self._find_bodies()
+        self._body_index = {b.name: i for i, b in enumerate(self._bodies)}
+        links = {f.name for f in self.model.frames if f.type == pin.FrameType.BODY}
+        for pair in allowed:
+            if len(pair) != 2:
+                raise ValueError(f"allowed pair {pair!r}: expected two link names")
+            for name in pair:
+                if name not in links:
+                    raise ValueError(f"allowed pair {tuple(pair)!r}: {name!r} is not a link of {model.urdf.name} "
+                                     f"(links with collision shapes: {', '.join(b.name for b in self._bodies)})")
+        self.allowed: frozenset[frozenset[str]] = frozenset(frozenset(p) for p in allowed)
+        pin.framesForwardKinematics(self.model, self.data, pin.neutral(self.model))
+        pin.updateGeometryPlacements(self.model, self.data, self.geometry, self.geometry.createData())
+        candidates = self._candidates()
+        self.pairs: list[tuple[str, str]] = []
+        self.pruned: list[tuple[str, str, float]] = []
+        self._pair_geometries: list[tuple[int, int, list[int]]] = []  # body a, body b, collision pair ids
+        for a, b in candidates:
+            bound = self.lower_bound(self._bodies[a].name, self._bodies[b].name)
+            if bound >= self.margin:
+                self.pruned.append((self._bodies[a].name, self._bodies[b].name, bound))
+                continue
+            ids = []
+            for ga in self._bodies[a].geometries:
+                for gb in self._bodies[b].geometries:
+                    self.geometry.addCollisionPair(pin.CollisionPair(ga, gb))
+                    ids.append(len(self.geometry.collisionPairs) - 1)
+            self.pairs.append((self._bodies[a].name, self._bodies[b].name))
+            self._pair_geometries.append((a, b, ids))
+        self.geometry_pairs: int = len(self.geometry.collisionPairs)
+        self.geometry_data = pin.GeometryData(self.geometry)
+        self.request = _request(gjk_tolerance)
+        """The request of every shape pair (absolute tolerance, no warm start: module docstring)."""
+        self._fallbacks = [_request(t) for t in FALLBACK_GJK_TOLERANCES if t > gjk_tolerance]
+        self._results = [coal.DistanceResult() for _ in self.geometry.collisionPairs]
+        self._names = [g.name for g in self.geometry.geometryObjects]
+        self._index_shape_pairs()
+        self._shape_pair_names = [(self._names[a], self._names[b]) for a, b in
+                                  zip(self._shape_a.tolist(), self._shape_b.tolist(), strict=True)]
+
+    # ---- links and pairs -------------------------------------------------------------------
+
+    def _index_shape_pairs(self) -> None:
+        """Arrays for the vectorised calls: each shape pair's shapes and link pair, each shape's
+        joint and bounding sphere (centre in its joint's frame), each joint's support mask."""
+        shapes = self.geometry.collisionPairs
+        self._shape_a = np.array([cp.first for cp in shapes], dtype=np.intp)
+        self._shape_b = np.array([cp.second for cp in shapes], dtype=np.intp)
+        owner = []
+        for i, (_, _, ids) in enumerate(self._pair_geometries):
+            owner += [i] * len(ids)
+        self._shape_pair_owner: list[int] = owner
+        self._all_shape_pairs = np.arange(len(shapes), dtype=np.intp)
+        objects = self.geometry.geometryObjects
+        self._shape_joint = np.array([obj.parentJoint for obj in objects], dtype=np.intp)
+        spheres = [_bounding_sphere(obj.geometry) for obj in objects]
+        self._centres = np.array([c for c, _ in spheres])  # in each shape's own frame, (shapes, 3)
+        self._radii = np.array([r for _, r in spheres])
+        self._shapes = [obj.geometry for obj in objects]
+        support = np.zeros((self.model.njoints, self.model.nv))
+        for joint in range(1, self.model.njoints):
+            for j in self._chain(joint):
+                support[joint, self.model.idx_vs[j]] = 1.0
+        self._support = support
+
+    def _find_bodies(self) -> list[_Body]:
+        """The links that carry collision shapes, in the order of their first shape."""
+        left = set(self.kinematics.joint_names[:self.kinematics.n_left])
+        order: list[str] = []
+        shapes: dict[str, list[int]] = {}
+        joint_of: dict[str, int] = {}
+        for k, obj in enumerate(self.geometry.geometryObjects):
+            name = self.model.frames[obj.parentFrame].name
+            if name not in shapes:
+                order.append(name)
+                shapes[name] = []
+                joint_of[name] = obj.parentJoint
+            shapes[name].append(k)
+        bodies = []
+        for name in order:
+            joint = joint_of[name]
+            side = WORLD if joint == 0 else "left" if self.model.names[joint] in left else "right"
+            bodies.append(_Body(name, joint, side, tuple(shapes[name])))
+        return bodies
+
+    def _body(self, link: str) -> _Body:
+        index = self._body_index.get(link)
+        if index is None:
+            raise KeyError(f"{link!r} is not a link with collision shapes; links: "
+                           f"{', '.join(b.name for b in self._bodies)}")
+        return self._bodies[index]
+
+    @property
+    def links(self) -> list[str]:
+        """The links that carry collision shapes, in the URDF's order."""
+        return [b.name for b in self._bodies]
+
+    def link_side(self, link: str) -> str:
+        """``"left"`` or ``"right"`` (moved by that arm's joints), or :data:`WORLD` (fixed)."""
+        return self._body(link).side
+
+    def joint_distance(self, link_a: str, link_b: str) -> int:
+        """Number of arm joints on the kinematic tree's path between two links [-] (KeyError for a
+        name that is not a link)."""
+        for name in (link_a, link_b):
+            if not self.model.existFrame(name):
+                raise KeyError(f"{name!r} is not a link of {self.kinematics.urdf.name}")
+        ja, jb = (self.model.frames[self.model.getFrameId(n)].parentJoint for n in (link_a, link_b))
+        chain_a, chain_b = self._chain(ja), self._chain(jb)
+        common = len(set(chain_a) & set(chain_b))
+        return len(chain_a) + len(chain_b) - 2 * common
+
+    def _chain(self, joint: int) -> list[int]:
+        """The joints from the world to ``joint``, inclusive (empty for the world)."""
+        out = []
+        while joint != 0:
+            out.append(joint)
+            joint = self.model.parents[joint]
+        return out[::-1]
+
+    def _candidates(self) -> list[tuple[int, int]]:
+        """Body index pairs by the rules of the module docstring, before the broadphase."""
+        out = []
+        bodies = self._bodies
+        rank = {WORLD: 0, "left": 1, "right": 2}
+        for i, a in enumerate(bodies):
+            for j, b in enumerate(bodies):
+                if j <= i:
+                    continue
+                if rank[a.side] > rank[b.side]:
+                    i2, j2, a2, b2 = j, i, b, a
+                else:
+                    i2, j2, a2, b2 = i, j, a, b
+                if frozenset((a2.name, b2.name)) in self.allowed or a2.side == b2.side == WORLD:
+                    continue
+                jd = self.joint_distance(a2.name, b2.name)
+                if a2.side == WORLD:
+                    keep = jd >= WORLD_JOINT_DISTANCE
+                elif a2.side == b2.side:
+                    keep = self.self_collision and jd >= SAME_ARM_JOINT_DISTANCE
+                else:
+                    keep = True
+                if keep:
+                    out.append((i2, j2))
+        out.sort(key=lambda ij: (rank[bodies[ij[0]].side], rank[bodies[ij[1]].side], ij))
+        return out
+
+    def _reach(self, body: _Body, start: int) -> float:
+        """Radius [m] of a sphere about the origin of joint ``start`` (an ancestor of the body's
+        joint, or the body's joint itself) that holds the body's shapes at every configuration:
+        the joint offsets from ``start`` to the body's joint (triangle inequality: the joints only
+        turn the offsets) plus the shapes' extent from the body's joint origin."""
+        extent = max(_farthest(self.geometry.geometryObjects[k]) for k in body.geometries)
+        chain = self._chain(body.joint)
+        offsets = chain[chain.index(start) + 1:]
+        return extent + sum(float(np.linalg.norm(self.model.jointPlacements[j].translation)) for j in offsets)
+
+    def lower_bound(self, link_a: str, link_b: str) -> float:
+        """A lower bound [m] of the two links' distance over all configurations (the broadphase).
+
+        Let A be the link nearer the world. If B is on the other arm (or A is the world), B's
+        shapes stay in a sphere about B's arm's first joint origin o_1 (fixed in the world) of
+        radius R_B = sum of the joint offsets after o_1 + B's extent; likewise A's when it moves:
+        bound = ||o_1A - o_1B|| - R_A - R_B, or the distance of A's shapes to B's sphere when A is
+        the world. If B is on A's arm beyond A's joint k, B's sphere is about the origin of joint
+        k + 1, which is fixed to A: bound = distance of A's shapes to that sphere (coal, in the
+        frame of joint k). Two links on one joint (or both in the world) keep their distance: the
+        bound is that distance. Negative when the spheres overlap the shapes (the pair is kept).
+        KeyError for a link without collision shapes.
+        """
+        a, b = self._body(link_a), self._body(link_b)
+        if a.joint == b.joint:
+            return min(_shape_distance(self.geometry.geometryObjects[ka], self.geometry.geometryObjects[kb])
+                       for ka in a.geometries for kb in b.geometries)
+        if a.side != WORLD and (b.side == WORLD or (a.side == b.side and len(self._chain(a.joint)) >
+                                                    len(self._chain(b.joint)))):
+            a, b = b, a
+        chain_b = self._chain(b.joint)
+        if a.side != WORLD and a.side != b.side:
+            chain_a = self._chain(a.joint)
+            o_a = self.data.oMi[chain_a[0]].translation
+            o_b = self.data.oMi[chain_b[0]].translation
+            return float(np.linalg.norm(o_a - o_b)) - self._reach(a, chain_a[0]) - self._reach(b, chain_b[0])
+        if a.side == WORLD:  # A in the world frame, B's sphere about its arm's first joint (fixed)
+            start = chain_b[0]
+            centre = self.data.oMi[start].translation
+        else:  # A in its joint's frame, B's sphere about the next joint of B's chain (fixed to A)
+            start = chain_b[chain_b.index(a.joint) + 1]
+            centre = self.model.jointPlacements[start].translation
+        sphere = coal.Sphere(max(self._reach(b, start), 1e-9))
+        place = coal.Transform3s(np.eye(3), np.asarray(centre, dtype=float))
+        bound = math.inf
+        for k in a.geometries:
+            obj = self.geometry.geometryObjects[k]
+            result = coal.DistanceResult()
+            coal.distance(obj.geometry, coal.Transform3s(obj.placement.rotation, obj.placement.translation),
+                          sphere, place, coal.DistanceRequest(), result)
+            bound = min(bound, float(result.min_distance))
+        return bound
+
+    # ---- distances ---------------------------------------------------------------------------
+
+    def distances(self, q: FloatArray, within: float | None = None) -> list[PairDistance]:
+        """Every pair's distance, witness points, normal and row dd_dq at q (module docstring).
+
+        Args:
+            q: joint positions [rad], (n,), left then right.
+            within: if given [m], only the pairs with d < within. Then only the shape pairs whose
+                bounding spheres (about each shape's centre, placed at q) are closer than
+                ``within`` go to coal, and rows are computed only for the pairs kept: the cheap
+                call for the damper, which needs the pairs with d < d_i.
+
+        Returns:
+            one :class:`PairDistance` per pair, in the order of :attr:`pairs` (those within).
+        """
+        q = self.kinematics.check_q(q)
+        model, data, gdata = self.model, self.data, self.geometry_data
+        pin.computeJointJacobians(model, data, q)
+        pin.updateGeometryPlacements(model, data, self.geometry, gdata)
+        placements = gdata.oMg
+        rotations = np.array([g.rotation for g in placements])
+        translations = np.array([g.translation for g in placements])
+        if within is None:
+            active = self._all_shape_pairs
+        else:
+            active = np.flatnonzero(self._sphere_bounds(rotations, translations) < within)
+        tf = {}
+        for g in np.union1d(self._shape_a[active], self._shape_b[active]).tolist():
+            tf[g] = coal.Transform3s(rotations[g], translations[g])
+        shapes, request, results = self._shapes, self.request, self._results
+        shape_a, shape_b, owner = self._shape_a.tolist(), self._shape_b.tolist(), self._shape_pair_owner
+        best: dict[int, tuple[float, int]] = {}  # link pair -> (d, shape pair)
+        for k in active.tolist():
+            res = results[k]
+            res.clear()
+            ga, gb = shape_a[k], shape_b[k]
+            d = coal.distance(shapes[ga], tf[ga], shapes[gb], tf[gb], request, res)
+            if not -_FAILED < d < _FAILED:  # also NaN
+                d = self._retry(k, tf[ga], tf[gb])
+            i = owner[k]
+            if i not in best or d < best[i][0]:
+                best[i] = (d, k)
+        chosen = sorted((i, k) for i, (d, k) in best.items() if within is None or d < within)
+        if not chosen:
+            return []
+        m = len(chosen)
+        dist = np.empty(m)
+        points = np.empty((2, m, 3))
+        normals = np.empty((m, 3))
+        for r, (_, k) in enumerate(chosen):
+            res = results[k]
+            points[0, r] = res.getNearestPoint1()
+            points[1, r] = res.getNearestPoint2()
+            normals[r] = res.normal
+            dist[r] = res.min_distance
+        bad = ~(np.isfinite(points).all(axis=(0, 2)) & np.isfinite(normals).all(axis=1))
+        for r in np.flatnonzero(bad).tolist():  # a finite distance with NaN points: GJK failed
+            k = chosen[r][1]
+            res = results[k]
+            dist[r] = self._retry(k, tf[shape_a[k]], tf[shape_b[k]])
+            points[0, r], points[1, r], normals[r] = res.getNearestPoint1(), res.getNearestPoint2(), res.normal
+        normals /= np.linalg.norm(normals, axis=1)[:, None]
+        rows = self._rows(np.array([k for _, k in chosen]), points, normals)
+        pairs, shape_names = self.pairs, self._shape_pair_names
+        return [PairDistance(*pairs[i], *shape_names[k], d, points[0, r], points[1, r], normals[r], rows[r])
+                for r, ((i, k), d) in enumerate(zip(chosen, dist.tolist(), strict=True))]
+
+    def _retry(self, k: int, tf_a: coal.Transform3s, tf_b: coal.Transform3s) -> float:
+        """Shape pair k again with the fallback requests, tightest first (GJK or EPA failed: coal
+        then returns -DBL_MAX or an infinite distance and NaN points); CollisionError if all fail."""
+        res = self._results[k]
+        ga, gb = int(self._shape_a[k]), int(self._shape_b[k])
+        d = math.nan
+        for request in self._fallbacks:
+            res.clear()
+            d = coal.distance(self._shapes[ga], tf_a, self._shapes[gb], tf_b, request, res)
+            if -_FAILED < d < _FAILED and all(np.isfinite(x).all() for x in (
+                    res.getNearestPoint1(), res.getNearestPoint2(), res.normal)):
+                return float(d)
+        raise CollisionError(f"coal failed on the shapes {self._names[ga]!r} and {self._names[gb]!r} (distance "
+                             f"{d!r}) at GJK tolerances {self.request.gjk_tolerance:g} to "
+                             f"{max(FALLBACK_GJK_TOLERANCES + (self.request.gjk_tolerance,)):g}")
+
+    def _sphere_bounds(self, rotations: FloatArray, translations: FloatArray) -> FloatArray:
+        """Lower bounds [m] of every shape pair's distance at the shapes' placements (rotations
+        (shapes, 3, 3), translations (shapes, 3), in the world), (shape pairs,):
+        ||c_a - c_b|| - r_a - r_b with c, r each shape's bounding sphere (centre in the world)."""
+        centres = np.einsum("gij,gj->gi", rotations, self._centres) + translations
+        gap = np.linalg.norm(centres[self._shape_a] - centres[self._shape_b], axis=1)
+        return gap - self._radii[self._shape_a] - self._radii[self._shape_b]
+
+    def _rows(self, shape_pairs: npt.NDArray[np.intp], points: FloatArray, normals: FloatArray) -> FloatArray:
+        """dd_dq = n^T (J_pb - J_pa) for m shape pairs, (m, n), from the WORLD joint Jacobians.
+
+        pinocchio's ``data.J`` (6, n) holds every joint's motion [v_0; w] in the world, v_0 the
+        velocity of the point at the world origin: the point p of a link moves at v_0 + w x p, so
+        J_p = (J_lin - S(p) J_ang) restricted to the joints that move the link, and
+        n^T J_p = (n^T J_lin + (p x n)^T J_ang) masked by that link's joint support.
+        """
+        jac = self.data.J
+        rows = np.zeros((len(shape_pairs), self.model.nv))
+        for side, sign in ((0, -1.0), (1, 1.0)):
+            joints = self._shape_joint[self._shape_a[shape_pairs] if side == 0 else self._shape_b[shape_pairs]]
+            p = points[side]
+            contribution = normals @ jac[:3] + np.cross(p, normals) @ jac[3:]
+            rows += sign * contribution * self._support[joints]
+        return rows
+
+    def closest(self, q: FloatArray) -> PairDistance:
+        """The pair with the smallest distance at q (ValueError when the model has no pair)."""
+        if not self.pairs:
+            raise ValueError("the collision model has no pair")
+        return min(self.distances(q), key=lambda p: p.distance)
+
+
+def velocity_damper_rows(distances: Sequence[PairDistance], influence: float, safety: float,
+                         gain: float) -> tuple[FloatArray, FloatArray]:
+    """The velocity damper's rows A qd <= b for the pairs closer than ``influence`` (module docstring).
+
+    For each pair with d < d_i:  -dd_dq qd <= xi (d - d_s) / (d_i - d_s).
+
+    Args:
+        distances: pairs from :meth:`CollisionModel.distances` (any subset).
+        influence: d_i [m]. safety: d_s [m], 0 <= d_s < d_i. gain: xi [m/s], > 0.
+
+    Returns:
+        A [m/rad], (m, n), and b [m/s], (m,), m the number of pairs with d < d_i, in their
+        order; (0, n) and (0,) when none (n = 0 when ``distances`` is empty too).
+    """
+    CollisionParams(influence_distance=influence, safety_distance=safety, gain=gain)  # validates
+    near = [p for p in distances if p.distance < influence]
+    n = distances[0].dd_dq.shape[0] if distances else 0
+    if not near:
+        return np.zeros((0, n)), np.zeros(0)
+    if any(p.dd_dq.shape != (n,) for p in near):
+        raise DimensionError(f"velocity_damper_rows: rows of different lengths {sorted({p.dd_dq.shape for p in near})}")
+    a = -np.stack([p.dd_dq for p in near])
+    b = gain * (np.array([p.distance for p in near]) - safety) / (influence - safety)
+    return a, b
+
+
+def _shape_distance(a: pin.GeometryObject, b: pin.GeometryObject) -> float:
+    """The distance [m] of two shapes placed in one frame (their ``placement``s)."""
+    result = coal.DistanceResult()
+    return float(coal.distance(a.geometry, coal.Transform3s(a.placement.rotation, a.placement.translation),
+                               b.geometry, coal.Transform3s(b.placement.rotation, b.placement.translation),
+                               coal.DistanceRequest(), result))
+
+
+def _request(gjk_tolerance: float) -> coal.DistanceRequest:
+    """A coal distance request: signed distances and witness points, the duality-gap criterion on
+    an absolute tolerance, no warm start, 256 iterations for GJK and EPA."""
+    request = coal.DistanceRequest()
+    request.gjk_tolerance = gjk_tolerance
+    request.epa_tolerance = EPA_TOLERANCE
+    request.gjk_convergence_criterion = coal.GJKConvergenceCriterion.DualityGap
+    request.gjk_convergence_criterion_type = coal.GJKConvergenceCriterionType.Absolute
+    request.gjk_initial_guess = coal.GJKInitialGuess.DefaultGuess
+    request.gjk_max_iterations = GJK_MAX_ITERATIONS
+    request.epa_max_iterations = GJK_MAX_ITERATIONS
+    request.enable_signed_distance = True
+    return request
+
+
+def _farthest(obj: pin.GeometryObject) -> float:
+    """max ||x|| [m] over the points x of a shape, in its parent joint's frame."""
+    return _farthest_from(obj.geometry, obj.placement.actInv(np.zeros(3)))
+
+
+def _farthest_from(shape: coal.CollisionGeometry, origin: FloatArray) -> float:
+    """max ||x - origin|| [m] over the points x of a shape, all in the shape's frame (exact for
+    spheres, capsules, cylinders, boxes and convex hulls; a bounding sphere of the local AABB
+    otherwise)."""
+    origin = np.asarray(origin, dtype=float)
+    if isinstance(shape, coal.Sphere):
+        return float(np.linalg.norm(origin)) + float(shape.radius)
+    if isinstance(shape, coal.Capsule):
+        h = float(shape.halfLength)
+        return max(float(np.linalg.norm(origin - [0.0, 0.0, z])) for z in (-h, h)) + float(shape.radius)
+    if isinstance(shape, coal.Cylinder):  # the farthest point lies on a rim circle
+        h, radial = float(shape.halfLength), float(np.hypot(origin[0], origin[1]))
+        return max(math.hypot(radial + float(shape.radius), z - float(origin[2])) for z in (-h, h))
+    if isinstance(shape, coal.Box):
+        corners = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T * np.asarray(shape.halfSide)
+        return float(np.max(np.linalg.norm(corners - origin, axis=1)))
+    if isinstance(shape, coal.ConvexBase):
+        return float(np.max(np.linalg.norm(np.asarray(shape.points()) - origin, axis=1)))
+    shape.computeLocalAABB()
+    return float(np.linalg.norm(np.asarray(shape.aabb_center) - origin)) + float(shape.aabb_radius)
+
+
+def _bounding_sphere(shape: coal.CollisionGeometry) -> tuple[FloatArray, float]:
+    """A sphere holding a shape: the centre of its local AABB (shape frame) [m], (3,), and the
+    farthest point's distance from it [m]."""
+    shape.computeLocalAABB()
+    centre = np.array(shape.aabb_center, dtype=float)
+    return centre, _farthest_from(shape, centre)
+
+
+def _reduced_geometry(model: DualArmModel) -> tuple[pin.Model, pin.GeometryModel]:
+    """The collision geometry of ``model``'s robot, reduced to its arms' joints like its model.
+
+    Meshes become their convex hulls. RobotError if the reduced model differs from ``model.model``
+    (joint names, nq, joint placements).
+    """
+    robot = model.description
+    urdf = str(model.urdf)
+    full = pin.buildModelFromUrdf(urdf)
+    geometry = pin.buildGeomFromUrdf(full, urdf, pin.GeometryType.COLLISION)
+    for obj in geometry.geometryObjects:
+        shape = obj.geometry
+        if isinstance(shape, coal.BVHModelBase):
+            shape.buildConvexHull(True, "Qt")
+            obj.geometry = shape.convex
+    locked = robot.locked_positions()
+    if locked:
+        q_ref = pin.neutral(full)
+        for name, value in locked.items():
+            joint = full.getJointId(name)
+            q_ref[full.idx_qs[joint]] = value
+        reduced, geometry = pin.buildReducedModel(full, geometry, [full.getJointId(n) for n in locked], q_ref)
+    else:
+        reduced = full
+    names = [reduced.names[i] for i in range(1, reduced.njoints)]
+    same = reduced.nq == model.model.nq and names == model.joint_names and all(
+        reduced.jointPlacements[i].isApprox(model.model.jointPlacements[i], 1e-12) for i in range(reduced.njoints))
+    if not same:
+        raise RobotError(f"robot {robot.name!r}: the collision model's joints {names} (nq {reduced.nq}) differ "
+                         f"from the kinematic model's {model.joint_names} (nq {model.model.nq})")
+    return reduced, geometry
