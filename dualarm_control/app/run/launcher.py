@@ -33,6 +33,8 @@ LAYOUTS = {
 }
 """Processes of ``dualarm launch --processes N``: which nodes share a process (started in this order)."""
 STOP_GRACE_S = 10.0
+STOPPED_LAST = ("bag",)
+"""Processes stopped after every other one: the recorder takes what the nodes still send."""
 INTERACTIVE = "interactive"
 """`dualarm launch interactive`: the trajectory node in mode:=interactive (issue 18)."""
 INTERACTIVE_CELL = "interactive_demo"
@@ -147,9 +149,16 @@ class Launch:
         return {p.name: p.popen.returncode for p in self.procs}
 
     def stop(self) -> None:
-        """SIGINT every live child (like Ctrl-C), escalate to SIGTERM/SIGKILL after a grace period."""
+        """Stop the nodes, then the recorders (:data:`STOPPED_LAST`): a lockstep node waits at its exit
+        until its samples are acknowledged (``ros.node.flush_publishers``), which needs the recorder
+        alive, so a recorder lagging behind a fast lockstep run still gets the run's end."""
+        self._stop([p for p in self.procs if p.name not in STOPPED_LAST])
+        self._stop(self.procs)
+
+    def _stop(self, procs: Sequence[Process]) -> None:
+        """SIGINT every live one of ``procs`` (like Ctrl-C), escalate to SIGTERM/SIGKILL after a grace period."""
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
-            alive = [p for p in self.procs if p.popen.poll() is None]
+            alive = [p for p in procs if p.popen.poll() is None]
             if not alive:
                 return
             for p in alive:
