@@ -81,8 +81,8 @@ PARAMETERS = (
     thread_priority_spec(50, "the physics loop"),
     ParamSpec("lockstep_subscribers", 2, "joint_states readers to wait for before the first lockstep state",
               check=non_negative),
-    ParamSpec("lockstep_resend", 0.5, "re-publish the pending state after this long without a command [s]",
-              check=positive),
+    ParamSpec("lockstep_resend", 0.5, "re-publish the pending state after this long without a command [s] "
+              "(before the first step: a discovery race; with best_effort streams: a lost sample)", check=positive),
     ParamSpec("lockstep_start_delay", 0.5, "wait after the joint_states readers matched, so that their other "
               "subscriptions (a recorder's /clock, /wrench) match too [s]", check=non_negative, read_only=True),
     QOS_PARAMETER,
@@ -124,6 +124,7 @@ class SimNode:
         self.lockstep = bool(p["lockstep"])
         self.wait_for = int(p["lockstep_subscribers"])
         self.resend_s = float(p["lockstep_resend"])
+        self.best_effort = p["qos_reliability"] == "best_effort"
         self.start_delay = float(p["lockstep_start_delay"])
         self.readers_matched_at: float | None = None
         n = self.node
@@ -235,7 +236,11 @@ class SimNode:
                                                   message, values))
 
     def lockstep_watchdog(self) -> None:
-        """Start once the readers are matched; re-send a state that got no command (discovery races)."""
+        """Start once the readers are matched; re-send a state that got no command: before the first
+        step (a discovery race: a reader matched on the writer's side only missed it) or, with
+        best_effort streams, a state or command lost. Not once the cell steps on reliable streams: a
+        state without a command is then the run's end (no target for it) or a node stopping, and a
+        re-sent one would only repeat its stamp in a recording while the nodes flush (ros.node.run)."""
         if not self.started:
             if self.node.count_subscribers("/joint_states") < self.wait_for:
                 return
@@ -246,7 +251,7 @@ class SimNode:
             self.started = True
             self.log.info(f"{self.wait_for} joint_states readers matched: starting lockstep")
             self.publish_state()
-        elif time.monotonic() - self.last_publish > self.resend_s:
+        elif (self.steps == 0 or self.best_effort) and time.monotonic() - self.last_publish > self.resend_s:
             self.publish_state()
 
 

@@ -273,6 +273,10 @@ class Recorder:
             for topic in wanted:
                 self._subscribe(topic, known[topic][0])
 
+    def publishing(self) -> bool:
+        """Whether any subscribed topic still has a publisher."""
+        return any(self.node.count_publishers(topic) for topic in self.subscriptions)
+
     @property
     def ready(self) -> bool:
         return all(t in self.subscriptions for t in self.named)
@@ -289,15 +293,25 @@ class Recorder:
 DRAIN_IDLE_S = 0.3
 """After a stop signal, messages are taken until none arrived for this long [s] ..."""
 DRAIN_MAX_S = 5.0
-"""... or for at most this long [s] (below the launcher's 10 s grace before SIGTERM)."""
+"""... or, while a recorded topic still has a publisher (a live graph, Ctrl-C), for at most this long [s] ..."""
+DRAIN_ENDED_MAX_S = 60.0
+"""... or, once every publisher of the recorded topics has gone (``dualarm launch`` stops the recorder
+after the nodes), for at most this long [s]: what is still queued then is the end of the run, and a
+recorder starved on a busy machine can be seconds of processing behind (below the launcher's grace
+for a recorder, ``app/run/launcher.py: RECORDER_STOP_GRACE_S``)."""
 
 
-def drain(executor: Any, bag: BagWriter) -> None:
+def drain(executor: Any, bag: BagWriter, publishing: Callable[[], bool] = lambda: True) -> None:
     """Take what is still queued after a stop signal: every message sent before the signal is
-    kept even when the recorder lags behind a fast (lockstep) run."""
-    start = last = time.monotonic()
+    kept even when the recorder lags behind a fast (lockstep) run. ``publishing()``: whether a
+    recorded topic still has a publisher (checked every :data:`POLL_INTERVAL_S`)."""
+    start = last = next_poll = time.monotonic()
     total = bag.total
-    while (now := time.monotonic()) - last < DRAIN_IDLE_S and now - start < DRAIN_MAX_S:
+    limit = DRAIN_MAX_S
+    while (now := time.monotonic()) - last < DRAIN_IDLE_S and now - start < limit:
+        if now >= next_poll:
+            limit = DRAIN_MAX_S if publishing() else DRAIN_ENDED_MAX_S
+            next_poll = now + POLL_INTERVAL_S
         executor.spin_once(timeout_sec=0.01)
         if bag.total != total:
             total, last = bag.total, time.monotonic()
@@ -345,7 +359,7 @@ def record(path: Path, topics: Sequence[str], *, record_all: bool = False, durat
                 executor.spin_once(timeout_sec=0.02)
             if stop.signal is not None:
                 stopped_by = f" (signal {signal.Signals(stop.signal).name})"
-                drain(executor, bag)
+                drain(executor, bag, recorder.publishing)
         if recorder is not None and recorder.tf is not None and recorder.tf.enabled:
             start = time.monotonic()
             count = recorder.tf.finish()

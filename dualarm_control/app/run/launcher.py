@@ -33,6 +33,12 @@ LAYOUTS = {
 }
 """Processes of ``dualarm launch --processes N``: which nodes share a process (started in this order)."""
 STOP_GRACE_S = 10.0
+STOPPED_LAST = ("bag",)
+"""Processes stopped after every other one: the recorder takes what the nodes still send."""
+RECORDER_STOP_GRACE_S = 120.0
+"""The grace of a recorder (:data:`STOPPED_LAST`) before SIGTERM: it takes what is still queued (up to
+``ros/recorder.py: DRAIN_ENDED_MAX_S``), computes /tf and closes the bag, seconds each when it is starved
+on a busy machine; a SIGTERM then would cost the bag its end or its index."""
 INTERACTIVE = "interactive"
 """`dualarm launch interactive`: the trajectory node in mode:=interactive (issue 18)."""
 INTERACTIVE_CELL = "interactive_demo"
@@ -147,9 +153,16 @@ class Launch:
         return {p.name: p.popen.returncode for p in self.procs}
 
     def stop(self) -> None:
-        """SIGINT every live child (like Ctrl-C), escalate to SIGTERM/SIGKILL after a grace period."""
+        """Stop the nodes, then the recorders (:data:`STOPPED_LAST`): a lockstep node waits at its exit
+        until its samples are acknowledged (``ros.node.flush_publishers``), which needs the recorder
+        alive, so a recorder lagging behind a fast lockstep run still gets the run's end."""
+        self._stop([p for p in self.procs if p.name not in STOPPED_LAST], STOP_GRACE_S)
+        self._stop(self.procs, RECORDER_STOP_GRACE_S)
+
+    def _stop(self, procs: Sequence[Process], grace: float) -> None:
+        """SIGINT every live one of ``procs`` (like Ctrl-C), escalate to SIGTERM/SIGKILL after ``grace`` [s]."""
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
-            alive = [p for p in self.procs if p.popen.poll() is None]
+            alive = [p for p in procs if p.popen.poll() is None]
             if not alive:
                 return
             for p in alive:
@@ -157,7 +170,7 @@ class Launch:
                     os.killpg(p.popen.pid, sig)
                 except ProcessLookupError:
                     pass
-            end = time.monotonic() + STOP_GRACE_S
+            end = time.monotonic() + grace
             while time.monotonic() < end and any(p.popen.poll() is None for p in alive):
                 time.sleep(0.05)
 
