@@ -17,7 +17,10 @@ Keys (flattened, under ``robot.``):
   (x y z [m] roll pitch yaw [deg] in the world): the joint and link names above are then the
   single-arm URDF's, and the model prefixes them ``left_`` / ``right_``;
   ``ready_positions_deg``: a start configuration of the arms' joints (left then right) in which
-  the tools face each other; optional ``acceleration_limit`` [rad/s^2] (one value or one per joint).
+  the tools face each other; optional ``acceleration_limit`` [rad/s^2] (one value or one per joint);
+  optional ``collision_allowed``: link pairs whose shapes may touch (``"link_a link_b"`` strings, as
+  the resolved URDF names the links: the cell's peg and hole, shapes that overlap by design), never
+  checked by the collision limit (:mod:`dualarm_control.collision`).
 
 The resolved URDF always has the two tool frames as links named ``left_tool`` (F1) and
 ``right_tool`` (F2), fixed to the description's tool links by ``left_tool_joint`` /
@@ -63,7 +66,7 @@ ERD_SCHEME = "example-robot-data:"
 MOVABLE = ("revolute", "prismatic", "continuous")
 KEYS = ("name", "description", "urdf", "left_joints", "right_joints", "left_tool", "right_tool",
         "left_tool_offset", "right_tool_offset", "pair", "left_base", "right_base", "ready_positions_deg",
-        "acceleration_limit")
+        "acceleration_limit", "collision_allowed")
 FloatArray = npt.NDArray[np.float64]
 TOOL_MASS = 1e-3  # kg: the generated tool links (a massless link gets pybullet's default 1 kg)
 
@@ -92,6 +95,7 @@ class RobotDescription:
         locked: value [rad or m] of each movable joint that is not an arm's (URDF names).
         ready_positions: the arms' start configuration [rad or m], (n,), left then right.
         acceleration_limit: the robot's default joint acceleration bound [rad/s^2] (empty: none).
+        collision_allowed: link pairs (resolved URDF names) the collision limit never checks.
         source: the file the description came from (None: built in code).
     """
 
@@ -109,6 +113,7 @@ class RobotDescription:
     right_base: Pose6 = IDENTITY
     locked: tuple[tuple[str, float], ...] = ()
     acceleration_limit: tuple[float, ...] = ()
+    collision_allowed: tuple[tuple[str, str], ...] = ()
     description: str = ""
     source: Path | None = field(default=None, compare=False)
 
@@ -308,7 +313,22 @@ def robot_from_parameters(flat: Mapping[str, Any], source: Path | None = None) -
         left_tool_offset=_pose(flat, "left_tool_offset"), right_tool_offset=_pose(flat, "right_tool_offset"),
         pair=pair, left_base=_pose(flat, "left_base"), right_base=_pose(flat, "right_base"),
         locked=tuple(locked), ready_positions=tuple(math.radians(v) for v in ready),
-        acceleration_limit=acc, source=source)
+        acceleration_limit=acc, collision_allowed=_link_pairs(flat, "collision_allowed"), source=source)
+
+
+def _link_pairs(flat: Mapping[str, Any], key: str) -> tuple[tuple[str, str], ...]:
+    """``robot.<key>``: a list of ``"link_a link_b"`` strings as pairs (RobotError naming a bad entry)."""
+    value = flat.get(PREFIX + key, [])
+    if not isinstance(value, list):
+        raise RobotError(f"robot parameter {_key(key)}: got {value!r}, expected a list of 'link_a link_b' strings")
+    pairs = []
+    for item in value:
+        parts = item.split() if isinstance(item, str) else []
+        if len(parts) != 2:
+            raise RobotError(f"robot parameter {_key(key)}: entry {item!r}, expected 'link_a link_b' (two link "
+                             "names separated by a space)")
+        pairs.append((parts[0], parts[1]))
+    return tuple(pairs)
 
 
 def example_robot_data_dir() -> Path:
