@@ -144,6 +144,8 @@ class CollisionParams:
     influence_distance: float = 0.10
     safety_distance: float = 0.03
     gain: float = 0.5
+    allowed: tuple[tuple[str, str], ...] = ()
+    """Link pairs never checked besides the robot's own ``collision_allowed`` (resolved URDF names)."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.enabled, bool):

@@ -13,6 +13,12 @@ from typing import Any
 
 import numpy as np
 
+from dualarm_control.collision import CollisionModel, CollisionParams
+from dualarm_control.collision_limit import (
+    CollisionLimit,
+    CollisionReport,
+    allowed_pairs,
+)
 from dualarm_control.errors import ParameterError
 from dualarm_control.joint_tracking import joint_tracking_velocity
 from dualarm_control.kinematics import (
@@ -22,9 +28,12 @@ from dualarm_control.kinematics import (
     rotation_angle,
 )
 from dualarm_control.limits import (
+    AccelerationLimit,
     JointLimits,
+    Limit,
     RepulsiveField,
-    acceleration_bounds,
+    VelocityLimit,
+    apply_limits,
     velocity_bounds,
 )
 from dualarm_control.params import (
@@ -71,6 +80,8 @@ class ControllerParams:
             acceleration limits for the LWR4; ``DEFAULT_ACCELERATION_LIMIT`` is this
             project's documented choice (docs/bench.md).
         solver_params: parameters of the QP solvers.
+        collision: the collision limit (:mod:`dualarm_control.collision_limit`): on by default,
+            d_i 0.10 m, d_s 0.03 m, xi 0.5 m/s (docs/collision.md gives the reasons).
     """
 
     solver: str = "hierarchical_sparse_qp"
@@ -80,6 +91,7 @@ class ControllerParams:
     velocity_scale: float = 1.0
     acceleration_limit: tuple[float, ...] = ()
     solver_params: SolverParams = field(default_factory=SolverParams)
+    collision: CollisionParams = field(default_factory=CollisionParams)
 
     def __post_init__(self) -> None:
         for key in ("gain", "period"):
@@ -129,6 +141,7 @@ class Cycle:
         measured_force: filtered normal force f_c [N] of paper 001's force loop (NaN without).
         normal_offset: f_F of eq (9) of paper 001 [m] (0 without force feedback).
         stage: what is being followed (segment name, "circle", "execute"), for progress output.
+        collision: what the collision limit saw (closest pair, rows), None when it is off.
     """
 
     velocities: FloatArray
@@ -142,6 +155,7 @@ class Cycle:
     measured_force: float = math.nan
     normal_offset: float = 0.0
     stage: str = ""
+    collision: CollisionReport | None = None
 
 
 class RelativeController:
@@ -150,9 +164,17 @@ class RelativeController:
 
     It remembers its last command for the optional acceleration bound; ``reset`` forgets it
     (the next cycle then starts from rest, zero velocity).
+
+    The constraints of a cycle are its limits (:class:`~dualarm_control.limits.Limit`), in order:
+    the joint position and velocity limits (eq 21-23), the acceleration bound when set, the
+    collision limit when ``params.collision.enabled``. ``collision`` is the robot's collision
+    model, built here when None (the robot's and the parameters' allowed pairs removed); a
+    controller taking over from another (:meth:`continue_from`) keeps the old one's when the allowed
+    pairs are the same.
     """
 
-    def __init__(self, model: DualArmModel, params: ControllerParams | None = None) -> None:
+    def __init__(self, model: DualArmModel, params: ControllerParams | None = None,
+                 collision: CollisionModel | None = None) -> None:
         self.model = model
         self.params = params or ControllerParams()
         self.limits = JointLimits(model.q_min, model.q_max, model.qd_max).scaled_velocity(self.params.velocity_scale)
@@ -165,6 +187,24 @@ class RelativeController:
         self._previous = np.zeros(n)
         self._zeros = np.zeros(n)
         self._repulsive = RepulsiveField(self.limits, self.params.alpha)
+        self.collision_model: CollisionModel | None = None
+        self.collision_limit: CollisionLimit | None = None
+        if self.params.collision.enabled:
+            allowed = allowed_pairs(model, self.params.collision)
+            if collision is None or collision.allowed != frozenset(frozenset(p) for p in allowed):
+                collision = CollisionModel(model, allowed=allowed)
+            self.collision_model = collision
+            self.collision_limit = CollisionLimit(collision, self.params.collision)
+        self.constraints: tuple[Limit, ...] = self._limits()
+
+    def _limits(self) -> tuple[Limit, ...]:
+        """The cycle's limits in their order (class docstring)."""
+        out: list[Limit] = [VelocityLimit(self.limits, self.params.period)]
+        if self._acceleration is not None:
+            out.append(AccelerationLimit(self.limits, self._acceleration, self.params.period))
+        if self.collision_limit is not None:
+            out.append(self.collision_limit)
+        return tuple(out)
 
     def reset(self) -> None:
         self.solver.reset()
@@ -193,6 +233,11 @@ class RelativeController:
         if old.model.nq != self.model.nq:
             raise ValueError(f"continue_from: {old.model.nq} joints, expected {self.model.nq}")
         self._previous = old._previous.copy()
+        if self.collision_limit is not None and old.collision_model is not None \
+                and old.collision_model.allowed == self.collision_limit.collision.allowed:
+            self.collision_model = old.collision_model
+            self.collision_limit = CollisionLimit(old.collision_model, self.params.collision)
+            self.constraints = self._limits()
         if (old.params.solver, old.params.solver_params) == (self.params.solver, self.params.solver_params):
             self.solver = old.solver
         else:
@@ -223,7 +268,11 @@ class RelativeController:
             position_error=math.sqrt(ex * ex + ey * ey + ez * ez),
             orientation_error=rotation_angle(state.rotation, np.asarray(target.rotation, dtype=float)),
             cycle_time=time.perf_counter() - start,
+            collision=self._collision_report(result.velocities),
         )
+
+    def _collision_report(self, velocities: FloatArray) -> CollisionReport | None:
+        return None if self.collision_limit is None else self.collision_limit.report(velocities)
 
     def solve_tasks(self, q: FloatArray, tasks: Sequence[Task], t: float) -> Cycle:
         """One cycle on any set of tasks at time t [s] (paper 001, eq (12)-(14)).
@@ -239,16 +288,17 @@ class RelativeController:
             return self._invalid("non-finite joint positions", start, q)
         rows = evaluate_tasks(tasks, Configuration(self.model, q), t)
         result = self._solve_rows(q, rows)
-        return Cycle(result.velocities, result, time.perf_counter() - start, rows=rows)
+        return Cycle(result.velocities, result, time.perf_counter() - start, rows=rows,
+                     collision=self._collision_report(result.velocities))
 
     def _solve_rows(self, q: FloatArray, rows: Sequence[TaskRows]) -> SolverResult:
-        """Bounds of eq (23) (and the acceleration bound), the problem of the rows, the solve."""
-        lower, upper = velocity_bounds(q, self.limits, self.params.period)
-        if self._acceleration is not None:
-            lower, upper = acceleration_bounds(lower, upper, q, self.limits, self._previous, self._acceleration,
-                                               self.params.period)
+        """The limits' bounds and rows (class docstring), the problem of the task rows, the solve."""
+        bounds = apply_limits(self.constraints, q, self._previous)
         repulsive = self._repulsive(q) if self.solver.uses_repulsive else self._zeros
-        result = self.solver.solve(assemble_problem(rows, lower, upper, repulsive))
+        problem = assemble_problem(rows, bounds.lower, bounds.upper, repulsive)
+        if bounds.rows.shape[0]:
+            problem.limit_rows, problem.limit_bound, problem.limit_labels = bounds.rows, bounds.bound, bounds.labels
+        result = self.solver.solve(problem)
         self._previous = result.velocities
         return result
 
@@ -320,6 +370,12 @@ def _acceleration_check(value: Any) -> str:
     return "" if value == [0.0] else acceleration_limit_problem(value)
 
 
+def _pairs_check(value: Any) -> str:
+    """[''] or 'link_a link_b' strings"""
+    ok = value == [""] or all(isinstance(v, str) and len(v.split()) == 2 for v in value)
+    return "" if ok else "[''] (none) or 'link_a link_b' strings (two link names separated by a space)"
+
+
 CONTROLLER_PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("solver", "hierarchical_sparse_qp", "kinematic solver (registry name)", choices=_solver_choices),
     ParamSpec("gain", 10.0, "closed-loop gain K of eq (13) [1/s]", check=positive),
@@ -335,6 +391,14 @@ CONTROLLER_PARAMETERS: tuple[ParamSpec, ...] = (
               "joint acceleration bound [rad/s^2]: [0.0] = none, one value for all joints or one per joint "
               f"(documented choice: [{DEFAULT_ACCELERATION_LIMIT}])", check=_acceleration_check),
     ParamSpec("qp_backend", DEFAULT_BACKEND, "QP back-end", choices=_backend_choices),
+    ParamSpec("collision.enabled", True, "collision limit on (velocity damper rows, hard in every solver)"),
+    ParamSpec("collision.influence_distance", 0.10, "collision limit: influence distance d_i [m] (> safety_distance)",
+              check=positive),
+    ParamSpec("collision.safety_distance", 0.03, "collision limit: safety distance d_s [m] kept between links",
+              check=non_negative),
+    ParamSpec("collision.gain", 0.5, "collision limit: approach speed xi [m/s] allowed at d_i", check=positive),
+    ParamSpec("collision.allowed", [""], "link pairs never checked besides the robot's collision_allowed: "
+              "'link_a link_b' strings ([''] = none)", check=_pairs_check, read_only=True),
     ParamSpec("qp_eps_abs", 1e-9, "QP absolute tolerance", check=positive),
     ParamSpec("qp_max_iter", 10000, "QP iteration cap", check=positive),
 )
@@ -357,4 +421,8 @@ def controller_params(values: Mapping[str, Any], node: str = "controller_node") 
             qp_backend=v["qp_backend"],
             qp=QPSettings(eps_abs=v["qp_eps_abs"], max_iter=v["qp_max_iter"]),
         ),
+        collision=CollisionParams(
+            enabled=v["collision.enabled"], influence_distance=v["collision.influence_distance"],
+            safety_distance=v["collision.safety_distance"], gain=v["collision.gain"],
+            allowed=tuple((a, b) for a, b in (p.split() for p in v["collision.allowed"] if p))),
     )

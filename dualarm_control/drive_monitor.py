@@ -12,16 +12,24 @@ the target arrives and the arms do not. So, per cycle, with the measured relativ
 * it is **stalled** when the target has been at the goal for ``stall_time`` [s] (default 2 s;
   the tracking error of the relative pose task decays with the task gain, e^{-k t}) without
   that: the remaining error and the joints within ``limit_margin`` [rad] of a position limit
-  are reported.
+  are reported, and, with a collision model, the closest link pair when it is closer than the
+  collision limit's influence distance (the collision limit stopped the arms): the reason then
+  starts "collision constraint: left_flange – right_link_5 at 0.030 m" (:func:`stall_reason`).
+
+:func:`judge_goals` gives the same verdicts after the fact, for a scripted goals run (in one
+process or from a bag): each goal is judged where the arms are when the next command comes.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
+from dualarm_control.collision import CollisionModel, CollisionParams
+from dualarm_control.goal_script import TimedCommand, TimedGoal
 from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.online_trajectory import MOVING, REACHED, STALLED, GoalProgress
 
@@ -29,6 +37,26 @@ POSITION_TOLERANCE = 5e-4  # m
 ANGLE_TOLERANCE = 5e-3  # rad
 STALL_TIME = 2.0  # s
 LIMIT_MARGIN = 1e-2  # rad
+COLLISION_NEAR = CollisionParams().influence_distance
+"""A stall is blamed on the collision limit when the closest pair is nearer than this [m] (d_i)."""
+
+
+def stall_reason(model: DualArmModel, q: FloatArray, distance: float, angle: float, when: str,
+                 collision: CollisionModel | None = None, near: float = COLLISION_NEAR) -> str:
+    """Why the arms stopped short of a goal at q (n,) [rad], ``distance`` [m] and ``angle`` [rad] from it.
+
+    "collision constraint: A – B at 0.030 m; " first when ``collision`` has a pair closer than
+    ``near`` [m], then the remaining error ``when`` (e.g. "2 s after the target arrived") and the
+    joints at a position limit."""
+    joints = joints_at_limit(model, q)
+    text = (f"remaining error {distance * 1000:.2f} mm, {angle:.4f} rad {when}; joints at a limit: "
+            f"{', '.join(joints) if joints else 'none'}")
+    if collision is not None and collision.pairs:
+        near_pairs = collision.distances(q, within=near)
+        if near_pairs:
+            closest = min(near_pairs, key=lambda p: p.distance)
+            text = f"collision constraint: {closest.link_a} – {closest.link_b} at {closest.distance:.3f} m; " + text
+    return text
 
 
 def joints_at_limit(model: DualArmModel, q: FloatArray, margin: float = LIMIT_MARGIN) -> list[str]:
@@ -53,8 +81,11 @@ class GoalMonitor:
     """Judges each cycle of one goal (:meth:`reset` for a new goal); see the module docstring."""
 
     def __init__(self, model: DualArmModel, position_tolerance: float = POSITION_TOLERANCE,
-                 angle_tolerance: float = ANGLE_TOLERANCE, stall_time: float = STALL_TIME) -> None:
+                 angle_tolerance: float = ANGLE_TOLERANCE, stall_time: float = STALL_TIME,
+                 collision: CollisionModel | None = None, collision_near: float = COLLISION_NEAR) -> None:
         self.model = model
+        self.collision = collision
+        self.collision_near = collision_near
         self.position_tolerance = position_tolerance
         self.angle_tolerance = angle_tolerance
         self.stall_time = stall_time
@@ -87,8 +118,58 @@ class GoalMonitor:
         if t - self.arrived < self.stall_time:
             return Verdict(MOVING, distance, angle)
         self.final = STALLED
-        joints = joints_at_limit(self.model, q)
-        reason = (f"remaining error {distance * 1000:.2f} mm, {angle:.4f} rad "
-                  f"{self.stall_time:g} s after the target arrived; joints at a limit: "
-                  f"{', '.join(joints) if joints else 'none'}")
+        reason = stall_reason(self.model, q, distance, angle, f"{self.stall_time:g} s after the target arrived",
+                              self.collision, self.collision_near)
         return Verdict(STALLED, distance, angle, reason)
+
+
+@dataclass(frozen=True)
+class GoalOutcome:
+    """How one scripted goal ended: ``index`` in the script, its time ``t`` [s], the ``state``
+    (``reached`` or ``stalled``), the measured ``distance`` [m] and ``angle`` [rad] to it where
+    it was judged, and the ``reason`` of a stall (:func:`stall_reason`)."""
+
+    index: int
+    t: float
+    state: str
+    distance: float
+    angle: float
+    reason: str = ""
+
+    def text(self) -> str:
+        head = f"goal {self.index} (t = {self.t:g} s): {self.state}"
+        return head + (f": {self.reason}" if self.reason else f", error {self.distance * 1000:.3f} mm, {self.angle:.5f} rad")
+
+
+def judge_goals(model: DualArmModel, commands: Sequence[TimedCommand], time: FloatArray, positions: FloatArray,
+                final_positions: FloatArray, collision: CollisionModel | None = None,
+                position_tolerance: float = POSITION_TOLERANCE, angle_tolerance: float = ANGLE_TOLERANCE,
+                near: float = COLLISION_NEAR) -> list[GoalOutcome]:
+    """The verdict of every goal of a script after the run (twists are not judged).
+
+    A goal is judged at the last recorded cycle before the next command (the run's final
+    positions for the last one): ``reached`` within the tolerances [m, rad], else ``stalled``
+    with :func:`stall_reason`. ``time`` (N,) [s], ``positions`` (N, n) [rad], ``final_positions`` (n,)."""
+    starts = [c.t for c in commands]
+    out = []
+    for i, command in enumerate(commands):
+        if not isinstance(command, TimedGoal):
+            continue
+        if i + 1 < len(commands):
+            k = int(np.searchsorted(time, starts[i + 1], side="left")) - 1
+            q = positions[max(k, 0)]
+        else:
+            q = final_positions if np.all(np.isfinite(final_positions)) else positions[-1]
+        p, r = model.relative_pose(q)
+        goal_r = np.asarray(command.orientation, dtype=float)
+        if goal_r.shape == (4,):
+            goal_r = pin.Quaternion(goal_r[3], *goal_r[:3]).normalized().toRotationMatrix()
+        distance = float(np.linalg.norm(p - command.position))
+        angle = float(np.linalg.norm(pin.log3(goal_r @ r.T)))
+        if distance <= position_tolerance and angle <= angle_tolerance:
+            out.append(GoalOutcome(i, command.t, REACHED, distance, angle))
+        else:
+            when = "when the next command came" if i + 1 < len(commands) else "at the end of the run"
+            out.append(GoalOutcome(i, command.t, STALLED, distance, angle,
+                                   stall_reason(model, q, distance, angle, when, collision, near)))
+    return out

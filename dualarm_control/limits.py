@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -182,3 +183,84 @@ def acceleration_bounds(
     new_lower = np.minimum(np.maximum(lower, acc_lower), upper)
     new_upper = np.maximum(np.minimum(upper, acc_upper), new_lower)
     return new_lower, new_upper
+
+
+# ---------------------------------------------------------------------- limits as one abstraction
+
+@dataclass(slots=True)
+class Bounds:
+    """What the limits give one cycle's QP over the joint velocities qd [rad/s], (n,).
+
+    The box ``lower <= qd <= upper`` (n,) and the general rows ``rows @ qd <= bound`` ((m, n), (m,),
+    m >= 0), each row labelled (``labels``, m strings: the collision pair it keeps apart). Every
+    solver takes both as hard constraints in its own variables (docs/collision.md, "Limits").
+
+    A per-cycle record: slotted, not frozen (cheaper to build, docs/bench.md).
+    """
+
+    lower: FloatArray
+    upper: FloatArray
+    rows: FloatArray
+    bound: FloatArray
+    labels: tuple[str, ...] = ()
+
+    @classmethod
+    def free(cls, n: int) -> Bounds:
+        """No constraint yet: the box (-inf, inf) and no row."""
+        return cls(np.full(n, -np.inf), np.full(n, np.inf), np.zeros((0, n)), np.zeros(0))
+
+
+class Limit(Protocol):
+    """One limit of the QP (as pink's and mink's ``Limit``): it narrows the box or adds rows.
+
+    ``apply`` gets the measured joint positions q [rad] (n,), the previous command [rad/s] (n,)
+    and the bounds of the limits applied before it, and returns the bounds with its own added.
+    Order matters where a limit narrows the box: :class:`VelocityLimit` (eq 21-23) first, then
+    :class:`AccelerationLimit` (priorities of :func:`acceleration_bounds`), then the row limits.
+    """
+
+    @property
+    def name(self) -> str: ...
+
+    def apply(self, q: FloatArray, previous: FloatArray, bounds: Bounds) -> Bounds: ...
+
+
+@dataclass(frozen=True)
+class VelocityLimit:
+    """The joint position and velocity limits as velocity bounds, eq (21)-(23) (:func:`velocity_bounds`).
+
+    Sets the box (it is the first limit); the period T [s] is the control period."""
+
+    limits: JointLimits
+    period: float
+    name: str = "joint_velocity"
+
+    def apply(self, q: FloatArray, previous: FloatArray, bounds: Bounds) -> Bounds:
+        bounds.lower, bounds.upper = velocity_bounds(q, self.limits, self.period)
+        return bounds
+
+
+@dataclass(frozen=True)
+class AccelerationLimit:
+    """The joint acceleration bound |qd_k - qd_{k-1}| <= a_max T narrowing the box
+    (:func:`acceleration_bounds`, with its stopping speed toward the position limits).
+
+    ``max_acceleration`` a_max [rad/s^2], (n,), > 0; ``period`` T [s]."""
+
+    limits: JointLimits
+    max_acceleration: FloatArray
+    period: float
+    name: str = "joint_acceleration"
+
+    def apply(self, q: FloatArray, previous: FloatArray, bounds: Bounds) -> Bounds:
+        bounds.lower, bounds.upper = acceleration_bounds(bounds.lower, bounds.upper, q, self.limits, previous,
+                                                         self.max_acceleration, self.period)
+        return bounds
+
+
+def apply_limits(limits: tuple[Limit, ...], q: FloatArray, previous: FloatArray) -> Bounds:
+    """Every limit in order on the free bounds: the constraints of one cycle (n = q.shape[0])."""
+    bounds = Bounds.free(q.shape[0])
+    for limit in limits:
+        bounds = limit.apply(q, previous, bounds)
+    return bounds

@@ -104,7 +104,7 @@ class LiveParameters(Generic[T]):
         try:
             for key, value in changes.items():
                 self.specs[key].validate(value, self.node.get_name())
-            merged = {**self.values, **changes}
+            merged = {**(self.pending[0] if self.pending is not None else self.values), **changes}  # two sets before a cycle: both
             built = self.build(merged)
         except (DualArmError, ValueError) as exc:
             self.node.get_logger().warning(f"parameter change refused: {exc}")

@@ -28,6 +28,7 @@ import numpy.typing as npt
 from scipy.optimize import lsq_linear
 
 from dualarm_control.qp import DEFAULT_BACKEND, QPSettings, QPSolution, make_backend
+from dualarm_control.solvers.slack_qp import slack_qp
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -67,6 +68,11 @@ class ControlProblem:
         inequality_bound: h of ``A_ie qd <= h``, k(b - f) - df/dt of eq (13), (m_ie,).
         equality_weights: slack weight of each row of ``jacobian`` (>= 0), (m,), or None (1).
         inequality_weights: slack weight of each inequality row (> 0), (m_ie,), or None.
+        limit_rows: hard rows ``limit_rows @ qd <= limit_bound`` of the limits beyond the box, (m_l, n), or
+            None: the collision limit's velocity damper (:mod:`dualarm_control.collision_limit`). Every
+            solver takes them as hard constraints (docs/collision.md, "Limits").
+        limit_bound: their right-hand side [m/s], (m_l,).
+        limit_labels: what each row keeps apart (the link pair), m_l strings, for reports.
     """
 
     jacobian: FloatArray
@@ -78,6 +84,20 @@ class ControlProblem:
     inequality_bound: FloatArray | None = None
     equality_weights: FloatArray | None = None
     inequality_weights: FloatArray | None = None
+    limit_rows: FloatArray | None = None
+    limit_bound: FloatArray | None = None
+    limit_labels: tuple[str, ...] = ()
+
+    @property
+    def has_limit_rows(self) -> bool:
+        """Whether the problem has at least one hard limit row."""
+        return self.limit_rows is not None and self.limit_rows.shape[0] > 0
+
+    def limit_excess(self, qd: FloatArray) -> float:
+        """How far qd (n,) [rad/s] breaks the hard limit rows at their worst: max(A qd - b, 0) [m/s]."""
+        if self.limit_rows is None or self.limit_bound is None or self.limit_rows.shape[0] == 0:
+            return 0.0
+        return float((self.limit_rows @ qd - self.limit_bound).max(initial=0.0))
 
     def problem_with_invalid_input(self) -> str:
         """Return a description of what is wrong with the inputs, or '' when they are usable.
@@ -101,7 +121,8 @@ class ControlProblem:
                 if not np.all(np.isfinite(getattr(self, name))):
                     return f"non-finite values in {name}"
         if self.inequality_jacobian is not None or self.inequality_bound is not None \
-                or self.equality_weights is not None or self.inequality_weights is not None:
+                or self.equality_weights is not None or self.inequality_weights is not None \
+                or self.limit_rows is not None or self.limit_bound is not None:
             optional = self._problem_with_optional_rows(m, n)
             if optional:
                 return optional
@@ -122,6 +143,15 @@ class ControlProblem:
                 return f"bad shapes: inequality_jacobian {a.shape}, inequality_bound {h.shape}"
             if not math.isfinite(a.sum() + h.sum()):
                 return "non-finite values in the inequality rows"
+        a, h = self.limit_rows, self.limit_bound
+        if (a is None) != (h is None):
+            return "limit_rows and limit_bound must be given together"
+        if a is not None and h is not None:
+            m_l = a.shape[0] if a.ndim == 2 else -1
+            if a.shape != (m_l, n) or h.shape != (m_l,):
+                return f"bad shapes: limit_rows {a.shape}, limit_bound {h.shape}"
+            if not math.isfinite(a.sum() + h.sum()):
+                return "non-finite values in the limit rows"
         for name, size in (("equality_weights", m), ("inequality_weights", m_ie)):
             w = getattr(self, name)
             if w is None:
@@ -299,6 +329,7 @@ class Solver:
         except (ValueError, np.linalg.LinAlgError, RuntimeError) as exc:
             qd, status, iters, detail = None, "failed", 0, f"{type(exc).__name__}: {exc}"
         excess = math.nan if qd is None else bound_excess(qd, problem.lower, problem.upper)
+        rows_excess = 0.0 if qd is None or not problem.has_limit_rows else problem.limit_excess(qd)
         if qd is None or status in FALLBACK_TRIGGERS or not math.isfinite(excess):
             self.reset()
             velocities, status, detail = fallback(problem, qd, status, detail)
@@ -306,9 +337,20 @@ class Solver:
             self.reset()
             velocities, status, detail = fallback(problem, qd, BOUNDS_VIOLATED,
                                                   violation_text(qd, problem.lower, problem.upper, self.bound_tolerance))
+        elif rows_excess > 0.0 and rows_excess > self.row_tolerance(problem):
+            self.reset()
+            velocities, status, detail = fallback(problem, qd, BOUNDS_VIOLATED,
+                                                  row_violation_text(problem, qd, self.row_tolerance(problem)))
         else:
             velocities = np.minimum(np.maximum(qd, problem.lower), problem.upper)  # absorbs <= bound_tolerance
         return velocities, qd, excess, status, iters, detail
+
+    def row_tolerance(self, problem: ControlProblem) -> float:
+        """How far beyond a hard limit row the result of ``_solve`` may lie [m/s]: ``bound_tolerance``
+        times (1 + the largest row 1-norm [m/rad]), the most a result within ``bound_tolerance`` of
+        the rows in each joint can differ in a row (and what the clip into the box can add)."""
+        assert problem.limit_rows is not None
+        return self.bound_tolerance * (1.0 + float(np.abs(problem.limit_rows).sum(axis=1).max(initial=0.0)))
 
 
 def fallback(problem: ControlProblem, qd: FloatArray | None, status: str, detail: str) -> tuple[FloatArray, str, str]:
@@ -318,15 +360,69 @@ def fallback(problem: ControlProblem, qd: FloatArray | None, status: str, detail
     "fallback" ("bounds_violated" for a result beyond its bounds), or :func:`rest_command`
     with the original failure status ("failed" for a "max_iter", non-finite or wrongly shaped
     result) when the least-squares step fails too.
+
+    With hard limit rows (the collision limit), a least-squares step that breaks them is not
+    commanded: :func:`separating_step` is (the rows relaxed as little as the box allows: it moves
+    the pairs apart as fast as the bounds let it, or stops), and ``detail`` says by how much the
+    rows were relaxed; when that fails too, the command nearest to rest.
     """
     if qd is not None and status not in FALLBACK_TRIGGERS and status != BOUNDS_VIOLATED:
         status, detail = "failed", detail or f"solver returned non-finite velocities or shape {qd.shape}"
     reason = f"{status}: {detail or 'no solution'}"
+    final_status = status if status == BOUNDS_VIOLATED else FALLBACK_STATUS
     step = bounded_least_squares(problem.jacobian, problem.reference, problem.lower, problem.upper)
-    if step is not None:
-        return step, (status if status == BOUNDS_VIOLATED else FALLBACK_STATUS), f"{reason}; bounded least-squares step used"
+    if step is not None and problem.limit_excess(step) <= ROUND_OFF:
+        return step, final_status, f"{reason}; bounded least-squares step used"
+    if problem.has_limit_rows:
+        separated = separating_step(problem)
+        if separated is not None:
+            velocities, slack = separated
+            relaxed = f", limit rows relaxed by up to {slack:.3g} m/s" if slack > ROUND_OFF else ""
+            return velocities, final_status, f"{reason}; separating step used (limit rows hard{relaxed})"
     final = "failed" if status == "max_iter" else status
     return rest_command(problem.lower, problem.upper), final, f"{reason}; bounded least squares failed, nearest-to-rest command"
+
+
+SEPARATING_WEIGHT = 1e3
+"""rho of :func:`separating_step`: the linear cost of a limit row's slack [per m/s], an exact penalty
+(no slack while the rows are feasible with multipliers below rho)."""
+
+
+def separating_step(problem: ControlProblem) -> tuple[FloatArray, float] | None:
+    """The fallback when the limit rows conflict with the box (a pair already inside d_s that the
+    box does not let move apart fast enough, or a solver that failed with rows):
+
+        min 1/2 ||J qd - r||^2 + eps ||qd||^2 + rho 1^T s + mu/2 ||s||^2
+        s.t. lower <= qd <= upper,  A qd - s <= b,  s >= 0
+
+    (paper 001's slack QP, :func:`~dualarm_control.solvers.slack_qp.slack_qp`, with the
+    limit rows as its inequality rows and rho = :data:`SEPARATING_WEIGHT`): where the rows can be
+    met inside the box, s = 0 and this is the task's best step that meets them; where they cannot,
+    the rows are relaxed by the least slack: the pair moves apart as fast as the box allows (zero
+    approach where zero is all it allows: a stop). Solved by daqp.
+
+    Returns:
+        (qd [rad/s] (n,), inside the box, the largest slack [m/s]); None when the QP fails.
+    """
+    assert problem.limit_rows is not None and problem.limit_bound is not None
+    m = problem.limit_rows.shape[0]
+    qp = slack_qp(problem.jacobian, problem.reference, problem.equality_weights, problem.lower, problem.upper,
+                  FALLBACK_DAMPING, problem.limit_rows, problem.limit_bound, np.full(m, SEPARATING_WEIGHT))
+    n = problem.lower.shape[0]
+    solution = make_backend("daqp").solve(qp)
+    if solution.x is None or not math.isfinite(float(solution.x.sum())):
+        return None
+    qd = np.minimum(np.maximum(solution.x[:n], problem.lower), problem.upper)
+    return qd, float(solution.x[n:].max(initial=0.0))
+
+
+def row_violation_text(problem: ControlProblem, qd: FloatArray, tolerance: float) -> str:
+    """The worst limit row broken by qd (n,) [rad/s], for a "bounds_violated" detail."""
+    assert problem.limit_rows is not None and problem.limit_bound is not None
+    over = problem.limit_rows @ qd - problem.limit_bound
+    i = int(np.argmax(over))
+    label = problem.limit_labels[i] if i < len(problem.limit_labels) else f"row {i}"
+    return f"limit row {label} broken by {over[i]:.3g} m/s (tolerance {tolerance:.3g} m/s)"
 
 
 def bound_excess(x: FloatArray, lower: FloatArray, upper: FloatArray) -> float:

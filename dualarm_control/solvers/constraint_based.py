@@ -16,7 +16,8 @@ Here, per row, with the weights of the tasks:
   (expensive: rho = the row's weight, 1e3 by default). The linear term is an exact
   penalty: s_ie = 0 whenever the hard constraints are feasible with multipliers below rho;
   mu = ``SLACK_CURVATURE`` keeps H definite;
-* the joint velocity/position limits of eq (21)-(23) are hard bounds lower <= u <= upper.
+* the joint velocity/position limits of eq (21)-(23) are hard bounds lower <= u <= upper, and
+  the limits' rows (the collision limit's velocity damper) hard rows ``A_l u <= b_l``.
 
 Q = eps I with eps = ``regularization`` (paper's small cost on u against chattering) and
 c = 0: the paper takes j = 1, an equality task, whose derivative is fixed by eq (14) on the
@@ -25,7 +26,10 @@ feasible set, so its linear term does not change the solution.
 QP variables x = [u (n); s_ie (m_ie)]:
 
     H = [[2 eps I + A_e^T W_e A_e, 0], [0, mu I]],  g = [-A_e^T W_e r_e; rho],
-    C = [A_ie, -I],  -inf <= C x <= h,   [lower; 0] <= x <= [upper; +inf].
+    C = [[A_ie, -I], [A_l, 0]],  -inf <= C x <= [h; b_l],   [lower; 0] <= x <= [upper; +inf].
+
+(:func:`~dualarm_control.solvers.slack_qp.slack_qp` builds it; the failure policy's separating
+step uses the same QP.)
 """
 
 from __future__ import annotations
@@ -44,50 +48,27 @@ from dualarm_control.solvers.base import (
 )
 from dualarm_control.solvers.methods import damped_least_squares
 from dualarm_control.solvers.registry import register
+from dualarm_control.solvers.slack_qp import slack_qp
 
-SLACK_CURVATURE = 1e-6
-"""mu: quadratic cost on the inequality slacks (keeps H positive definite) [-]."""
-INFINITY = 1e20
-"""Stand-in for an absent bound (both daqp and proxsuite treat it as infinite)."""
 SLACK_REPORT_THRESHOLD = 1e-9
 """An inequality slack above this is reported in ``detail`` [units of the row]."""
 
 
 def constraint_qp(problem: ControlProblem, regularization: float) -> QPProblem:
-    """The QP of the module docstring for one control problem.
+    """The QP of the module docstring for one control problem (:func:`slack_qp`).
 
     Args:
         problem: equality rows (jacobian, reference, equality_weights), optional inequality
-            rows (inequality_jacobian, inequality_bound, inequality_weights), bounds.
+            rows (inequality_jacobian, inequality_bound, inequality_weights), bounds, and the
+            limits' hard rows (limit_rows, limit_bound: no slack, as the joint bounds).
         regularization: eps of Q = eps I, >= 0.
 
     Returns:
         QPProblem over x = [u; s_ie], (n + m_ie) variables.
     """
-    a_e, r_e = problem.jacobian, problem.reference
-    n = a_e.shape[1]
-    w_e = np.ones(a_e.shape[0]) if problem.equality_weights is None else problem.equality_weights
-    weighted = a_e.T * w_e  # A_e^T W_e, (n, m)
-    h_uu = weighted @ a_e
-    h_uu.flat[:: n + 1] += 2.0 * regularization
-    g_u = -weighted @ r_e
-    a_ie, h = problem.inequality_jacobian, problem.inequality_bound
-    if a_ie is None or h is None or a_ie.shape[0] == 0:
-        return QPProblem(H=h_uu, g=g_u, lb=problem.lower, ub=problem.upper)
-    m = a_ie.shape[0]
-    rho = np.full(m, 1.0) if problem.inequality_weights is None else problem.inequality_weights
-    big = np.zeros((n + m, n + m))
-    big[:n, :n] = h_uu
-    big[n:, n:] = np.eye(m) * SLACK_CURVATURE
-    return QPProblem(
-        H=big,
-        g=np.concatenate((g_u, rho)),
-        C=np.hstack((a_ie, -np.eye(m))),
-        l=np.full(m, -INFINITY),
-        u=h,
-        lb=np.concatenate((problem.lower, np.zeros(m))),
-        ub=np.concatenate((problem.upper, np.full(m, INFINITY))),
-    )
+    return slack_qp(problem.jacobian, problem.reference, problem.equality_weights, problem.lower, problem.upper,
+                    regularization, problem.inequality_jacobian, problem.inequality_bound,
+                    problem.inequality_weights, problem.limit_rows, problem.limit_bound)
 
 
 @register("constraint_based")
@@ -119,7 +100,7 @@ class ConstraintBased(Solver):
             scale = 1.0 if problem.equality_weights is None else np.sqrt(problem.equality_weights)
             qd = damped_least_squares(problem.jacobian * np.reshape(scale, (-1, 1)), problem.reference * scale,
                                       2.0 * self.params.regularization)
-            if qd is not None and inside(qd, problem.lower, problem.upper):
+            if qd is not None and inside(qd, problem.lower, problem.upper) and problem.limit_excess(qd) <= 0.0:
                 return qd, "solved", 0, ""
         solution = self._qp.solve(constraint_qp(problem, self.params.regularization))
         qd, status, iters, detail = from_qp(solution, lambda x: x[:n])

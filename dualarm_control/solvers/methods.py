@@ -21,6 +21,7 @@ from dualarm_control.solvers.base import (
     inside,
 )
 from dualarm_control.solvers.registry import register
+from dualarm_control.solvers.slack_qp import INFINITY
 
 
 @register("pseudo_inverse")
@@ -32,6 +33,12 @@ class PseudoInverse(Solver):
     Shrinking toward 0 cannot reach the bounds of a joint beyond a position limit (its bounds
     exclude 0, :func:`dualarm_control.limits.velocity_bounds`): such a joint's velocity is
     set to the nearest bound (status "scaled", ``detail`` names the joints).
+
+    Limit rows (the collision limit, ``A qd <= b``): the same uniform shrink also fits every row
+    with b >= 0 (rest meets it). A row with b < 0 (a pair inside the safety distance: it must move
+    apart) cannot be met by shrinking eq (13)'s direction, which is the task's: the pseudo-inverse
+    then gives up, status "infeasible" with the row named, and the failure policy's separating
+    step (:func:`~dualarm_control.solvers.base.separating_step`) is commanded.
     """
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
@@ -43,9 +50,22 @@ class PseudoInverse(Solver):
             elif value < lo and value < 0:
                 scale = min(scale, min(lo, 0.0) / value)
         notes = []
+        if problem.has_limit_rows:
+            assert problem.limit_rows is not None and problem.limit_bound is not None
+            rows, bound = problem.limit_rows @ qd, problem.limit_bound
+            if (bound < 0.0).any() and (rows[bound < 0.0] > bound[bound < 0.0]).any():
+                i = int(np.flatnonzero(bound < 0.0)[0])
+                label = problem.limit_labels[i] if i < len(problem.limit_labels) else f"row {i}"
+                return None, "infeasible", 0, f"limit row {label} needs motion apart (b = {bound[i]:.3g} m/s)"
+            over = rows > bound
+            if over.any():
+                row_scale = float(np.min(bound[over] / rows[over]))
+                if row_scale < scale:
+                    scale = row_scale
+                    notes.append("limited by the limit rows")
         if scale < 1.0:
             qd = qd * scale
-            notes.append(f"scaled by {scale:.3g} into the joint bounds")
+            notes.insert(0, f"scaled by {scale:.3g} into the joint bounds")
         beyond = (problem.lower > 0.0) | (problem.upper < 0.0)  # joints beyond a position limit
         if beyond.any():
             lo, hi = problem.lower[beyond], problem.upper[beyond]
@@ -96,7 +116,8 @@ class StandardQP(_QPSolver):
     J^T J has rank 6 < n, so eq (14) alone has a whole affine set of minimisers; the tiny
     term eps (``regularization``, default 1e-6) selects the minimum-norm one, as J^+ does.
     With eps = 0, H is only semi-definite. The QP is solved only when the unbounded
-    minimiser (:func:`damped_least_squares`) leaves the bounds.
+    minimiser (:func:`damped_least_squares`) leaves the bounds. The limits' rows (``A qd <= b``,
+    the collision limit) are the QP's constraint rows, hard.
     """
 
     qp_description = "QP, eq (14)"
@@ -107,13 +128,26 @@ class StandardQP(_QPSolver):
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
         qd = damped_least_squares(problem.jacobian, problem.reference, self.params.regularization)
-        if qd is not None and inside(qd, problem.lower, problem.upper):
-            return qd, "solved", 0, ""  # eq (14)'s optimum: no bound is active
+        if qd is not None and inside(qd, problem.lower, problem.upper) and problem.limit_excess(qd) <= 0.0:
+            return qd, "solved", 0, ""  # eq (14)'s optimum: no bound and no row is active
         jtj, jtr = _least_squares_terms(problem)
         n = jtj.shape[0]
         h = jtj  # a fresh array: add eps to its diagonal in place
         h.flat[:: n + 1] += self.params.regularization
-        return from_qp(self._qp.solve(QPProblem(H=h, g=-jtr, lb=problem.lower, ub=problem.upper)))
+        return from_qp(self._qp.solve(QPProblem(H=h, g=-jtr, lb=problem.lower, ub=problem.upper,
+                                                **limit_rows_of(problem))))
+
+
+def limit_rows_of(problem: ControlProblem, columns: int = 1) -> dict[str, FloatArray]:
+    """The limits' rows ``A qd <= b`` as a QP's constraint rows (C, l, u), none without rows.
+
+    ``columns`` 2 writes them on z = [qd+; qd-] (qd = qd+ - qd-): C = [A, -A].
+    """
+    if not problem.has_limit_rows:
+        return {}
+    assert problem.limit_rows is not None and problem.limit_bound is not None
+    a = problem.limit_rows if columns == 1 else np.hstack((problem.limit_rows, -problem.limit_rows))
+    return {"C": a, "l": np.full(a.shape[0], -INFINITY), "u": problem.limit_bound}
 
 
 def damped_least_squares(jacobian: FloatArray, reference: FloatArray, eps: float) -> FloatArray | None:
@@ -163,7 +197,8 @@ class SparseQP(_QPSolver):
     min 1/2 ||J qd - r||^2 + lambda ||qd||_1  s.t. Qd_min <= qd <= Qd_max, solved as the
     standard QP of eq (19) in 2n variables z = [qd+; qd-], qd = qd+ - qd-:
     H = [J, -J]^T [J, -J] (2n, 2n), g = lambda 1_2n - [J, -J]^T r, and the bounds as the
-    equivalent box of :func:`lasso_box` (no constraint rows). H has rank 6: only positive
+    equivalent box of :func:`lasso_box` (no constraint rows but the limits': ``A qd <= b`` is
+    ``[A, -A] z <= b``, :func:`limit_rows_of`). H has rank 6: only positive
     semi-definite, so back-ends that need a definite H are refused.
 
     Tie-break: with ``proximal_weight`` mu > 0 and a previous solution z_prev (none after
@@ -210,7 +245,7 @@ class SparseQP(_QPSolver):
         prev = self._previous if mu > 0 and self._previous is not None and self._previous.shape == (n,) else None
         if prev is None and self._dual is not None:
             qd, iterations = self._dual.solve(j, problem.reference, self.params.l1_weight)
-            if qd is not None and inside(qd, problem.lower, problem.upper):
+            if qd is not None and inside(qd, problem.lower, problem.upper) and problem.limit_excess(qd) <= 0.0:
                 self._previous = qd
                 return qd, "solved", iterations, ""  # eq (17)'s optimum lies inside the bounds
         b = np.hstack((j, -j))  # J [I, -I], (6, 2n)
@@ -220,7 +255,7 @@ class SparseQP(_QPSolver):
             h.flat[:: 2 * n + 1] += mu
             g -= mu * np.concatenate((np.maximum(prev, 0.0), np.maximum(-prev, 0.0)))
         lb, ub = lasso_box(problem.lower, problem.upper)
-        solution = self._qp.solve(QPProblem(H=h, g=g, lb=lb, ub=ub))
+        solution = self._qp.solve(QPProblem(H=h, g=g, lb=lb, ub=ub, **limit_rows_of(problem, 2)))
         qd, status, iterations, detail = from_qp(solution, lambda z: z[:n] - z[n:])
         self._previous = qd if solution.ok else None
         return qd, status, iterations, detail
@@ -293,7 +328,8 @@ class HierarchicalSparseQP(Solver):
     the bounds. QP2 starts from qd1 clipped into the bounds; a qd1 beyond them by more than
     QP1's tolerance is returned as it is, so that :meth:`Solver.solve` reports it
     ("bounds_violated") instead of the clip hiding it. Bound tolerance: QP1's (twice the
-    back-end's); qd1 clipped + qd2 lies within one back-end tolerance of the bounds.
+    back-end's); qd1 clipped + qd2 lies within one back-end tolerance of the bounds. The limits'
+    rows are hard in both levels: QP1's (:class:`SparseQP`) and QP2's, ``A qd2 <= b - A qd1``.
     """
 
     uses_repulsive = True
@@ -326,13 +362,17 @@ class HierarchicalSparseQP(Solver):
             return qd1, status, iters, detail  # no secondary motion, or a failure for solve() to handle
         qd1 = np.minimum(np.maximum(qd1, problem.lower), problem.upper)  # absorbs QP1's tolerance
         lower2, upper2 = problem.lower - qd1, problem.upper - qd1
+        rows2: dict[str, FloatArray] = {}
+        if problem.has_limit_rows:  # hard in QP2 too: A (qd1 + qd2) <= b
+            rows2 = limit_rows_of(problem)
+            rows2["u"] = rows2["u"] - rows2["C"] @ qd1
         qd2 = null_space_projection(problem.jacobian, problem.repulsive)
-        if qd2 is not None and inside(qd2, lower2, upper2):
-            return qd1 + qd2, status, iters, detail  # eq (27)'s optimum: no bound is active
+        if qd2 is not None and inside(qd2, lower2, upper2) and problem.limit_excess(qd1 + qd2) <= 0.0:
+            return qd1 + qd2, status, iters, detail  # eq (27)'s optimum: no bound and no row is active
         n = qd1.shape[0]
         qp2 = QPProblem(
             H=self._identity_of(n), g=-problem.repulsive, A=problem.jacobian, b=np.zeros(problem.jacobian.shape[0]),
-            lb=lower2, ub=upper2,
+            lb=lower2, ub=upper2, **rows2,
         )
         sol = self._secondary.solve(qp2)
         if sol.x is None:

@@ -26,6 +26,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from dualarm_control.app.record.run_record import RunRecord, TaskValues
+from dualarm_control.collision import CollisionModel
+from dualarm_control.drive_monitor import judge_goals
 from dualarm_control.kinematics import DualArmModel, FloatArray, rotation_angle
 from dualarm_control.metrics import (
     active_set_switches_per_s,
@@ -99,7 +101,32 @@ def summarize_run(record: RunRecord, scenario: Scenario | None,
     if pos.size and rot.size:
         out.update(max_tracking_error_m=float(pos.max()), rms_tracking_error_m=float(np.sqrt(np.mean(pos**2))),
                    max_tracking_error_rad=float(rot.max()))
+    commands_script = getattr(scenario.reference, "commands", None) if scenario is not None else None
+    if commands_script:
+        out.update(goal_metrics(record, commands_script, model))
     return out
+
+
+GOAL_KEYS = ("goals_reached", "goals_stalled", "goal_outcomes", "collision_min_distance_m", "collision_min_pair")
+"""The keys of a scripted goals run (:func:`goal_metrics`)."""
+
+
+def goal_metrics(record: RunRecord, commands: Sequence[Any], model: DualArmModel) -> dict[str, float | int | str]:
+    """How each goal of a script ended (:func:`~dualarm_control.drive_monitor.judge_goals`, stalls
+    explained by the robot's collision model) and the smallest link-pair distance over the run [m]
+    (coal, on the recorded positions, the robot's ``collision_allowed`` pairs excluded)."""
+    collision = CollisionModel(model, allowed=model.description.collision_allowed)
+    outcomes = judge_goals(model, commands, record.time, record.positions, record.final_positions, collision)
+    closest = (np.inf, "")
+    for q in record.positions[np.all(np.isfinite(record.positions), axis=1)]:
+        for pair in collision.distances(q, within=min(closest[0], collision.margin)):
+            if pair.distance < closest[0]:
+                closest = (pair.distance, f"{pair.link_a} – {pair.link_b}")
+    return {"goals_reached": sum(o.state == "reached" for o in outcomes),
+            "goals_stalled": sum(o.state == "stalled" for o in outcomes),
+            "goal_outcomes": " | ".join(o.text() for o in outcomes),
+            "collision_min_distance_m": float(closest[0]) if np.isfinite(closest[0]) else float(collision.margin),
+            "collision_min_pair": closest[1] or f"none closer than {collision.margin:g} m"}
 
 
 def final_errors(record: RunRecord, scenario: Scenario, model: DualArmModel) -> tuple[float, float]:

@@ -1,0 +1,99 @@
+"""The collision limit: the velocity damper's rows as a :class:`~dualarm_control.limits.Limit`.
+
+Each cycle, the pairs of the robot's :class:`~dualarm_control.collision.CollisionModel` closer
+than the influence distance d_i give one hard row each (:func:`~dualarm_control.collision.velocity_damper_rows`):
+
+    -dd_dq qd <= xi (d - d_s) / (d_i - d_s)        [m/s]
+
+which every solver takes in its own variables (docs/collision.md, "Limits"). What the limit saw
+is kept for the cycle's report (:class:`CollisionReport`: the closest pair, its distance, the rows
+and how many of them are at their bound).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from dualarm_control.collision import (
+    CollisionModel,
+    CollisionParams,
+    PairDistance,
+    velocity_damper_rows,
+)
+from dualarm_control.kinematics import DualArmModel, FloatArray
+from dualarm_control.limits import Bounds
+
+ACTIVE_TOLERANCE = 1e-6
+"""A row is active (at its bound) when A qd >= b - 1e-6 m/s."""
+
+
+@dataclass(frozen=True, slots=True)
+class CollisionReport:
+    """What the collision limit saw in one cycle.
+
+    Attributes:
+        distance: the smallest distance d [m] of the pairs closer than d_i (inf: none that close).
+        pair: its links ``(link_a, link_b)``, or None.
+        rows: how many pairs gave a row (d < d_i).
+        active: how many rows the command holds at their bound (A qd >= b - :data:`ACTIVE_TOLERANCE`).
+        influence_distance: d_i [m] of the cycle (what "inf" means).
+    """
+
+    distance: float
+    pair: tuple[str, str] | None
+    rows: int
+    active: int
+    influence_distance: float
+
+    def text(self) -> str:
+        """One line, e.g. ``left_flange – right_link_5 at 0.030 m (2 rows, 1 active)``."""
+        if self.pair is None:
+            return f"no pair closer than {self.influence_distance:.3f} m"
+        return (f"{self.pair[0]} – {self.pair[1]} at {self.distance:.3f} m ({self.rows} rows, "
+                f"{self.active} active)")
+
+
+def allowed_pairs(model: DualArmModel, params: CollisionParams) -> tuple[tuple[str, str], ...]:
+    """The robot's ``collision_allowed`` pairs and the parameters' own, in that order."""
+    return tuple(model.description.collision_allowed) + tuple(params.allowed)
+
+
+class CollisionLimit:
+    """The velocity damper of every pair closer than d_i, as hard rows (module docstring).
+
+    Args:
+        collision: the robot's collision model (its allowed pairs already removed).
+        params: d_i, d_s, xi (``enabled`` is the controller's business: it adds this limit or not).
+    """
+
+    name = "collision"
+
+    def __init__(self, collision: CollisionModel, params: CollisionParams) -> None:
+        self.collision = collision
+        self.params = params
+        self.near: list[PairDistance] = []
+        self._rows = (np.zeros((0, collision.model.nv)), np.zeros(0))
+
+    def apply(self, q: FloatArray, previous: FloatArray, bounds: Bounds) -> Bounds:
+        p = self.params
+        self.near = self.collision.distances(q, within=p.influence_distance)
+        if not self.near:
+            return bounds
+        self._rows = a, b = velocity_damper_rows(self.near, p.influence_distance, p.safety_distance, p.gain)
+        bounds.rows = np.vstack((bounds.rows, a))
+        bounds.bound = np.concatenate((bounds.bound, b))
+        bounds.labels = bounds.labels + tuple(f"{d.link_a} – {d.link_b} at {d.distance:.3f} m" for d in self.near)
+        return bounds
+
+    def report(self, velocities: FloatArray) -> CollisionReport:
+        """The last cycle's :class:`CollisionReport` for its command ``velocities`` [rad/s] (n,)."""
+        d_i = self.params.influence_distance
+        if not self.near:
+            return CollisionReport(math.inf, None, 0, 0, d_i)
+        a, b = self._rows
+        active = int(np.count_nonzero(a @ velocities >= b - ACTIVE_TOLERANCE))
+        closest = min(self.near, key=lambda d: d.distance)
+        return CollisionReport(closest.distance, (closest.link_a, closest.link_b), len(self.near), active, d_i)
