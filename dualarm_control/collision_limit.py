@@ -48,6 +48,14 @@ class CollisionReport:
     active: int
     influence_distance: float
 
+    def values(self) -> dict[str, str]:
+        """The /diagnostics keys (strings, as diagnostic_msgs/KeyValue holds them): ``collision_distance_m``
+        (the closest pair's d, or ``inf`` beyond d_i), ``collision_pair`` ("link_a – link_b" or ""),
+        ``collision_rows`` and ``collision_active``."""
+        return {"collision_distance_m": f"{self.distance:.6f}" if self.pair is not None else "inf",
+                "collision_pair": f"{self.pair[0]} – {self.pair[1]}" if self.pair is not None else "",
+                "collision_rows": str(self.rows), "collision_active": str(self.active)}
+
     def text(self) -> str:
         """One line, e.g. ``left_flange – right_link_5 at 0.030 m (2 rows, 1 active)``."""
         if self.pair is None:

@@ -46,6 +46,7 @@ from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
 from dualarm_control import controller as core
+from dualarm_control.collision_limit import CollisionReport
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import ParamSpec, non_negative, positive
 from dualarm_control.references.base import (
@@ -118,6 +119,7 @@ class ControllerNode:
         self.inputs = inputs.StreamInputs(self.streams, self.lockstep)
         self.state: tuple[int, np.ndarray, int] | None = None  # (stamp_ns, q, received monotonic ns)
         self.last_commanded_stamp: int | None = None
+        self.collision_active = False
         self.timing = inputs.CycleTiming(realtime=not self.lockstep)
         self.first_stamp: int | None = None  # task mode: stamp of the first joint state (t = 0)
         self.completed_at: float | None = None  # task mode: monotonic s at which the duration was reached
@@ -144,7 +146,8 @@ class ControllerNode:
             subscribe(WrenchStamped, WRENCH, lambda msg: self.on_input(
                 WRENCH, convert.stamp_ns(msg.header.stamp), convert.wrench_vector(msg)), 10)
         self.live = shell.LiveParameters(n, {s.name: s for s in ALL_PARAMETERS}, self.values, lambda merged: (
-            core.RelativeController(self.model, core.controller_params(merged, n.get_name()))))
+            core.RelativeController(self.model, core.controller_params(merged, n.get_name()),
+                                    collision=self.tracker.controller.collision_model)))
         self.ticks: list[shell.Tick] = ([] if self.lockstep else  # ros.node.Ticker, not an rclpy timer
                                         [(max(self.params.period, WATCHDOG_MIN_PERIOD_S), self.on_watchdog)])
         self.log.info(f"{self.tracker.label} on scenario '{self.scenario.name}' ({source.describe()}"
@@ -242,9 +245,22 @@ class ControllerNode:
         if math.isfinite(cycle.position_error):
             local_bus.publish_if_subscribed(self.pub_pose, lambda: convert.pose_stamped(stamp, cycle.position, cycle.rotation))
         extra = {"scenario": self.values["scenario"], **self.tracker.report(cycle, t)}
+        if cycle.collision is not None:
+            extra.update(cycle.collision.values())
+            self.log_collision(cycle.collision)
         if not self.timed:
             extra.update(self.timing.values(latency, refresh=self.out.count["cycles"] % STATS_EVERY == 1))
         self.publish_cycle(stamp, cycle, self.params.solver, extra)
+
+    def log_collision(self, report: CollisionReport) -> None:
+        """One log line when the collision limit starts holding a pair at its bound, one when it lets go."""
+        active = report.active > 0
+        if active != self.collision_active:
+            self.collision_active = active
+            if active:
+                self.log.warning(f"collision constraint active: {report.text()}")
+            else:
+                self.log.info("collision constraint released")
 
     def fresh_inputs(self, stamp: int) -> dict[str, Any] | None:
         """Real time: the latest sample of every stream, or None after a safe command (none yet,

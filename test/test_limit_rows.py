@@ -1,0 +1,143 @@
+"""The limits' hard rows ``A qd <= b`` (the collision limit) in every solver (issue 27, docs/collision.md).
+
+Each solver's own result (``raw_velocities``, beneath the clip and the failure policy) must meet the
+rows; the standard QP with rows is checked against quadprog (an independent dual active-set
+solver, through qpsolvers) on the same QP, the lasso against quadprog on its split form, and
+rows a solver cannot meet go to the separating step, never to a command that breaks them where
+the box allows meeting them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import qpsolvers
+
+from dualarm_control.solvers import ControlProblem, SolverParams, make_solver, solver_names
+from dualarm_control.solvers.base import separating_step
+
+N = 14
+SOLVERS = solver_names()
+
+
+def problem_with_rows(seed: int, rows: int = 3, bound: float = 0.0) -> ControlProblem:
+    """Random J and reference, a box containing 0, and ``rows`` rows that the unconstrained
+    least-squares step breaks by construction: a_i = -(its normalised direction) rotated a little,
+    b_i = ``bound`` (0: no approach at all along a_i; > 0: some; < 0: must move apart)."""
+    rng = np.random.default_rng(seed)
+    j = rng.standard_normal((6, N))
+    r = rng.standard_normal(6)
+    free = np.linalg.pinv(j) @ r
+    a = np.array([free / np.linalg.norm(free) + 0.3 * rng.standard_normal(N) for _ in range(rows)])
+    a /= np.linalg.norm(a, axis=1)[:, None]
+    lower, upper = -rng.uniform(1.0, 3.0, N), rng.uniform(1.0, 3.0, N)
+    return ControlProblem(j, r, lower, upper, 0.1 * rng.standard_normal(N), limit_rows=a,
+                          limit_bound=np.full(rows, bound), limit_labels=tuple(f"pair {i}" for i in range(rows)))
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+@pytest.mark.parametrize("seed", range(6))
+def test_every_solver_meets_the_rows_itself(name: str, seed: int) -> None:
+    problem = problem_with_rows(seed, bound=0.05)
+    assert problem.limit_excess(np.linalg.pinv(problem.jacobian) @ problem.reference) > 0.01  # the rows matter
+    result = make_solver(name).solve(problem)
+    assert result.status in ("solved", "scaled"), (result.status, result.detail)
+    assert result.raw_velocities is not None
+    assert problem.limit_excess(result.raw_velocities) <= 1e-7, result.detail
+    assert problem.limit_excess(result.velocities) <= 1e-7
+    assert np.all(result.velocities >= problem.lower) and np.all(result.velocities <= problem.upper)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_standard_qp_with_rows_equals_quadprog(seed: int) -> None:
+    problem = problem_with_rows(seed, bound=0.05)
+    eps = 1e-3  # a well-conditioned H: the minimiser is unique to well below the tolerance
+    params = SolverParams(regularization=eps)
+    ours = make_solver("standard_qp", params).solve(problem).velocities
+    j = problem.jacobian
+    ref = qpsolvers.solve_qp(j.T @ j + eps * np.eye(N), -j.T @ problem.reference, G=problem.limit_rows,
+                             h=problem.limit_bound, lb=problem.lower, ub=problem.upper, solver="quadprog")
+    assert ref is not None
+    np.testing.assert_allclose(ours, ref, atol=1e-6)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_sparse_qp_with_rows_equals_quadprog_on_the_split(seed: int) -> None:
+    """Eq (19) with the rows written on z = [qd+; qd-] as [A, -A] z <= b, against quadprog on the
+    same split with a small proximal-free definite term (quadprog needs H > 0)."""
+    problem = problem_with_rows(seed, bound=0.05)
+    lam, mu = 1e-3, 1e-4
+    ours = make_solver("sparse_qp", SolverParams(l1_weight=lam, proximal_weight=0.0)).solve(problem)
+    b = np.hstack((problem.jacobian, -problem.jacobian))
+    lb = np.concatenate((np.maximum(problem.lower, 0), np.maximum(-problem.upper, 0)))
+    ub = np.concatenate((np.maximum(problem.upper, 0), np.maximum(-problem.lower, 0)))
+    g_rows = np.hstack((problem.limit_rows, -problem.limit_rows))
+    z = qpsolvers.solve_qp(b.T @ b + mu * np.eye(2 * N), lam - b.T @ problem.reference, G=g_rows,
+                           h=problem.limit_bound, lb=lb, ub=ub, solver="quadprog")
+    assert z is not None
+    reference = z[:N] - z[N:]
+    # both meet the rows; the objectives agree (the lasso's minimiser need not be unique)
+    assert problem.limit_excess(ours.velocities) <= 1e-7
+    def objective(qd: np.ndarray) -> float:
+        return 0.5 * float(np.sum((problem.jacobian @ qd - problem.reference) ** 2)) + lam * float(np.abs(qd).sum())
+    assert objective(ours.velocities) <= objective(reference) + 1e-6
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+def test_a_pair_inside_the_safety_distance_is_pushed_apart(name: str) -> None:
+    """b < 0: A qd <= b < 0 asks for motion apart; every command meets it (the pseudo-inverse
+    through the separating step, reported)."""
+    problem = problem_with_rows(11, rows=1, bound=-0.02)
+    result = make_solver(name).solve(problem)
+    assert problem.limit_excess(result.velocities) <= 1e-7, (result.status, result.detail)
+    if name == "pseudo_inverse":
+        assert result.status == "fallback" and "separating step" in result.detail and "pair 0" in result.detail
+    else:
+        assert result.status == "solved", result.detail
+
+
+def test_rows_that_the_box_forbids_are_relaxed_by_the_least_slack() -> None:
+    """The box pins every joint but one at 0; the row asks for 0.5 m/s apart along that joint,
+    which may move only 0.1 rad/s: the separating step moves it at its bound (as far apart as the
+    box lets it), reports the slack, never leaves the box."""
+    problem = problem_with_rows(3, rows=1, bound=-0.5)
+    problem.lower, problem.upper = np.zeros(N), np.zeros(N)
+    problem.upper[4] = 0.1
+    problem.limit_rows = np.zeros((1, N))
+    problem.limit_rows[0, 4] = -1.0  # A qd <= b: -qd_4 <= -0.5
+    for name in SOLVERS:
+        result = make_solver(name).solve(problem)
+        assert result.status == "fallback", (name, result.status, result.detail)
+        assert "relaxed by up to 0.4" in result.detail, result.detail
+        np.testing.assert_allclose(result.velocities[4], 0.1, atol=1e-9)
+        assert np.all(result.velocities >= problem.lower) and np.all(result.velocities <= problem.upper)
+
+
+def test_separating_step_without_conflict_is_the_constrained_least_squares() -> None:
+    problem = problem_with_rows(5, bound=0.05)
+    separated = separating_step(problem)
+    assert separated is not None
+    qd, slack = separated
+    assert slack <= 1e-9 and problem.limit_excess(qd) <= 1e-7
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+def test_no_rows_and_empty_rows_give_the_same_command(name: str) -> None:
+    """A problem with a (0, n) row block is solved exactly as one without rows (bit for bit)."""
+    base = problem_with_rows(2)
+    plain = ControlProblem(base.jacobian, base.reference, base.lower, base.upper, base.repulsive)
+    empty = ControlProblem(base.jacobian, base.reference, base.lower, base.upper, base.repulsive,
+                           limit_rows=np.zeros((0, N)), limit_bound=np.zeros(0))
+    a, b = make_solver(name).solve(plain), make_solver(name).solve(empty)
+    assert np.array_equal(a.velocities, b.velocities) and a.status == b.status
+
+
+def test_bad_rows_are_invalid_input() -> None:
+    problem = problem_with_rows(1)
+    assert problem.limit_bound is not None
+    problem.limit_bound[0] = np.nan
+    result = make_solver("sparse_qp").solve(problem)
+    assert result.status == "invalid_input" and "limit rows" in result.detail
+    problem = problem_with_rows(1)
+    problem.limit_bound = np.zeros(5)
+    assert "limit_rows" in make_solver("standard_qp").solve(problem).detail
