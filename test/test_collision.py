@@ -29,6 +29,7 @@ from dualarm_control.collision import (
 from dualarm_control.errors import ParameterError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.qp import QPProblem, make_backend
+from dualarm_control.robot import RobotError
 from dualarm_sim.cell import CellConfig, DualArmCell
 
 ROBOTS = ("lwr4_cell", "baxter")
@@ -93,45 +94,113 @@ def finite_differences(c: CollisionModel, q: np.ndarray, v: np.ndarray, steps: n
     return out, skipped
 
 
-@pytest.mark.parametrize("name", ROBOTS)
-def test_rows_are_the_derivative_of_the_distance(name: str) -> None:
-    """d_dot = dd_dq @ v against the finite difference of coal's distance along a random unit joint
-    direction v, for every separated pair near contact (1 mm < d < 0.15 m) in 40 configurations.
+FD_STEP = 1e-4
+"""Central-difference step [rad] of the property test (test_polished_rows_are_the_derivative_of_coals_distance)."""
+KINK = 1e-6
+"""A pair is not smooth over the stencil when its one-sided slopes at h and 2h disagree by more than this [m/rad]."""
 
-    The step: the central difference's truncation error is h^2/6 d''' (below 1e-8 m/rad at h =
-    1e-4 rad); its noise is the distance's error over h, about 1e-12 / h with coal's duality-gap
-    tolerance of 1e-12 m^2 (1e-10 m on a 1 cm distance), so h = 1e-6 would already cost 1e-4
-    m/rad. The derivative is the median of five central differences at h = 0.5 to 2 x 1e-4 rad
-    (an isolated bad distance is voted out).
-    The row itself rests on coal's witness points, which GJK leaves where the distance stops
-    changing to first order: a point may slide by e along a rim, or along a box edge nearly parallel
-    to a cylinder, for a change of d of order e^2 times the relative curvature. Hence: the median
-    error within 2e-7 m/rad and 99 % within 5e-6 m/rad (observed over 5 seeds: medians 4e-9 to
-    6e-8, 99th percentiles 1.6e-6 to 2.8e-6, 94 to 98 % within 1e-6), all within 1e-4 m/rad
-    (observed worst 5.3e-5 on Baxter, 4.4e-5 on the LWR4: a box edge along a cylinder); a wrong
-    point, column or sign in the row gives 1e-2 to 1e-1.
-    Skipped: pairs whose closest shapes change or whose witness points jump (> 50 m/rad) within
-    the steps (non-unique closest features: no derivative); at most 5 %. Pairs closer than 1 mm are
-    left out (a step may cross contact, where coal switches from GJK to EPA).
+
+def smooth_central_difference(d: list[float], h: float) -> tuple[float, bool]:
+    """The central difference (d(+h) - d(-h)) / (2h) from d = [d(-2h), d(-h), d(0), d(h), d(2h)],
+    and whether d is smooth over the stencil: for a smooth d the one-sided slopes' difference grows
+    linearly with the step, s+(2h) - s-(2h) = 2 (s+(h) - s-(h)) + O(h^2), while a kink (a change of
+    closest features) inside the stencil breaks that by about the slopes' jump."""
+    s_plus, s_minus = (d[3] - d[2]) / h, (d[2] - d[1]) / h
+    s2_plus, s2_minus = (d[4] - d[2]) / (2 * h), (d[2] - d[0]) / (2 * h)
+    return (d[3] - d[1]) / (2 * h), abs((s2_plus - s2_minus) - 2 * (s_plus - s_minus)) <= KINK
+
+
+def test_kink_detector() -> None:
+    """smooth_central_difference keeps a smooth cubic and flags |x| with its kink inside the stencil."""
+    h = FD_STEP
+    grid = [k * h for k in (-2, -1, 0, 1, 2)]
+    value, smooth = smooth_central_difference([0.3 + 2 * x - 5 * x * x + 7 * x ** 3 for x in grid], h)
+    assert smooth and value == pytest.approx(2.0, abs=1e-6)
+    assert not smooth_central_difference([abs(x + 0.5 * h) for x in grid], h)[1]
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_polished_rows_are_the_derivative_of_coals_distance(name: str) -> None:
+    """The issue's property: for random configurations near contact, d_dot = dd_dq @ v equals the
+    finite difference of coal's distance to 1e-6 m/rad.
+
+    Sampling: q uniform inside the limits (seed 3) until 60 configurations have a pair with 0 < d
+    < 0.10 m (the influence distance; the robot's allowed pairs left out); every such pair, one
+    random unit joint direction v per configuration, rows from ``distances(q, within=0.10,
+    polish=True)``.
+    Step: central differences at h = 1e-4 rad: truncation h^2/6 d''' below 1e-8 m/rad; coal's d
+    is within 1e-12 / d of the true distance (its duality gap) and that error is smooth in q in
+    practice. Measured (docs/collision.md): the differences agree from h = 1e-3 to 1e-5 rad to
+    1e-8 m/rad (the rows' errors, not the differences', dominate); at 1e-6 the noise shows.
+    Excluded, without looking at the row: pairs whose closest shapes change within +-2h, whose
+    distance reaches 0 there (EPA's 1e-6 m accuracy), or which are not smooth over the stencil
+    (smooth_central_difference): at most 2 %.
+    Asserted: 99.5 % within 1e-6 m/rad and all within 2e-6 (measured: LWR4 max 1.7e-7, Baxter one
+    pair at 1.4e-6, the rest within 1e-6). The check can fail: the same comparison on the rows with the sign flipped, or with the
+    angular part (p x n)^T J_w dropped, fails for more than 90 % of the pairs.
     """
-    c = collision_model(name)
-    rng = np.random.default_rng(11)
-    errors, skipped, configurations = [], 0, near_contact(c, 40, seed=3)
-    for q in configurations:
+    m = kinematics(name)
+    c = CollisionModel(m, allowed=m.description.collision_allowed)
+    rng = np.random.default_rng(3)
+    h, within = FD_STEP, 0.10
+    shape_index = {g.name: i for i, g in enumerate(c.geometry.geometryObjects)}
+    errors, excluded, flipped, linear = [], 0, [], []
+    configurations = 0
+    while configurations < 60:
+        q = rng.uniform(m.q_min, m.q_max)
+        pairs = [d for d in c.distances(q, within, polish=True) if d.distance > 0.0]
+        if not pairs:
+            continue
+        configurations += 1
+        jac = c.data.J.copy()
         v = rng.normal(size=q.size)
         v /= np.linalg.norm(v)
-        pairs = [d for d in c.distances(q, NEAR) if d.distance > 1e-3]
-        fd, jumped = finite_differences(c, q, v, STEPS, pairs)
-        skipped += len(jumped)
-        errors += [abs(f - d.dd_dq @ v) for f, d in zip(fd, pairs, strict=True) if not math.isnan(f)]
+        stencil = [by_pair(c.distances(q + k * h * v, within + 0.01)) for k in (-2, -1, 0, 1, 2)]
+        for d in pairs:
+            key, shapes = (d.link_a, d.link_b), (d.geometry_a, d.geometry_b)
+            ends = [s.get(key) for s in stencil]
+            values = [x.distance for x in ends if x is not None and (x.geometry_a, x.geometry_b) == shapes]
+            if len(values) < 5 or min(values) <= 0.0:
+                excluded += 1
+                continue
+            fd, smooth = smooth_central_difference(values, h)
+            if not smooth:
+                excluded += 1
+                continue
+            errors.append(abs(fd - d.dd_dq @ v))
+            flipped.append(abs(fd + d.dd_dq @ v))
+            row_linear = np.zeros(q.size)  # n^T J_v with the world-origin velocity only: no angular part
+            for shape, sign in ((d.geometry_a, -1.0), (d.geometry_b, 1.0)):
+                joint = c._shape_joint[shape_index[shape]]
+                row_linear += sign * (d.normal @ jac[:3]) * c._support[joint]
+            linear.append(abs(fd - row_linear @ v))
     e = np.array(errors)
-    summary = (f"{name}: {len(configurations)} configurations, {len(e)} pair samples, {skipped} skipped, "
-               f"|fd - row|: median {np.median(e):.1e}, 99% {np.percentile(e, 99):.1e}, max {e.max():.1e} m/rad, "
-               f"{np.mean(e <= 1e-6):.1%} within 1e-6")
+    fraction = excluded / (len(e) + excluded)
+    wrong_sign, no_angular = np.mean(np.array(flipped) > 1e-6), np.mean(np.array(linear) > 1e-6)
+    summary = (f"{name}: {configurations} configurations, {len(e)} pairs kept, {excluded} excluded ({fraction:.1%}); "
+               f"|fd - row| median {np.median(e):.1e}, max {e.max():.1e} m/rad; wrong rows fail: sign flipped "
+               f"{wrong_sign:.0%}, angular part dropped {no_angular:.0%}")
     print(summary)
-    assert len(e) >= 300 and skipped <= 0.05 * (len(e) + skipped), summary
-    assert np.median(e) <= 2e-7 and np.percentile(e, 99) <= 5e-6, summary
-    assert e.max() <= 1e-4, summary
+    assert len(e) >= 80 and fraction <= 0.02, summary
+    # Baxter keeps one pair at 1.4e-6 (seed 3): a hull's facet or edge against a rim, a feature
+    # _polish does not refine (GJK's points kept); all others within 1e-6
+    assert np.mean(e <= 1e-6) >= 0.995 and e.max() <= 2e-6, summary
+    assert wrong_sign > 0.9 and no_angular > 0.9, summary
+
+
+@pytest.mark.parametrize("name", ["lwr4_cell", "lwr4_pan_cell", "baxter", "panda_pair", "ur5_pair"])
+def test_ready_configuration_is_clear_of_every_checked_pair(name: str) -> None:
+    """With the robot's collision_allowed pairs, no checked pair is closer than the safety distance
+    (0.03 m) at its ready configuration, inter-arm pairs included (config/robots/*.yaml)."""
+    try:
+        m = DualArmModel(name)
+    except RobotError as error:
+        if "example-robot-data" in str(error):
+            pytest.skip(str(error))
+        raise
+    c = CollisionModel(m, allowed=m.description.collision_allowed)
+    near = c.distances(np.asarray(m.description.ready_positions), CollisionParams().safety_distance)
+    assert not near, [(d.link_a, d.link_b, round(d.distance, 4)) for d in near]
 
 
 @pytest.mark.parametrize("name", ROBOTS)

@@ -13,7 +13,12 @@ import numpy as np
 import pytest
 import qpsolvers
 
-from dualarm_control.solvers import ControlProblem, SolverParams, make_solver, solver_names
+from dualarm_control.solvers import (
+    ControlProblem,
+    SolverParams,
+    make_solver,
+    solver_names,
+)
 from dualarm_control.solvers.base import separating_step
 
 N = 14
