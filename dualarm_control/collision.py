@@ -263,7 +263,7 @@ class CollisionModel:
             self.pairs.append((self._bodies[a].name, self._bodies[b].name))
             self._pair_geometries.append((a, b, ids))
         self.geometry_pairs: int = len(self.geometry.collisionPairs)
-        self.geometry_data = pin.GeometryData(self.geometry)
+        self._joints = np.tile(np.eye(4), (self.model.njoints, 1, 1))  # oMi of the last call, (joints, 4, 4)
         self.request = _request(gjk_tolerance)
         """The request of every shape pair (absolute tolerance, no warm start: module docstring)."""
         self._fallbacks = [_request(t) for t in FALLBACK_GJK_TOLERANCES if t > gjk_tolerance]
@@ -288,8 +288,11 @@ class CollisionModel:
         self._all_shape_pairs = np.arange(len(shapes), dtype=np.intp)
         objects = self.geometry.geometryObjects
         self._shape_joint = np.array([obj.parentJoint for obj in objects], dtype=np.intp)
+        self._place_rotation = np.array([obj.placement.rotation for obj in objects]).reshape(-1, 3, 3)
+        self._place_translation = np.array([obj.placement.translation for obj in objects]).reshape(-1, 3)
         spheres = [_bounding_sphere(obj.geometry) for obj in objects]
         self._centres = np.array([c for c, _ in spheres])  # in each shape's own frame, (shapes, 3)
+        self._centres_joint = (self._place_rotation @ self._centres[:, :, None])[:, :, 0] + self._place_translation
         self._radii = np.array([r for _, r in spheres])
         self._shapes = [obj.geometry for obj in objects]
         self._hull_points: list[FloatArray | None] = [
@@ -454,19 +457,15 @@ class CollisionModel:
             one :class:`PairDistance` per pair, in the order of :attr:`pairs` (those within).
         """
         q = self.kinematics.check_q(q)
-        model, data, gdata = self.model, self.data, self.geometry_data
-        pin.computeJointJacobians(model, data, q)
-        pin.updateGeometryPlacements(model, data, self.geometry, gdata)
-        placements = gdata.oMg
-        rotations = np.array([g.rotation for g in placements])
-        translations = np.array([g.translation for g in placements])
+        pin.computeJointJacobians(self.model, self.data, q)  # the joints' placements data.oMi too
+        self._joints = np.array([placement.homogeneous for placement in self.data.oMi])
         if within is None:
             active = self._all_shape_pairs
         else:
-            active = np.flatnonzero(self._sphere_bounds(rotations, translations) < within)
-        tf = {}
-        for g in np.union1d(self._shape_a[active], self._shape_b[active]).tolist():
-            tf[g] = coal.Transform3s(rotations[g], translations[g])
+            active = np.flatnonzero(self._sphere_bounds() < within)
+        needed = np.union1d(self._shape_a[active], self._shape_b[active])
+        rotations, translations = self._placements(needed)
+        tf = {g: coal.Transform3s(rotations[r], translations[r]) for r, g in enumerate(needed.tolist())}
         shapes, request, results = self._shapes, self.request, self._results
         shape_a, shape_b, owner = self._shape_a.tolist(), self._shape_b.tolist(), self._shape_pair_owner
         best: dict[int, tuple[float, int]] = {}  # link pair -> (d, shape pair)
@@ -501,6 +500,7 @@ class CollisionModel:
             points[0, r], points[1, r], normals[r] = res.getNearestPoint1(), res.getNearestPoint2(), res.normal
         normals /= np.linalg.norm(normals, axis=1)[:, None]
         if polish:
+            rotations, translations = self._placements()
             for r, (_, k) in enumerate(chosen):
                 ga, gb = shape_a[k], shape_b[k]
                 points[0, r], points[1, r], normals[r] = self._polish(ga, gb, dist[r], points[0, r], points[1, r],
@@ -575,11 +575,28 @@ class CollisionModel:
             return pa, pb, n
         return new_a, new_b, new_n
 
-    def _sphere_bounds(self, rotations: FloatArray, translations: FloatArray) -> FloatArray:
-        """Lower bounds [m] of every shape pair's distance at the shapes' placements (rotations
-        (shapes, 3, 3), translations (shapes, 3), in the world), (shape pairs,):
-        ||c_a - c_b|| - r_a - r_b with c, r each shape's bounding sphere (centre in the world)."""
-        centres = np.einsum("gij,gj->gi", rotations, self._centres) + translations
+    def _placements(self, shapes: npt.NDArray[np.intp] | None = None) -> tuple[FloatArray, FloatArray]:
+        """Shapes' placements in the world at the last :meth:`distances` call, oMg = oMi placement
+        (as ``pin.updateGeometryPlacements``, vectorised, for the ``shapes`` asked only; all when None):
+        rotations (k, 3, 3), translations (k, 3)."""
+        index = slice(None) if shapes is None else shapes
+        joints = self._joints[self._shape_joint[index]]
+        joint_rot = joints[:, :3, :3]
+        rotations = joint_rot @ self._place_rotation[index]
+        translations = (joint_rot @ self._place_translation[index][:, :, None])[:, :, 0] + joints[:, :3, 3]
+        return rotations, translations
+
+    def shape_placement(self, index: int) -> pin.SE3:
+        """Shape ``index``'s placement in the world at the last :meth:`distances` call."""
+        rotations, translations = self._placements(np.array([index]))
+        return pin.SE3(rotations[0], translations[0])
+
+    def _sphere_bounds(self) -> FloatArray:
+        """Lower bounds [m] of every shape pair's distance at the last call's joint placements,
+        (shape pairs,): ||c_a - c_b|| - r_a - r_b with c, r each shape's bounding sphere (centre
+        in the world, from its centre in its joint's frame)."""
+        joints = self._joints[self._shape_joint]
+        centres = (joints[:, :3, :3] @ self._centres_joint[:, :, None])[:, :, 0] + joints[:, :3, 3]
         gap = np.linalg.norm(centres[self._shape_a] - centres[self._shape_b], axis=1)
         return gap - self._radii[self._shape_a] - self._radii[self._shape_b]
 
@@ -596,7 +613,11 @@ class CollisionModel:
         for side, sign in ((0, -1.0), (1, 1.0)):
             joints = self._shape_joint[self._shape_a[shape_pairs] if side == 0 else self._shape_b[shape_pairs]]
             p = points[side]
-            contribution = normals @ jac[:3] + np.cross(p, normals) @ jac[3:]
+            cross = np.empty_like(normals)  # p x n, written out (np.cross costs 10x more on (m, 3))
+            cross[:, 0] = p[:, 1] * normals[:, 2] - p[:, 2] * normals[:, 1]
+            cross[:, 1] = p[:, 2] * normals[:, 0] - p[:, 0] * normals[:, 2]
+            cross[:, 2] = p[:, 0] * normals[:, 1] - p[:, 1] * normals[:, 0]
+            contribution = normals @ jac[:3] + cross @ jac[3:]
             rows += sign * contribution * self._support[joints]
         return rows
 

@@ -293,7 +293,7 @@ def _rounding(c: CollisionModel, shape: str, point: np.ndarray, margin: float) -
     ``margin`` from every edge, and how far pybullet's rounding of the shape's edges reaches."""
     index = [g.name for g in c.geometry.geometryObjects].index(shape)
     geometry = c.geometry.geometryObjects[index].geometry
-    x = c.geometry_data.oMg[index].actInv(point)  # placements of the last distances() call
+    x = c.shape_placement(index).actInv(point)  # placements of the last distances() call
     if isinstance(geometry, coal.Box):
         half = np.asarray(geometry.halfSide)
         on = np.abs(np.abs(x) - half) < 1e-7
