@@ -312,11 +312,12 @@ def cmd_bag_info(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     """Metrics of a recorded run: DIR/metrics.json, the figures of its kind and the table."""
     from dualarm_control.app.record.bag import report
-    from dualarm_control.app.record.report import format_table
+    from dualarm_control.app.record.report import format_table, goal_lines
 
     out = Path(args.output)
     results, kind, figures = report(Path(args.bag), out)
     print(format_table(results, kind))
+    print(goal_lines(results), end="")
     print(f"\nwrote {out / 'metrics.json'} and {', '.join(figures)} in {out}")
     return 0
 

@@ -9,8 +9,9 @@ nothing and is reported ``rejected`` with its reason. The motion limits
 (``limits.<MotionLimits field>``) are live parameters, validated as the scenario file's. Every
 cycle the drive keys (:func:`~dualarm_control.online_trajectory.status_values`: state, goal
 stamp, measured distance and angle to the goal, time to go) go on ``/diagnostics``; the arms'
-arrival and stalls are judged by :class:`~dualarm_control.drive_monitor.GoalMonitor`. One log
-line per goal accepted, preempted, reached, stalled or rejected.
+arrival and stalls are judged by :class:`~dualarm_control.drive_monitor.GoalMonitor` (a stall
+at the collision limit names the pair: "collision constraint: left_flange – right_link_5 at
+0.030 m; ..."). One log line per goal accepted, preempted, reached, stalled or rejected.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import pinocchio as pin
 from geometry_msgs.msg import PoseStamped, TwistStamped
 from rcl_interfaces.msg import SetParametersResult
 
+from dualarm_control.collision import CollisionModel
 from dualarm_control.drive_monitor import GoalMonitor
 from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel, FloatArray
@@ -68,7 +70,8 @@ class InteractiveDrive:
         self.limits = limits
         self.pending_limits: MotionLimits | None = None
         self.generator: OnlineTrajectory | None = None
-        self.monitor = GoalMonitor(model)
+        # stalls are explained by the closest link pair (the controller's collision limit stops the arms at d_s)
+        self.monitor = GoalMonitor(model, collision=CollisionModel(model, allowed=model.description.collision_allowed))
         self.q: FloatArray | None = None
         self.rejected: tuple[float | None, str, float] | None = None  # (goal stamp, reason, since t)
         self.last_state = ""

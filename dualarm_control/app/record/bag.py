@@ -506,6 +506,23 @@ def _task_record(path: Path, bag: Bag) -> tuple[list[RunRecord], Scenario]:
     return [with_task_values(record, scenario, model, gain, force)], scenario
 
 
+def goals_scenario(bag: Bag) -> Scenario | None:
+    """The scripted goals scenario a relative-motion bag ran (the controller's ``scenario`` on
+    /diagnostics, on the bag's robot), for the goals' verdicts; None for another kind, or when the
+    scenario cannot be loaded here (a file of another machine)."""
+    from dualarm_control.errors import DualArmError
+    from dualarm_control.scenario import load_scenario
+
+    name = next((v[SCENARIO_KEY] for _, v in bag.cycles if v.get(SCENARIO_KEY)), "")
+    if not name:
+        return None
+    try:
+        scenario = load_scenario(name, bag.robot)
+    except DualArmError:
+        return None
+    return scenario if getattr(scenario.reference, "commands", None) else None
+
+
 def report(path: Path, output: Path) -> tuple[dict[str, dict[str, Any]], str, list[str]]:
     """``dualarm report``: ``output/metrics.json`` ({label: record}, the keys of ``dualarm
     experiment``) and the figures of the run's kind. Returns the records, the kind and the
@@ -523,6 +540,8 @@ def report(path: Path, output: Path) -> tuple[dict[str, dict[str, Any]], str, li
     if not runs:
         raise BagError(f"bag {path}: no {COMMANDS_TOPIC} message could be attributed to a solver")
     model = DualArmModel(scenario.robot if scenario is not None else bag.robot)  # the run's limits
+    if scenario is None:
+        scenario = goals_scenario(bag)
     results = {r.label: summarize_run(r, scenario, model) for r in runs}
     write_json(Path(output) / "metrics.json", results)
     return results, runs[0].kind, write_figures(runs[0].kind, Path(output), Path(path).name, runs, scenario)

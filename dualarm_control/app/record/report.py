@@ -111,6 +111,17 @@ GOAL_KEYS = ("goals_reached", "goals_stalled", "goal_outcomes", "collision_min_d
 """The keys of a scripted goals run (:func:`goal_metrics`)."""
 
 
+def goal_lines(results: Mapping[str, Mapping[str, Any]]) -> str:
+    """The goals' verdicts and the closest pair of every goals run, for the terminal ('' without goals)."""
+    out = []
+    for label, summary in results.items():
+        if "goal_outcomes" in summary:
+            out.append(f"\n{label}: closest pair {summary['collision_min_pair']} at "
+                       f"{summary['collision_min_distance_m']:.4f} m")
+            out += [f"  {line}" for line in str(summary["goal_outcomes"]).split(" | ")]
+    return "\n".join(out) + "\n" if out else ""
+
+
 def goal_metrics(record: RunRecord, commands: Sequence[Any], model: DualArmModel) -> dict[str, float | int | str]:
     """How each goal of a script ended (:func:`~dualarm_control.drive_monitor.judge_goals`, stalls
     explained by the robot's collision model) and the smallest link-pair distance over the run [m]

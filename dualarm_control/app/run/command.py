@@ -14,6 +14,7 @@ from typing import Any
 
 from dualarm_control.app.record.report import (
     format_table,
+    goal_lines,
     summarize_run,
     write_figures,
     write_json,
@@ -86,11 +87,6 @@ def experiment_command(scenario_name: str, solver_names: str | None, params_file
     kind = scenario.reference.kind
     paths = [str(out / f) for f in ("metrics.json", *write_figures(kind, out, scenario.name, logs, scenario))]
     print(format_table(results, kind))
-    for label, summary in results.items():
-        if "goal_outcomes" in summary:
-            print(f"\n{label}: closest pair {summary['collision_min_pair']} at "
-                  f"{summary['collision_min_distance_m']:.4f} m")
-            for line in str(summary["goal_outcomes"]).split(" | "):
-                print(f"  {line}")
+    print(goal_lines(results), end="")
     print(f"\nwrote {' and '.join(paths) if len(paths) == 2 else ', '.join(paths)}")
     return 0
