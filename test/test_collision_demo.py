@@ -1,0 +1,112 @@
+"""Issue 27's shipped scenario ``collision_demo``: goals that drive one arm through the other.
+
+With the collision limit on (the default), every run keeps the smallest link-pair distance over the
+recorded joint positions at or above d_s - 1 mm (d_s = 0.03 m) and ends the three collision goals
+``stalled`` with "collision constraint: <pair> at 0.0xx m"; the safe goals are reached. With
+``collision.enabled: false`` the same scenario drives the links into each other (the check can
+fail). In one process and over ROS (lockstep: the bag's numbers equal the in-process run's; real
+time), on the LWR4 cell; on Baxter behind the ``slow`` marker (a Baxter run takes about a minute in
+one process, with 515 link pairs).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+from test_ros_live import Launch, dualarm
+
+from dualarm_control.app.record.report import summarize_run
+from dualarm_control.app.run.experiment import run_scenario
+from dualarm_control.controller import controller_params
+from dualarm_control.kinematics import DualArmModel
+from dualarm_control.scenario import load_scenario
+
+SAFETY = 0.03
+STATES = ["stalled", "reached", "stalled", "reached", "stalled"]
+SOLVER = "sparse_qp"
+
+
+def in_process(robot: str, **values: Any) -> dict[str, Any]:
+    scenario = load_scenario("collision_demo", robot)
+    model = DualArmModel(scenario.robot)
+    record = run_scenario(scenario, controller_params({"solver": SOLVER, **values}), model)
+    return summarize_run(record, scenario, model)
+
+
+def outcomes(summary: dict[str, Any]) -> list[str]:
+    return [part.split(": ")[1].split(",")[0] for part in str(summary["goal_outcomes"]).split(" | ")]
+
+
+def assert_stops_at_the_safety_distance(summary: dict[str, Any]) -> None:
+    assert summary["collision_min_distance_m"] >= SAFETY - 1e-3, summary["collision_min_pair"]
+    assert summary["solver_failures"] == 0
+    states = outcomes(summary)
+    assert [s for i, s in enumerate(states) if i % 2 == 0] == ["stalled"] * 3, summary["goal_outcomes"]
+    for part in str(summary["goal_outcomes"]).split(" | ")[::2]:
+        assert ": stalled: collision constraint: " in part, part
+        distance = float(part.split(" at ")[1].split(" m")[0])
+        assert SAFETY - 1e-3 <= distance < 0.10, part  # held near d_s, inside the influence distance
+
+
+@pytest.fixture(scope="module")
+def lwr4_on() -> dict[str, Any]:
+    return in_process("lwr4_cell")
+
+
+def test_in_process_the_goals_stop_at_the_safety_distance(lwr4_on: dict[str, Any]) -> None:
+    assert_stops_at_the_safety_distance(lwr4_on)
+    assert outcomes(lwr4_on) == STATES, lwr4_on["goal_outcomes"]
+
+
+def test_with_the_limit_off_the_same_goals_go_through_the_other_arm() -> None:
+    summary = in_process("lwr4_cell", **{"collision.enabled": False})
+    assert summary["collision_min_distance_m"] < -0.05, summary["collision_min_pair"]  # 10 cm deep (measured)
+    assert outcomes(summary) == ["reached"] * 5, summary["goal_outcomes"]
+
+
+def run_over_ros(tmp_path: Path, robot: str, *mode: str) -> dict[str, Any]:
+    bag = tmp_path / "bag"
+    launch = Launch("collision_demo", "--robot", robot, "--solver", SOLVER, *mode, "--record", str(bag))
+    try:
+        code = launch.finish(timeout=900)
+    finally:
+        launch.kill()
+    assert code == 0, "\n".join(launch.lines[-40:])
+    assert any("collision constraint active:" in line for line in launch.lines), "\n".join(launch.lines[-40:])
+    report = dualarm("report", str(bag), "--output", str(tmp_path / "report"), timeout=600)
+    assert report.returncode == 0, report.stderr[-2000:]
+    assert "stalled: collision constraint: " in report.stdout, report.stdout[-2000:]
+    return dict(json.loads((tmp_path / "report" / "metrics.json").read_text())[SOLVER])
+
+
+def test_lockstep_over_ros_equals_the_in_process_run(tmp_path: Path, lwr4_on: dict[str, Any]) -> None:
+    bag = run_over_ros(tmp_path, "lwr4_cell", "--lockstep")
+    assert_stops_at_the_safety_distance(bag)
+    assert bag["goal_outcomes"] == lwr4_on["goal_outcomes"]  # to the printed 0.01 mm and 1e-4 rad
+    # Not bit for bit as the assembly (1e-9): held against the limit the commands alternate from one
+    # cycle to the next (docs/collision.md, "At a stall"), which amplifies the last-bit differences of
+    # the target's quaternion round trip through /relative_target (2e-3 of 9.88 rad in l1_integral).
+    assert abs(bag["collision_min_distance_m"] - lwr4_on["collision_min_distance_m"]) <= 1e-6
+    for key in ("l0_mean", "l1_integral", "l2_integral"):
+        assert abs(bag[key] - lwr4_on[key]) <= 1e-3 * abs(lwr4_on[key]), (key, bag[key], lwr4_on[key])
+
+
+def test_real_time_over_ros_stops_at_the_safety_distance(tmp_path: Path) -> None:
+    assert_stops_at_the_safety_distance(run_over_ros(tmp_path, "lwr4_cell"))
+
+
+@pytest.mark.slow
+def test_baxter_in_process_on_and_off() -> None:
+    on = in_process("baxter")
+    assert_stops_at_the_safety_distance(on)
+    off = in_process("baxter", **{"collision.enabled": False})
+    assert off["collision_min_distance_m"] < 0.0, off["collision_min_pair"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mode", [("--lockstep",), ()], ids=["lockstep", "real_time"])
+def test_baxter_over_ros_stops_at_the_safety_distance(tmp_path: Path, mode: tuple[str, ...]) -> None:
+    assert_stops_at_the_safety_distance(run_over_ros(tmp_path, "baxter", *mode))
