@@ -18,7 +18,7 @@ from dualarm_control.solvers import make_solver
 def test_bench_writes_every_part(tmp_path: Path) -> None:
     """bench.json has the random set (every accepted solver x back-end), refusals, exactness and scaling."""
     argv = ["bench", "--scenario", "none", "--cases", "6", "--solver", "standard_qp,sparse_qp",
-            "--backend", "daqp,quadprog", "--output", str(tmp_path)]
+            "--backend", "daqp,quadprog", "--collision-robots", "none", "--output", str(tmp_path)]
     assert main(argv) == 0
     record = json.loads((tmp_path / "bench.json").read_text())
     rows = record["random"]["rows"]

@@ -233,8 +233,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
     backends = [b.strip() for b in args.backend.split(",") if b.strip()]
     for name in backends:
         make_backend(name)
+    robots = [] if args.collision_robots == "none" else [r.strip() for r in args.collision_robots.split(",") if r.strip()]
     record = run_bench(scenario, solvers, backends, count=args.cases, seed=args.seed,
-                       progress=lambda msg: print(f"[bench] {msg}", file=sys.stderr, flush=True))
+                       progress=lambda msg: print(f"[bench] {msg}", file=sys.stderr, flush=True),
+                       collision_robots=robots)
     write_bench(Path(args.output), record)
     print(format_bench(record))
     print(f"wrote {Path(args.output) / 'bench.md'} and bench.json")
@@ -554,6 +556,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="comma-separated QP back-ends (default: %(default)s)")
     ben.add_argument("--cases", type=int, default=400, help="random configurations (default: %(default)s)")
     ben.add_argument("--seed", type=int, default=0, help="random seed (default: %(default)s)")
+    ben.add_argument("--collision-robots", default="lwr4_cell,baxter", metavar="ROBOT,...",
+                     help="robots of the collision part (the assembly's cycles with and without the collision "
+                     "limit, interleaved), or 'none' (default: %(default)s)")
     ben.add_argument("--output", default="out/bench", metavar="DIR", help="output directory (default: %(default)s)")
     ben.add_argument("--realtime", action="store_true",
                      help="instead: the three nodes over ROS in real time per solver and --rates; missed deadlines, "

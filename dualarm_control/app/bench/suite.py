@@ -10,7 +10,9 @@ measured in the same run, never a single absolute figure on its own. Parts:
 - the scenario (assembly) run in-process per solver and back-end, and pink replaying the
   recorded states and targets of one run;
 - exactness of the lasso solve against a reference (proxsuite at eps 1e-12);
-- scaling with the number of joints (3- and 4-arm chains of the LWR4).
+- scaling with the number of joints (3- and 4-arm chains of the LWR4);
+- the collision limit (:mod:`dualarm_control.app.bench.collision`): the assembly's cycles with and
+  without it, per robot (the other parts run without it: the solvers on paper 000's problem).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from dualarm_control.app.bench.collision import bench_collision
 from dualarm_control.app.bench.pink import pink_cycle, pink_version
 from dualarm_control.app.bench.random_set import (
     Case,
@@ -34,6 +37,7 @@ from dualarm_control.app.bench.random_set import (
     with_backend,
 )
 from dualarm_control.app.run.experiment import run_scenario
+from dualarm_control.collision import CollisionParams
 from dualarm_control.controller import ControllerParams
 from dualarm_control.errors import ParameterError
 from dualarm_control.kinematics import DualArmModel
@@ -161,10 +165,12 @@ def run_bench(
     fallback_reference: str = "standard_qp | daqp",
     scaling_arms: Sequence[int] = (2, 3, 4),
     progress: Progress | None = None,
+    collision_robots: Sequence[str] = (),
 ) -> dict[str, Any]:
     """The whole benchmark as one JSON-able record (see the module docstring)."""
     model = DualArmModel()
-    params = ControllerParams()
+    # the solvers on paper 000's problem (as pink solves it): the collision limit has its own part
+    params = ControllerParams(collision=CollisionParams(enabled=False))
     configs, refused = solver_configs(params, solvers, backends)
     say = progress or (lambda _msg: None)
     say(f"random set: {count} cases x {len(configs)} configurations")
@@ -183,6 +189,9 @@ def run_bench(
     if scenario is not None:
         scenario_configs = {k: v for k, v in configs.items() if k.split(" | ")[1] in ("daqp", "proxsuite", "-")}
         record["scenario"] = bench_scenario(scenario, model, scenario_configs, progress)
+    if collision_robots:
+        record["collision"] = bench_collision(collision_robots, ["hierarchical_sparse_qp", "sparse_qp", "standard_qp"],
+                                              progress)
     return record
 
 
@@ -234,6 +243,16 @@ def format_bench(record: dict[str, Any]) -> str:
         lines += _table(sc["rows"], [("cycles", "cycles", "{:d}"), *timing,
                                      ("p50_ratio_to_pink_fastest", "cycle p50 / pink fastest", "{:.2f}")],
                         "solver | QP back-end")
+    if record.get("collision"):
+        lines += ["", "## Collision limit: the assembly's recorded cycles with and without it, interleaved", ""]
+        lines += _table(record["collision"], [("pairs", "pairs", "{:d}"), ("rows_p50", "rows p50", "{:.0f}"),
+                                              ("rows_max", "rows max", "{:d}"),
+                                              ("cycle_p50_ms", "with: p50 [ms]", "{:.3f}"),
+                                              ("cycle_p99_ms", "p99 [ms]", "{:.3f}"),
+                                              ("off_p50_ms", "without: p50 [ms]", "{:.3f}"),
+                                              ("off_p99_ms", "p99 [ms]", "{:.3f}"),
+                                              ("p50_ratio", "p50 ratio", "{:.2f}"), ("p99_ratio", "p99 ratio", "{:.2f}")],
+                        "robot | solver")
     lines += ["", "## Scaling with the number of joints (chains of LWR4 arms, relative tasks between neighbours)", ""]
     lines += _table(record["scaling"], [("solve_p50_ms", "solve p50 [ms]", "{:.3f}"),
                                         ("solve_p99_ms", "solve p99 [ms]", "{:.3f}"),
