@@ -115,6 +115,8 @@ WITNESS_FEATURE_TOLERANCE = 1e-7
 the surfaces to about 1e-9 m: a chord of rim points sags by e^2 / 2r)."""
 WITNESS_POLISH_LIMIT = 1e-3
 """A refined witness point farther than this [m] from GJK's is not used (:meth:`CollisionModel._polish`)."""
+KNOWN_MARGIN = 1e-9
+"""Subtracted from a computed distance before it is kept as a known lower bound [m] (round-off)."""
 _FAILED = 1e6
 """A distance [m] beyond this is coal's failure value (-DBL_MAX or inf), not a distance."""
 
@@ -302,6 +304,18 @@ class CollisionModel:
             for j in self._chain(joint):
                 support[joint, self.model.idx_vs[j]] = 1.0
         self._support = support
+        # motion bound (temporal coherence): a point of a body moves by at most sum_j c_j |dq_j| when the
+        # joints move by dq, c_j = the reach of the body about joint j (revolute) or 1 (prismatic)
+        coefficients = np.zeros((len(self._bodies), self.model.nv))
+        for i, body in enumerate(self._bodies):
+            for j in self._chain(body.joint):
+                prismatic = "P" in self.model.joints[j].shortname().replace("JointModel", "")
+                coefficients[i, self.model.idx_vs[j]] = 1.0 if prismatic else self._reach(body, j)
+        body_of_shape = {g: i for i, body in enumerate(self._bodies) for g in body.geometries}
+        self._pair_motion = (coefficients[[body_of_shape[int(g)] for g in self._shape_a.tolist()]]
+                             + coefficients[[body_of_shape[int(g)] for g in self._shape_b.tolist()]])
+        self._known = np.full(len(shapes), -np.inf)  # a lower bound of each shape pair's d [m] ...
+        self._known_at = np.zeros((len(shapes), self.model.nv))  # ... at these joint positions
 
     def _find_bodies(self) -> list[_Body]:
         """The links that carry collision shapes, in the order of their first shape."""
@@ -445,10 +459,15 @@ class CollisionModel:
 
         Args:
             q: joint positions [rad], (n,), left then right.
-            within: if given [m], only the pairs with d < within. Then only the shape pairs whose
-                bounding spheres (about each shape's centre, placed at q) are closer than
-                ``within`` go to coal, and rows are computed only for the pairs kept: the cheap
-                call for the damper, which needs the pairs with d < d_i.
+            within: if given [m], only the pairs with d < within. Then only the shape pairs that may
+                be closer than ``within`` go to coal, and rows are computed only for the pairs kept:
+                the cheap call for the damper, which needs the pairs with d < d_i. Two lower bounds
+                decide: what is known of a pair (its distance, or its bounding spheres' gap, at the
+                joint positions q_k of an earlier call) minus how far its shapes can have moved
+                since, sum_j c_j |q_j - q_k,j| (c_j the reach of the shape's body about joint j, m per
+                rad: :attr:`_pair_motion`; so no kinematics at all when nothing can be near), then
+                the bounding spheres (about each shape's centre, placed at q). The result does not
+                depend on earlier calls: a pair with d < within passes both bounds and is computed.
             polish: refine the witness points and normals of the pairs returned on the shapes' closest
                 features (:meth:`_polish`; rows to 1e-6 m/rad instead of 1e-5, at up to 100 us per pair): the
                 distances are coal's either way; False (the default) gives GJK's points and normals.
@@ -457,12 +476,20 @@ class CollisionModel:
             one :class:`PairDistance` per pair, in the order of :attr:`pairs` (those within).
         """
         q = self.kinematics.check_q(q)
+        candidates = self._all_shape_pairs
+        if within is not None:  # pairs whose distance may be < within, from what is known (no kinematics)
+            motion = (np.abs(q - self._known_at) * self._pair_motion).sum(axis=1)
+            candidates = np.flatnonzero(self._known - motion < within)
+            if not candidates.size:
+                return []
         pin.computeJointJacobians(self.model, self.data, q)  # the joints' placements data.oMi too
         self._joints = np.array([placement.homogeneous for placement in self.data.oMi])
         if within is None:
-            active = self._all_shape_pairs
+            active = candidates
         else:
-            active = np.flatnonzero(self._sphere_bounds() < within)
+            spheres = self._sphere_bounds(candidates)
+            self._known[candidates], self._known_at[candidates] = spheres, q
+            active = candidates[spheres < within]
         needed = np.union1d(self._shape_a[active], self._shape_b[active])
         rotations, translations = self._placements(needed)
         tf = {g: coal.Transform3s(rotations[r], translations[r]) for r, g in enumerate(needed.tolist())}
@@ -476,6 +503,7 @@ class CollisionModel:
             d = coal.distance(shapes[ga], tf[ga], shapes[gb], tf[gb], request, res)
             if not -_FAILED < d < _FAILED:  # also NaN
                 d = self._retry(k, tf[ga], tf[gb])
+            self._known[k], self._known_at[k] = d - KNOWN_MARGIN, q
             i = owner[k]
             if i not in best or d < best[i][0]:
                 best[i] = (d, k)
@@ -591,14 +619,14 @@ class CollisionModel:
         rotations, translations = self._placements(np.array([index]))
         return pin.SE3(rotations[0], translations[0])
 
-    def _sphere_bounds(self) -> FloatArray:
-        """Lower bounds [m] of every shape pair's distance at the last call's joint placements,
-        (shape pairs,): ||c_a - c_b|| - r_a - r_b with c, r each shape's bounding sphere (centre
-        in the world, from its centre in its joint's frame)."""
+    def _sphere_bounds(self, shape_pairs: npt.NDArray[np.intp]) -> FloatArray:
+        """Lower bounds [m] of the distance of ``shape_pairs`` at the last call's joint placements,
+        (k,): ||c_a - c_b|| - r_a - r_b with c, r each shape's bounding sphere (centre in the world,
+        from its centre in its joint's frame)."""
         joints = self._joints[self._shape_joint]
         centres = (joints[:, :3, :3] @ self._centres_joint[:, :, None])[:, :, 0] + joints[:, :3, 3]
-        gap = np.linalg.norm(centres[self._shape_a] - centres[self._shape_b], axis=1)
-        return gap - self._radii[self._shape_a] - self._radii[self._shape_b]
+        a, b = self._shape_a[shape_pairs], self._shape_b[shape_pairs]
+        return np.linalg.norm(centres[a] - centres[b], axis=1) - self._radii[a] - self._radii[b]
 
     def _rows(self, shape_pairs: npt.NDArray[np.intp], points: FloatArray, normals: FloatArray) -> FloatArray:
         """dd_dq = n^T (J_pb - J_pa) for m shape pairs, (m, n), from the WORLD joint Jacobians.
@@ -642,7 +670,8 @@ def velocity_damper_rows(distances: Sequence[PairDistance], influence: float, sa
         A [m/rad], (m, n), and b [m/s], (m,), m the number of pairs with d < d_i, in their
         order; (0, n) and (0,) when none (n = 0 when ``distances`` is empty too).
     """
-    CollisionParams(influence_distance=influence, safety_distance=safety, gain=gain)  # validates
+    if not (0.0 <= safety < influence and gain > 0.0 and math.isfinite(influence + gain)):
+        CollisionParams(influence_distance=influence, safety_distance=safety, gain=gain)  # raises, naming the key
     near = [p for p in distances if p.distance < influence]
     n = distances[0].dd_dq.shape[0] if distances else 0
     if not near:

@@ -93,7 +93,7 @@ class CollisionLimit:
         self._rows = a, b = velocity_damper_rows(self.near, p.influence_distance, p.safety_distance, p.gain)
         bounds.rows = np.vstack((bounds.rows, a))
         bounds.bound = np.concatenate((bounds.bound, b))
-        bounds.labels = bounds.labels + tuple(f"{d.link_a} – {d.link_b} at {d.distance:.3f} m" for d in self.near)
+        bounds.labels = bounds.labels + tuple(f"{d.link_a} – {d.link_b}" for d in self.near)
         return bounds
 
     def report(self, velocities: FloatArray) -> CollisionReport:

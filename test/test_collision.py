@@ -537,3 +537,28 @@ def test_damper_keeps_two_arms_driven_into_each_other_apart() -> None:
     assert free < 0.0, f"without the damper the arms should collide: closest {free:.4f} m"
     assert params.safety_distance - 1e-3 <= damped <= params.safety_distance + 0.01, (
         f"with the damper the closest distance is {damped:.4f} m (d_s {params.safety_distance} m)")
+
+
+@pytest.mark.parametrize("robot", ["lwr4_cell", "baxter"])
+def test_what_is_known_from_earlier_calls_never_changes_the_result(robot: str) -> None:
+    """``distances(q, within)`` skips pairs by what earlier calls learnt (temporal coherence); along a
+    random walk with small steps and jumps, a model used all along gives bit for bit what a fresh model
+    gives at each q, and a pair is skipped only when it is really farther than ``within``."""
+    m = kinematics(robot)
+    used = CollisionModel(m, allowed=m.description.collision_allowed)
+    rng = np.random.default_rng(7)
+    q = np.asarray(m.description.ready, dtype=float)
+    skipped = 0
+    for k in range(30):
+        step = rng.normal(0.0, 0.02, m.nq) if k % 10 else rng.uniform(-0.8, 0.8, m.nq)  # every 10th: a jump
+        q = np.clip(q + step, m.q_min, m.q_max)
+        got = used.distances(q, within=0.10)
+        fresh = CollisionModel(m, allowed=m.description.collision_allowed)
+        want = fresh.distances(q, within=0.10)
+        assert [(d.link_a, d.link_b, d.distance) for d in got] == [(d.link_a, d.link_b, d.distance) for d in want]
+        assert all(np.array_equal(a.dd_dq, b.dd_dq) for a, b in zip(got, want, strict=True))
+        every = by_pair(fresh.distances(q))
+        returned = {(d.link_a, d.link_b) for d in got}
+        assert all(d.distance >= 0.10 for pair, d in every.items() if pair not in returned)
+        skipped += int(((used._known - (np.abs(q - used._known_at) * used._pair_motion).sum(axis=1)) >= 0.10).sum())
+    assert skipped > 0  # the bound does skip pairs
