@@ -99,6 +99,13 @@ class ControlProblem:
             return 0.0
         return float((self.limit_rows @ qd - self.limit_bound).max(initial=0.0))
 
+    def without_limit_rows(self) -> ControlProblem:
+        """The same problem without the limits' rows (its relaxation: a solution of it that meets the
+        rows solves the problem with them, as the QPs are convex)."""
+        return ControlProblem(self.jacobian, self.reference, self.lower, self.upper, self.repulsive,
+                              self.inequality_jacobian, self.inequality_bound, self.equality_weights,
+                              self.inequality_weights)
+
     def problem_with_invalid_input(self) -> str:
         """Return a description of what is wrong with the inputs, or '' when they are usable.
 

@@ -102,6 +102,10 @@ class ConstraintBased(Solver):
                                       2.0 * self.params.regularization)
             if qd is not None and inside(qd, problem.lower, problem.upper) and problem.limit_excess(qd) <= 0.0:
                 return qd, "solved", 0, ""
+        if problem.has_limit_rows:  # the relaxation first: rows its optimum meets are not active
+            relaxed = self._solve(problem.without_limit_rows())
+            if relaxed[0] is not None and relaxed[1] == "solved" and problem.limit_excess(relaxed[0]) <= 0.0:
+                return relaxed
         solution = self._qp.solve(constraint_qp(problem, self.params.regularization))
         qd, status, iters, detail = from_qp(solution, lambda x: x[:n])
         if solution.x is not None and solution.x.shape[0] > n:

@@ -134,6 +134,11 @@ class StandardQP(_QPSolver):
         n = jtj.shape[0]
         h = jtj  # a fresh array: add eps to its diagonal in place
         h.flat[:: n + 1] += self.params.regularization
+        box = QPProblem(H=h, g=-jtr, lb=problem.lower, ub=problem.upper)
+        if problem.has_limit_rows:  # the relaxation first: rows that its optimum meets are not active
+            relaxed = from_qp(self._qp.solve(box))
+            if relaxed[0] is not None and relaxed[1] == "solved" and problem.limit_excess(relaxed[0]) <= 0.0:
+                return relaxed
         return from_qp(self._qp.solve(QPProblem(H=h, g=-jtr, lb=problem.lower, ub=problem.upper,
                                                 **limit_rows_of(problem))))
 
@@ -239,6 +244,12 @@ class SparseQP(_QPSolver):
         self._previous = np.array(velocities, dtype=float)
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
+        if problem.has_limit_rows:  # the relaxation first (the box QP): rows its optimum meets are not active
+            previous = self._previous
+            relaxed = self._solve(problem.without_limit_rows())
+            if relaxed[0] is not None and relaxed[1] == "solved" and problem.limit_excess(relaxed[0]) <= 0.0:
+                return relaxed
+            self._previous = previous  # the proximal centre stays the previous cycle's solution
         j = problem.jacobian
         n = j.shape[1]
         mu = self.params.proximal_weight
@@ -372,9 +383,11 @@ class HierarchicalSparseQP(Solver):
         n = qd1.shape[0]
         qp2 = QPProblem(
             H=self._identity_of(n), g=-problem.repulsive, A=problem.jacobian, b=np.zeros(problem.jacobian.shape[0]),
-            lb=lower2, ub=upper2, **rows2,
+            lb=lower2, ub=upper2,
         )
-        sol = self._secondary.solve(qp2)
+        sol = self._secondary.solve(qp2)  # the relaxation first: rows its optimum meets are not active
+        if rows2 and (sol.x is None or problem.limit_excess(qd1 + sol.x) > 0.0):
+            sol = self._secondary.solve(QPProblem(H=qp2.H, g=qp2.g, A=qp2.A, b=qp2.b, lb=lower2, ub=upper2, **rows2))
         if sol.x is None:
             return qd1, status, iters + sol.iterations, f"secondary QP {sol.status}; primary task only"
         return qd1 + sol.x, status, iters + sol.iterations, detail
