@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pybullet as p
 import pytest
 from waiting import exited, wait_until
 
@@ -79,6 +80,18 @@ def test_min_distances_sees_penetration_and_finds_the_row() -> None:
     assert result.row == len(path) - 1 and result.minimum < -0.05 and result.pair == FIRST_PAIR, result.minimum
     coal = CollisionModel(DualArmModel(robot)).closest(path[-1])
     assert (coal.link_a, coal.link_b) == FIRST_PAIR and coal.distance < -0.05
+    # the bounding-box prefilter drops no pair that getClosestPoints would give: every pair, every row
+    plain = np.full((len(path), len(result.pairs)), math.inf)
+    with DualArmCell(CellConfig.for_robot(robot, collisions=False)) as cell:
+        links = [(cell.link_index(a), cell.link_index(b)) for a, b in result.pairs]
+        for k, q in enumerate(path):
+            cell.pose(q)
+            for i, (a, b) in enumerate(links):
+                points = p.getClosestPoints(cell.body_id, cell.body_id, result.cutoff, a, b,
+                                            physicsClientId=cell.client_id)
+                plain[k, i] = min((c[8] for c in points), default=math.inf)
+    assert np.array_equal(plain.min(axis=1), result.distances)
+    assert np.array_equal(plain.min(axis=0), result.pair_minimum)
 
 
 def test_min_distances_names_bad_input() -> None:
