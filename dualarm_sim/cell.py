@@ -44,8 +44,8 @@ Physics choices (all measured on ``urdf/dualarm_cell.urdf``):
   against right arm, an arm against the fixed parts and against its own links at joint distance
   >= 3, minus the robot's ``collision_allowed`` pairs and the broadphase's far pairs), so that
   adjacent links and shapes that overlap by design never touch. The two end effectors are always
-  filtered against each other, left against right: from each tool link up through fixed joints to
-  the first link with collision shapes (the LWR4's flange, Baxter's gripper base), and every link
+  filtered against each other, left against right: from each tool link's parent up through fixed
+  joints to the first link with collision shapes (the LWR4's flange, Baxter's gripper base), and every link
   fixed or held below it (the tool link, Baxter's locked fingers). The assembly's hole block and
   peg meet on purpose (the peg enters the hole kinematically), Baxter's fingers interpenetrate by
   12 mm at the assembly's end. :meth:`DualArmCell.contacts` reads the link pairs in contact after
@@ -361,15 +361,15 @@ class DualArmCell:
 
     def _filter_tool_collisions(self, infos: list[tuple[object, ...]]) -> None:
         """Disable contacts between the two end effectors (module docstring), left against right:
-        from each tool link up through fixed joints to the first link with collision shapes (the
-        LWR4's flange, Baxter's gripper base), and every link fixed or held below that one."""
+        from each tool link's parent up through fixed joints to the first link with collision
+        shapes (the LWR4's flange, Baxter's gripper base), and every link fixed or held below it."""
         cid = self._client
         rigid = {j for j, info in enumerate(infos) if info[2] == p.JOINT_FIXED} | set(self._held_idx)
 
         def tool_links(tool: str) -> list[int]:
             if tool not in self._link_index:
                 return []
-            top = self._link_index[tool]
+            top = int(infos[self._link_index[tool]][16])  # type: ignore[call-overload]  # the tool's parent
             while top in rigid and not p.getCollisionShapeData(self._body, top, physicsClientId=cid):
                 top = int(infos[top][16])  # type: ignore[call-overload]
             links = [top]
