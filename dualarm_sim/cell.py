@@ -51,7 +51,8 @@ Physics choices (all measured on ``urdf/dualarm_cell.urdf``):
   12 mm at the assembly's end. :meth:`DualArmCell.contacts` reads the link pairs in contact after
   a step (one ``getContactPoints`` call). When nothing touches, the physics is the same as
   without self-collision, bit for bit: contact points farther apart than 0 (within pybullet's
-  contact threshold) give zero impulses (test_sim_contacts.py runs the assembly both ways).
+  contact threshold) give zero impulses (test_sim_contacts.py; the shipped robots' assemblies and
+  pan cleaning compared so: docs/collision.md).
   ``CellConfig()`` alone (a URDF, no robot description) has no collision pairs.
 * Contacts between links of the cell can be switched on pair by pair
   (``CellConfig.contact_pairs``, e.g. the brush on the pan of the pan-cleaning cell): the
