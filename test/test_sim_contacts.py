@@ -166,6 +166,26 @@ def test_driving_the_right_arm_into_the_left_is_counted() -> None:
     assert check.minimum > -0.02 and check.pair == FIRST_PAIR, (check.minimum, check.pair)  # not 7 cm through
 
 
+def test_baxter_elbow_into_the_torso_is_counted_and_the_allowed_pairs_are_not() -> None:
+    """Baxter's right_s0 turned 0.8 rad from ready swings the upper elbow into the torso's hull
+    (min_distances: contact from +0.68 rad): counted as torso - right_upper_elbow. The pairs of its
+    collision_allowed and its two grippers (end effectors) are not collision pairs of the cell."""
+    robot = load_robot("baxter")
+    allowed = set(robot.collision_allowed)
+    assert ("torso", "left_lower_shoulder") in allowed
+    counter = ContactCounter()
+    with DualArmCell(CellConfig.for_robot(robot), initial_positions=robot.ready) as cell:
+        pairs = set(cell.collision_pairs)
+        assert not pairs & allowed and not any("gripper" in a and "gripper" in b for a, b in pairs)
+        velocity = np.zeros(robot.nq)
+        velocity[robot.joint_names.index("right_s0")] = 0.8
+        for _ in range(200):  # 1 s
+            cell.apply_command(velocity)
+            cell.step()
+            counter.update(cell.contacts())
+    assert list(counter.per_pair) == [("torso", "right_upper_elbow")], counter.per_pair
+
+
 def test_contact_counter_events_and_diagnostics() -> None:
     counter = ContactCounter()
     ab, cd = ("a", "b"), ("c", "d")
