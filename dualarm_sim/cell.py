@@ -37,13 +37,27 @@ Physics choices (all measured on ``urdf/dualarm_cell.urdf``):
 * Link linear/angular damping (pybullet defaults 0.04) is set to 0; the URDF joint damping
   (0.5 N m s/rad) is kept, the motors overcome it.
 * Inertias come from the URDF (``URDF_USE_INERTIA_FROM_FILE``), as in pinocchio.
-* No contact model between the arms: self-collision is not enabled when loading, so links
-  of the cell (torso, both arms, hole block and peg) never collide with each other; the
-  peg enters the hole kinematically. Collisions between the two tools and flanges are also
-  filtered explicitly (``setCollisionFilterPair``) in case self-collision is turned on later.
+* Contacts between the arms (issue 27, docs/collision.md "The simulator's contacts"): a robot's
+  cell (:meth:`CellConfig.for_robot`) is loaded with self-collision (``URDF_USE_SELF_COLLISION``)
+  and every link pair is filtered out (``setCollisionFilterPair``) but ``CellConfig.collision_pairs``:
+  the link pairs the controller's collision model checks (:func:`robot_collision_pairs`: left arm
+  against right arm, an arm against the fixed parts and against its own links at joint distance
+  >= 3, minus the robot's ``collision_allowed`` pairs and the broadphase's far pairs), so that
+  adjacent links and shapes that overlap by design never touch. The two end effectors are always
+  filtered against each other, left against right: from each tool link's parent up through fixed
+  joints to the first link with collision shapes (the LWR4's flange, Baxter's gripper base), and every link
+  fixed or held below it (the tool link, Baxter's locked fingers). The assembly's hole block and
+  peg meet on purpose (the peg enters the hole kinematically), Baxter's fingers interpenetrate by
+  12 mm at the assembly's end. :meth:`DualArmCell.contacts` reads the link pairs in contact after
+  a step (one ``getContactPoints`` call). When nothing touches, the physics is the same as
+  without self-collision, bit for bit: contact points farther apart than 0 (within pybullet's
+  contact threshold) give zero impulses (test_sim_contacts.py; the shipped robots' assemblies and
+  pan cleaning compared so: docs/collision.md).
+  ``CellConfig()`` alone (a URDF, no robot description) has no collision pairs.
 * Contacts between links of the cell can be switched on pair by pair
   (``CellConfig.contact_pairs``, e.g. the brush on the pan of the pan-cleaning cell): the
-  URDF is then loaded with self-collision and every other link pair is filtered out.
+  URDF is then loaded with self-collision and every other link pair (but the collision pairs) is
+  filtered out. These intended contacts are not counted by :meth:`DualArmCell.contacts`.
   Contact stiffness/damping/friction come from the URDF's ``<contact>`` tags.
 * ``CellConfig.table_height`` adds a table: a static 1.2 x 1.6 x 0.05 m box in front of the
   torso (centre at x = 0.7 m, clear of the torso) whose top is at that world height; it collides with every link.
@@ -87,6 +101,30 @@ MAX_LAG = 0.01
 """Largest distance [rad] the position reference may run ahead of (or behind) a joint that does not
 follow it (an obstacle, a saturated motor); about 5x a joint's motion in one substep at 2 rad/s."""
 _RATE_TOL = 1e-9  # relative tolerance of the "integer multiple" check
+CONTACT_DISTANCE = 0.0
+"""A contact point counts as a contact at a distance <= this [m] (pybullet also keeps points up to
+its contact threshold apart, which the solver gives zero impulse)."""
+
+
+_PAIRS_CACHE: dict[tuple[object, ...], tuple[tuple[str, str], ...]] = {}
+
+
+def robot_collision_pairs(robot: RobotDescription | str,
+                          allowed: tuple[tuple[str, str], ...] = ()) -> tuple[tuple[str, str], ...]:
+    """The link pairs the controller's collision model checks on ``robot``: the pairs of
+    :class:`~dualarm_control.collision.CollisionModel` with the robot's ``collision_allowed``
+    and ``allowed`` (link names of the resolved URDF; ValueError for an unknown one) left out.
+    Cached per robot description and ``allowed`` (building the model takes 0.01-0.1 s)."""
+    r = load_robot(robot)
+    key = (r.name, r.urdf_xml, tuple(r.joint_names), r.collision_allowed, tuple(map(tuple, allowed)))
+    if key not in _PAIRS_CACHE:
+        # coal and pinocchio: imported for a robot's cell only
+        from dualarm_control.collision import CollisionModel
+        from dualarm_control.kinematics import DualArmModel
+
+        model = CollisionModel(DualArmModel(r), allowed=tuple(r.collision_allowed) + tuple(allowed))
+        _PAIRS_CACHE[key] = tuple(model.pairs)
+    return _PAIRS_CACHE[key]
 
 
 def _check_positive(name: str, value: float) -> None:
@@ -111,8 +149,11 @@ class CellConfig:
         position_gain: gain of the joint position controller, in (0, 1] [-]: the fraction
             of the integrated command's position error corrected per physics substep.
         table_height: world z of a table top [m], or None (no table).
-        contact_pairs: pairs of link names that make contact with each other (all other
-            link pairs of the cell never do).
+        contact_pairs: pairs of link names that make contact with each other on purpose (the
+            pan and the brush; not counted as contacts).
+        collision_pairs: pairs of link names that collide and whose contacts are counted
+            (:meth:`DualArmCell.contacts`); the robot's collision model's pairs in
+            :meth:`for_robot`. Every other link pair (but ``contact_pairs``) never makes contact.
         solver_iterations: iterations of pybullet's constraint solver per substep
             (``numSolverIterations``; pybullet's default is 50). See the module docstring.
         joints: the commanded joints, in command order (the robot's arms); empty: every movable
@@ -130,17 +171,24 @@ class CellConfig:
     position_gain: float = 1.0
     table_height: float | None = None
     contact_pairs: tuple[tuple[str, str], ...] = ()
+    collision_pairs: tuple[tuple[str, str], ...] = ()
     solver_iterations: int = 20
     joints: tuple[str, ...] = ()
     held: tuple[tuple[str, float], ...] = ()
 
     @classmethod
-    def for_robot(cls, robot: RobotDescription | str, **settings: object) -> CellConfig:
+    def for_robot(cls, robot: RobotDescription | str, allowed: tuple[tuple[str, str], ...] = (),
+                  collisions: bool = True, **settings: object) -> CellConfig:
         """The cell of a robot description: its resolved URDF, its arms' joints commanded, its
-        locked joints held (``settings``: the other fields)."""
+        locked joints held, and with ``collisions`` the collision model's link pairs colliding
+        (:func:`robot_collision_pairs`; ``allowed``: more link pairs that never collide, besides
+        the robot's ``collision_allowed`` and the ``contact_pairs`` setting). ``settings``: the
+        other fields."""
         r = load_robot(robot)
+        contact = settings.get("contact_pairs", ())
+        pairs = robot_collision_pairs(r, tuple(allowed) + tuple(contact)) if collisions else ()  # type: ignore[arg-type]
         return cls(urdf=r.urdf_path, joints=tuple(r.joint_names), held=tuple(r.locked_positions().items()),
-                   **settings)  # type: ignore[arg-type]
+                   collision_pairs=pairs, **settings)  # type: ignore[arg-type]
 
     def __post_init__(self) -> None:
         if self.table_height is not None and not math.isfinite(self.table_height):
@@ -259,12 +307,14 @@ class DualArmCell:
         p.setGravity(0.0, 0.0, self.config.gravity, physicsClientId=cid)
         p.setPhysicsEngineParameter(fixedTimeStep=self.config.physics_dt, numSubSteps=0,
                                     numSolverIterations=self.config.solver_iterations, physicsClientId=cid)
-        flags = p.URDF_USE_INERTIA_FROM_FILE | (p.URDF_USE_SELF_COLLISION if self.config.contact_pairs else 0)
+        contacts = bool(self.config.contact_pairs or self.config.collision_pairs)
+        flags = p.URDF_USE_INERTIA_FROM_FILE | (p.URDF_USE_SELF_COLLISION if contacts else 0)
         self._body = p.loadURDF(str(self.config.urdf), useFixedBase=True, flags=flags, physicsClientId=cid)
         n_joints = p.getNumJoints(self._body, physicsClientId=cid)
         infos = [p.getJointInfo(self._body, j, physicsClientId=cid) for j in range(n_joints)]
         self._joint_index = {info[1].decode(): j for j, info in enumerate(infos)}
-        self._link_index = {info[12].decode(): j for j, info in enumerate(infos)}
+        self._link_index = {p.getBodyInfo(self._body, physicsClientId=cid)[0].decode(): -1}  # the base: -1
+        self._link_index.update({info[12].decode(): j for j, info in enumerate(infos)})
         movable = [j for j, info in enumerate(infos) if info[2] != p.JOINT_FIXED]
         if self.config.joints:
             unknown = [n for n in self.config.joints if n not in self._joint_index
@@ -282,10 +332,13 @@ class DualArmCell:
         for link in range(-1, len(infos)):
             p.changeDynamics(self._body, link, linearDamping=0.0, angularDamping=0.0, physicsClientId=cid)
         self._hold(infos)
-        self._filter_tool_collisions()
         self._table: int | None = None
-        if self.config.contact_pairs:
-            self._keep_only_contact_pairs(len(infos))
+        self._pair_names: dict[tuple[int, int], tuple[str, str]] = {}  # counted pairs, both index orders
+        self.collision_pairs: list[tuple[str, str]] = []
+        """The link pairs that collide and are counted (``config.collision_pairs`` but the tools')."""
+        if contacts:
+            self._keep_only_pairs(len(infos))
+        self._filter_tool_collisions(infos)
         if self.config.table_height is not None:
             self._table = self._add_table(self.config.table_height)
         self._sensor = self._joint_index.get(SENSOR_JOINT)
@@ -307,28 +360,55 @@ class DualArmCell:
         p.setJointMotorControlArray(self._body, self._held_idx, p.POSITION_CONTROL, targetPositions=self._held_q,
                                     forces=forces, physicsClientId=self._client)
 
-    def _filter_tool_collisions(self) -> None:
-        """Disable contacts between the two tools and their parent links (see module docstring)."""
+    def _filter_tool_collisions(self, infos: list[tuple[object, ...]]) -> None:
+        """Disable contacts between the two end effectors (module docstring), left against right:
+        from each tool link's parent up through fixed joints to the first link with collision
+        shapes (the LWR4's flange, Baxter's gripper base), and every link fixed or held below it."""
+        cid = self._client
+        rigid = {j for j, info in enumerate(infos) if info[2] == p.JOINT_FIXED} | set(self._held_idx)
+
         def tool_links(tool: str) -> list[int]:
-            joint = self._joint_index.get(TOOL_JOINTS[tool])
-            if joint is None:
+            if tool not in self._link_index:
                 return []
-            parent = p.getJointInfo(self._body, joint, physicsClientId=self._client)[16]
-            return [self._link_index[tool]] + ([parent] if parent >= 0 else [])
+            top = int(infos[self._link_index[tool]][16])  # type: ignore[call-overload]  # the tool's parent
+            while top in rigid and not p.getCollisionShapeData(self._body, top, physicsClientId=cid):
+                top = int(infos[top][16])  # type: ignore[call-overload]
+            links = [top]
+            grown = True
+            while grown:  # the links hanging from it by fixed or held joints, recursively
+                below = {j for j in rigid if infos[j][16] in links and j not in links}
+                links += sorted(below)
+                grown = bool(below)
+            return links
 
         left, right = tool_links(LEFT_TOOL), tool_links(RIGHT_TOOL)
+        intended = {self._pair_indices(pair, "contact_pairs") for pair in self.config.contact_pairs}
         for a in left:
             for b in right:
+                ab = (min(a, b), max(a, b))
+                if ab in intended:  # the pan and the brush touch on purpose
+                    continue
                 p.setCollisionFilterPair(self._body, self._body, a, b, 0, physicsClientId=self._client)
+                self._pair_names.pop(ab, None)
+        self.collision_pairs = list(dict.fromkeys(self._pair_names.values()))
 
-    def _keep_only_contact_pairs(self, n_links: int) -> None:
-        """Filter out every link pair of the cell but ``contact_pairs`` (self-collision is on)."""
-        keep = set()
-        for a, b in self.config.contact_pairs:
-            for name in (a, b):
-                if name not in self._link_index:
-                    raise ValueError(f"contact_pairs: unknown link {name!r}")
-            keep |= {(self._link_index[a], self._link_index[b]), (self._link_index[b], self._link_index[a])}
+    def _pair_indices(self, pair: tuple[str, str], what: str) -> tuple[int, int]:
+        """The pybullet link indices of a link pair, smaller first (ValueError naming an unknown link)."""
+        for name in pair:
+            if name not in self._link_index:
+                raise ValueError(f"{what}: unknown link {name!r} in {self.config.urdf.name}")
+        a, b = self._link_index[pair[0]], self._link_index[pair[1]]
+        return min(a, b), max(a, b)
+
+    def _keep_only_pairs(self, n_links: int) -> None:
+        """Filter out every link pair of the cell but ``contact_pairs`` and ``collision_pairs``
+        (self-collision is on); the collision pairs are the ones counted (:meth:`contacts`)."""
+        intended = {self._pair_indices(pair, "contact_pairs") for pair in self.config.contact_pairs}
+        for pair in self.config.collision_pairs:
+            ab = self._pair_indices(pair, "collision_pairs")
+            if ab not in intended:
+                self._pair_names[ab] = (pair[0], pair[1])
+        keep = intended | set(self._pair_names)
         for i in range(-1, n_links):
             for j in range(i + 1, n_links):
                 p.setCollisionFilterPair(self._body, self._body, i, j, int((i, j) in keep),
@@ -347,6 +427,41 @@ class DualArmCell:
         a, b = self._link_index[link_a], self._link_index[link_b]
         points = p.getContactPoints(self._body, self._body, a, b, physicsClientId=self._client)
         return float(sum(c[9] for c in points))
+
+    def contacts(self) -> dict[tuple[str, str], float]:
+        """The counted link pairs (:attr:`collision_pairs`) in contact after the last step, each
+        with its deepest contact point's distance [m] (<= 0: minus the penetration depth), from
+        the last physics substep (one ``getContactPoints`` call). Empty before the first step
+        after a reset, and when the cell has no collision pairs."""
+        if not self._stepped or not self._pair_names:
+            return {}
+        out: dict[tuple[str, str], float] = {}
+        names = self._pair_names
+        for c in p.getContactPoints(self._body, self._body, physicsClientId=self._client):
+            if c[8] > CONTACT_DISTANCE:
+                continue
+            a, b = c[3], c[4]
+            pair = names.get((a, b) if a < b else (b, a))
+            if pair is not None and c[8] < out.get(pair, math.inf):
+                out[pair] = float(c[8])
+        return out
+
+    def link_index(self, link: str) -> int:
+        """pybullet's link index of a URDF link in :attr:`body_id` (-1 for the base; KeyError
+        naming the link otherwise)."""
+        if link not in self._link_index:
+            raise KeyError(f"unknown link {link!r} in {self.config.urdf.name}")
+        return self._link_index[link]
+
+    def pose(self, positions: FloatArray) -> None:
+        """Teleport the commanded joints to ``positions`` [rad], (n,), for inspection (distances,
+        drawing): no limit check, the reference, command and sim time are kept (a simulation
+        restarts with :meth:`reset`). DimensionError for a wrong shape, ValueError if not finite."""
+        q = self._check_vector(positions, "pose positions")
+        if not np.isfinite(q).all():
+            raise ValueError(f"pose positions must be finite, got {q.tolist()}")
+        for j, qj in zip(self._idx, q.tolist()):
+            p.resetJointState(self._body, j, qj, 0.0, physicsClientId=self._client)
 
     def table_contacts(self) -> int:
         """Number of contact points between the cell and the table (0 without a table)."""

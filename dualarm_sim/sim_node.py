@@ -12,6 +12,15 @@ last valid one kept, so the timeout still applies. Once a second a ``sim_node`` 
 timeouts (WARN while the arms are held at rest by the timeout), and in a task scenario the
 table contact points summed over the steps (``table_contacts``).
 
+Contacts between the robot's links (issue 27; :mod:`dualarm_sim.contacts`): the cell collides the
+link pairs of the controller's collision model (:meth:`~dualarm_sim.cell.CellConfig.for_robot`; a
+task scenario's ``contact_links`` are allowed: they touch on purpose). After every step the pairs
+in contact are counted, once per step each; a log line (WARN) names a pair and its penetration
+depth when it comes into contact, another (INFO) when it separates; the status carries
+``contacts`` (contact-steps summed over the pairs), ``contact_pairs`` (``link_a-link_b:steps``,
+comma-separated), ``deepest_contact_m`` (the deepest penetration so far [m]) and ``in_contact``
+(the pairs in contact at the last step; WARN, "links in contact: ...", while > 0).
+
 A task scenario (pan_cleaning) loads its cell URDF (pan and brush) and its table; with
 ``force:=true`` its ``contact_links`` (pan and brush) make real contact, as in the in-process
 runner (the pan's modelling error is the controller's, not the simulator's), and
@@ -67,6 +76,7 @@ from dualarm_control.ros.qos import (
 )
 from dualarm_control.scenario import ROBOT_PARAMETER, load_scenario, scenario_names
 from dualarm_sim.cell import CellConfig, DualArmCell, JointSample
+from dualarm_sim.contacts import ContactCounter
 
 PARAMETERS = (
     ParamSpec("scenario", "assembly", "scenario name or YAML path (initial configuration)", read_only=True),
@@ -109,7 +119,8 @@ class SimNode:
         tasks = scenario.tasks  # a task scenario: its cell (pan and brush), table and contact pair
         robot = scenario.robot
         self.cell = DualArmCell(
-            CellConfig.for_robot(robot, control_period=p["control_period"],
+            CellConfig.for_robot(robot, allowed=(tasks.contact_links,) if tasks is not None else (),
+                                 control_period=p["control_period"],
                                  physics_rate_hz=p["physics_rate_hz"], command_timeout=p["command_timeout"],
                                  table_height=tasks.table_height if tasks is not None else None,
                                  contact_pairs=(tasks.contact_links,) if tasks is not None and p["force"] else ()),
@@ -120,6 +131,7 @@ class SimNode:
         self.table = tasks is not None
         self.contact = tasks.contact_links if tasks is not None and p["force"] else None
         self.table_contacts = 0  # contact points with the table, summed over steps (as the in-process runner)
+        self.contacts = ContactCounter()  # contact-steps per link pair of the robot (module docstring)
         self.period_ns = round(p["control_period"] * 1e9)
         self.lockstep = bool(p["lockstep"])
         self.wait_for = int(p["lockstep_subscribers"])
@@ -164,7 +176,10 @@ class SimNode:
 
     def close(self) -> None:
         self.log.info(f"stopping after {self.steps} steps ({self.steps * self.period_ns / 1e9:.3f} s sim time), "
-                      f"{self.received} commands received, {self.rejected} rejected, {self.timeouts} command timeouts")
+                      f"{self.received} commands received, {self.rejected} rejected, {self.timeouts} command timeouts, "
+                      f"{self.contacts.total} contact-steps" + (f" ({self.contacts.pairs_text()}, deepest "
+                                                                f"{self.contacts.deepest * 1e3:.1f} mm)"
+                                                                if self.contacts.total else ""))
         self.cell.close()
 
     def _stamp_ns(self) -> int:
@@ -226,13 +241,20 @@ class SimNode:
         self.steps += 1
         if self.table:
             self.table_contacts += self.cell.table_contacts()
+        for event in self.contacts.update(self.cell.contacts()):  # rclpy: one severity per call site
+            if event.started:
+                self.log.warning(event.text())
+            else:
+                self.log.info(event.text())
 
     def publish_status(self) -> None:
         values = {"steps": self.steps, "commands_received": self.received, "commands_rejected": self.rejected,
                   "command_timeouts": self.timeouts, "timed_out": self.timed_out,
-                  **({"table_contacts": self.table_contacts} if self.table else {})}
-        message = "arms at rest: command timeout" if self.timed_out else "running"
-        self.pub_diag.publish(convert.diagnostics(self._stamp_ns(), "sim_node", 1 if self.timed_out else 0,
+                  **({"table_contacts": self.table_contacts} if self.table else {}), **self.contacts.diagnostics()}
+        touching = ", ".join(f"{a}-{b}" for a, b in self.contacts.current)
+        message = ("arms at rest: command timeout" if self.timed_out else
+                   f"links in contact: {touching}" if touching else "running")
+        self.pub_diag.publish(convert.diagnostics(self._stamp_ns(), "sim_node", 1 if self.timed_out or touching else 0,
                                                   message, values))
 
     def lockstep_watchdog(self) -> None:
