@@ -152,3 +152,10 @@ def test_unknown_row_is_a_usage_error() -> None:
     out = subprocess.run([sys.executable, "-m", "dualarm_control.app.cli", "faults", "--only", "nope"],
                          capture_output=True, text=True, timeout=60, check=False)
     assert out.returncode == 2 and "stale_states" in out.stderr
+
+
+@pytest.mark.slow
+def test_goal_into_collision_stalls_with_the_pair_and_no_contact(runs: Runs, tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Issue 27's row (47 s; the same stall over ROS is in test_interactive_node.py's default run)."""
+    row = passed(runs, tmp_path_factory, "goal_into_collision")
+    assert row.figures["contacts"] == 0 and row.figures["distance_m"] >= 0.029, row.observed

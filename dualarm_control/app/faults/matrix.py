@@ -15,6 +15,7 @@ import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
@@ -53,13 +54,20 @@ LINK_NETEM = ("delay", "2ms", "1ms", "loss", "2%")
 
 LOOPBACK_ROWS = ("stale_states", "target_stopped", "kill_sim", "kill_controller", "recorder_sigint",
                  "recorder_sigterm")
-ROWS = (*LOOPBACK_ROWS, "best_effort_loss", "across_hosts", "link_cut", "link_netem")
+ROWS = (*LOOPBACK_ROWS, "best_effort_loss", "across_hosts", "link_cut", "link_netem", "goal_into_collision")
+COLLISION_GOAL = ("0", "0", "-0.35", "3.14159265", "0", "0")
+"""goal_into_collision: F2 35 cm behind F1, through the left forearm (xyz [m], rpy [rad])."""
+SAFE_GOAL = ("0", "0", "0.15", "3.14159265", "0", "0")
+SAFETY_DISTANCE = 0.03  # m, the collision limit's default d_s
 RECORDER_EXIT_S = 30.0
 """How long a signalled recorder may take to close its bag and exit before the run is stopped."""
 KILL_INTO_MOTION_S = 0.6
 """kill_controller: seconds into a window of at least 1.5 s of motion (a segment starts from rest)."""
 
 EXPECTED = {
+    "goal_into_collision": "interactive cell, real time: a goal through the other arm (xyz 0 0 -0.35, rpy pi 0 0) "
+                           f"ends stalled with 'collision constraint: <pair> at d m', d >= {SAFETY_DISTANCE:g} m - "
+                           "1 mm; the simulator counts no contact (its /diagnostics 'contacts' stays 0)",
     "stale_states": f"sim_node SIGSTOP {PAUSE_S:g} s mid-motion: zero commands + /diagnostics ERROR once joint states "
                     f"are older than stale_timeout {STALE_TIMEOUT * 1e3:.0f} ms (tripped at <= +2 periods); OK again "
                     f"< {RECOVER_WITHIN_MS:.0f} ms after SIGCONT; one log line each way",
@@ -382,6 +390,51 @@ def _cut_link(run: CellRun, link: Link, say: Callable[[str], None]) -> _Episode:
     return _Episode(start, resume, _recovered(run, line))
 
 
+def collision_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[str], None]) -> list[Row]:
+    """A goal into collision on the interactive cell (``dualarm launch interactive --record``): the
+    verdict from ``dualarm goal --wait``, the contacts from the simulator's statuses in the bag."""
+    if "goal_into_collision" not in only:
+        return []
+    from dualarm_control.app.record.bag import SIM_STATUS, read_bag
+
+    out = out / "goal_into_collision"
+    out.mkdir(parents=True, exist_ok=True)
+    cli = [sys.executable, "-m", "dualarm_control.app.cli"]
+    launch = subprocess.Popen([*cli, "launch", "interactive", "--solver", "sparse_qp", "--record", str(out / "bag")],
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines: list[str] = []
+    threading.Thread(target=lambda: lines.extend(launch.stdout or ()), daemon=True).start()  # keeps the pipe drained
+    answers: list[tuple[int, str]] = []
+    try:
+        deadline = time.monotonic() + 180.0
+        while not any("interactive: holding the measured relative pose" in line for line in list(lines)):
+            if launch.poll() is not None or time.monotonic() > deadline:
+                return _failed(["goal_into_collision"], "the interactive cell did not start: " + "".join(lines[-5:]))
+            time.sleep(0.1)
+        for goal in (SAFE_GOAL, COLLISION_GOAL):
+            say(f"goal_into_collision: goal xyz {' '.join(goal[:3])} rpy {' '.join(goal[3:])}")
+            done = subprocess.run([*cli, "goal", "--xyz", *goal[:3], "--rpy", *goal[3:], "--wait", "--timeout", "200"],
+                                  capture_output=True, text=True, timeout=300, check=False)
+            answers.append((done.returncode, (done.stdout.strip().splitlines() or [""])[-1]))
+    finally:
+        launch.send_signal(signal.SIGINT)
+        try:
+            launch.communicate(timeout=180)
+        except subprocess.TimeoutExpired:
+            launch.kill()
+    if len(answers) < 2:
+        return _failed(["goal_into_collision"], f"goals not answered: {answers}")
+    (code_safe, _), (code, last) = answers
+    bag = read_bag(out / "bag")
+    contacts = max((int(st.values.get("contacts", "0")) for st in bag.statuses if st.name == SIM_STATUS), default=-1)
+    match = re.search(r"collision constraint: (.+?) at ([0-9.]+) m", last)
+    distance = float(match.group(2)) if match else float("nan")
+    ok = (code_safe == 0 and code == 1 and match is not None and distance >= SAFETY_DISTANCE - 1e-3 and contacts == 0)
+    observed = (f"safe goal: exit {code_safe}; collision goal: exit {code}, '{last}'; simulator contacts "
+                f"{contacts if contacts >= 0 else 'not reported'}")
+    return [_row("goal_into_collision", ok, observed, distance_m=distance, contacts=contacts)]
+
+
 # ------------------------------------------------------------------------------------------ matrix
 
 
@@ -392,7 +445,7 @@ def run_matrix(out: Path, scenario: str = "assembly", only: Sequence[str] = ROWS
     if unknown:
         raise ValueError(f"unknown fault rows {', '.join(unknown)}; valid: {', '.join(ROWS)}")
     rows: list[Row] = []
-    for group in (loopback_rows, loss_rows, link_rows):
+    for group in (loopback_rows, loss_rows, link_rows, collision_rows):
         t = time.monotonic()
         got = group(out, scenario, only, say)
         for row in got:
