@@ -83,6 +83,8 @@ from dualarm_control.kinematics import DualArmModel
 from dualarm_control.robot import RobotError
 
 FloatArray = npt.NDArray[np.float64]
+TOOL_FRAMES = ("left_tool", "right_tool")
+"""The tool frames F1, F2 every resolved URDF has (``dualarm_control.robot``)."""
 WORLD = "world"
 """The side of the shapes no arm joint moves (the torso, the pedestal, the arms' bases)."""
 SAME_ARM_JOINT_DISTANCE = 3
@@ -245,7 +247,10 @@ class CollisionModel:
                 if name not in links:
                     raise ValueError(f"allowed pair {tuple(pair)!r}: {name!r} is not a link of {model.urdf.name} "
                                      f"(links with collision shapes: {', '.join(b.name for b in self._bodies)})")
-        self.allowed: frozenset[frozenset[str]] = frozenset(frozenset(p) for p in allowed)
+        self.allowed_given: frozenset[frozenset[str]] = frozenset(frozenset(p) for p in allowed)
+        """The allowed pairs as given (a tool frame not yet expanded to its end effector)."""
+        self.allowed: frozenset[frozenset[str]] = frozenset(
+            frozenset((a, b)) for pair in allowed for a in self.end_effector(pair[0]) for b in self.end_effector(pair[1]))
         pin.framesForwardKinematics(self.model, self.data, pin.neutral(self.model))
         pin.updateGeometryPlacements(self.model, self.data, self.geometry, self.geometry.createData())
         candidates = self._candidates()
@@ -336,6 +341,46 @@ class CollisionModel:
             side = WORLD if joint == 0 else "left" if self.model.names[joint] in left else "right"
             bodies.append(_Body(name, joint, side, tuple(shapes[name])))
         return bodies
+
+    def end_effector(self, link: str) -> list[str]:
+        """``link`` itself, or for a tool frame (``left_tool``, ``right_tool``: F1, F2) its end effector:
+        from the tool up through fixed joints to the first link with collision shapes (the LWR4's
+        flange, Baxter's gripper base) and every link fixed below it (Baxter's locked fingers, the
+        tool), as the simulator groups them (``dualarm_sim.cell``). An allowed pair naming a tool
+        frame allows the whole end effector (``left_tool right_tool``: the tools meet on purpose)."""
+        if link not in TOOL_FRAMES:
+            return [link]
+        shaped = {b.name for b in self._bodies}
+        parent_of, rigid = self._urdf_tree()
+        top: str | None = link
+        while top is not None and top not in shaped:
+            top = parent_of[top] if top in rigid else None  # up through fixed (or locked) joints only
+        if top is None:
+            return [link]
+        group = [top]
+        grown = True
+        while grown:  # the links hanging from the group by fixed or locked joints, recursively
+            below = sorted(child for child in rigid if parent_of.get(child) in group and child not in group)
+            group += below
+            grown = bool(below)
+        return group
+
+    def _urdf_tree(self) -> tuple[dict[str, str], set[str]]:
+        """The resolved URDF's tree: each link's parent link, and the links whose joint to it does not
+        move in the model (fixed, or an arm's locked joint)."""
+        import xml.etree.ElementTree as ET
+
+        moving = set(self.kinematics.joint_names)
+        parent_of: dict[str, str] = {}
+        rigid: set[str] = set()
+        for joint in ET.parse(self.kinematics.urdf).getroot().iter("joint"):
+            child, parent = joint.find("child"), joint.find("parent")
+            if child is None or parent is None:
+                continue
+            parent_of[child.get("link", "")] = parent.get("link", "")
+            if joint.get("name") not in moving:
+                rigid.add(child.get("link", ""))
+        return parent_of, rigid
 
     def _body(self, link: str) -> _Body:
         index = self._body_index.get(link)

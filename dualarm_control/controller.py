@@ -191,7 +191,7 @@ class RelativeController:
         self.collision_limit: CollisionLimit | None = None
         if self.params.collision.enabled:
             allowed = allowed_pairs(model, self.params.collision)
-            if collision is None or collision.allowed != frozenset(frozenset(p) for p in allowed):
+            if collision is None or collision.allowed_given != frozenset(frozenset(p) for p in allowed):
                 collision = CollisionModel(model, allowed=allowed)
             self.collision_model = collision
             self.collision_limit = CollisionLimit(collision, self.params.collision)

@@ -22,12 +22,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from dualarm_control.controller import ControllerParams
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import FloatArray
 from dualarm_control.params import ParameterError, ParamSpec, read_params_file
@@ -67,6 +68,15 @@ class Scenario:
     settle_time: float
     source: Path
     robot: RobotDescription = field(default_factory=load_robot)
+    collision_allowed: tuple[tuple[str, str], ...] = ()
+
+    def controller_params(self, params: ControllerParams) -> ControllerParams:
+        """``params`` with the scenario's allowed contacts added to the collision limit's
+        (``scenario.collision_allowed``: e.g. the assembly's tools, which meet on purpose)."""
+        if not self.collision_allowed:
+            return params
+        collision = replace(params.collision, allowed=tuple(params.collision.allowed) + self.collision_allowed)
+        return replace(params, collision=collision)
 
     @property
     def tasks(self) -> TasksSource | None:
@@ -120,6 +130,21 @@ def load_scenario(name_or_path: str, robot: str | RobotDescription | None = None
     except ParameterError as exc:
         raise ScenarioError(str(exc)) from None
     return scenario_from_parameters(flat, path, robot or None)
+
+
+def _link_pairs(flat: Mapping[str, Any]) -> tuple[tuple[str, str], ...]:
+    """``scenario.collision_allowed``: 'link_a link_b' strings (``left_tool right_tool``: the two end
+    effectors, :class:`~dualarm_control.collision.CollisionModel`) as pairs; ScenarioError naming a bad entry."""
+    value = get(flat, "collision_allowed", [])
+    entries = value if isinstance(value, list) else [value]
+    pairs = []
+    for item in entries:
+        parts = item.split() if isinstance(item, str) else []
+        if len(parts) != 2:
+            raise ScenarioError(f"scenario parameter '{PREFIX}collision_allowed': entry {item!r}, expected "
+                                "'link_a link_b' (two link names separated by a space)")
+        pairs.append((parts[0], parts[1]))
+    return tuple(pairs)
 
 
 def _motion_limits(flat: Mapping[str, Any]) -> MotionLimits:
@@ -195,6 +220,7 @@ def scenario_from_parameters(flat: Mapping[str, Any], source: Path,
         raise ScenarioError(f"scenario {source}: the start on robot {chosen.name!r} is outside the joint limits: "
                             + ", ".join(outside))
     return Scenario(
+        collision_allowed=_link_pairs(flat),
         name=str(get(flat, "name")),
         description=str(get(flat, "description", "")),
         initial_positions=start,

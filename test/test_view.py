@@ -273,3 +273,55 @@ def test_web_viewer_shows_the_arms_in_chromium(short_run: RunArrays, tmp_path: P
         keep = os.environ.get("DUALARM_VIEW_SCREENSHOT")
         if keep:
             Path(keep).write_bytes(png_end)
+
+
+NEAR_Q = [1.1261, -1.6987, -1.1776, 0.8174, 2.7065, -1.2329, 2.6597, 0.246, 0.1941, 0.1538, -1.3768, -1.7228, -1.8484,
+          2.4161]
+"""An LWR4 cell configuration with left_flange 2.1 cm from right_link_3 (found by a seeded search)."""
+
+
+def red_pixels(img: np.ndarray) -> int:
+    view = img[VIEW_REGION]
+    return int(np.count_nonzero((view[..., 0] > 0.7) & (view[..., 1] < 0.35) & (view[..., 2] < 0.35)))
+
+
+def near_contact_run(with_pair: bool) -> RunArrays:
+    model = DualArmModel()
+    q = np.array([NEAR_Q, NEAR_Q])
+    closest = rv.closest_pairs(model, q) if with_pair else None
+    return RunArrays(model.urdf, np.array([0.0, 0.005]), q, list(model.joint_names), {}, closest=closest)
+
+
+def test_the_closest_pair_is_in_the_recording(tmp_path: Path) -> None:
+    """Issue 27: /collision/closest holds one line per cycle between coal's witness points, labelled
+    with the pair and the distance, and its distance is plotted."""
+    run = near_contact_run(True)
+    assert run.closest is not None
+    assert run.closest.labels[0].startswith("left_flange – right_link_3 0.021"), run.closest.labels
+    save(run, tmp_path / "near.rrd")
+    rows, scalars = read_rrd(tmp_path / "near.rrd")
+    assert rows[f"/{rv.CLOSEST_ENTITY}"] == 2 and rows[f"/{rv.CLOSEST_ENTITY}/points"] == 2
+    np.testing.assert_allclose(scalars[f"/plot/{rv.CLOSEST_DISTANCE}"], run.closest.distance, rtol=0, atol=0)
+    gap = np.linalg.norm(run.closest.points[0, 1] - run.closest.points[0, 0])
+    assert abs(gap - run.closest.distance[0]) < 1e-9
+
+
+def test_web_viewer_draws_the_closest_pair_in_red(tmp_path: Path) -> None:
+    """In chromium, the served viewer of a cell 2.1 cm from contact shows the closest pair's red
+    witness points; the same run without the pair has none of those pixels."""
+    if not CHROMIUM.exists():
+        pytest.skip(f"{CHROMIUM} missing: apt-get install chromium (.ci/run does, as root)")
+    deadline = time.monotonic() + LOAD_TIMEOUT_S
+    with (WebViewer(free_port(), free_port()) as drawn, WebViewer(free_port(), free_port()) as plain,
+          Chromium() as browser):
+        for server, run in ((drawn, near_contact_run(True)), (plain, near_contact_run(False))):
+            rec = rr.RecordingStream(rv.APPLICATION_ID)
+            rec.connect_grpc(server.grpc_url)
+            run.log(rec)
+            rec.flush()
+            rec.disconnect()
+        _, with_pair = load(browser, drawn.url, deadline, tmp_path / "pair.png")
+        _, without = load(browser, plain.url, deadline, tmp_path / "plain.png")
+    red, base = red_pixels(with_pair), red_pixels(without)
+    print(f"red pixels: {red} with the closest pair, {base} without; screenshots in {tmp_path}")
+    assert red >= base + 20, f"{red} red pixels with the pair, {base} without"

@@ -104,9 +104,10 @@ class ControllerNode:
         self.node = n = Node("controller_node", context=context)
         self.log = n.get_logger()
         self.values = shell.declare(n, ALL_PARAMETERS)
-        self.params = core.controller_params(self.values, n.get_name())
         self.lockstep = bool(self.values["lockstep"])
         self.scenario = load_scenario(self.values["scenario"], self.values["robot"])
+        # the parameters, with the scenario's allowed contacts (the assembly's tools) in the collision limit
+        self.params = self.scenario.controller_params(core.controller_params(self.values, n.get_name()))
         self.model = DualArmModel(self.scenario.robot)
         self.robot_ref = self.model.description.reference
         # The same tracker as the in-process runner's (source.tracker): model, gain and cycle count
@@ -146,7 +147,7 @@ class ControllerNode:
             subscribe(WrenchStamped, WRENCH, lambda msg: self.on_input(
                 WRENCH, convert.stamp_ns(msg.header.stamp), convert.wrench_vector(msg)), 10)
         self.live = shell.LiveParameters(n, {s.name: s for s in ALL_PARAMETERS}, self.values, lambda merged: (
-            core.RelativeController(self.model, core.controller_params(merged, n.get_name()),
+            core.RelativeController(self.model, self.scenario.controller_params(core.controller_params(merged, n.get_name())),
                                     collision=self.tracker.controller.collision_model)))
         self.ticks: list[shell.Tick] = ([] if self.lockstep else  # ros.node.Ticker, not an rclpy timer
                                         [(max(self.params.period, WATCHDOG_MIN_PERIOD_S), self.on_watchdog)])

@@ -49,6 +49,7 @@ def run_scenario(
     source = scenario.reference
     model = model or DualArmModel(scenario.robot)
     options = RunOptions(scenario.limits, scenario.settle_time, gain, force, duration)
+    params = scenario.controller_params(params)  # its allowed contacts (the assembly's tools)
     period = params.period
     cell_options = source.cell(options)
     pairs: tuple[tuple[str, str], ...] = cell_options.get("contact_pairs", ())

@@ -33,10 +33,11 @@ class RunArrays:
     series: dict[str, FloatArray]
     frames: dict[str, FloatArray] = field(default_factory=dict)
     statuses: list[str] | None = None
+    closest: rv.ClosestPairs | None = None
 
     def log(self, recording: object = None) -> None:
         rv.log_run(self.urdf, self.stamps, self.q, self.joint_names, self.series, frames=self.frames,
-                   statuses=self.statuses, recording=recording)
+                   statuses=self.statuses, recording=recording, closest=self.closest)
 
 
 def relative_run_arrays(path: Path, model: DualArmModel, bag: Bag | None = None) -> RunArrays:
@@ -70,9 +71,10 @@ def relative_run_arrays(path: Path, model: DualArmModel, bag: Bag | None = None)
         rv.TRACKING_ORIENTATION: column("orientation_error_rad"),
         rv.CYCLE_TIME: column("cycle_time_s"),
     }
-    return RunArrays(model.urdf, t, positions.values[nearest_index(diag_t, positions.t)], list(model.joint_names),
-                     series, {"relative_target": targets.values[nearest_index(diag_t, targets.t)]},
-                     [v.get("status", "") for v in cycles])
+    q = positions.values[nearest_index(diag_t, positions.t)]
+    return RunArrays(model.urdf, t, q, list(model.joint_names), series,
+                     {"relative_target": targets.values[nearest_index(diag_t, targets.t)]},
+                     [v.get("status", "") for v in cycles], rv.closest_pairs(model, q))
 
 
 def record_arrays(record: RunRecord, model: DualArmModel,
@@ -97,7 +99,7 @@ def record_arrays(record: RunRecord, model: DualArmModel,
                 series[f"task/{name}{suffix}_bound"] = np.full(n, bounds[j])
     series = {k: np.asarray(v, dtype=float) for k, v in series.items() if not np.all(np.isnan(np.asarray(v, dtype=float)))}
     return RunArrays(model.urdf, record.time - record.time[0], record.positions, list(model.joint_names), series,
-                     frames or {}, list(record.status))
+                     frames or {}, list(record.status), rv.closest_pairs(model, record.positions))
 
 
 def bag_run_arrays(path: Path) -> RunArrays:

@@ -22,6 +22,7 @@ import numpy as np
 
 from dualarm_control.app.record.bag import CONTROLLER_STATUS, parse_float
 from dualarm_control.app.view import rerun_view as rv
+from dualarm_control.collision import CollisionModel
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.ros import convert
 from dualarm_control.ros.listen import Topic, listen
@@ -39,6 +40,7 @@ class LiveLog:
     def __init__(self, model: DualArmModel, recording: Any = None) -> None:
         self.model = model
         self.recording = recording
+        self.collision = CollisionModel(model, allowed=model.description.collision_allowed)  # the closest pair
         self.t0: int | None = None
         self.last_state_ns: int | None = None
         self.states: list[tuple[float, np.ndarray]] = []
@@ -98,6 +100,7 @@ class LiveLog:
         if self.states:
             t, q = zip(*self.states, strict=True)
             rv.log_joints(self.model.urdf, np.array(t), np.array(q), self.model.joint_names, rec)
+            rv.log_closest_pairs(np.array(t), rv.closest_pairs(self.model, np.array(q), self.collision), recording=rec)
         if self.commands:
             t, qd = zip(*self.commands, strict=True)
             rv.log_series(np.array(t), rv.velocity_norm_series(np.array(qd)), rec)

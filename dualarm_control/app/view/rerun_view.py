@@ -10,13 +10,15 @@ Entities: ``/<robot>/visual_geometries/<link>/...`` (the URDF, static, as Rerun'
 names it), ``/joint_tf/<joint>`` (each driven joint's transform per cycle), ``/frames/<name>``
 (poses given in the left tool frame, drawn as axes; the tools' own axes are ``/frames/left_tool``
 and ``/frames/right_tool``), ``/plot/<group>/<name>`` (scalars), ``/status`` (solver status
-changes, text log). The blueprint puts the 3D view (collision geometry hidden) beside one
+changes, text log), ``/collision/closest`` (the closest link pair within the collision limit's
+influence distance, a line between its witness points, labelled with the pair and the distance). The blueprint puts the 3D view (collision geometry hidden) beside one
 plot per series group.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +48,86 @@ TRACKING_ORIENTATION = "tracking/orientation_error_rad"
 SOLVE_TIME = "timing/solve_time_s"
 CYCLE_TIME = "timing/cycle_time_s"
 STATUS_ENTITY = "status"
+CLOSEST_ENTITY = "collision/closest"
+"""The closest link pair of each cycle, a line between its witness points (issue 27)."""
+CLOSEST_DISTANCE = "collision/closest_distance_m"
+NEAR_COLOR = (230, 40, 40)
+"""Colour of the closest pair's line within 5 mm of the safety distance (held by the limit)."""
+INFLUENCE_COLOR = (255, 170, 0)
+WITNESS_RADIUS_M = 0.015
+"""Radius of the closest pair's witness points as drawn [m] (a 3 cm gap is a few pixels from the camera)."""
+"""Colour of the closest pair's line inside the influence distance."""
+
+
+@dataclass(frozen=True)
+class ClosestPairs:
+    """The closest link pair of each cycle closer than the influence distance d_i (else NaN, '').
+
+    Attributes:
+        points: witness points p_a, p_b in the world [m], (N, 2, 3). distance: d [m], (N,).
+        labels: "link_a – link_b 0.030 m" per cycle ('' when none within d_i).
+        frame: the URDF's root link, the frame the points are given in (the world).
+    """
+
+    points: FloatArray
+    distance: FloatArray
+    labels: list[str]
+    frame: str
+
+
+def closest_pairs(model: Any, q: FloatArray, collision: Any = None) -> ClosestPairs:
+    """:class:`ClosestPairs` of joint positions q (N, n) [rad]: ``collision`` (default: the robot's
+    collision model, its ``collision_allowed`` pairs left out), the pairs closer than the default
+    influence distance."""
+    from dualarm_control.collision import CollisionModel, CollisionParams
+
+    collision = collision or CollisionModel(model, allowed=model.description.collision_allowed)
+    within = CollisionParams().influence_distance
+    q = np.asarray(q, dtype=float)
+    points, distance, labels = np.full((len(q), 2, 3), np.nan), np.full(len(q), np.nan), [""] * len(q)
+    for k, row in enumerate(q):
+        if not np.all(np.isfinite(row)):
+            continue
+        near = collision.distances(row, within=within)
+        if near:
+            pair = min(near, key=lambda d: d.distance)
+            points[k], distance[k] = (pair.point_a, pair.point_b), pair.distance
+            labels[k] = f"{pair.link_a} – {pair.link_b} {pair.distance:.3f} m"
+    return ClosestPairs(points, distance, labels, root_link(Path(model.urdf)))
+
+
+def root_link(urdf: Path) -> str:
+    """The URDF's root link (the one no joint has as its child): Rerun's name of the world frame."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.parse(urdf).getroot()
+    children = {child.get("link") for joint in root.iter("joint") for child in joint.iter("child")}
+    return next(link.get("name", "") for link in root.iter("link") if link.get("name") not in children)
+
+
+def log_closest_pairs(stamps: FloatArray, pairs: ClosestPairs, safety: float = 0.03, recording: Any = None) -> None:
+    """The closest pair per cycle as a labelled line ``/collision/closest`` (red within 5 mm of the
+    safety distance [m], orange inside d_i; an empty line when no pair is that close) and its
+    distance as the plot ``/plot/collision/closest_distance_m``."""
+    import rerun as rr
+
+    stamps = np.asarray(stamps, dtype=float)
+    near = np.isfinite(pairs.distance)
+    strips = [p if ok else np.zeros((0, 3)) for p, ok in zip(pairs.points, near, strict=True)]
+    colors = [NEAR_COLOR if ok and d < safety + 5e-3 else INFLUENCE_COLOR for d, ok in zip(pairs.distance, near,
+                                                                                        strict=True)]
+    if len(stamps):
+        for entity in (CLOSEST_ENTITY, f"{CLOSEST_ENTITY}/points"):  # witness points are in the world frame
+            rr.log(entity, rr.CoordinateFrame(pairs.frame), static=True, recording=recording)
+        rr.send_columns(CLOSEST_ENTITY, indexes=[_time(stamps)],
+                        columns=rr.LineStrips3D.columns(strips=strips, colors=colors, labels=pairs.labels,
+                                                        radii=[0.004] * len(stamps)), recording=recording)
+        rr.send_columns(f"{CLOSEST_ENTITY}/points", indexes=[_time(stamps)],  # the witness points, visible from afar
+                        columns=rr.Points3D.columns(positions=np.concatenate(strips), colors=np.repeat(
+                            np.array(colors, dtype=np.uint8), [len(x) for x in strips], axis=0),
+                            radii=np.full(sum(len(x) for x in strips), WITNESS_RADIUS_M)).partition(
+                            [len(x) for x in strips]), recording=recording)
+    log_series(stamps, {CLOSEST_DISTANCE: pairs.distance}, recording)
 
 
 def velocity_norm_series(qd: FloatArray, threshold: float = ACTIVITY_THRESHOLD) -> dict[str, FloatArray]:
@@ -195,7 +277,8 @@ def series_groups(names: Sequence[str]) -> list[str]:
 
 def log_run(urdf: Path, stamps: FloatArray, q: FloatArray, joint_names: Sequence[str],
             series: Mapping[str, FloatArray], *, frames: Mapping[str, FloatArray] | None = None,
-            statuses: Sequence[str] | None = None, recording: Any = None, send_blueprint: bool = True) -> None:
+            statuses: Sequence[str] | None = None, recording: Any = None, send_blueprint: bool = True,
+            closest: ClosestPairs | None = None) -> None:
     """Log a whole run: the posed URDF, frames, plots and status changes, on the ``time`` timeline.
 
     Args:
@@ -210,6 +293,7 @@ def log_run(urdf: Path, stamps: FloatArray, q: FloatArray, joint_names: Sequence
         statuses: solver status per cycle (N,); its changes go to the text log.
         recording: a ``rerun.RecordingStream`` (default: the global one).
         send_blueprint: also send :func:`blueprint` (the layout of the viewer).
+        closest: the closest link pair per cycle (:func:`closest_pairs`), drawn by :func:`log_closest_pairs`.
     """
     import rerun as rr
 
@@ -225,11 +309,13 @@ def log_run(urdf: Path, stamps: FloatArray, q: FloatArray, joint_names: Sequence
         raise ValueError(f"statuses: {len(statuses)} values for {n} stamps")
     urdf = Path(urdf)
     if send_blueprint:
-        rr.send_blueprint(blueprint(robot_name(urdf), series_groups(list(series)), statuses is not None),
-                          recording=recording)
+        groups = series_groups([*series, *([CLOSEST_DISTANCE] if closest is not None else [])])
+        rr.send_blueprint(blueprint(robot_name(urdf), groups, statuses is not None), recording=recording)
     log_model(urdf, recording)
     log_joints(urdf, stamps, q, joint_names, recording)
     log_frames(stamps, frames or {}, recording=recording)
     log_series(stamps, series, recording)
     if statuses is not None:
         log_statuses(stamps, statuses, recording=recording)
+    if closest is not None:
+        log_closest_pairs(stamps, closest, recording=recording)
