@@ -155,6 +155,10 @@ class CollisionParams:
     gain: float = 0.5
     allowed: tuple[tuple[str, str], ...] = ()
     """Link pairs never checked besides the robot's own ``collision_allowed`` (resolved URDF names)."""
+    shape_margin: float = 0.001
+    """m, >= 0: the limit keeps d_s between the shapes grown by this much each (d >= d_s + 2 margin in
+    coal's distance of the URDF's shapes): pybullet's collision margin, 1 mm, by which the simulator's
+    shapes are larger (its distances are 0.5-2 mm shorter than coal's, docs/collision.md)."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.enabled, bool):
@@ -170,6 +174,15 @@ class CollisionParams:
                                  f"a distance [m] > collision.safety_distance = {self.safety_distance}")
         if self.gain <= 0.0:
             raise ParameterError("collision.gain", self.gain, "a speed > 0 [m/s]")
+        if not (isinstance(self.shape_margin, int | float) and math.isfinite(self.shape_margin)
+                and self.shape_margin >= 0.0):
+            raise ParameterError("collision.shape_margin", self.shape_margin, "a distance >= 0 [m]")
+
+    @property
+    def kept_distances(self) -> tuple[float, float]:
+        """(d_i, d_s) in coal's distance of the URDF's shapes [m]: both plus 2 ``shape_margin``."""
+        grow = 2.0 * self.shape_margin
+        return self.influence_distance + grow, self.safety_distance + grow
 
 
 @dataclass(frozen=True, slots=True)

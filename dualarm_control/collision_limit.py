@@ -3,7 +3,10 @@
 Each cycle, the pairs of the robot's :class:`~dualarm_control.collision.CollisionModel` closer
 than the influence distance d_i give one hard row each (:func:`~dualarm_control.collision.velocity_damper_rows`):
 
-    -dd_dq qd <= xi (d - d_s) / (d_i - d_s)        [m/s]
+    -dd_dq qd <= xi (d - d_s') / (d_i' - d_s')        [m/s]
+
+with d_s' = d_s + 2 m and d_i' = d_i + 2 m, m the shape margin (``collision.shape_margin``, 1 mm:
+pybullet's collision margin; the limit keeps d_s between the shapes as the simulator grows them).
 
 which every solver takes in its own variables (docs/collision.md, "Limits"). What the limit saw
 is kept for the cycle's report (:class:`CollisionReport`: the closest pair, its distance, the rows
@@ -86,11 +89,11 @@ class CollisionLimit:
         self._rows = (np.zeros((0, collision.model.nv)), np.zeros(0))
 
     def apply(self, q: FloatArray, previous: FloatArray, bounds: Bounds) -> Bounds:
-        p = self.params
-        self.near = self.collision.distances(q, within=p.influence_distance)
+        influence, safety = self.params.kept_distances
+        self.near = self.collision.distances(q, within=influence)
         if not self.near:
             return bounds
-        self._rows = a, b = velocity_damper_rows(self.near, p.influence_distance, p.safety_distance, p.gain)
+        self._rows = a, b = velocity_damper_rows(self.near, influence, safety, self.params.gain)
         bounds.rows = np.vstack((bounds.rows, a))
         bounds.bound = np.concatenate((bounds.bound, b))
         bounds.labels = bounds.labels + tuple(f"{d.link_a} – {d.link_b}" for d in self.near)
@@ -98,7 +101,7 @@ class CollisionLimit:
 
     def report(self, velocities: FloatArray) -> CollisionReport:
         """The last cycle's :class:`CollisionReport` for its command ``velocities`` [rad/s] (n,)."""
-        d_i = self.params.influence_distance
+        d_i = self.params.kept_distances[0]
         if not self.near:
             return CollisionReport(math.inf, None, 0, 0, d_i)
         a, b = self._rows

@@ -37,8 +37,8 @@ POSITION_TOLERANCE = 5e-4  # m
 ANGLE_TOLERANCE = 5e-3  # rad
 STALL_TIME = 2.0  # s
 LIMIT_MARGIN = 1e-2  # rad
-COLLISION_NEAR = CollisionParams().influence_distance
-"""A stall is blamed on the collision limit when the closest pair is nearer than this [m] (d_i)."""
+COLLISION_NEAR = CollisionParams().kept_distances[0]
+"""A stall is blamed on the collision limit when the closest pair is nearer than this [m] (d_i + 2 shape margins)."""
 
 
 def stall_reason(model: DualArmModel, q: FloatArray, distance: float, angle: float, when: str,

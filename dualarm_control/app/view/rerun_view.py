@@ -82,7 +82,7 @@ def closest_pairs(model: Any, q: FloatArray, collision: Any = None) -> ClosestPa
     from dualarm_control.collision import CollisionModel, CollisionParams
 
     collision = collision or CollisionModel(model, allowed=model.description.collision_allowed)
-    within = CollisionParams().influence_distance
+    within = CollisionParams().kept_distances[0]
     q = np.asarray(q, dtype=float)
     points, distance, labels = np.full((len(q), 2, 3), np.nan), np.full(len(q), np.nan), [""] * len(q)
     for k, row in enumerate(q):
