@@ -211,6 +211,10 @@ def _basis(first: FloatArray, hint: FloatArray | None) -> FloatArray:
         other = np.eye(3)[int(np.argmin(np.abs(first)))]
         e2 = _unit(other - (other @ first) * first)
         assert e2 is not None
+    # a second Gram-Schmidt pass ("twice is enough"): a hint nearly parallel to ``first`` leaves e2 off
+    # orthogonal by the cancellation's rounding (1e-9 for a hint 1e-9 rad from ``first``, hypothesis found it)
+    again = _unit(e2 - (e2 @ first) * first)
+    e2 = again if again is not None else e2
     return np.column_stack((first, e2, _cross(first, e2)))
 
 

@@ -460,3 +460,12 @@ def test_a_state_one_cycle_from_rest_on_the_goal_ends_there_where_ruckig_fails()
     sample = gen.step()
     assert gen.state == REACHED and sample.done
     assert not np.any(sample.angular_velocity) and not np.any(sample.angular_acceleration)
+
+
+def test_rotation_box_basis_is_orthonormal_for_a_hint_nearly_along_the_direction() -> None:
+    """The case hypothesis found under stress-ng (direction 1e-9 rad from the acceleration share):
+    the box's frame is orthonormal to 1e-12."""
+    from dualarm_control.online_trajectory import rotation_box
+
+    q, _ = rotation_box(np.array([0.0, 1e-9, 1.0]), np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.1)
+    np.testing.assert_allclose(q.T @ q, np.eye(3), atol=1e-12)

@@ -50,14 +50,10 @@ class PseudoInverse(Solver):
             elif value < lo and value < 0:
                 scale = min(scale, min(lo, 0.0) / value)
         notes = []
-        if problem.has_limit_rows:
+        if problem.has_limit_rows:  # the same shrink fits the rows with b >= 0 (rest meets them)
             assert problem.limit_rows is not None and problem.limit_bound is not None
             rows, bound = problem.limit_rows @ qd, problem.limit_bound
-            if (bound < 0.0).any() and (rows[bound < 0.0] > bound[bound < 0.0]).any():
-                i = int(np.flatnonzero(bound < 0.0)[0])
-                label = problem.limit_labels[i] if i < len(problem.limit_labels) else f"row {i}"
-                return None, "infeasible", 0, f"limit row {label} needs motion apart (b = {bound[i]:.3g} m/s)"
-            over = rows > bound
+            over = (rows > bound) & (bound >= 0.0)
             if over.any():
                 row_scale = float(np.min(bound[over] / rows[over]))
                 if row_scale < scale:
@@ -74,6 +70,12 @@ class PseudoInverse(Solver):
                 qd[beyond] = np.minimum(np.maximum(qd[beyond], lo), hi)
                 notes.append(f"joints {np.flatnonzero(beyond)[moved].tolist()} (beyond a position limit) "
                              "set to their nearest bound")
+        if problem.has_limit_rows and problem.limit_excess(qd) > ROUND_OFF:
+            assert problem.limit_rows is not None and problem.limit_bound is not None
+            i = int(np.argmax(problem.limit_rows @ qd - problem.limit_bound))
+            label = problem.limit_labels[i] if i < len(problem.limit_labels) else f"row {i}"
+            return None, "infeasible", 0, (f"limit row {label} not met by eq (13) shrunk into the bounds "
+                                           f"(b = {problem.limit_bound[i]:.3g} m/s)")
         if notes:
             return qd, "scaled", 0, "; ".join(notes)
         return qd, "solved", 0, ""
