@@ -38,6 +38,7 @@ from dualarm_control.limits import (
 )
 from dualarm_control.params import (
     ParamSpec,
+    link_pairs,
     non_negative,
     open_unit_interval,
     positive,
@@ -370,10 +371,18 @@ def _acceleration_check(value: Any) -> str:
     return "" if value == [0.0] else acceleration_limit_problem(value)
 
 
+def _allowed(value: Any) -> tuple[tuple[str, str], ...]:
+    """``collision.allowed`` as link pairs (validated by :func:`_pairs_check`)."""
+    pairs = link_pairs(value)
+    if isinstance(pairs, str):
+        raise ParameterError("collision.allowed", value, pairs)
+    return pairs
+
+
 def _pairs_check(value: Any) -> str:
     """[''] or 'link_a link_b' strings"""
-    ok = value == [""] or all(isinstance(v, str) and len(v.split()) == 2 for v in value)
-    return "" if ok else "[''] (none) or 'link_a link_b' strings (two link names separated by a space)"
+    pairs = link_pairs(value)
+    return pairs if isinstance(pairs, str) else ""
 
 
 CONTROLLER_PARAMETERS: tuple[ParamSpec, ...] = (
@@ -397,6 +406,8 @@ CONTROLLER_PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("collision.safety_distance", 0.03, "collision limit: safety distance d_s [m] kept between links",
               check=non_negative),
     ParamSpec("collision.gain", 0.5, "collision limit: approach speed xi [m/s] allowed at d_i", check=positive),
+    ParamSpec("collision.shape_margin", 0.001, "collision limit: the shapes grown by this [m] each (pybullet's "
+              "collision margin): d_s is kept between them", check=non_negative),
     ParamSpec("collision.allowed", [""], "link pairs never checked besides the robot's collision_allowed: "
               "'link_a link_b' strings ([''] = none)", check=_pairs_check, read_only=True),
     ParamSpec("qp_eps_abs", 1e-9, "QP absolute tolerance", check=positive),
@@ -424,5 +435,6 @@ def controller_params(values: Mapping[str, Any], node: str = "controller_node") 
         collision=CollisionParams(
             enabled=v["collision.enabled"], influence_distance=v["collision.influence_distance"],
             safety_distance=v["collision.safety_distance"], gain=v["collision.gain"],
-            allowed=tuple((a, b) for a, b in (p.split() for p in v["collision.allowed"] if p))),
+            shape_margin=v["collision.shape_margin"],
+            allowed=_allowed(v["collision.allowed"])),
     )

@@ -51,7 +51,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dualarm_control.errors import DualArmError
-from dualarm_control.params import ParameterError, read_params_file
+from dualarm_control.params import ParameterError, link_pairs, read_params_file
 from dualarm_control.paths import config_path, registry_file, registry_names, share_dir
 
 PREFIX = "robot."
@@ -318,17 +318,10 @@ def robot_from_parameters(flat: Mapping[str, Any], source: Path | None = None) -
 
 def _link_pairs(flat: Mapping[str, Any], key: str) -> tuple[tuple[str, str], ...]:
     """``robot.<key>``: a list of ``"link_a link_b"`` strings as pairs (RobotError naming a bad entry)."""
-    value = flat.get(PREFIX + key, [])
-    if not isinstance(value, list):
-        raise RobotError(f"robot parameter {_key(key)}: got {value!r}, expected a list of 'link_a link_b' strings")
-    pairs = []
-    for item in value:
-        parts = item.split() if isinstance(item, str) else []
-        if len(parts) != 2:
-            raise RobotError(f"robot parameter {_key(key)}: entry {item!r}, expected 'link_a link_b' (two link "
-                             "names separated by a space)")
-        pairs.append((parts[0], parts[1]))
-    return tuple(pairs)
+    pairs = link_pairs(flat.get(PREFIX + key, []))
+    if isinstance(pairs, str):
+        raise RobotError(f"robot parameter {_key(key)}: {pairs}")
+    return pairs
 
 
 def example_robot_data_dir() -> Path:

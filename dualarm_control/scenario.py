@@ -31,7 +31,12 @@ import numpy as np
 from dualarm_control.controller import ControllerParams
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import FloatArray
-from dualarm_control.params import ParameterError, ParamSpec, read_params_file
+from dualarm_control.params import (
+    ParameterError,
+    ParamSpec,
+    link_pairs,
+    read_params_file,
+)
 from dualarm_control.paths import registry_file, registry_names
 from dualarm_control.references.base import PREFIX, ReferenceSource, get, number, vector
 from dualarm_control.references.goals import GoalsSource, parse_goals_source
@@ -135,16 +140,10 @@ def load_scenario(name_or_path: str, robot: str | RobotDescription | None = None
 def _link_pairs(flat: Mapping[str, Any]) -> tuple[tuple[str, str], ...]:
     """``scenario.collision_allowed``: 'link_a link_b' strings (``left_tool right_tool``: the two end
     effectors, :class:`~dualarm_control.collision.CollisionModel`) as pairs; ScenarioError naming a bad entry."""
-    value = get(flat, "collision_allowed", [])
-    entries = value if isinstance(value, list) else [value]
-    pairs = []
-    for item in entries:
-        parts = item.split() if isinstance(item, str) else []
-        if len(parts) != 2:
-            raise ScenarioError(f"scenario parameter '{PREFIX}collision_allowed': entry {item!r}, expected "
-                                "'link_a link_b' (two link names separated by a space)")
-        pairs.append((parts[0], parts[1]))
-    return tuple(pairs)
+    pairs = link_pairs(get(flat, "collision_allowed", []))
+    if isinstance(pairs, str):
+        raise ScenarioError(f"scenario parameter '{PREFIX}collision_allowed': {pairs}")
+    return pairs
 
 
 def _motion_limits(flat: Mapping[str, Any]) -> MotionLimits:
