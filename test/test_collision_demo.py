@@ -97,6 +97,11 @@ def run_over_ros(tmp_path: Path, robot: str, *mode: str) -> dict[str, Any]:
     assert "stalled: collision constraint: " in report.stdout, report.stdout[-2000:]
     recorded = read_bag(bag)
     states, _ = recorded.joint_states(recorded.robot.joint_names)
+    # /diagnostics carries the closest pair every cycle (issue 27)
+    cycles = [v for _, v in recorded.cycles if "stamp_ns" in v]
+    assert cycles and all("collision_distance_m" in v and "collision_active" in v for v in cycles)
+    held = [v for v in cycles if int(v["collision_active"]) > 0]
+    assert held and all(v["collision_pair"] and float(v["collision_distance_m"]) < 0.1 for v in held)
     metrics = json.loads((tmp_path / "report" / "metrics.json").read_text())[SOLVER]
     return {**metrics, **pybullet_check(recorded.robot, states.values)}
 

@@ -126,3 +126,21 @@ def test_goal_into_collision_stalls_at_the_safety_distance_naming_the_pair(cell:
     assert last.startswith("stalled: ") and match is not None, last
     assert float(match.group(3)) >= 0.03 - 1e-3, last
     cell.wait_for("collision constraint active:")
+
+
+def test_collision_parameters_are_live_and_validated(cell: Launch) -> None:
+    """`dualarm param set /controller_node collision.safety_distance 0.05` is taken; a safety distance
+    beyond the influence distance is refused naming the key, and the running value stays."""
+    cli = [sys.executable, "-m", "dualarm_control.app.cli"]
+
+    def param(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([*cli, "param", *args], cwd=REPO, check=False, capture_output=True, text=True,
+                              timeout=120)
+
+    done = param("set", "/controller_node", "collision.safety_distance", "0.05")
+    assert done.returncode == 0, done.stdout + done.stderr
+    done = param("set", "/controller_node", "collision.safety_distance", "0.2")
+    assert done.returncode != 0 and "collision.influence_distance" in done.stdout + done.stderr, done.stdout
+    done = param("get", "/controller_node", "collision.safety_distance")
+    assert "0.05" in done.stdout, done.stdout + done.stderr
+    param("set", "/controller_node", "collision.safety_distance", "0.03")
