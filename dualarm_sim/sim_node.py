@@ -120,6 +120,7 @@ class SimNode:
         robot = scenario.robot
         self.cell = DualArmCell(
             CellConfig.for_robot(robot, allowed=(tasks.contact_links,) if tasks is not None else (),
+                                 collisions=not p["plan"],  # a plan runs as planned (references.plan.PlanSource.cell)
                                  control_period=p["control_period"],
                                  physics_rate_hz=p["physics_rate_hz"], command_timeout=p["command_timeout"],
                                  table_height=tasks.table_height if tasks is not None else None,
