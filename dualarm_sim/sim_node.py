@@ -88,6 +88,8 @@ PARAMETERS = (
     ParamSpec("command_timeout", 0.05, "command age that brings the arms to rest [s]", check=positive),
     ParamSpec("lockstep", False, "advance one period per received command", read_only=True),
     ParamSpec("plan", "", "plan.json of `dualarm plan`: start at its first configuration", read_only=True),
+    ParamSpec("collisions", True, "link contacts between the collision model's pairs (false: a plan run as planned, "
+              "docs/planner.md)", read_only=True),
     thread_priority_spec(50, "the physics loop"),
     ParamSpec("lockstep_subscribers", 2, "joint_states readers to wait for before the first lockstep state",
               check=non_negative),
@@ -120,7 +122,7 @@ class SimNode:
         robot = scenario.robot
         self.cell = DualArmCell(
             CellConfig.for_robot(robot, allowed=(tasks.contact_links,) if tasks is not None else (),
-                                 collisions=not p["plan"],  # a plan runs as planned (references.plan.PlanSource.cell)
+                                 collisions=p["collisions"],
                                  control_period=p["control_period"],
                                  physics_rate_hz=p["physics_rate_hz"], command_timeout=p["command_timeout"],
                                  table_height=tasks.table_height if tasks is not None else None,

@@ -166,10 +166,12 @@ def test_driving_the_right_arm_into_the_left_is_counted() -> None:
     assert check.minimum > -0.02 and check.pair == FIRST_PAIR, (check.minimum, check.pair)  # not 7 cm through
 
 
-def test_baxter_elbow_into_the_torso_is_counted_and_the_allowed_pairs_are_not() -> None:
+def test_baxter_allowed_pairs_are_not_counted() -> None:
     """Baxter's right_s0 turned 0.8 rad from ready swings the upper elbow into the torso's hull
-    (min_distances: contact from +0.68 rad): counted as torso - right_upper_elbow. The pairs of its
-    collision_allowed and its two grippers (end effectors) are not collision pairs of the cell."""
+    (min_distances: contact from +0.68 rad). torso - right_upper_elbow is one of Baxter's
+    collision_allowed pairs (the torso's hull covers the elbows in 62 % of configurations,
+    docs/collision.md "Allowed pairs"): not counted, as no pair of collision_allowed and no pair of its
+    two grippers (end effectors) is a collision pair of the cell. (Counting: the LWR4 test above.)"""
     robot = load_robot("baxter")
     allowed = set(robot.collision_allowed)
     assert ("torso", "left_lower_shoulder") in allowed
@@ -183,7 +185,8 @@ def test_baxter_elbow_into_the_torso_is_counted_and_the_allowed_pairs_are_not() 
             cell.apply_command(velocity)
             cell.step()
             counter.update(cell.contacts())
-    assert list(counter.per_pair) == [("torso", "right_upper_elbow")], counter.per_pair
+    assert ("torso", "right_upper_elbow") in allowed
+    assert list(counter.per_pair) == [], counter.per_pair
 
 
 def test_contact_counter_events_and_diagnostics() -> None:
