@@ -1,7 +1,7 @@
 """Collision distances between the robot's links and the velocity damper that keeps them apart.
 
-The ROS-free core of collision avoidance (issue 27, part 1; docs/collision.md). Not yet used by the
-solvers or the controller: :func:`velocity_damper_rows` gives rows ``A qd <= b`` that a QP can add.
+The ROS-free core of collision avoidance (issue 27; docs/collision.md): :func:`velocity_damper` gives
+the rows ``A qd <= b`` that :class:`~dualarm_control.collision_limit.CollisionLimit` adds to every solver's QP.
 
 Geometry: the robot's COLLISION shapes from its resolved URDF (``pin.buildGeomFromUrdf``), reduced
 like :class:`~dualarm_control.kinematics.DualArmModel`'s model (``pin.buildReducedModel``, the same
@@ -117,6 +117,10 @@ WITNESS_FEATURE_TOLERANCE = 1e-7
 the surfaces to about 1e-9 m: a chord of rim points sags by e^2 / 2r)."""
 WITNESS_POLISH_LIMIT = 1e-3
 """A refined witness point farther than this [m] from GJK's is not used (:meth:`CollisionModel._polish`)."""
+SPHERE_BROADPHASE_MIN = 16
+"""Shape pairs left after the known bounds (:meth:`CollisionModel.near`) beyond which their bounding
+spheres are checked before coal: below it the spheres' fixed cost (every joint's placement) is more
+than the few coal calls they could save (a cylinder pair costs coal about 3 us)."""
 KNOWN_MARGIN = 1e-9
 """Subtracted from a computed distance before it is kept as a known lower bound [m] (round-off)."""
 _FAILED = 1e6
@@ -209,6 +213,41 @@ class PairDistance:
     dd_dq: FloatArray
 
 
+@dataclass(frozen=True, slots=True)
+class NearPairs:
+    """The pairs of one :meth:`CollisionModel.near` call, as arrays (m pairs, in the order of
+    :attr:`CollisionModel.pairs`): what the collision limit needs each cycle, without one object
+    per pair (:meth:`pair_distances` gives those).
+
+    Attributes:
+        index: each pair's index in :attr:`CollisionModel.pairs`, (m,).
+        links: each pair's links (link_a, link_b). geometries: its closest shapes.
+        distance: d [m], (m,). points: p_a, p_b [m], (2, m, 3). normals: n, (m, 3).
+        rows: dd_dq [m/rad], (m, n).
+    """
+
+    index: tuple[int, ...]
+    links: tuple[tuple[str, str], ...]
+    geometries: tuple[tuple[str, str], ...]
+    distance: FloatArray
+    points: FloatArray
+    normals: FloatArray
+    rows: FloatArray
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    @classmethod
+    def empty(cls, n: int) -> NearPairs:
+        """No pair, for n joints."""
+        return cls((), (), (), np.zeros(0), np.zeros((2, 0, 3)), np.zeros((0, 3)), np.zeros((0, n)))
+
+    def pair_distances(self) -> list[PairDistance]:
+        """One :class:`PairDistance` per pair."""
+        return [PairDistance(*self.links[r], *self.geometries[r], d, self.points[0, r], self.points[1, r],
+                             self.normals[r], self.rows[r]) for r, d in enumerate(self.distance.tolist())]
+
+
 @dataclass(frozen=True)
 class _Body:
     """A link with collision shapes: its joint (0 = the world) and its side ('left', 'right', WORLD)."""
@@ -283,7 +322,7 @@ class CollisionModel:
             self.pairs.append((self._bodies[a].name, self._bodies[b].name))
             self._pair_geometries.append((a, b, ids))
         self.geometry_pairs: int = len(self.geometry.collisionPairs)
-        self._joints = np.tile(np.eye(4), (self.model.njoints, 1, 1))  # oMi of the last call, (joints, 4, 4)
+        self._joints = np.tile(np.eye(4), (self.model.njoints, 1, 1))  # oMi for the sphere bounds, (joints, 4, 4)
         self.request = _request(gjk_tolerance)
         """The request of every shape pair (absolute tolerance, no warm start: module docstring)."""
         self._fallbacks = [_request(t) for t in FALLBACK_GJK_TOLERANCES if t > gjk_tolerance]
@@ -292,6 +331,7 @@ class CollisionModel:
         self._index_shape_pairs()
         self._shape_pair_names = [(self._names[a], self._names[b]) for a, b in
                                   zip(self._shape_a.tolist(), self._shape_b.tolist(), strict=True)]
+        self._none = NearPairs.empty(self.model.nv)
 
     # ---- links and pairs -------------------------------------------------------------------
 
@@ -308,6 +348,10 @@ class CollisionModel:
         self._all_shape_pairs = np.arange(len(shapes), dtype=np.intp)
         objects = self.geometry.geometryObjects
         self._shape_joint = np.array([obj.parentJoint for obj in objects], dtype=np.intp)
+        self._shape_joint_list: list[int] = self._shape_joint.tolist()
+        self._shape_placements = [pin.SE3(obj.placement) for obj in objects]  # in the parent joint's frame
+        self._shape_a_list: list[int] = self._shape_a.tolist()
+        self._shape_b_list: list[int] = self._shape_b.tolist()
         self._place_rotation = np.array([obj.placement.rotation for obj in objects]).reshape(-1, 3, 3)
         self._place_translation = np.array([obj.placement.translation for obj in objects]).reshape(-1, 3)
         spheres = [_bounding_sphere(obj.geometry) for obj in objects]
@@ -513,7 +557,12 @@ class CollisionModel:
     # ---- distances ---------------------------------------------------------------------------
 
     def distances(self, q: FloatArray, within: float | None = None, polish: bool = False) -> list[PairDistance]:
-        """Every pair's distance, witness points, normal and row dd_dq at q (module docstring).
+        """Every pair's distance, witness points, normal and row dd_dq at q (module docstring):
+        :meth:`near` as one :class:`PairDistance` per pair, in the order of :attr:`pairs`."""
+        return self.near(q, within, polish).pair_distances()
+
+    def near(self, q: FloatArray, within: float | None = None, polish: bool = False) -> NearPairs:
+        """The pairs' distances, witness points, normals and rows dd_dq at q, as arrays (module docstring).
 
         Args:
             q: joint positions [rad], (n,), left then right.
@@ -523,51 +572,54 @@ class CollisionModel:
                 decide: what is known of a pair (its distance, or its bounding spheres' gap, at the
                 joint positions q_k of an earlier call) minus how far its shapes can have moved
                 since, sum_j c_j |q_j - q_k,j| (c_j the reach of the shape's body about joint j, m per
-                rad: :attr:`_pair_motion`; so no kinematics at all when nothing can be near), then
-                the bounding spheres (about each shape's centre, placed at q). The result does not
-                depend on earlier calls: a pair with d < within passes both bounds and is computed.
+                rad: :attr:`_pair_motion`; so no kinematics at all when nothing can be near), then,
+                when more than :data:`SPHERE_BROADPHASE_MIN` shape pairs are left, the bounding
+                spheres (about each shape's centre, placed at q). The result does not depend on
+                earlier calls: a pair with d < within passes both bounds and is computed, from the
+                same placements (pinocchio's oMi * the shape's placement) whatever the bounds kept.
             polish: refine the witness points and normals of the pairs returned on the shapes' closest
                 features (:meth:`_polish`; rows to 1e-6 m/rad instead of 1e-5, at up to 100 us per pair): the
                 distances are coal's either way; False (the default) gives GJK's points and normals.
 
         Returns:
-            one :class:`PairDistance` per pair, in the order of :attr:`pairs` (those within).
+            the pairs (those within), in the order of :attr:`pairs`.
         """
         q = self.kinematics.check_q(q)
         candidates = self._all_shape_pairs
         if within is not None:  # pairs whose distance may be < within, from what is known (no kinematics)
-            motion = (np.abs(q - self._known_at) * self._pair_motion).sum(axis=1)
+            motion = np.einsum("ij,ij->i", np.abs(q - self._known_at), self._pair_motion)
             candidates = np.flatnonzero(self._known - motion < within)
             if not candidates.size:
-                return []
+                return self._none
         pin.computeJointJacobians(self.model, self.data, q)  # the joints' placements data.oMi too
-        self._joints = np.array([placement.homogeneous for placement in self.data.oMi])
-        if within is None:
+        if within is None or candidates.size <= SPHERE_BROADPHASE_MIN:
             active = candidates
         else:
+            self._joints = np.array([placement.homogeneous for placement in self.data.oMi])
             spheres = self._sphere_bounds(candidates)
             self._known[candidates], self._known_at[candidates] = spheres, q
             active = candidates[spheres < within]
-        needed = np.union1d(self._shape_a[active], self._shape_b[active])
-        rotations, translations = self._placements(needed)
-        tf = {g: coal.Transform3s(rotations[r], translations[r]) for r, g in enumerate(needed.tolist())}
+        shape_a, shape_b, owner = self._shape_a_list, self._shape_b_list, self._shape_pair_owner
+        active_list = active.tolist()
+        placed = self._place({g for k in active_list for g in (shape_a[k], shape_b[k])})
         shapes, request, results = self._shapes, self.request, self._results
-        shape_a, shape_b, owner = self._shape_a.tolist(), self._shape_b.tolist(), self._shape_pair_owner
         best: dict[int, tuple[float, int]] = {}  # link pair -> (d, shape pair)
-        for k in active.tolist():
+        found = []
+        for k in active_list:
             res = results[k]
             res.clear()
             ga, gb = shape_a[k], shape_b[k]
-            d = coal.distance(shapes[ga], tf[ga], shapes[gb], tf[gb], request, res)
+            d = coal.distance(shapes[ga], placed[ga], shapes[gb], placed[gb], request, res)
             if not -_FAILED < d < _FAILED:  # also NaN
-                d = self._retry(k, tf[ga], tf[gb])
-            self._known[k], self._known_at[k] = d - KNOWN_MARGIN, q
+                d = self._retry(k, placed[ga], placed[gb])
+            found.append(d)
             i = owner[k]
             if i not in best or d < best[i][0]:
                 best[i] = (d, k)
+        self._known[active], self._known_at[active] = np.array(found) - KNOWN_MARGIN, q
         chosen = sorted((i, k) for i, (d, k) in best.items() if within is None or d < within)
         if not chosen:
-            return []
+            return self._none
         m = len(chosen)
         dist = np.empty(m)
         points = np.empty((2, m, 3))
@@ -578,25 +630,32 @@ class CollisionModel:
             points[1, r] = res.getNearestPoint2()
             normals[r] = res.normal
             dist[r] = res.min_distance
-        bad = ~(np.isfinite(points).all(axis=(0, 2)) & np.isfinite(normals).all(axis=1))
-        for r in np.flatnonzero(bad).tolist():  # a finite distance with NaN points: GJK failed
-            k = chosen[r][1]
-            res = results[k]
-            dist[r] = self._retry(k, tf[shape_a[k]], tf[shape_b[k]])
-            points[0, r], points[1, r], normals[r] = res.getNearestPoint1(), res.getNearestPoint2(), res.normal
-        normals /= np.linalg.norm(normals, axis=1)[:, None]
+        if not math.isfinite(float(points.sum() + normals.sum())):  # a finite distance with NaN points: GJK failed
+            bad = ~(np.isfinite(points).all(axis=(0, 2)) & np.isfinite(normals).all(axis=1))
+            for r in np.flatnonzero(bad).tolist():
+                k = chosen[r][1]
+                res = results[k]
+                dist[r] = self._retry(k, placed[shape_a[k]], placed[shape_b[k]])
+                points[0, r], points[1, r], normals[r] = res.getNearestPoint1(), res.getNearestPoint2(), res.normal
+        normals /= np.sqrt((normals * normals).sum(axis=1))[:, None]  # np.linalg.norm(normals, axis=1), as it computes it
         if polish:
-            rotations, translations = self._placements()
             for r, (_, k) in enumerate(chosen):
                 ga, gb = shape_a[k], shape_b[k]
                 points[0, r], points[1, r], normals[r] = self._polish(ga, gb, dist[r], points[0, r], points[1, r],
-                                                                      normals[r], rotations, translations)
-        rows = self._rows(np.array([k for _, k in chosen]), points, normals)
-        pairs, shape_names = self.pairs, self._shape_pair_names
-        return [PairDistance(*pairs[i], *shape_names[k], d, points[0, r], points[1, r], normals[r], rows[r])
-                for r, ((i, k), d) in enumerate(zip(chosen, dist.tolist(), strict=True))]
+                                                                      normals[r], placed[ga], placed[gb])
+        shape_pairs = [k for _, k in chosen]
+        return NearPairs(tuple(i for i, _ in chosen), tuple(self.pairs[i] for i, _ in chosen),
+                         tuple(self._shape_pair_names[k] for k in shape_pairs), dist, points, normals,
+                         self._rows(np.array(shape_pairs, dtype=np.intp), points, normals))
 
-    def _retry(self, k: int, tf_a: coal.Transform3s, tf_b: coal.Transform3s) -> float:
+    def _place(self, shapes: set[int]) -> dict[int, pin.SE3]:
+        """The shapes' placements in the world at the current ``data.oMi``, per shape index: oMg = oMi
+        * the shape's placement in its joint's frame (as ``pin.updateGeometryPlacements``). coal takes
+        a pinocchio SE3 where it takes a Transform3s (the same values, bit for bit)."""
+        oMi, joint, local = self.data.oMi, self._shape_joint_list, self._shape_placements
+        return {g: oMi[joint[g]] * local[g] for g in shapes}
+
+    def _retry(self, k: int, tf_a: pin.SE3, tf_b: pin.SE3) -> float:
         """Shape pair k again with the fallback requests, tightest first (GJK or EPA failed: coal
         then returns -DBL_MAX or an infinite distance and NaN points); CollisionError if all fail."""
         res = self._results[k]
@@ -613,8 +672,9 @@ class CollisionModel:
                              f"{max(FALLBACK_GJK_TOLERANCES + (self.request.gjk_tolerance,)):g}")
 
     def _polish(self, ga: int, gb: int, d: float, pa: FloatArray, pb: FloatArray, n: FloatArray,
-                rotations: FloatArray, translations: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Witness points and normal of shapes ga (A) and gb (B) refined on their closest features.
+                placed_a: pin.SE3, placed_b: pin.SE3) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Witness points and normal of shapes ga (A) and gb (B), placed as :meth:`_place` gives them,
+        refined on their closest features.
 
         GJK certifies d (its duality gap, 1e-12 m^2) but not where the witness points lie along the
         surfaces: there d changes only to second order, so each point may be off by about
@@ -630,8 +690,8 @@ class CollisionModel:
         edge or facet, a segment parallel to a face, or a result more than
         :data:`WITNESS_POLISH_LIMIT` from GJK's.
         """
-        fa = _feature(self._shapes[ga], rotations[ga], translations[ga], pa, self._hull_points[ga])
-        fb = _feature(self._shapes[gb], rotations[gb], translations[gb], pb, self._hull_points[gb])
+        fa = _feature(self._shapes[ga], placed_a.rotation, placed_a.translation, pa, self._hull_points[ga])
+        fb = _feature(self._shapes[gb], placed_b.rotation, placed_b.translation, pb, self._hull_points[gb])
         if fa is None or fb is None or (fa[0] == "face" and fb[0] == "face"):
             return pa, pb, n
         if fa[0] == "face" or fb[0] == "face":
@@ -661,21 +721,9 @@ class CollisionModel:
             return pa, pb, n
         return new_a, new_b, new_n
 
-    def _placements(self, shapes: npt.NDArray[np.intp] | None = None) -> tuple[FloatArray, FloatArray]:
-        """Shapes' placements in the world at the last :meth:`distances` call, oMg = oMi placement
-        (as ``pin.updateGeometryPlacements``, vectorised, for the ``shapes`` asked only; all when None):
-        rotations (k, 3, 3), translations (k, 3)."""
-        index = slice(None) if shapes is None else shapes
-        joints = self._joints[self._shape_joint[index]]
-        joint_rot = joints[:, :3, :3]
-        rotations = joint_rot @ self._place_rotation[index]
-        translations = (joint_rot @ self._place_translation[index][:, :, None])[:, :, 0] + joints[:, :3, 3]
-        return rotations, translations
-
     def shape_placement(self, index: int) -> pin.SE3:
-        """Shape ``index``'s placement in the world at the last :meth:`distances` call."""
-        rotations, translations = self._placements(np.array([index]))
-        return pin.SE3(rotations[0], translations[0])
+        """Shape ``index``'s placement in the world at the last :meth:`distances` call (:meth:`_place`)."""
+        return self.data.oMi[self._shape_joint_list[index]] * self._shape_placements[index]
 
     def _sphere_bounds(self, shape_pairs: npt.NDArray[np.intp]) -> FloatArray:
         """Lower bounds [m] of the distance of ``shape_pairs`` at the last call's joint placements,
@@ -695,17 +743,16 @@ class CollisionModel:
         n^T J_p = (n^T J_lin + (p x n)^T J_ang) masked by that link's joint support.
         """
         jac = self.data.J
-        rows = np.zeros((len(shape_pairs), self.model.nv))
-        for side, sign in ((0, -1.0), (1, 1.0)):
-            joints = self._shape_joint[self._shape_a[shape_pairs] if side == 0 else self._shape_b[shape_pairs]]
-            p = points[side]
-            cross = np.empty_like(normals)  # p x n, written out (np.cross costs 10x more on (m, 3))
-            cross[:, 0] = p[:, 1] * normals[:, 2] - p[:, 2] * normals[:, 1]
-            cross[:, 1] = p[:, 2] * normals[:, 0] - p[:, 0] * normals[:, 2]
-            cross[:, 2] = p[:, 0] * normals[:, 1] - p[:, 1] * normals[:, 0]
-            contribution = normals @ jac[:3] + cross @ jac[3:]
-            rows += sign * contribution * self._support[joints]
-        return rows
+        m = len(shape_pairs)
+        p = points.reshape(2 * m, 3)  # the points on A, then on B
+        n = np.concatenate((-normals, normals))  # -n on A, +n on B: dd_dq = (-n)^T J_pa + n^T J_pb
+        cross = np.empty_like(n)  # p x n, written out (np.cross costs 10x more on (m, 3))
+        cross[:, 0] = p[:, 1] * n[:, 2] - p[:, 2] * n[:, 1]
+        cross[:, 1] = p[:, 2] * n[:, 0] - p[:, 0] * n[:, 2]
+        cross[:, 2] = p[:, 0] * n[:, 1] - p[:, 1] * n[:, 0]
+        joints = self._shape_joint[np.concatenate((self._shape_a[shape_pairs], self._shape_b[shape_pairs]))]
+        contribution = (n @ jac[:3] + cross @ jac[3:]) * self._support[joints]
+        return contribution[:m] + contribution[m:]
 
     def closest(self, q: FloatArray) -> PairDistance:
         """The pair with the smallest distance at q (ValueError when the model has no pair)."""
@@ -714,31 +761,37 @@ class CollisionModel:
         return min(self.distances(q), key=lambda p: p.distance)
 
 
-def velocity_damper_rows(distances: Sequence[PairDistance], influence: float, safety: float,
-                         gain: float) -> tuple[FloatArray, FloatArray]:
-    """The velocity damper's rows A qd <= b for the pairs closer than ``influence`` (module docstring).
+def velocity_damper(dd_dq: FloatArray, distance: FloatArray, influence: float, safety: float,
+                    gain: float) -> tuple[FloatArray, FloatArray]:
+    """The velocity damper's rows A qd <= b of m pairs, all closer than ``influence`` (module docstring):
 
-    For each pair with d < d_i:  -dd_dq qd <= xi (d - d_s) / (d_i - d_s).
+        -dd_dq qd <= xi (d - d_s) / (d_i - d_s)
 
     Args:
-        distances: pairs from :meth:`CollisionModel.distances` (any subset).
+        dd_dq: the pairs' rows [m/rad], (m, n). distance: their d [m], (m,).
         influence: d_i [m]. safety: d_s [m], 0 <= d_s < d_i. gain: xi [m/s], > 0.
 
     Returns:
-        A [m/rad], (m, n), and b [m/s], (m,), m the number of pairs with d < d_i, in their
-        order; (0, n) and (0,) when none (n = 0 when ``distances`` is empty too).
+        A = -dd_dq [m/rad], (m, n), and b [m/s], (m,).
     """
     if not (0.0 <= safety < influence and gain > 0.0 and math.isfinite(influence + gain)):
         CollisionParams(influence_distance=influence, safety_distance=safety, gain=gain)  # raises, naming the key
+    if dd_dq.ndim != 2 or distance.shape != (dd_dq.shape[0],):
+        raise DimensionError(f"velocity_damper: rows {dd_dq.shape} and distances {distance.shape} do not match")
+    return -dd_dq, gain * (distance - safety) / (influence - safety)
+
+
+def velocity_damper_rows(distances: Sequence[PairDistance], influence: float, safety: float,
+                         gain: float) -> tuple[FloatArray, FloatArray]:
+    """:func:`velocity_damper` of the pairs of ``distances`` closer than ``influence`` (any subset of
+    :meth:`CollisionModel.distances`), in their order; (0, n) and (0,) when none (n = 0 when
+    ``distances`` is empty too)."""
     near = [p for p in distances if p.distance < influence]
     n = distances[0].dd_dq.shape[0] if distances else 0
-    if not near:
-        return np.zeros((0, n)), np.zeros(0)
     if any(p.dd_dq.shape != (n,) for p in near):
         raise DimensionError(f"velocity_damper_rows: rows of different lengths {sorted({p.dd_dq.shape for p in near})}")
-    a = -np.stack([p.dd_dq for p in near])
-    b = gain * (np.array([p.distance for p in near]) - safety) / (influence - safety)
-    return a, b
+    rows = np.stack([p.dd_dq for p in near]) if near else np.zeros((0, n))
+    return velocity_damper(rows, np.array([p.distance for p in near]), influence, safety, gain)
 
 
 Feature = tuple  # ("point", P, rad) | ("segment", P, Q, rad) | ("circle", C, u, v, r, theta, 0.0) | ("face", N)

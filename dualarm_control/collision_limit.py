@@ -1,7 +1,7 @@
 """The collision limit: the velocity damper's rows as a :class:`~dualarm_control.limits.Limit`.
 
 Each cycle, the pairs of the robot's :class:`~dualarm_control.collision.CollisionModel` closer
-than the influence distance d_i give one hard row each (:func:`~dualarm_control.collision.velocity_damper_rows`):
+than the influence distance d_i give one hard row each (:func:`~dualarm_control.collision.velocity_damper`):
 
     -dd_dq qd <= xi (d - d_s') / (d_i' - d_s')        [m/s]
 
@@ -23,8 +23,9 @@ import numpy as np
 from dualarm_control.collision import (
     CollisionModel,
     CollisionParams,
+    NearPairs,
     PairDistance,
-    velocity_damper_rows,
+    velocity_damper,
 )
 from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.limits import Bounds
@@ -85,26 +86,35 @@ class CollisionLimit:
     def __init__(self, collision: CollisionModel, params: CollisionParams) -> None:
         self.collision = collision
         self.params = params
-        self.near: list[PairDistance] = []
+        self.last = NearPairs.empty(collision.model.nv)
         self._rows = (np.zeros((0, collision.model.nv)), np.zeros(0))
+        self._labels = tuple(f"{a} – {b}" for a, b in collision.pairs)
+        self._kept = params.kept_distances
+
+    @property
+    def near(self) -> list[PairDistance]:
+        """The pairs of the last cycle closer than d_i (one object each: for a report, not the cycle)."""
+        return self.last.pair_distances()
 
     def apply(self, q: FloatArray, previous: FloatArray, bounds: Bounds) -> Bounds:
-        influence, safety = self.params.kept_distances
-        self.near = self.collision.distances(q, within=influence)
-        if not self.near:
+        influence, safety = self._kept
+        self.last = near = self.collision.near(q, within=influence)
+        if not near.index:
             return bounds
-        self._rows = a, b = velocity_damper_rows(self.near, influence, safety, self.params.gain)
-        bounds.rows = np.vstack((bounds.rows, a))
-        bounds.bound = np.concatenate((bounds.bound, b))
-        bounds.labels = bounds.labels + tuple(f"{d.link_a} – {d.link_b}" for d in self.near)
+        self._rows = a, b = velocity_damper(near.rows, near.distance, influence, safety, self.params.gain)
+        labels = tuple(self._labels[i] for i in near.index)
+        if bounds.rows.shape[0]:
+            a, b, labels = np.vstack((bounds.rows, a)), np.concatenate((bounds.bound, b)), bounds.labels + labels
+        bounds.rows, bounds.bound, bounds.labels = a, b, labels
         return bounds
 
     def report(self, velocities: FloatArray) -> CollisionReport:
         """The last cycle's :class:`CollisionReport` for its command ``velocities`` [rad/s] (n,)."""
-        d_i = self.params.kept_distances[0]
-        if not self.near:
+        d_i = self._kept[0]
+        near = self.last
+        if not near.index:
             return CollisionReport(math.inf, None, 0, 0, d_i)
         a, b = self._rows
         active = int(np.count_nonzero(a @ velocities >= b - ACTIVE_TOLERANCE))
-        closest = min(self.near, key=lambda d: d.distance)
-        return CollisionReport(closest.distance, (closest.link_a, closest.link_b), len(self.near), active, d_i)
+        r = int(np.argmin(near.distance))
+        return CollisionReport(float(near.distance[r]), near.links[r], len(near), active, d_i)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -41,8 +42,9 @@ def bench_collision(robots: Sequence[str], solvers: Sequence[str], progress: Cal
         for solver in solvers:
             if progress:
                 progress(f"collision: {robot} | {solver}, {len(cases)} cycles with and without the limit")
-            on = RelativeController(model, ControllerParams(solver=solver))
-            off = RelativeController(model, ControllerParams(solver=solver, collision=OFF))
+            params = scenario.controller_params(ControllerParams(solver=solver))  # the scenario's allowed pairs
+            on = RelativeController(model, params)
+            off = RelativeController(model, replace(params, collision=OFF))
             assert on.collision_model is not None
             times = {True: np.empty(len(cases)), False: np.empty(len(cases))}
             near = np.empty(len(cases))
