@@ -324,8 +324,8 @@ def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text
 ACK_TIMEOUT_S = 15.0
 """How long, in all, a stopping lockstep node waits for its readers to acknowledge what it published:
 a deadline for a recorder starved on a busy machine (a trajectory node's flush took 5.4 s under
-``stress-ng --cpu 1``, its recorder 2800 samples behind), below the launcher's SIGKILL (SIGTERM after
-10 s, which the wait does not end, then SIGKILL 10 s later)."""
+``stress-ng --cpu 1``, its recorder 2800 samples behind), below the launcher's grace before SIGTERM
+(``app.run.launcher.STOP_GRACE_S``, 5 s more than this)."""
 
 
 def flush_publishers(nodes: Sequence[Any], timeout_s: float) -> bool:

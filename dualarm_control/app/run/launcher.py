@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dualarm_control.ros.env import LAUNCHER_PID_VARIABLE, localhost_environment
-from dualarm_control.ros.node import StopOnSignal
+from dualarm_control.ros.node import ACK_TIMEOUT_S, StopOnSignal
 
 NODES = {
     "sim_node": "dualarm_sim.sim_node",
@@ -32,7 +32,11 @@ LAYOUTS = {
     1: (("controller_node", "trajectory_node", "sim_node"),),
 }
 """Processes of ``dualarm launch --processes N``: which nodes share a process (started in this order)."""
-STOP_GRACE_S = 10.0
+STOP_GRACE_S = ACK_TIMEOUT_S + 5.0
+"""The grace of a node before SIGTERM: longer than a stopping lockstep node's wait for its readers'
+acknowledgements (``ros.node.ACK_TIMEOUT_S``, 15 s), so that the node ends that wait itself and exits 0.
+Under ``stress-ng --cpu 1`` a lockstep sim_node's wait for a starved recorder outlasted the former 10 s
+grace: SIGTERM then ended it (exit -15) and the launch failed. A node that exits at once costs nothing."""
 STOPPED_LAST = ("bag",)
 """Processes stopped after every other one: the recorder takes what the nodes still send."""
 RECORDER_STOP_GRACE_S = 120.0
