@@ -376,8 +376,8 @@ class CollisionModel:
         body_of_shape = {g: i for i, body in enumerate(self._bodies) for g in body.geometries}
         self._pair_motion = (coefficients[[body_of_shape[int(g)] for g in self._shape_a.tolist()]]
                              + coefficients[[body_of_shape[int(g)] for g in self._shape_b.tolist()]])
-        self._known = np.full(len(shapes), -np.inf)  # a lower bound of each shape pair's d [m] ...
-        self._known_at = np.zeros((len(shapes), self.model.nv))  # ... at these joint positions
+        self._slack = np.full(len(shapes), -np.inf)  # a lower bound of each shape pair's d [m] at ...
+        self._slack_q: FloatArray | None = None  # ... these joint positions (the last call's)
 
     def _find_bodies(self) -> list[_Body]:
         """The links that carry collision shapes, in the order of their first shape."""
@@ -570,9 +570,10 @@ class CollisionModel:
                 be closer than ``within`` go to coal, and rows are computed only for the pairs kept:
                 the cheap call for the damper, which needs the pairs with d < d_i. Two lower bounds
                 decide: what is known of a pair (its distance, or its bounding spheres' gap, at the
-                joint positions q_k of an earlier call) minus how far its shapes can have moved
-                since, sum_j c_j |q_j - q_k,j| (c_j the reach of the shape's body about joint j, m per
-                rad: :attr:`_pair_motion`; so no kinematics at all when nothing can be near), then,
+                joint positions of an earlier call) minus how far its shapes can have moved since,
+                sum_j c_j |dq_j| summed over the calls between (c_j the reach of the shape's body
+                about joint j, m per rad: :attr:`_pair_motion`; one matrix-vector product per call,
+                no kinematics at all when nothing can be near; a non-finite q forgets it all), then,
                 when more than :data:`SPHERE_BROADPHASE_MIN` shape pairs are left, the bounding
                 spheres (about each shape's centre, placed at q). The result does not depend on
                 earlier calls: a pair with d < within passes both bounds and is computed, from the
@@ -585,10 +586,19 @@ class CollisionModel:
             the pairs (those within), in the order of :attr:`pairs`.
         """
         q = self.kinematics.check_q(q)
+        if not math.isfinite(float(q.sum())):  # forget what is known (it would turn NaN); no pair is near
+            self._slack.fill(-np.inf)
+            self._slack_q = None
+            if within is not None:
+                return self._none
+        elif self._slack_q is not None:  # what is known, moved to q: d(q) >= d(q') - sum_j c_j |q_j - q'_j|
+            self._slack -= self._pair_motion @ np.abs(q - self._slack_q)
+            self._slack_q = q.copy()
+        else:
+            self._slack_q = q.copy()
         candidates = self._all_shape_pairs
         if within is not None:  # pairs whose distance may be < within, from what is known (no kinematics)
-            motion = np.einsum("ij,ij->i", np.abs(q - self._known_at), self._pair_motion)
-            candidates = np.flatnonzero(self._known - motion < within)
+            candidates = np.flatnonzero(self._slack < within)
             if not candidates.size:
                 return self._none
         pin.computeJointJacobians(self.model, self.data, q)  # the joints' placements data.oMi too
@@ -597,7 +607,7 @@ class CollisionModel:
         else:
             self._joints = np.array([placement.homogeneous for placement in self.data.oMi])
             spheres = self._sphere_bounds(candidates)
-            self._known[candidates], self._known_at[candidates] = spheres, q
+            self._slack[candidates] = spheres
             active = candidates[spheres < within]
         shape_a, shape_b, owner = self._shape_a_list, self._shape_b_list, self._shape_pair_owner
         active_list = active.tolist()
@@ -616,7 +626,7 @@ class CollisionModel:
             i = owner[k]
             if i not in best or d < best[i][0]:
                 best[i] = (d, k)
-        self._known[active], self._known_at[active] = np.array(found) - KNOWN_MARGIN, q
+        self._slack[active] = np.array(found) - KNOWN_MARGIN
         chosen = sorted((i, k) for i, (d, k) in best.items() if within is None or d < within)
         if not chosen:
             return self._none
@@ -742,16 +752,10 @@ class CollisionModel:
         J_p = (J_lin - S(p) J_ang) restricted to the joints that move the link, and
         n^T J_p = (n^T J_lin + (p x n)^T J_ang) masked by that link's joint support.
         """
-        jac = self.data.J
         m = len(shape_pairs)
-        p = points.reshape(2 * m, 3)  # the points on A, then on B
         n = np.concatenate((-normals, normals))  # -n on A, +n on B: dd_dq = (-n)^T J_pa + n^T J_pb
-        cross = np.empty_like(n)  # p x n, written out (np.cross costs 10x more on (m, 3))
-        cross[:, 0] = p[:, 1] * n[:, 2] - p[:, 2] * n[:, 1]
-        cross[:, 1] = p[:, 2] * n[:, 0] - p[:, 0] * n[:, 2]
-        cross[:, 2] = p[:, 0] * n[:, 1] - p[:, 1] * n[:, 0]
         joints = self._shape_joint[np.concatenate((self._shape_a[shape_pairs], self._shape_b[shape_pairs]))]
-        contribution = (n @ jac[:3] + cross @ jac[3:]) * self._support[joints]
+        contribution = witness_rows(n, points.reshape(2 * m, 3), self.data.J) * self._support[joints]
         return contribution[:m] + contribution[m:]
 
     def closest(self, q: FloatArray) -> PairDistance:
@@ -759,6 +763,61 @@ class CollisionModel:
         if not self.pairs:
             raise ValueError("the collision model has no pair")
         return min(self.distances(q), key=lambda p: p.distance)
+
+
+def witness_rows(normals: FloatArray, offsets: FloatArray, jacobian: FloatArray) -> FloatArray:
+    """How fast witness points move along their normals (module docstring, "Distance velocity"):
+
+        n^T J_p qd,   J_p = J_v - S(p - o) J_w,   so   n^T J_p = n^T J_v + ((p - o) x n)^T J_w
+
+    the part of a pair's row dd_dq = n^T (J_pb - J_pa) that one point gives (its normal signed: -n
+    for the point on A, +n for the point on B).
+
+    Args:
+        normals: the signed normals, (m, 3). offsets: p - o [m], (m, 3), from the point o whose
+            motion ``jacobian`` gives to each witness point p.
+        jacobian: [J_v; J_w], (6, n): the velocity of o and the angular velocity [m/s; rad/s per
+            rad/s] (world axes), one for all m points (o the world origin: pinocchio's ``data.J``;
+            or a frame's origin: LOCAL_WORLD_ALIGNED).
+
+    Returns:
+        (m, n) [m/rad].
+    """
+    p, n = offsets, normals
+    cross = np.empty_like(n)  # (p - o) x n, written out (np.cross costs 10x more on (m, 3))
+    cross[:, 0] = p[:, 1] * n[:, 2] - p[:, 2] * n[:, 1]
+    cross[:, 1] = p[:, 2] * n[:, 0] - p[:, 0] * n[:, 2]
+    cross[:, 2] = p[:, 0] * n[:, 1] - p[:, 1] * n[:, 0]
+    result: FloatArray = n @ jacobian[:3] + cross @ jacobian[3:]
+    return result
+
+
+def sphere_plane_distances(centres: FloatArray, radii: FloatArray, normal: FloatArray,
+                           offset: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """coal's distances of spheres (A) to the half-space {x : normal . x <= offset} (B), as for
+    every shape pair (module docstring; paper 001's f_6 table plane, eq (11)):
+
+        d = normal . c - r - offset   [m]   (< 0: the sphere dips into the half-space)
+
+    Args:
+        centres: c [m], (m, 3), world. radii: r [m], (m,), >= 0. normal: the half-space's outward
+            unit normal, (3,). offset: [m].
+
+    Returns:
+        d (m,), the witness points on the spheres (m, 3) (c - r normal) and the normals n from A
+        to B (m, 3) (-normal): a sphere's row is :func:`witness_rows` of -n at p - c = -r normal.
+    """
+    request = _request(DEFAULT_GJK_TOLERANCE)
+    plane = coal.Halfspace(np.asarray(normal, dtype=float), float(offset))
+    identity = coal.Transform3s()
+    m = len(radii)
+    d, points, normals = np.empty(m), np.empty((m, 3)), np.empty((m, 3))
+    for j in range(m):
+        result = coal.DistanceResult()
+        d[j] = coal.distance(coal.Sphere(float(radii[j])), coal.Transform3s(np.eye(3), centres[j]), plane, identity,
+                             request, result)
+        points[j], normals[j] = result.getNearestPoint1(), result.normal
+    return d, points, normals
 
 
 def velocity_damper(dd_dq: FloatArray, distance: FloatArray, influence: float, safety: float,

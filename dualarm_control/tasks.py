@@ -26,6 +26,7 @@ from typing import Literal, Protocol
 
 import numpy as np
 
+from dualarm_control.collision import sphere_plane_distances, witness_rows
 from dualarm_control.kinematics import (
     Configuration,
     FloatArray,
@@ -300,6 +301,10 @@ class ManipulabilityTask:
                         self.gain, self.weight)
 
 
+UP = np.array([0.0, 0.0, 1.0])
+"""The table plane's outward normal (world z)."""
+
+
 @dataclass(frozen=True)
 class TablePlaneTask:
     """Distance of the robot to a horizontal table plane, paper 001 eq (11) (one row per point).
@@ -331,12 +336,25 @@ class TablePlaneTask:
 
     def distances(self, conf: Configuration) -> FloatArray:
         """Clearance z_j - r_j - z_table of every sphere [m], (m,)."""
-        return np.array([conf.frame(f).position[2] - r - self.table_height for f, r in self.points])
+        return self._distances(conf)[0]
+
+    def _distances(self, conf: Configuration) -> tuple[FloatArray, FloatArray]:
+        """The spheres' clearances [m] (m,) and their normals from sphere to table (m, 3), from the
+        collision limit's distance code (:func:`~dualarm_control.collision.sphere_plane_distances`)."""
+        centres = np.array([conf.frame(f).position for f, _ in self.points])
+        radii = np.array([r for _, r in self.points])
+        d, _, normals = sphere_plane_distances(centres, radii, UP, self.table_height)
+        return d, normals
 
     def evaluate(self, conf: Configuration, t: float) -> TaskRows:
-        jac = np.array([-conf.frame(f).jacobian[2] for f, _ in self.points])
+        """f_6j = -d_j, df_6j/dq = -dd_dq: the collision limit's row (:func:`~dualarm_control.collision.witness_rows`)
+        of the sphere's lowest point, which moves with the frame: (-n)^T J_v + ((-r up) x (-n))^T J_w =
+        (J_v)_z, the second term zero (up and -n are parallel)."""
+        d, normals = self._distances(conf)
+        jac = np.array([-witness_rows(-normals[j:j + 1], -r * UP[None, :], conf.frame(f).jacobian)[0]
+                        for j, (f, r) in enumerate(self.points)])
         m = len(self.points)
-        return TaskRows(self.name, self.kind, -self.distances(conf), np.full(m, self.bound), jac, np.zeros(m),
+        return TaskRows(self.name, self.kind, -d, np.full(m, self.bound), jac, np.zeros(m),
                         self.gain, self.weight)
 
 

@@ -174,3 +174,18 @@ def test_manipulability_is_finite_at_a_singular_configuration(model: DualArmMode
     task = ManipulabilityTask("right_tool", "right", bound=-1e-3, gain=1.0)
     rows = task.evaluate(Configuration(model, np.zeros(model.nq)), 0.0)
     assert abs(rows.value[0]) < 1e-12 and np.all(np.isfinite(rows.jacobian))
+
+
+def test_table_plane_rows_are_the_collision_limits_and_eq_11(model: DualArmModel) -> None:
+    """f_6 (eq (11)) through the collision limit's distance code (coal's sphere-half-space distance,
+    the witness point's row) equals the paper's closed form bit for bit: f_6j = -(z_j - r_j - z_table),
+    df_6j/dq = -(J_v,j)_z."""
+    task = paper_001_tasks()[4]
+    assert isinstance(task, TablePlaneTask)
+    for q in configurations(model, 5, seed=21):
+        conf = Configuration(model, q)
+        rows = task.evaluate(conf, 0.0)
+        for j, (frame, radius) in enumerate(task.points):
+            state = conf.frame(frame)
+            assert rows.value[j] == -(state.position[2] - radius - task.table_height)
+            assert np.array_equal(rows.jacobian[j], -state.jacobian[2])
