@@ -562,3 +562,19 @@ def test_what_is_known_from_earlier_calls_never_changes_the_result(robot: str) -
         assert all(d.distance >= 0.10 for pair, d in every.items() if pair not in returned)
         skipped += int((used._slack >= 0.10).sum())  # the known bounds at q after the call
     assert skipped > 0  # the bound does skip pairs
+
+
+def test_a_non_finite_q_forgets_what_is_known_and_gives_no_pair() -> None:
+    """NaN joint positions give no pair (the controller's input check rejects the cycle) and never
+    poison the known bounds: the next finite q gives what a fresh model gives, bit for bit."""
+    m = kinematics("lwr4_cell")
+    used = CollisionModel(m, allowed=m.description.collision_allowed)
+    q = np.asarray(m.description.ready, dtype=float)
+    used.distances(q, within=0.10)
+    bad = q.copy()
+    bad[3] = np.nan
+    assert used.distances(bad, within=0.10) == []
+    near = q + 0.05
+    want = CollisionModel(m, allowed=m.description.collision_allowed).distances(near, within=0.5)
+    got = used.distances(near, within=0.5)
+    assert want and [(d.link_a, d.link_b, d.distance) for d in got] == [(d.link_a, d.link_b, d.distance) for d in want]
