@@ -1,0 +1,116 @@
+"""Hardware profiles over real rclpy processes (issue 29): the nodes with each shipped profile, lockstep.
+
+The simulator speaks each profile (its command topics and interfaces, joint states as
+joint_state_broadcaster gives them); the run's Table I metrics equal the default profile's, the
+final error is below 1 mm, and no position command is farther than v_max T from the measured position.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from dualarm_control.app.run.launcher import launch_scenario
+from dualarm_control.hardware import HardwareProfile, load_profile
+from dualarm_control.kinematics import DualArmModel
+from dualarm_control.metrics import velocity_norm_metrics
+from dualarm_control.params import read_params_file
+
+ROOT = Path(__file__).parents[1]
+SHORT = ROOT / "test" / "data" / "short.yaml"
+PROFILES = ("sim", "ros2_control_velocity", "lbr_dual_position")
+PERIOD = 0.005
+
+
+def profile_of(name: str) -> HardwareProfile:
+    return load_profile(read_params_file(ROOT / "config" / "hardware" / f"{name}.yaml", "controller_node"),
+                        DualArmModel().joint_names)
+
+
+def read_bag(bag: Path) -> dict[str, list[Any]]:
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    out: dict[str, list[Any]] = {}
+    with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        for conn, _, raw in reader.messages():
+            out.setdefault(conn.topic, []).append(reader.deserialize(raw, conn.msgtype))
+    return out
+
+
+class Run:
+    """A profile's lockstep run from its bag: measured positions per stamp and the commanded velocities
+    (description order; a position output's as its position differences over one period)."""
+
+    def __init__(self, profile: HardwareProfile, topics: dict[str, list[Any]]) -> None:
+        names = DualArmModel().joint_names
+        order = {n: i for i, n in enumerate(names)}
+        states: dict[int, np.ndarray] = {}
+        for topic in profile.joint_states:
+            for m in topics[topic]:
+                stamp = m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
+                q = states.setdefault(stamp, np.full(len(names), np.nan))
+                for n, v in zip(m.name, m.position):
+                    if n in order:
+                        q[order[n]] = v
+        self.stamps = sorted(states)
+        self.positions = np.array([states[s] for s in self.stamps])
+        counts = {len(topics[o.topic]) for o in profile.outputs}
+        assert len(counts) == 1, f"outputs sent different command counts: {counts}"
+        n = counts.pop()
+        self.velocities = np.zeros((n, len(names)))
+        self.position_commands: list[tuple[np.ndarray, np.ndarray]] = []  # (joint indices, (n, k) positions)
+        for o, idx in zip(profile.outputs, profile.indices(names)):
+            values = np.array([m.data for m in topics[o.topic]])
+            if o.position:
+                start = self.positions[0, idx]
+                self.velocities[:, idx] = np.diff(np.vstack((start, values)), axis=0) / PERIOD
+                self.position_commands.append((idx, values))
+            else:
+                self.velocities[:, idx] = values
+        status = [s for d in topics["/diagnostics"] for s in d.status if s.name == "controller_node"]
+        errors = [float(kv.value) for s in status for kv in s.values if kv.key == "position_error_m"]
+        self.final_error = errors[-1]
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Run]:
+    out = {}
+    for name in PROFILES:
+        profile = profile_of(name)
+        bag = tmp_path_factory.mktemp("hw") / name
+        topics = (*profile.joint_states, *profile.topics, "/diagnostics", "/relative_target")
+        params = [str(ROOT / "config" / "hardware" / f"{name}.yaml")]
+        assert launch_scenario(str(SHORT), params, [], True, bag, timeout=240.0, record_topics=topics) == 0
+        out[name] = Run(profile, read_bag(bag))
+    return out
+
+
+@pytest.mark.parametrize("name", PROFILES)
+def test_each_profile_completes_the_scenario(runs: dict[str, Run], name: str) -> None:
+    run = runs[name]
+    assert not np.isnan(run.positions).any(), "a stamp without every joint"
+    assert run.final_error < 1e-3
+
+
+@pytest.mark.parametrize("name", PROFILES[1:])
+def test_lockstep_table_one_metrics_equal_the_default_profiles(runs: dict[str, Run], name: str) -> None:
+    default, got = runs["sim"], runs[name]
+    assert got.velocities.shape == default.velocities.shape
+    a, b = velocity_norm_metrics(default.velocities, PERIOD), velocity_norm_metrics(got.velocities, PERIOD)
+    for key in ("l0_mean", "l1_mean", "l2_mean"):
+        assert getattr(b, key) == pytest.approx(getattr(a, key), abs=1e-6), key
+    np.testing.assert_allclose(got.positions, default.positions, atol=1e-6, rtol=0)
+
+
+def test_position_commands_stay_within_one_cycle_at_the_velocity_limit(runs: dict[str, Run]) -> None:
+    run = runs["lbr_dual_position"]
+    qd_max = DualArmModel().qd_max
+    assert run.position_commands
+    for idx, values in run.position_commands:
+        measured = run.positions[: len(values), idx]  # command k was computed at the state of stamp k
+        gap = np.abs(values - measured) / (qd_max[idx] * PERIOD)
+        assert gap.max() <= 1.0 + 1e-9, f"command {gap.max():.3f} v_max T from the measured position"
