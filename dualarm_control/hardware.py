@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from dualarm_control.errors import ParameterError
-from dualarm_control.params import ParamSpec, positive, resolve
+from dualarm_control.params import ParamSpec, non_negative, positive, resolve
 
 FloatArray = np.ndarray
 MESSAGES = ("float64_multi_array", "joint_trajectory")
@@ -65,6 +65,10 @@ HARDWARE_PARAMETERS = (
               check=_topic_list, read_only=True),
     ParamSpec("hardware.stamp_tolerance", 0.0025, "stamps of the joint-state topics of one cycle differ by at "
               "most this [s]", check=positive, read_only=True),
+    ParamSpec("hardware.startup_check", 0.0, "controller: no command until the profile matches the graph (every "
+              "joint-state topic published, every joint on one, every command topic subscribed with its type); "
+              "refused (exit 2, the problems named) if it does not within this time [s] (0: no check)",
+              check=non_negative, read_only=True),
 )
 
 

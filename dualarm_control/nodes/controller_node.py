@@ -45,6 +45,7 @@ from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
 from dualarm_control import controller as core
 from dualarm_control.collision_limit import CollisionReport
+from dualarm_control.errors import DualArmError
 from dualarm_control.hardware import HARDWARE_PARAMETERS, profile_from_values
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import ParamSpec, non_negative, positive
@@ -59,6 +60,7 @@ from dualarm_control.references.base import (
 from dualarm_control.references.plan import PlanSource
 from dualarm_control.ros import convert, inputs, local_bus
 from dualarm_control.ros import node as shell
+from dualarm_control.ros.hardware_check import check_graph
 from dualarm_control.ros.hardware_io import (
     CommandSink,
     JointStates,
@@ -72,6 +74,7 @@ DEFAULT_PRIORITY = 50
 WATCHDOG_MIN_PERIOD_S = 0.005  # the watchdog ticks at the control rate, at most 200 Hz
 STATS_EVERY = 200  # cycles between percentile updates
 MOVING = 1e-9  # a target twist / reference velocity norm above this is motion [m/s, rad/s]
+CHECK_PERIOD_S = 0.1  # hardware.startup_check: the graph is checked this often until it matches
 END_DELAY_S = 0.5  # task mode: spin this long after the last cycle, so that a recorder gets the last messages
 NODE_PARAMETERS = (
     ParamSpec("lockstep", False, "compute one command per joint-state stamp (deterministic runs)", read_only=True),
@@ -159,6 +162,10 @@ class ControllerNode:
                                     collision=self.tracker.controller.collision_model)))
         self.ticks: list[shell.Tick] = ([] if self.lockstep else  # ros.node.Ticker, not an rclpy timer
                                         [(max(self.params.period, WATCHDOG_MIN_PERIOD_S), self.on_watchdog)])
+        check_s = float(self.values["hardware.startup_check"])
+        self.check_deadline = time.monotonic() + check_s if check_s > 0 else None  # None: checked (or no check)
+        if self.check_deadline is not None:
+            self.ticks.append((CHECK_PERIOD_S, self.on_startup_check))
         self.log.info(f"{self.tracker.label} on scenario '{self.scenario.name}' ({source.describe()}"
                       f"{f', {self.tracker.steps} cycles' if self.timed else ''}), robot '{self.model.description.name}'"
                       f" ({self.model.nq} joints), solver '{self.params.solver}' (K={self.params.gain}, "
@@ -234,6 +241,10 @@ class ControllerNode:
             return
         stamp, q, _ = self.state
         if stamp == self.last_commanded_stamp and (self.lockstep or self.timed):
+            return
+        if self.check_deadline is not None:  # the profile is not known to match the graph yet: no motion
+            if not self.lockstep:
+                self.out.safe(stamp, "checking the hardware profile against the graph")
             return
         inputs = self.inputs.at(stamp) if self.lockstep else self.fresh_inputs(stamp)
         if inputs is None:
@@ -348,6 +359,20 @@ class ControllerNode:
                   else self.target_fault(now))
         if reason:
             self.out.enter_safe_state(self.state[0], reason)
+
+    def on_startup_check(self) -> None:
+        """``hardware.startup_check``: commands start once the profile matches the graph; past the deadline
+        the controller is refused (exit 2) with one line per problem."""
+        if self.check_deadline is None:
+            return
+        report = check_graph(self.node, self.profile, self.model.joint_names, self.joint_states.names_seen())
+        if report.ok:
+            self.check_deadline = None
+            self.log.info("hardware profile matches the graph:\n" + "\n".join(report.lines))
+            if self.state is not None and self.lockstep:
+                self.try_cycle()
+        elif time.monotonic() > self.check_deadline:
+            raise DualArmError("the hardware profile does not match the graph: " + "; ".join(report.problems))
 
     def stale_topics(self, now: int, timeout: float) -> str:
         """Several joint-state topics: which one is stale (the arm it carries), or their stamps beyond the

@@ -81,6 +81,11 @@ class JointStateInput:
         self.present = np.arange(len(order))
         """Model index of each value decoded (``partial``: the model's joints the last message carried)."""
 
+    @property
+    def names(self) -> tuple[str, ...] | None:
+        """The joint names of the last message decoded (None before one)."""
+        return self._names
+
     def indices(self, names: tuple[str, ...]) -> list[int] | str:
         """Index in ``names`` of each joint decoded (``partial``: of the model's joints among ``names``,
         whose model indices become :attr:`present`), or why the message is unusable."""

@@ -63,8 +63,9 @@ class JointStates:
         self.on_state, self.on_reject = on_state, on_reject
         order = {name: i for i, name in enumerate(joint_names)}
         self.subscriptions = []
+        self.decoders: dict[str, convert.JointStateInput] = {}
         for topic in topics:
-            decoder = convert.JointStateInput(order, partial=len(topics) > 1)
+            self.decoders[topic] = decoder = convert.JointStateInput(order, partial=len(topics) > 1)
             self.subscriptions.append(subscribe_checked(
                 node, JointState, topic, self.receiver(topic, decoder), qos, on_malformed, decoder, bus))
 
@@ -81,6 +82,10 @@ class JointStates:
             if state is not None:
                 self.on_state(state[0], state[1], now)
         return receive
+
+    def names_seen(self) -> dict[str, tuple[str, ...]]:
+        """Per joint-state topic that delivered a message, the joint names of its last one."""
+        return {t: d.names for t, d in self.decoders.items() if d.names is not None}
 
     def close(self) -> None:
         for sub in self.subscriptions:
