@@ -3,7 +3,10 @@
 Publishes ``/joint_states`` every control period, and ``/wrench`` and ``/clock`` (simulation
 time, steps x period) every period while a subscription reads them (lazy, as image pipelines
 publish); applies
-``/velocity_controller/commands`` (Float64MultiArray, 14 values, controller joint order).
+``/velocity_controller/commands`` (Float64MultiArray, 14 values, controller joint order). Those are the
+default hardware profile's topics: with ``hardware.*`` (docs/hardware.md) it takes the profile's command
+outputs (topics, message types, velocity or position interfaces) and publishes its joint-state topics
+as joint_state_broadcaster does (``state_order``, ``extra_joints``, a topic per namespace).
 A command older than ``command_timeout`` (simulation time, counted in steps, as a robot's
 own cycle counts it) brings the arms to rest, in both modes. A malformed command (bad CDR,
 wrong length, NaN/inf) is rejected (throttled log, WARN on ``/diagnostics``, counted) and the

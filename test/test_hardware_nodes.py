@@ -114,3 +114,59 @@ def test_position_commands_stay_within_one_cycle_at_the_velocity_limit(runs: dic
         measured = run.positions[: len(values), idx]  # command k was computed at the state of stamp k
         gap = np.abs(values - measured) / (qd_max[idx] * PERIOD)
         assert gap.max() <= 1.0 + 1e-9, f"command {gap.max():.3f} v_max T from the measured position"
+
+
+def dualarm_node(name: str, *args: str) -> Any:
+    import subprocess
+    import sys
+
+    return subprocess.Popen([sys.executable, "-m", "dualarm_control.app.cli", "run", name, "--ros-args",
+                             "-p", f"scenario:={SHORT}", "--params-file",
+                             str(ROOT / "config" / "hardware" / "lbr_dual_position.yaml"), *args],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def test_position_commands_hold_the_arms_after_the_controller_is_killed() -> None:
+    """Real time, lbr_dual_position: once the arms move, SIGKILL the controller; the last position
+    commands hold the arms (the simulator does not drift)."""
+    import time
+
+    from sensor_msgs.msg import JointState
+
+    from dualarm_control.ros.node import tool_node
+
+    hang_guard_s = 120.0  # a hang guard, not a timing claim
+    latest: dict[str, dict[str, float]] = {}
+    procs = [dualarm_node("sim_node"), dualarm_node("controller_node"), dualarm_node("trajectory_node")]
+    try:
+        with tool_node("hold_probe") as (node, executor, _):
+            for topic in ("/left/joint_states", "/right/joint_states"):
+                node.create_subscription(JointState, topic, lambda m, t=topic: latest.__setitem__(
+                    t, dict(zip(m.name, m.position))), 10)
+
+            def q() -> np.ndarray:
+                merged = {**latest.get("/left/joint_states", {}), **latest.get("/right/joint_states", {})}
+                return np.array([merged[n] for n in DualArmModel().joint_names])
+
+            def spin_until(cond: Any, what: str) -> None:
+                end = time.monotonic() + hang_guard_s
+                while not cond():
+                    assert time.monotonic() < end, f"hang guard: {what}; saw {latest.keys()}"
+                    executor.spin_once(timeout_sec=0.05)
+
+            spin_until(lambda: len(latest) == 2, "joint states on both topics")
+            start = q()
+            spin_until(lambda: np.abs(q() - start).max() > 5e-3, "the arms moving")
+            procs[1].kill()
+            procs[1].wait(timeout=30)
+            stop_at = time.monotonic()
+            spin_until(lambda: time.monotonic() - stop_at > 0.2, "")
+            held = q()
+            spin_until(lambda: time.monotonic() - stop_at > 1.2, "")
+            drift = np.abs(q() - held).max()
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.terminate()
+            p.wait(timeout=30)
+    assert drift < 1e-4, f"the arms drifted {drift:.2e} rad in 1 s after the controller was killed"

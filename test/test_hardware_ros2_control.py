@@ -72,8 +72,8 @@ def test_two_velocity_controllers_and_a_broadcaster_drive_the_cell(tmp_path: Pat
     try:
         out, err = cell.communicate(timeout=HANG_GUARD_S)
     finally:
-        c_out, c_err = stop(controller)
-        t_out, t_err = stop(trajectory)
+        _, c_err = stop(controller)
+        _, t_err = stop(trajectory)
         stop(cell)
     result = json.loads(out.strip().splitlines()[-1])
     seen = f"fake: {out}{err[-2000:]}\ncontroller: {c_err[-3000:]}\ntrajectory: {t_err[-2000:]}"

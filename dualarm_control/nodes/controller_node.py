@@ -6,7 +6,8 @@ runner runs, with the same model, gain and cycle count (``ReferenceSource.tracke
 also a planned joint trajectory on ``/joint_reference`` (``plan:=FILE``: qd_ref + K (q_ref - q),
 K the plan's execution.gain, eq 23 bounds), or none for the tasks of a task scenario
 (``scenario:=pan_cleaning``, paper 001; ``/wrench`` with ``force:=true``, eq 9). Publishes
-``/velocity_controller/commands`` and ``/diagnostics`` (one per cycle), and ``/relative_pose``
+``/velocity_controller/commands`` (the default hardware profile: ``hardware.*`` gives the command
+outputs and the joint-state topics, docs/hardware.md) and ``/diagnostics`` (one per cycle), and ``/relative_pose``
 every cycle while it has a reader. The control math is the core's.
 
 Real time: a command per joint state (read -> update -> write, as ros2_control); a tick at the
