@@ -162,3 +162,27 @@ def test_sim_merges_outputs_and_turns_positions_into_one_period_of_velocity() ->
     np.testing.assert_allclose(merger.take(), [0.2] * 7 + [0.3] * 7)
     assert not merger.complete
     np.testing.assert_array_equal(merger.position_mask, [True] * 7 + [False] * 7)
+
+
+def test_graph_check_names_each_problem() -> None:
+    from types import SimpleNamespace
+
+    from dualarm_control.ros.hardware_check import check_graph
+
+    def info(node: str, type_name: str) -> SimpleNamespace:
+        return SimpleNamespace(node_name=node, node_namespace="/left", topic_type=type_name)
+
+    graph = {"/left/joint_states": [info("joint_state_broadcaster", "sensor_msgs/msg/JointState")],
+             "/right/joint_states": [info("joint_state_broadcaster", "sensor_msgs/msg/JointState")],
+             "/left/commands": [info("left", "trajectory_msgs/msg/JointTrajectory")]}
+    node = SimpleNamespace(get_publishers_info_by_topic=lambda t: graph.get(t, []) if "states" in t else [],
+                           get_subscriptions_info_by_topic=lambda t: graph.get(t, []) if "commands" in t else [])
+    seen = {"/left/joint_states": [*LEFT, "gripper"], "/right/joint_states": RIGHT[:6]}
+    report = check_graph(node, load_profile(per_arm(), NAMES), NAMES, seen)
+    assert report.problems == (
+        f"joint {RIGHT[6]} is on no joint-state topic",
+        ("/left/commands is subscribed as trajectory_msgs/msg/JointTrajectory, the profile sends "
+         "std_msgs/msg/Float64MultiArray"),
+        "no subscriber on /right/commands")
+    assert "  8 joints, 7 of the robot's, extra: gripper" in report.lines
+    assert not report.ok

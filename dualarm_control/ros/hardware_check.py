@@ -27,6 +27,8 @@ class GraphReport:
 
     lines: tuple[str, ...]
     problems: tuple[str, ...]
+    named: bool = True
+    """Every endpoint's node is known (discovery gives an endpoint before its node's name)."""
 
     @property
     def ok(self) -> bool:
@@ -38,8 +40,16 @@ class GraphReport:
         return "\n".join([*self.lines, *(f"problem: {p}" for p in self.problems), verdict])
 
 
+UNKNOWN = "_NODE_NAME_UNKNOWN_"
+
+
+def _node(info: Any) -> str:
+    return "(a node not discovered yet)" if info.node_name == UNKNOWN else \
+        f"{info.node_namespace.rstrip('/')}/{info.node_name}"
+
+
 def _endpoints(infos: Sequence[Any]) -> str:
-    return ", ".join(f"{i.node_namespace.rstrip('/')}/{i.node_name} [{i.topic_type}]" for i in infos) or "none"
+    return ", ".join(f"{_node(i)} [{i.topic_type}]" for i in infos) or "none"
 
 
 def check_graph(node: Any, profile: HardwareProfile, joint_names: Sequence[str],
@@ -48,6 +58,7 @@ def check_graph(node: Any, profile: HardwareProfile, joint_names: Sequence[str],
     each joint-state topic; endpoints of the node named ``ignore_node`` are left out (the checking node)."""
     lines: list[str] = []
     problems: list[str] = []
+    endpoints: list[Any] = []
 
     def others(infos: Sequence[Any]) -> list[Any]:
         return [i for i in infos if i.node_name != ignore_node]
@@ -55,6 +66,7 @@ def check_graph(node: Any, profile: HardwareProfile, joint_names: Sequence[str],
     carried: dict[str, list[str]] = {}
     for topic in profile.joint_states:
         pubs = others(node.get_publishers_info_by_topic(topic))
+        endpoints += pubs
         lines.append(f"joint states {topic}: publishers {_endpoints(pubs)}")
         if not pubs:
             problems.append(f"no publisher on {topic}")
@@ -79,13 +91,14 @@ def check_graph(node: Any, profile: HardwareProfile, joint_names: Sequence[str],
     for out in profile.outputs:
         expected = COMMAND_TYPES[out.message]
         subs = others(node.get_subscriptions_info_by_topic(out.topic))
+        endpoints += subs
         lines.append(f"command {out.topic} ({out.interface}, {len(out.joints)} joints): subscribers "
                      f"{_endpoints(subs)}")
         if not subs:
             problems.append(f"no subscriber on {out.topic}")
         for wrong in {i.topic_type for i in subs} - {expected}:
             problems.append(f"{out.topic} is subscribed as {wrong}, the profile sends {expected}")
-    return GraphReport(tuple(lines), tuple(problems))
+    return GraphReport(tuple(lines), tuple(problems), all(i.node_name != UNKNOWN for i in endpoints))
 
 
 def wait_for_graph(node: Any, executor: Any, profile: HardwareProfile, joint_names: Sequence[str],
@@ -95,6 +108,6 @@ def wait_for_graph(node: Any, executor: Any, profile: HardwareProfile, joint_nam
     end = time.monotonic() + timeout_s
     while True:
         report = check_graph(node, profile, joint_names, names_seen(), ignore_node)
-        if report.ok or time.monotonic() >= end:
+        if (report.ok and report.named) or time.monotonic() >= end:
             return report
         executor.spin_once(timeout_sec=0.1)
