@@ -8,6 +8,8 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -42,10 +44,43 @@ def profile(tmp_path: Path, right_topic: str = "/right_velocity_controller/comma
     return path
 
 
-def node(name: str, params: Path) -> subprocess.Popen[str]:
-    return subprocess.Popen([sys.executable, "-m", "dualarm_control.app.cli", "run", name, "--ros-args",
-                             "-p", f"scenario:={SHORT}", "--params-file", str(params)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+class Node:
+    """A node process whose stderr (its log) is collected as it comes."""
+
+    def __init__(self, name: str, params: Path) -> None:
+        self.proc = subprocess.Popen([sys.executable, "-m", "dualarm_control.app.cli", "run", name, "--ros-args",
+                                      "-p", f"scenario:={SHORT}", "--params-file", str(params)],
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        self.lines: list[str] = []
+        self.reader = threading.Thread(target=self.read, daemon=True)
+        self.reader.start()
+
+    def read(self) -> None:
+        assert self.proc.stderr is not None
+        for line in self.proc.stderr:
+            self.lines.append(line)
+
+    @property
+    def log(self) -> str:
+        return "".join(self.lines)
+
+    def wait_for(self, text: str, limit: float = HANG_GUARD_S) -> None:
+        end = time.monotonic() + limit
+        while text not in self.log:
+            assert self.proc.poll() is None or text in self.log, f"exited {self.proc.returncode}: {self.log[-3000:]}"
+            assert time.monotonic() < end, f"hang guard: no {text!r} in {self.log[-3000:]}"
+            time.sleep(0.05)
+
+    def stop(self) -> str:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+        try:
+            self.proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        self.reader.join(timeout=10)
+        return self.log
 
 
 def fake(rename: dict[str, str] | None = None) -> subprocess.Popen[str]:
@@ -66,22 +101,25 @@ def stop(proc: subprocess.Popen[str]) -> tuple[str, str]:
 
 
 def test_two_velocity_controllers_and_a_broadcaster_drive_the_cell(tmp_path: Path) -> None:
+    """The targets start once the controller found the profile on the graph (hardware.startup_check)."""
     params = profile(tmp_path)
     cell = fake()
-    controller, trajectory = node("controller_node", params), node("trajectory_node", params)
+    controller = Node("controller_node", params)
+    trajectory = None
     try:
+        controller.wait_for("hardware profile matches the graph")
+        trajectory = Node("trajectory_node", params)
         out, err = cell.communicate(timeout=HANG_GUARD_S)
     finally:
-        _, c_err = stop(controller)
-        _, t_err = stop(trajectory)
+        c_log = controller.stop()
+        t_log = trajectory.stop() if trajectory is not None else ""
         stop(cell)
     result = json.loads(out.strip().splitlines()[-1])
-    seen = f"fake: {out}{err[-2000:]}\ncontroller: {c_err[-3000:]}\ntrajectory: {t_err[-2000:]}"
+    seen = f"fake: {out}{err[-2000:]}\ncontroller: {c_log[-3000:]}\ntrajectory: {t_log[-2000:]}"
     assert result["complete"], seen
     assert result["received"]["left_velocity_controller"] > 100, seen
     assert result["received"]["right_velocity_controller"] > 100, seen
     assert result["position_error_m"] < 1e-3, seen
-    assert "hardware profile matches the graph" in c_err, seen
 
 
 @pytest.mark.parametrize(("change", "rename", "words"), [
@@ -95,12 +133,12 @@ def test_a_profile_that_does_not_match_the_graph_is_refused_at_start(
         tmp_path: Path, change: dict[str, object], rename: dict[str, str] | None, words: list[str]) -> None:
     params = profile(tmp_path, **change)  # type: ignore[arg-type]
     cell = fake(rename)
-    controller = node("controller_node", params)
+    controller = Node("controller_node", params)
     try:
-        _, err = controller.communicate(timeout=HANG_GUARD_S)
+        code = controller.proc.wait(timeout=HANG_GUARD_S)
     finally:
-        stop(controller)
+        log = controller.stop()
         stop(cell)
-    assert controller.returncode == 2, err[-3000:]
+    assert code == 2, log[-3000:]
     for word in words:
-        assert word in err, err[-3000:]
+        assert word in log, log[-3000:]
