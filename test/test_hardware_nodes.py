@@ -21,13 +21,28 @@ from dualarm_control.params import read_params_file
 
 ROOT = Path(__file__).parents[1]
 SHORT = ROOT / "test" / "data" / "short.yaml"
-PROFILES = ("sim", "ros2_control_velocity", "lbr_dual_position")
+PROFILES = ("sim", "ros2_control_velocity", "lbr_dual_position", "servo_trajectories")
 PERIOD = 0.005
+SERVO = ROOT / "test" / "data" / "servo_trajectories.yaml"
+"""A profile of one-point JointTrajectory outputs (MoveIt Servo's form): the left arm by velocity, the right
+by position, in their own joint orders, /left and /right joint states."""
+
+
+def profile_file(name: str) -> Path:
+    return SERVO if name == "servo_trajectories" else ROOT / "config" / "hardware" / f"{name}.yaml"
 
 
 def profile_of(name: str) -> HardwareProfile:
-    return load_profile(read_params_file(ROOT / "config" / "hardware" / f"{name}.yaml", "controller_node"),
-                        DualArmModel().joint_names)
+    return load_profile(read_params_file(profile_file(name), "controller_node"), DualArmModel().joint_names)
+
+
+def command_values(o: Any, msg: Any) -> list[float]:
+    """A command message's values in the output's joint order."""
+    if o.message == "float64_multi_array":
+        return list(msg.data)
+    point = msg.points[0]
+    values = dict(zip(msg.joint_names, point.positions if o.position else point.velocities))
+    return [values[j] for j in o.joints]
 
 
 def read_bag(bag: Path) -> dict[str, list[Any]]:
@@ -64,7 +79,7 @@ class Run:
         self.velocities = np.zeros((n, len(names)))
         self.position_commands: list[tuple[np.ndarray, np.ndarray]] = []  # (joint indices, (n, k) positions)
         for o, idx in zip(profile.outputs, profile.indices(names)):
-            values = np.array([m.data for m in topics[o.topic]])
+            values = np.array([command_values(o, m) for m in topics[o.topic]])
             if o.position:
                 start = self.positions[0, idx]
                 self.velocities[:, idx] = np.diff(np.vstack((start, values)), axis=0) / PERIOD
@@ -83,7 +98,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Run]:
         profile = profile_of(name)
         bag = tmp_path_factory.mktemp("hw") / name
         topics = (*profile.joint_states, *profile.topics, "/diagnostics", "/relative_target")
-        params = [str(ROOT / "config" / "hardware" / f"{name}.yaml")]
+        params = [str(profile_file(name))]
         assert launch_scenario(str(SHORT), params, [], True, bag, timeout=240.0, record_topics=topics) == 0
         out[name] = Run(profile, read_bag(bag))
     return out
@@ -106,8 +121,9 @@ def test_lockstep_table_one_metrics_equal_the_default_profiles(runs: dict[str, R
     np.testing.assert_allclose(got.positions, default.positions, atol=1e-6, rtol=0)
 
 
-def test_position_commands_stay_within_one_cycle_at_the_velocity_limit(runs: dict[str, Run]) -> None:
-    run = runs["lbr_dual_position"]
+@pytest.mark.parametrize("name", ["lbr_dual_position", "servo_trajectories"])
+def test_position_commands_stay_within_one_cycle_at_the_velocity_limit(runs: dict[str, Run], name: str) -> None:
+    run = runs[name]
     qd_max = DualArmModel().qd_max
     assert run.position_commands
     for idx, values in run.position_commands:

@@ -186,3 +186,21 @@ def test_graph_check_names_each_problem() -> None:
         "no subscriber on /right/commands")
     assert "  8 joints, 7 of the robot's, extra: gripper" in report.lines
     assert not report.ok
+
+
+@pytest.mark.parametrize("interface", ["velocity", "position"])
+def test_one_point_trajectory_command_is_exact_cdr(interface: str) -> None:
+    """The JointTrajectory command is the message's exact CDR (rosbags refuses a byte too many)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from dualarm_control.hardware import OutputSpec
+    from dualarm_control.ros.hardware_io import trajectory_bytes
+
+    spec = OutputSpec("servo", "/servo", "joint_trajectory", interface, ("b", "a"))
+    msg = get_typestore(Stores.ROS2_JAZZY).deserialize_cdr(trajectory_bytes(spec, np.array([0.5, -1.0]), 0.005),
+                                                           "trajectory_msgs/msg/JointTrajectory")
+    (point,) = msg.points
+    assert list(msg.joint_names) == ["b", "a"]
+    assert list(point.positions if interface == "position" else point.velocities) == [0.5, -1.0]
+    assert len(point.velocities if interface == "position" else point.positions) == 0
+    assert (point.time_from_start.sec, point.time_from_start.nanosec) == (0, 5_000_000)

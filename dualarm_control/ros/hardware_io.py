@@ -27,7 +27,7 @@ from dualarm_control.hardware import (
     profile_parameters,
 )
 from dualarm_control.params import ParamSpec
-from dualarm_control.ros import convert
+from dualarm_control.ros import cdr, convert
 from dualarm_control.ros.inputs import subscribe_checked, unsubscribe
 from dualarm_control.ros.local_bus import LocalBus, local_publisher
 
@@ -96,17 +96,9 @@ class JointStates:
 def trajectory_bytes(spec: OutputSpec, values: np.ndarray, period: float) -> bytes:
     """A one-point trajectory_msgs/JointTrajectory (CDR) of ``spec``'s joints reached one ``period`` from
     now (MoveIt Servo's form): ``values`` as positions or velocities per ``spec.interface``."""
-    from builtin_interfaces.msg import Duration
-    from rclpy.serialization import serialize_message
-    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
-
-    ns = round(period * 1e9)
-    point = JointTrajectoryPoint(time_from_start=Duration(sec=ns // 10**9, nanosec=ns % 10**9))
-    if spec.position:
-        point.positions = values.tolist()
-    else:
-        point.velocities = values.tolist()
-    return bytes(serialize_message(JointTrajectory(joint_names=list(spec.joints), points=[point])))
+    empty = np.zeros(0)
+    return cdr.joint_trajectory_point(spec.joints, values if spec.position else empty,
+                                      empty if spec.position else values, round(period * 1e9))
 
 
 class CommandSink:
