@@ -91,17 +91,27 @@ class Run:
         self.final_error = errors[-1]
 
 
+def lockstep_run(name: str, scenario: str, bag: Path, timeout: float) -> Run:
+    """The scenario over the nodes in lockstep on profile ``name``, recorded (its topics) and read back."""
+    profile = profile_of(name)
+    topics = (*profile.joint_states, *profile.topics, "/diagnostics", "/relative_target")
+    params = [str(profile_file(name))]
+    assert launch_scenario(scenario, params, [], True, bag, timeout=timeout, record_topics=topics) == 0
+    return Run(profile, read_bag(bag))
+
+
+def assert_same_run(default: Run, got: Run) -> None:
+    """Lockstep Table I metrics equal to 1e-6, and the same joint trajectory."""
+    assert got.velocities.shape == default.velocities.shape
+    a, b = velocity_norm_metrics(default.velocities, PERIOD), velocity_norm_metrics(got.velocities, PERIOD)
+    for key in ("l0_mean", "l1_mean", "l2_mean"):
+        assert getattr(b, key) == pytest.approx(getattr(a, key), abs=1e-6), key
+    np.testing.assert_allclose(got.positions, default.positions, atol=1e-6, rtol=0)
+
+
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Run]:
-    out = {}
-    for name in PROFILES:
-        profile = profile_of(name)
-        bag = tmp_path_factory.mktemp("hw") / name
-        topics = (*profile.joint_states, *profile.topics, "/diagnostics", "/relative_target")
-        params = [str(profile_file(name))]
-        assert launch_scenario(str(SHORT), params, [], True, bag, timeout=240.0, record_topics=topics) == 0
-        out[name] = Run(profile, read_bag(bag))
-    return out
+    return {name: lockstep_run(name, str(SHORT), tmp_path_factory.mktemp("hw") / name, 240.0) for name in PROFILES}
 
 
 @pytest.mark.parametrize("name", PROFILES)
@@ -113,12 +123,17 @@ def test_each_profile_completes_the_scenario(runs: dict[str, Run], name: str) ->
 
 @pytest.mark.parametrize("name", PROFILES[1:])
 def test_lockstep_table_one_metrics_equal_the_default_profiles(runs: dict[str, Run], name: str) -> None:
-    default, got = runs["sim"], runs[name]
-    assert got.velocities.shape == default.velocities.shape
-    a, b = velocity_norm_metrics(default.velocities, PERIOD), velocity_norm_metrics(got.velocities, PERIOD)
-    for key in ("l0_mean", "l1_mean", "l2_mean"):
-        assert getattr(b, key) == pytest.approx(getattr(a, key), abs=1e-6), key
-    np.testing.assert_allclose(got.positions, default.positions, atol=1e-6, rtol=0)
+    assert_same_run(runs["sim"], runs[name])
+
+
+@pytest.mark.slow
+def test_the_assembly_with_each_shipped_profile(tmp_path: Path) -> None:
+    """The full assembly (paper 000) in lockstep with each shipped profile: final error < 1 mm, Table I
+    equal to the default profile's."""
+    got = {name: lockstep_run(name, "assembly", tmp_path / name, 900.0) for name in PROFILES[:3]}
+    for name, run in got.items():
+        assert run.final_error < 1e-3, name
+        assert_same_run(got["sim"], run)
 
 
 @pytest.mark.parametrize("name", ["lbr_dual_position", "servo_trajectories"])

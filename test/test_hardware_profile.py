@@ -204,3 +204,13 @@ def test_one_point_trajectory_command_is_exact_cdr(interface: str) -> None:
     assert list(point.positions if interface == "position" else point.velocities) == [0.5, -1.0]
     assert len(point.velocities if interface == "position" else point.positions) == 0
     assert (point.time_from_start.sec, point.time_from_start.nanosec) == (0, 5_000_000)
+
+
+def test_a_recording_takes_the_profiles_topics() -> None:
+    from dualarm_control.app.run.launcher import GRAPH_TOPICS, with_profile_topics
+
+    assert with_profile_topics(GRAPH_TOPICS, [], NAMES) == GRAPH_TOPICS
+    got = with_profile_topics(GRAPH_TOPICS, [str(CONFIG / "lbr_dual_position.yaml")], NAMES)
+    assert got[:4] == ("/left/joint_states", "/right/joint_states", "/left/forward_position_controller/commands",
+                       "/right/forward_position_controller/commands")
+    assert "/joint_states" not in got and "/diagnostics" in got
