@@ -201,3 +201,19 @@ def test_position_commands_hold_the_arms_after_the_controller_is_killed() -> Non
                 p.terminate()
             p.wait(timeout=30)
     assert drift < 1e-4, f"the arms drifted {drift:.2e} rad in 1 s after the controller was killed"
+
+
+def test_the_position_profile_in_real_time(tmp_path: Path) -> None:
+    """lbr_dual_position in real time (two joint-state topics assembled by stamp, position commands):
+    the scenario completes with a final error below 1 mm."""
+    profile = profile_of("lbr_dual_position")
+    bag = tmp_path / "bag"
+    topics = (*profile.joint_states, *profile.topics, "/diagnostics")
+    assert launch_scenario(str(SHORT), [str(profile_file("lbr_dual_position"))], [], False, bag, timeout=240.0,
+                           record_topics=topics) == 0
+    recorded = read_bag(bag)
+    status = [s for d in recorded["/diagnostics"] for s in d.status if s.name == "controller_node"]
+    errors = [float(kv.value) for s in status for kv in s.values if kv.key == "position_error_m"]
+    assert errors, f"no controller cycle: {[s.message for s in status][-5:]}"
+    assert errors[-1] < 1e-3
+    assert all(len(recorded[t]) > 100 for t in topics), {t: len(recorded.get(t, [])) for t in topics}
