@@ -50,11 +50,16 @@ def _topic_list(value: Any) -> str:
     return ""
 
 
+RESERVED = ("outputs", "joint_states", "stamp_tolerance", "startup_check")
+
+
 def _output_names(value: Any) -> str:
-    """output names (letters, digits, '_'), at least one, no duplicates"""
+    """output names (letters, digits, '_'; not outputs, joint_states, stamp_tolerance, startup_check), at least
+    one, no duplicates"""
     names = [v for v in value if v]
-    if not names or len(set(names)) != len(names) or not all(n.replace("_", "").isalnum() for n in names):
-        return "output names (letters, digits, '_'), at least one, no duplicates"
+    if (not names or len(set(names)) != len(names) or not all(n.replace("_", "").isalnum() for n in names)
+            or set(names) & set(RESERVED)):
+        return f"output names (letters, digits, '_'; not {', '.join(RESERVED)}), at least one, no duplicates"
     return ""
 
 

@@ -64,6 +64,7 @@ def test_per_arm_outputs_in_their_own_order() -> None:
     ({"hardware.left.message": "twist"}, ["hardware.left.message", "joint_trajectory"]),
     ({"hardware.joint_states": ["joint_states"]}, ["hardware.joint_states", "absolute"]),
     ({"hardware.outputs": ["left", "left"]}, ["hardware.outputs", "no duplicates"]),
+    ({"hardware.outputs": ["left", "joint_states"]}, ["hardware.outputs", "not outputs, joint_states"]),
     ({"hardware.stamp_tolerance": 0.0}, ["hardware.stamp_tolerance", "> 0"]),
 ])
 def test_a_bad_profile_is_refused_naming_the_key_and_the_joint_or_topic(changes: dict[str, object],
