@@ -43,7 +43,7 @@ def test_the_profile_the_simulator_speaks_can_run(lbr_sim: None) -> None:
     out = result.stdout
     assert "joint states /left/joint_states: publishers /sim_node [sensor_msgs/msg/JointState]" in out, out
     assert ("command /right/forward_position_controller/commands (position, 7 joints): subscribers /sim_node "
-            "[std_msgs/msg/Float64MultiArray]") in out, out
+            "[std_msgs/msg/Float64MultiArray]; publishers none") in out, out
     assert "joints matched: 14 of 14" in out, out
     assert out.rstrip().endswith("the profile can run"), out
 

@@ -176,7 +176,8 @@ def test_graph_check_names_each_problem() -> None:
     graph = {"/left/joint_states": [info("joint_state_broadcaster", "sensor_msgs/msg/JointState")],
              "/right/joint_states": [info("joint_state_broadcaster", "sensor_msgs/msg/JointState")],
              "/left/commands": [info("left", "trajectory_msgs/msg/JointTrajectory")]}
-    node = SimpleNamespace(get_publishers_info_by_topic=lambda t: graph.get(t, []) if "states" in t else [],
+    node = SimpleNamespace(get_publishers_info_by_topic=lambda t: graph.get(t, []) if "states" in t else [
+                               info("controller_node", "std_msgs/msg/Float64MultiArray")],
                            get_subscriptions_info_by_topic=lambda t: graph.get(t, []) if "commands" in t else [])
     seen = {"/left/joint_states": [*LEFT, "gripper"], "/right/joint_states": RIGHT[:6]}
     report = check_graph(node, load_profile(per_arm(), NAMES), NAMES, seen)
@@ -186,6 +187,8 @@ def test_graph_check_names_each_problem() -> None:
          "std_msgs/msg/Float64MultiArray"),
         "no subscriber on /right/commands")
     assert "  8 joints, 7 of the robot's, extra: gripper" in report.lines
+    assert ("command /right/commands (velocity, 7 joints): subscribers none; publishers /left/controller_node "
+            "[std_msgs/msg/Float64MultiArray]") in report.lines
     assert not report.ok
 
 

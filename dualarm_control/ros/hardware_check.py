@@ -92,8 +92,9 @@ def check_graph(node: Any, profile: HardwareProfile, joint_names: Sequence[str],
         expected = COMMAND_TYPES[out.message]
         subs = others(node.get_subscriptions_info_by_topic(out.topic))
         endpoints += subs
+        pubs = others(node.get_publishers_info_by_topic(out.topic))
         lines.append(f"command {out.topic} ({out.interface}, {len(out.joints)} joints): subscribers "
-                     f"{_endpoints(subs)}")
+                     f"{_endpoints(subs)}; publishers {_endpoints(pubs)}")
         if not subs:
             problems.append(f"no subscriber on {out.topic}")
         for wrong in {i.topic_type for i in subs} - {expected}:
