@@ -568,6 +568,16 @@ class DualArmCell:
         names = [n for n, o in zip(self.joint_names, over) if o]
         return CommandReport(True, int(over.sum()), f"clipped to the velocity limits: {', '.join(names)}")
 
+    @property
+    def reference(self) -> FloatArray:
+        """The joint position controller's reference [rad], (n,): the integrated command (a copy)."""
+        return np.array(self._reference)
+
+    def hold(self, mask: np.ndarray) -> None:
+        """Zero the velocity command of the joints in ``mask`` (bool, (n,)): they hold their reference
+        (a position interface's last command), the command timeout unchanged."""
+        self._target = np.where(mask, 0.0, self._target)
+
     def step(self) -> JointSample:
         """Advance one control period (``substeps`` physics steps) and return the measured state.
 

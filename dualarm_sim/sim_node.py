@@ -3,7 +3,10 @@
 Publishes ``/joint_states`` every control period, and ``/wrench`` and ``/clock`` (simulation
 time, steps x period) every period while a subscription reads them (lazy, as image pipelines
 publish); applies
-``/velocity_controller/commands`` (Float64MultiArray, 14 values, controller joint order).
+``/velocity_controller/commands`` (Float64MultiArray, 14 values, controller joint order). Those are the
+default hardware profile's topics: with ``hardware.*`` (docs/hardware.md) it takes the profile's command
+outputs (topics, message types, velocity or position interfaces) and publishes its joint-state topics
+as joint_state_broadcaster does (``state_order``, ``extra_joints``, a topic per namespace).
 A command older than ``command_timeout`` (simulation time, counted in steps, as a robot's
 own cycle counts it) brings the arms to rest, in both modes. A malformed command (bad CDR,
 wrong length, NaN/inf) is rejected (throttled log, WARN on ``/diagnostics``, counted) and the
@@ -39,6 +42,7 @@ the first state is sent once ``lockstep_subscribers`` readers of /joint_states a
 
 from __future__ import annotations
 
+import functools
 import sys
 import time
 from typing import Any
@@ -50,9 +54,12 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
+from trajectory_msgs.msg import JointTrajectory
 
+from dualarm_control.hardware import HARDWARE_PARAMETERS, profile_from_values
 from dualarm_control.params import ParamSpec, non_negative, positive
 from dualarm_control.ros import convert
+from dualarm_control.ros.hardware_io import declare_with_profile
 from dualarm_control.ros.inputs import Throttle, subscribe_checked
 from dualarm_control.ros.local_bus import (
     LocalBus,
@@ -61,7 +68,6 @@ from dualarm_control.ros.local_bus import (
 )
 from dualarm_control.ros.node import (
     Tick,
-    declare,
     priority_from_args,
     request_realtime_priority,
     run,
@@ -77,6 +83,7 @@ from dualarm_control.ros.qos import (
 from dualarm_control.scenario import ROBOT_PARAMETER, load_scenario, scenario_names
 from dualarm_sim.cell import CellConfig, DualArmCell, JointSample
 from dualarm_sim.contacts import ContactCounter
+from dualarm_sim.ports import STATE_ORDERS, CommandMerger, state_layout
 
 PARAMETERS = (
     ParamSpec("scenario", "assembly", "scenario name or YAML path (initial configuration)", read_only=True),
@@ -98,6 +105,11 @@ PARAMETERS = (
     ParamSpec("lockstep_start_delay", 0.5, "wait after the joint_states readers matched, so that their other "
               "subscriptions (a recorder's /clock, /wrench) match too [s]", check=non_negative, read_only=True),
     QOS_PARAMETER,
+    *HARDWARE_PARAMETERS,
+    ParamSpec("state_order", STATE_ORDERS[0], "order of the joints on the joint-state topics (joint_state_broadcaster: "
+              "the hardware's own)", choices=lambda: list(STATE_ORDERS), read_only=True),
+    ParamSpec("extra_joints", [""], "joints the hardware has beyond the robot's (a gripper): on every joint-state "
+              "topic, at 0", read_only=True),
 )
 STATUS_PERIOD_S = 1.0
 
@@ -116,7 +128,7 @@ class SimNode:
 
     def __init__(self, context: Any, priority_note: str = "disabled", bus: LocalBus | None = None) -> None:
         self.node = Node("sim_node", context=context)
-        p = declare(self.node, PARAMETERS)
+        p = declare_with_profile(self.node, PARAMETERS)
         scenario = load_scenario(p["scenario"], p["robot"])
         tasks = scenario.tasks  # a task scenario: its cell (pan and brush), table and contact pair
         robot = scenario.robot
@@ -129,8 +141,12 @@ class SimNode:
                                  contact_pairs=(tasks.contact_links,) if tasks is not None and p["force"] else ()),
             initial_positions=plan_start(p["plan"], robot.joint_names) if p["plan"] else scenario.initial_positions,
         )
-        # /joint_states as joint_state_broadcaster gives them: the arms' joints, then the held (locked) ones
-        self.state_names = self.cell.joint_names + self.cell.held_names
+        # joint states as joint_state_broadcaster gives them: the arms' joints, the held (locked) ones, the extra ones
+        profile = profile_from_values(p, robot.joint_names, "sim_node")
+        self.extra = [j for j in p["extra_joints"] if j]
+        self.layout = state_layout(profile, self.cell.joint_names, self.cell.held_names, self.extra, p["state_order"])
+        self.merger = CommandMerger(profile, self.cell.joint_names, p["control_period"])
+        self.holds = bool(self.merger.position_mask.any())
         self.table = tasks is not None
         self.contact = tasks.contact_links if tasks is not None and p["force"] else None
         self.table_contacts = 0  # contact points with the table, summed over steps (as the in-process runner)
@@ -145,8 +161,8 @@ class SimNode:
         n = self.node
         qos = stream_qos(p["qos_reliability"])
         depth = publisher_depth(self.lockstep)
-        self.pub_js = local_publisher(bus, n.create_publisher(
-            JointState, "/joint_states", stream_qos(p["qos_reliability"], depth)), "/joint_states")
+        self.pub_js = [local_publisher(bus, n.create_publisher(JointState, s.topic, stream_qos(
+            p["qos_reliability"], depth)), s.topic) for s in self.layout]
         self.pub_wrench = local_publisher(bus, n.create_publisher(WrenchStamped, "/wrench", depth), "/wrench")
         self.pub_clock = n.create_publisher(Clock, "/clock", depth)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -154,8 +170,12 @@ class SimNode:
         self.pub_description.publish(String(data=robot.urdf_xml))
         self.pub_contact = (n.create_publisher(Vector3Stamped, "/contact_force", depth) if self.contact is not None
                             else None)
-        subscribe_checked(n, Float64MultiArray, "/velocity_controller/commands", self.on_command, qos, self.reject,
-                          convert.CommandInput(len(self.cell.joint_names)), bus)
+        for o in profile.outputs:
+            array = o.message == "float64_multi_array"
+            subscribe_checked(n, Float64MultiArray if array else JointTrajectory, o.topic,
+                              functools.partial(self.on_command, o.name), qos, self.reject,
+                              convert.CommandInput(len(o.joints)) if array else
+                              convert.TrajectoryCommandInput(o.joints, o.interface), bus)
         self.log = n.get_logger()
         self.throttle = Throttle(1.0)
         self.steps = 0
@@ -193,10 +213,13 @@ class SimNode:
         ns = self._stamp_ns()
         publish_if_subscribed(self.pub_clock, lambda: convert.clock(self.steps * self.period_ns))
         positions, velocities = sample.positions, sample.velocities
-        if self.cell.held_names:
+        if self.cell.held_names or self.extra:
             held_q, held_qd = self.cell.held_state()
-            positions, velocities = np.concatenate((positions, held_q)), np.concatenate((velocities, held_qd))
-        self.pub_js.publish(convert.joint_state(self.state_names, ns, positions, velocities))
+            zeros = np.zeros(len(self.extra))
+            positions = np.concatenate((positions, held_q, zeros))
+            velocities = np.concatenate((velocities, held_qd, zeros))
+        for pub, state in zip(self.pub_js, self.layout):
+            pub.publish(convert.joint_state(state.names, ns, positions[state.indices], velocities[state.indices]))
         publish_if_subscribed(self.pub_wrench, lambda: convert.wrench_stamped(ns, self.cell.wrench()))
         if self.pub_contact is not None and self.contact is not None:
             contact = self.contact
@@ -212,12 +235,16 @@ class SimNode:
         self.pub_diag.publish(convert.diagnostics(self._stamp_ns(), "sim_node", 1, reason,
                                                   {"status": "input_rejected", "rejected_inputs": self.rejected}))
 
-    def on_command(self, data: np.ndarray | str) -> None:
+    def on_command(self, output: str, data: np.ndarray | str) -> None:
+        """A command of one output of the profile; lockstep: the step runs once every output's has arrived."""
         self.received += 1
         if isinstance(data, str):
             self.reject(data)
             return
-        report = self.cell.apply_command(data)
+        self.merger.put(output, data, self.cell.reference)
+        if self.lockstep and not self.merger.complete:
+            return
+        report = self.cell.apply_command(self.merger.take())
         if report.clipped:
             line = self.throttle.text(f"command: {report.reason}")
             if line is not None:
@@ -241,6 +268,8 @@ class SimNode:
             self.log.info("commands resumed")
         self.timed_out = timed_out
         self.stepped = self.cell.step()
+        if self.holds:  # a position command moves its joints once, then they hold it
+            self.cell.hold(self.merger.position_mask)
         self.steps += 1
         if self.table:
             self.table_contacts += self.cell.table_contacts()
@@ -267,7 +296,7 @@ class SimNode:
         state without a command is then the run's end (no target for it) or a node stopping, and a
         re-sent one would only repeat its stamp in a recording while the nodes flush (ros.node.run)."""
         if not self.started:
-            if self.node.count_subscribers("/joint_states") < self.wait_for:
+            if min(self.node.count_subscribers(s.topic) for s in self.layout) < self.wait_for:
                 return
             if self.readers_matched_at is None:
                 self.readers_matched_at = time.monotonic()

@@ -37,6 +37,13 @@ def cmd_robot(args: argparse.Namespace) -> int:
     return command.ready_command(args.robot, args.distance, args.center, args.starts, args.seed)
 
 
+def cmd_hardware(args: argparse.Namespace) -> int:
+    """``dualarm hardware check``: :mod:`dualarm_control.app.hardware.command`."""
+    from dualarm_control.app.hardware.command import check_command
+
+    return check_command(args.params, args.robot, args.timeout)
+
+
 def cmd_experiment(args: argparse.Namespace) -> int:
     """Run a scenario in-process (lockstep): :func:`dualarm_control.app.run.command.experiment_command`."""
     from dualarm_control.app.run.command import experiment_command
@@ -595,6 +602,20 @@ def build_parser() -> argparse.ArgumentParser:
                      "row is also run with the nodes and the recorder importing DIR (PYTHONPATH, same venv), right "
                      "before the current tree's, labelled with DIR's short commit")
     ben.set_defaults(func=cmd_bench)
+
+    hw = sub.add_parser("hardware", help="hardware profiles against a live ros2_control graph (docs/hardware.md)",
+                        description="Hardware profiles (hardware.* parameters of the controller, config/hardware/).")
+    hverbs = hw.add_subparsers(dest="hardware_verb", metavar="HARDWARE_VERB", required=True)
+    chk = hverbs.add_parser("check", help="does the profile match the live graph? (exit 0 only when it can run)",
+                            description="List the profile's joint-state and command topics on the live graph, their "
+                            "publishers and subscribers with types, the joint names matched or missing, and one line "
+                            "per problem. Waits for discovery up to --timeout; exit 0 only when the profile can run.")
+    chk.add_argument("--params", action="append", default=[], metavar="FILE",
+                     help="the controller's parameter file with the profile (repeatable; default: the default profile)")
+    chk.add_argument("--timeout", type=float, default=10.0, metavar="S",
+                     help="how long to wait for the graph to match (discovery takes up to ~4 s)")
+    add_robot_argument(chk)
+    chk.set_defaults(func=cmd_hardware)
 
     run = sub.add_parser("run", help="run one node (like ros2 run dualarm_control NODE)",
                          description="Run NODE (sim_node, controller_node, trajectory_node) in the foreground. "

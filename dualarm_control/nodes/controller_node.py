@@ -6,7 +6,8 @@ runner runs, with the same model, gain and cycle count (``ReferenceSource.tracke
 also a planned joint trajectory on ``/joint_reference`` (``plan:=FILE``: qd_ref + K (q_ref - q),
 K the plan's execution.gain, eq 23 bounds), or none for the tasks of a task scenario
 (``scenario:=pan_cleaning``, paper 001; ``/wrench`` with ``force:=true``, eq 9). Publishes
-``/velocity_controller/commands`` and ``/diagnostics`` (one per cycle), and ``/relative_pose``
+``/velocity_controller/commands`` (the default hardware profile: ``hardware.*`` gives the command
+outputs and the joint-state topics, docs/hardware.md) and ``/diagnostics`` (one per cycle), and ``/relative_pose``
 every cycle while it has a reader. The control math is the core's.
 
 Real time: a command per joint state (read -> update -> write, as ros2_control); a tick at the
@@ -41,12 +42,12 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.node import Node
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
 from dualarm_control import controller as core
 from dualarm_control.collision_limit import CollisionReport
+from dualarm_control.errors import DualArmError
+from dualarm_control.hardware import HARDWARE_PARAMETERS, profile_from_values
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import ParamSpec, non_negative, positive
 from dualarm_control.references.base import (
@@ -60,15 +61,21 @@ from dualarm_control.references.base import (
 from dualarm_control.references.plan import PlanSource
 from dualarm_control.ros import convert, inputs, local_bus
 from dualarm_control.ros import node as shell
+from dualarm_control.ros.hardware_check import check_graph
+from dualarm_control.ros.hardware_io import (
+    CommandSink,
+    JointStates,
+    declare_with_profile,
+)
 from dualarm_control.ros.output import CommandOutput
 from dualarm_control.ros.qos import QOS_PARAMETER, publisher_depth, stream_qos
 from dualarm_control.scenario import ROBOT_PARAMETER, load_scenario
 
 DEFAULT_PRIORITY = 50
-COMMANDS = "/velocity_controller/commands"
 WATCHDOG_MIN_PERIOD_S = 0.005  # the watchdog ticks at the control rate, at most 200 Hz
 STATS_EVERY = 200  # cycles between percentile updates
 MOVING = 1e-9  # a target twist / reference velocity norm above this is motion [m/s, rad/s]
+CHECK_PERIOD_S = 0.1  # hardware.startup_check: the graph is checked this often until it matches
 END_DELAY_S = 0.5  # task mode: spin this long after the last cycle, so that a recorder gets the last messages
 NODE_PARAMETERS = (
     ParamSpec("lockstep", False, "compute one command per joint-state stamp (deterministic runs)", read_only=True),
@@ -92,6 +99,7 @@ NODE_PARAMETERS = (
               "readers (the launcher sets 1 when recording: the bag then holds the run from t = 0)",
               check=non_negative, read_only=True),
     ROBOT_PARAMETER,
+    *HARDWARE_PARAMETERS,
 )
 ALL_PARAMETERS = core.CONTROLLER_PARAMETERS + NODE_PARAMETERS
 
@@ -103,9 +111,10 @@ class ControllerNode:
     def __init__(self, context: Any, priority_note: str = "disabled", bus: local_bus.LocalBus | None = None) -> None:
         self.node = n = Node("controller_node", context=context)
         self.log = n.get_logger()
-        self.values = shell.declare(n, ALL_PARAMETERS)
+        self.values = declare_with_profile(n, ALL_PARAMETERS)
         self.lockstep = bool(self.values["lockstep"])
         self.scenario = load_scenario(self.values["scenario"], self.values["robot"])
+        self.profile = profile_from_values(self.values, self.scenario.robot.joint_names, n.get_name())
         # the parameters, with the scenario's allowed contacts (the assembly's tools) in the collision limit
         self.params = self.scenario.controller_params(core.controller_params(self.values, n.get_name()))
         self.model = DualArmModel(self.scenario.robot)
@@ -127,16 +136,19 @@ class ControllerNode:
         qos = stream_qos(self.values["qos_reliability"])
         depth = publisher_depth(self.lockstep)
         self.pub_pose = n.create_publisher(PoseStamped, "/relative_pose", depth)
-        self.out = CommandOutput("controller_node", self.log, local_bus.local_publisher(bus, n.create_publisher(
-            Float64MultiArray, COMMANDS, stream_qos(self.values["qos_reliability"], depth)), COMMANDS),
-            n.create_publisher(DiagnosticArray, "/diagnostics", depth), self.model.nq, self.timing)
+        m = self.model
+        self.sink = CommandSink(n, self.profile, m.joint_names, (m.q_min, m.q_max, m.qd_max), self.params.period,
+                                stream_qos(self.values["qos_reliability"], depth), bus)
+        self.out = CommandOutput("controller_node", self.log, self.sink,
+                                 n.create_publisher(DiagnosticArray, "/diagnostics", depth), self.model.nq, self.timing)
         self.out.solver = self.params.solver
         order = {name: i for i, name in enumerate(self.model.joint_names)}
 
         def subscribe(msg_type: Any, topic: str, callback: Any, qos: Any, decoder: Any = None) -> None:
             inputs.subscribe_checked(n, msg_type, topic, callback, qos, self.on_malformed, decoder, bus)
 
-        subscribe(JointState, "/joint_states", self.on_joint_state, qos, convert.JointStateInput(order))
+        self.joint_states = JointStates(n, self.profile, m.joint_names, qos, self.on_joint_state, self.out.reject,
+                                        self.on_malformed, bus)
         if RELATIVE_TARGET in self.streams:
             subscribe(MultiDOFJointTrajectory, RELATIVE_TARGET, lambda s: self.on_input(RELATIVE_TARGET, *s),
                       qos, convert.TargetInput(self.model.relative_reach()))
@@ -151,6 +163,10 @@ class ControllerNode:
                                     collision=self.tracker.controller.collision_model)))
         self.ticks: list[shell.Tick] = ([] if self.lockstep else  # ros.node.Ticker, not an rclpy timer
                                         [(max(self.params.period, WATCHDOG_MIN_PERIOD_S), self.on_watchdog)])
+        check_s = float(self.values["hardware.startup_check"])
+        self.check_deadline = time.monotonic() + check_s if check_s > 0 else None  # None: checked (or no check)
+        if self.check_deadline is not None:
+            self.ticks.append((CHECK_PERIOD_S, self.on_startup_check))
         self.log.info(f"{self.tracker.label} on scenario '{self.scenario.name}' ({source.describe()}"
                       f"{f', {self.tracker.steps} cycles' if self.timed else ''}), robot '{self.model.description.name}'"
                       f" ({self.model.nq} joints), solver '{self.params.solver}' (K={self.params.gain}, "
@@ -200,16 +216,14 @@ class ControllerNode:
                 self.last_commanded_stamp = None
         return verdict.accepted
 
-    def on_joint_state(self, sample: tuple[int, tuple[np.ndarray, np.ndarray] | str]) -> None:
-        stamp, decoded = sample
-        if isinstance(decoded, str):  # keep the last good state; it goes stale -> safe command
-            self.out.reject(stamp, decoded)
-            return
+    def on_joint_state(self, stamp: int, q: np.ndarray, now: int) -> None:
+        """A consistent state of both arms (:class:`JointStates`; a rejected sample is reported there and
+        the last good state kept: it goes stale -> safe command)."""
         if not self.stamp_accepted("/joint_states", stamp):
             return
-        now = time.monotonic_ns()
         self.timing.arrival(now, self.params.period)
-        self.state = (stamp, decoded[0], now)
+        self.state = (stamp, q, now)
+        self.sink.measure(q)
         self.try_cycle()
 
     def on_input(self, stream: str, stamp: int, value: Any) -> None:
@@ -228,6 +242,10 @@ class ControllerNode:
             return
         stamp, q, _ = self.state
         if stamp == self.last_commanded_stamp and (self.lockstep or self.timed):
+            return
+        if self.check_deadline is not None:  # the profile is not known to match the graph yet: no motion
+            if not self.lockstep:
+                self.out.safe(stamp, "checking the hardware profile against the graph")
             return
         inputs = self.inputs.at(stamp) if self.lockstep else self.fresh_inputs(stamp)
         if inputs is None:
@@ -337,10 +355,31 @@ class ControllerNode:
             return
         now = time.monotonic_ns()
         age = now - self.state[2]
-        reason = (f"joint_states stale by {age / 1e6:.1f} ms" if age > self.values["stale_timeout"] * 1e9
+        timeout = self.values["stale_timeout"] * 1e9
+        reason = ((self.stale_topics(now, timeout) or f"joint_states stale by {age / 1e6:.1f} ms") if age > timeout
                   else self.target_fault(now))
         if reason:
             self.out.enter_safe_state(self.state[0], reason)
+
+    def on_startup_check(self) -> None:
+        """``hardware.startup_check``: commands start once the profile matches the graph; past the deadline
+        the controller is refused (exit 2) with one line per problem."""
+        if self.check_deadline is None:
+            return
+        report = check_graph(self.node, self.profile, self.model.joint_names, self.joint_states.names_seen())
+        if report.ok:
+            self.check_deadline = None
+            self.log.info("hardware profile matches the graph:\n" + "\n".join(report.lines))
+            if self.state is not None and self.lockstep:
+                self.try_cycle()
+        elif time.monotonic() > self.check_deadline:
+            raise DualArmError("the hardware profile does not match the graph: " + "; ".join(report.problems))
+
+    def stale_topics(self, now: int, timeout: float) -> str:
+        """Several joint-state topics: which one is stale (the arm it carries), or their stamps beyond the
+        tolerance ('' with one topic: today's reason)."""
+        assembler = self.joint_states.assembler
+        return assembler.stale_reason(now, timeout) if len(assembler.topics) > 1 else ""
 
     def target_fault(self, now: int) -> str:
         """Why the target streams count as stopped mid-motion ('' if they do not): their last sample

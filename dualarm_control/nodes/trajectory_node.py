@@ -31,9 +31,9 @@ from typing import Any
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
-from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
+from dualarm_control.hardware import HARDWARE_PARAMETERS, profile_from_values
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import ParamSpec, positive
 from dualarm_control.references.base import (
@@ -45,12 +45,8 @@ from dualarm_control.references.base import (
 from dualarm_control.references.goals import GoalsSource, GoalsStream
 from dualarm_control.references.plan import PlanSource
 from dualarm_control.ros import convert
-from dualarm_control.ros.inputs import (
-    StampGate,
-    Throttle,
-    subscribe_checked,
-    unsubscribe,
-)
+from dualarm_control.ros.hardware_io import JointStates, declare_with_profile
+from dualarm_control.ros.inputs import StampGate, Throttle
 from dualarm_control.ros.local_bus import LocalBus, local_publisher
 from dualarm_control.ros.node import (
     Tick,
@@ -81,6 +77,7 @@ PARAMETERS = (
     ParamSpec("repeat", False, "start the scenario again from the current pose when it completes (soak runs)",
               read_only=True),
     ROBOT_PARAMETER,
+    *HARDWARE_PARAMETERS,  # the joint-state topics (issue 29; the outputs are validated as the controller's)
 )
 
 
@@ -96,8 +93,9 @@ class TrajectoryNode:
 
         self.node = Node("trajectory_node", context=context)
         self.bus = bus
-        p = declare(self.node, PARAMETERS)
+        p = declare_with_profile(self.node, PARAMETERS)
         self.scenario = load_scenario(p["scenario"], p["robot"])
+        self.profile = profile_from_values(p, self.scenario.robot.joint_names, "trajectory_node")
         self.lockstep = bool(p["lockstep"])
         self.repeat = bool(p["repeat"])
         self.period = float(p["control_period"])
@@ -115,14 +113,13 @@ class TrajectoryNode:
             limits = declare(n, limit_specs(self.scenario.limits))
             self.drive = InteractiveDrive(n, self.model, MotionLimits(
                 **{k[len(LIMIT_PREFIX):]: v for k, v in limits.items()}), self.qos)
-        self.order = {name: i for i, name in enumerate(self.model.joint_names)}
         depth = stream_qos(p["qos_reliability"], publisher_depth(self.lockstep))
         self.pub = local_publisher(bus, n.create_publisher(MultiDOFJointTrajectory, RELATIVE_TARGET, depth),
                                    RELATIVE_TARGET)
         self.pub_joint = (local_publisher(bus, n.create_publisher(JointTrajectory, JOINT_REFERENCE, depth),
                                           JOINT_REFERENCE) if JOINT_REFERENCE in self.source.streams else None)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.states: Any = None  # the /joint_states subscription while one is needed
+        self.states: JointStates | None = None  # the joint-state subscriptions while they are needed
         self.subscribe_states()
         self.throttle = Throttle(1.0)
         self.gate = StampGate("joint_states")
@@ -137,15 +134,12 @@ class TrajectoryNode:
             self.log.warning(priority_note)
 
     def subscribe_states(self) -> None:
-        self.states = subscribe_checked(self.node, JointState, "/joint_states", self.on_joint_state, self.qos,
-                                        self.reject, convert.JointStateInput(self.order), self.bus)
+        self.states = JointStates(self.node, self.profile, self.model.joint_names, self.qos, self.on_joint_state,
+                                  lambda stamp, reason: self.reject(f"joint state rejected: {reason}"), self.reject,
+                                  self.bus)
 
-    def on_joint_state(self, sample: tuple[int, tuple[np.ndarray, np.ndarray] | str]) -> None:
+    def on_joint_state(self, stamp: int, q: np.ndarray, received: int) -> None:
         if self.finished:
-            return
-        stamp, decoded = sample
-        if isinstance(decoded, str):
-            self.reject(f"joint state rejected: {decoded}")
             return
         verdict = self.gate.check(stamp)
         if verdict.message:
@@ -153,10 +147,10 @@ class TrajectoryNode:
         if not verdict.accepted:
             return
         if self.drive is not None:
-            self.drive.q = decoded[0]
+            self.drive.q = q
         if self.stream is None:
             options = RunOptions(self.scenario.limits, self.scenario.settle_time)
-            self.stream = self.source.stream(self.model, decoded[0], options, self.period)
+            self.stream = self.source.stream(self.model, q, options, self.period)
             self.start_ns = stamp if self.lockstep else self.node.get_clock().now().nanoseconds
             if self.drive is not None and isinstance(self.stream, GoalsStream):
                 self.drive.start(self.stream.generator)
@@ -174,7 +168,7 @@ class TrajectoryNode:
     def on_tick(self) -> None:
         if self.stream is not None:
             if self.states is not None and self.drive is None:  # started: the timer drives the stream
-                unsubscribe(self.node, self.states)  # (not destroyed in its own callback)
+                self.states.close()  # (not destroyed in its own callback)
                 self.states = None
             now = self.node.get_clock().now().nanoseconds
             self.publish(now, now - self.start_ns)

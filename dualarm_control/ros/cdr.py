@@ -241,6 +241,22 @@ def joint_state(ns: int, names: Sequence[str], position: np.ndarray, velocity: n
     return w.bytes()
 
 
+def joint_trajectory_point(names: Sequence[str], positions: Sequence[float] | np.ndarray,
+                           velocities: Sequence[float] | np.ndarray, from_start_ns: int) -> bytes:
+    """trajectory_msgs/JointTrajectory with a zero header stamp (start now) and one point: ``positions``,
+    ``velocities`` (either may be empty), no accelerations or efforts, ``time_from_start``."""
+    w = Writer()
+    w.header(0, "")
+    w.strings(names)
+    w.u32(1)  # points
+    w.double_seq(positions)
+    w.double_seq(velocities)
+    w.u32(0)  # accelerations
+    w.u32(0)  # effort
+    w.time(from_start_ns)
+    return w.bytes()
+
+
 def clock(ns: int) -> bytes:
     """rosgraph_msgs/Clock."""
     w = Writer()

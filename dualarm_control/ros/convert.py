@@ -68,13 +68,34 @@ class JointStateInput:
     Rejected: duplicate or missing names, a position count different from the name count, a
     velocity count that is neither 0 (then qd = 0) nor the name count, NaN or inf. The name ->
     index mapping is computed once per distinct names tuple (a stream repeats its names).
+    ``partial`` (one of several joint-state topics, issue 29): the model's joints the message carries,
+    in model order, their model indices in :attr:`present`; none of them makes it unusable.
     """
 
-    def __init__(self, order: Mapping[str, int]) -> None:
+    def __init__(self, order: Mapping[str, int], partial: bool = False) -> None:
         self.order = order
+        self.partial = partial
         self.read = cdr.JointStateReader()
         self._names: tuple[str, ...] | None = None
         self._idx: list[int] | str = ""
+        self.present = np.arange(len(order))
+        """Model index of each value decoded (``partial``: the model's joints the last message carried)."""
+
+    @property
+    def names(self) -> tuple[str, ...] | None:
+        """The joint names of the last message decoded (None before one)."""
+        return self._names
+
+    def indices(self, names: tuple[str, ...]) -> list[int] | str:
+        """Index in ``names`` of each joint decoded (``partial``: of the model's joints among ``names``,
+        whose model indices become :attr:`present`), or why the message is unusable."""
+        if not self.partial:
+            return joint_indices(list(names), self.order, "joint_states")
+        carried = {n: i for n, i in self.order.items() if n in names}
+        if not carried:
+            return f"joint_states carries none of the robot's joints (got {list(names)[:3]}...)"
+        self.present = np.array(list(carried.values()), dtype=int)
+        return joint_indices(list(names), carried, "joint_states")
 
     def from_bytes(self, data: bytes) -> tuple[int, tuple[np.ndarray, np.ndarray] | str]:
         """The fast path: the CDR payload (raises :class:`cdr.CdrError` if it cannot read it)."""
@@ -92,7 +113,7 @@ class JointStateInput:
     def vectors(self, names: tuple[str, ...], position: np.ndarray,
                 velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray] | str:
         if names is not self._names and names != self._names:
-            self._names, self._idx = names, joint_indices(list(names), self.order, "joint_states")
+            self._names, self._idx = names, self.indices(names)
         idx = self._idx
         if isinstance(idx, str):
             return idx
@@ -129,6 +150,31 @@ class CommandInput:
         if not finite(data):
             return f"command with NaN or inf at indices {np.flatnonzero(~np.isfinite(data))[:5].tolist()} rejected"
         return data.copy()
+
+
+class TrajectoryCommandInput:
+    """A one-point trajectory_msgs/JointTrajectory command (MoveIt Servo's form) -> the values of
+    ``joints`` in that order (positions or velocities per ``interface``), or why it is unusable."""
+
+    def __init__(self, joints: Sequence[str], interface: str) -> None:
+        self.order = {name: i for i, name in enumerate(joints)}
+        self.interface = interface
+        self.check = CommandInput(len(joints)).check
+
+    def from_bytes(self, data: bytes) -> np.ndarray | str:
+        raise cdr.CdrError("decoded by rclpy")
+
+    def from_message(self, msg: Any) -> np.ndarray | str:
+        if len(msg.points) != 1:
+            return f"trajectory command with {len(msg.points)} points rejected: expected 1"
+        idx = joint_indices(list(msg.joint_names), self.order, "trajectory command")
+        if isinstance(idx, str):
+            return idx
+        field = msg.points[0].positions if self.interface == "position" else msg.points[0].velocities
+        values = np.asarray(field, dtype=float)
+        if values.shape != (len(msg.joint_names),):
+            return f"trajectory command with {values.size} {self.interface}s for {len(msg.joint_names)} joints rejected"
+        return self.check(values[idx])
 
 
 def float_array(values: np.ndarray) -> bytes:

@@ -27,10 +27,12 @@ ERROR = 2
 
 
 class CommandOutput:
-    """Commands, /diagnostics and the safe state of the node named ``name`` (``nq`` joints)."""
+    """Commands, /diagnostics and the safe state of the node named ``name`` (``nq`` joints); the
+    commands go out through ``sink`` (:class:`~dualarm_control.ros.hardware_io.CommandSink`: the
+    hardware profile's outputs)."""
 
-    def __init__(self, name: str, log: Any, pub_cmd: Any, pub_diag: Any, nq: int, timing: CycleTiming) -> None:
-        self.name, self.log, self.pub_cmd, self.pub_diag, self.nq = name, log, pub_cmd, pub_diag, nq
+    def __init__(self, name: str, log: Any, sink: Any, pub_diag: Any, nq: int, timing: CycleTiming) -> None:
+        self.name, self.log, self.sink, self.pub_diag, self.nq = name, log, sink, pub_diag, nq
         self.timing = timing
         self.solver = ""  # the running solver, named in every status
         self.count = dict.fromkeys(COUNTERS, 0)
@@ -43,9 +45,11 @@ class CommandOutput:
     def watchdog_text(self) -> str:
         return "ok" if self.fault is None else self.fault[0]
 
-    def send(self, velocities: np.ndarray) -> None:
-        self.pub_cmd.publish(convert.float_array(velocities))
-        if self.pub_cmd.get_subscription_count() == 0:
+    def send(self, velocities: np.ndarray, safe: bool = False) -> None:
+        """``velocities`` [rad/s] on every command output of the sink (``safe``: a safe stop, see
+        :meth:`~dualarm_control.ros.hardware_io.CommandSink.send`)."""
+        self.sink.send(velocities, safe)
+        if self.sink.get_subscription_count() == 0:
             self.count["unmatched_commands"] += 1
 
     def status(self, stamp: int, level: int, message: str, values: dict[str, Any]) -> None:
@@ -72,7 +76,7 @@ class CommandOutput:
 
     def safe(self, stamp: int, reason: str, level: int = 1) -> None:
         """Zero-velocity command with the reason on /diagnostics (``level``) and in the (throttled) log."""
-        self.send(np.zeros(self.nq))
+        self.send(np.zeros(self.nq), safe=True)
         self.count["safe_commands"] += 1
         self.report(stamp, reason, "safe_command", level)
 

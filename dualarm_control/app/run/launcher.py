@@ -56,6 +56,21 @@ TASK_TOPICS = ("/joint_states", "/velocity_controller/commands", "/diagnostics",
 the simulator's ``/contact_force``)."""
 
 
+def with_profile_topics(topics: Sequence[str], params: Sequence[str], joint_names: Sequence[str]) -> tuple[str, ...]:
+    """``topics`` with the joint-state and command topics of the hardware profile of the ``params`` files
+    (docs/hardware.md) in place of the default profile's (the same topics without a profile)."""
+    from dualarm_control.hardware import load_profile
+    from dualarm_control.params import read_params_files
+
+    profile = load_profile(read_params_files(params, "controller_node"), joint_names, "controller_node")
+    default = load_profile({}, joint_names)
+    out: list[str] = []
+    for topic in topics:
+        out += (profile.joint_states if topic in default.joint_states else
+                profile.topics if topic in default.topics else (topic,))
+    return tuple(dict.fromkeys(out))
+
+
 def node_command(node: str, ros_args: Sequence[str]) -> list[str]:
     """Command line running ``node`` with this interpreter; KeyError lists the valid nodes."""
     if node not in NODES:
@@ -252,6 +267,7 @@ def launch_scenario(
             if plan is not None and record_topics == GRAPH_TOPICS:
                 record_topics = PLAN_TOPICS
             if record is not None:  # subscribes the graph's topics once they all have a publisher
+                record_topics = with_profile_topics(record_topics, params, loaded.robot.joint_names)
                 # Real-time task runs start once the recorder reads /diagnostics (task_start_readers); it
                 # subscribes that topic last, once the others deliver: the bag then holds the run from t = 0.
                 gate = ("/diagnostics",) if tasks and not lockstep else ()

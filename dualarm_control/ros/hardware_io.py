@@ -1,0 +1,144 @@
+"""A hardware profile on the wire (issue 29, :mod:`dualarm_control.hardware`): the joint-state topics in,
+the command outputs out.
+
+* :class:`JointStates` subscribes every joint-state topic of the profile (matched by name) and hands
+  over each consistent state of both arms (:class:`~dualarm_control.hardware.StateAssembler`).
+* :class:`CommandSink` sends a cycle's joint velocities (the description's order) to every output of
+  the profile in one call: each output its joints, in its order, as Float64MultiArray or a one-point
+  JointTrajectory, as velocities or as integrated positions
+  (:class:`~dualarm_control.hardware.PositionIntegrator`).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from dualarm_control.hardware import (
+    HARDWARE_PARAMETERS,
+    HardwareProfile,
+    OutputSpec,
+    PositionIntegrator,
+    StateAssembler,
+    StateSample,
+    profile_parameters,
+)
+from dualarm_control.params import ParamSpec
+from dualarm_control.ros import cdr, convert
+from dualarm_control.ros.inputs import subscribe_checked, unsubscribe
+from dualarm_control.ros.local_bus import LocalBus, local_publisher
+
+
+def declare_with_profile(node: Any, specs: Sequence[ParamSpec]) -> dict[str, Any]:
+    """Declare ``specs`` (which hold :data:`~dualarm_control.hardware.HARDWARE_PARAMETERS`) and the
+    parameters of every command output ``hardware.outputs`` names (its value from the node's overrides:
+    the outputs' keys depend on it), in one call; the validated values."""
+    from dualarm_control.ros.node import declare
+
+    overrides = getattr(node, "_parameter_overrides", {})
+    key = HARDWARE_PARAMETERS[0].name
+    given = {key: overrides[key].value} if key in overrides else {}
+    return declare(node, [*specs, *profile_parameters(given)[len(HARDWARE_PARAMETERS):]])
+
+
+OnState = Callable[[int, np.ndarray, int], None]
+"""(stamp [ns], positions in the description's order [rad], receipt monotonic [ns])."""
+
+
+class JointStates:
+    """The profile's joint-state subscriptions; ``on_state`` per consistent state, ``on_reject(stamp,
+    reason)`` per unusable sample, ``on_malformed(reason)`` per undecodable one."""
+
+    def __init__(self, node: Any, profile: HardwareProfile, joint_names: Sequence[str], qos: Any,
+                 on_state: OnState, on_reject: Callable[[int, str], None], on_malformed: Callable[[str], None],
+                 bus: LocalBus | None = None) -> None:
+        from sensor_msgs.msg import JointState
+
+        self.node = node
+        topics = profile.joint_states
+        self.assembler = StateAssembler(topics, len(joint_names), round(profile.stamp_tolerance * 1e9))
+        self.on_state, self.on_reject = on_state, on_reject
+        order = {name: i for i, name in enumerate(joint_names)}
+        self.subscriptions = []
+        self.decoders: dict[str, convert.JointStateInput] = {}
+        for topic in topics:
+            self.decoders[topic] = decoder = convert.JointStateInput(order, partial=len(topics) > 1)
+            self.subscriptions.append(subscribe_checked(
+                node, JointState, topic, self.receiver(topic, decoder), qos, on_malformed, decoder, bus))
+
+    def receiver(self, topic: str, decoder: convert.JointStateInput) -> Callable[[Any], None]:
+        several = len(self.assembler.topics) > 1
+
+        def receive(sample: tuple[int, tuple[np.ndarray, np.ndarray] | str]) -> None:
+            stamp, decoded = sample
+            if isinstance(decoded, str):
+                self.on_reject(stamp, f"{topic}: {decoded}" if several else decoded)
+                return
+            now = time.monotonic_ns()
+            state = self.assembler.put(topic, StateSample(stamp, now, decoder.present, decoded[0]))
+            if state is not None:
+                self.on_state(state[0], state[1], now)
+        return receive
+
+    def names_seen(self) -> dict[str, tuple[str, ...]]:
+        """Per joint-state topic that delivered a message, the joint names of its last one."""
+        return {t: d.names for t, d in self.decoders.items() if d.names is not None}
+
+    def close(self) -> None:
+        for sub in self.subscriptions:
+            unsubscribe(self.node, sub)
+        self.subscriptions = []
+
+
+def trajectory_bytes(spec: OutputSpec, values: np.ndarray, period: float) -> bytes:
+    """A one-point trajectory_msgs/JointTrajectory (CDR) of ``spec``'s joints reached one ``period`` from
+    now (MoveIt Servo's form): ``values`` as positions or velocities per ``spec.interface``."""
+    empty = np.zeros(0)
+    return cdr.joint_trajectory_point(spec.joints, values if spec.position else empty,
+                                      empty if spec.position else values, round(period * 1e9))
+
+
+class CommandSink:
+    """Every command output of ``profile``; :meth:`send` publishes one cycle's command on all of them."""
+
+    def __init__(self, node: Any, profile: HardwareProfile, joint_names: Sequence[str], limits: tuple[
+                 np.ndarray, np.ndarray, np.ndarray], period: float, qos: Any, bus: LocalBus | None = None) -> None:
+        from std_msgs.msg import Float64MultiArray
+        from trajectory_msgs.msg import JointTrajectory
+
+        self.period = period
+        self.outputs: list[tuple[OutputSpec, np.ndarray, Any]] = []
+        for spec, idx in zip(profile.outputs, profile.indices(joint_names)):
+            msg_type = Float64MultiArray if spec.message == "float64_multi_array" else JointTrajectory
+            self.outputs.append((spec, idx, local_publisher(bus, node.create_publisher(msg_type, spec.topic, qos),
+                                                            spec.topic)))
+        self.integrator = PositionIntegrator(*limits, period)
+        self.positions = any(spec.position for spec, _, _ in self.outputs)
+        self.measured: np.ndarray | None = None
+
+    def measure(self, q: np.ndarray) -> None:
+        """The measured positions [rad] (description order) the next command is integrated from."""
+        self.measured = q
+
+    def send(self, velocities: np.ndarray, safe: bool) -> None:
+        """One cycle's command on every output: ``velocities`` [rad/s] (description order); ``safe``: a
+        safe stop (velocity outputs: zero; position outputs: hold the measured position, and the next
+        cycle integrates from the measurement). Position outputs send nothing before a measurement."""
+        positions = None
+        if self.positions and self.measured is not None:
+            positions = (self.integrator.hold(self.measured) if safe
+                         else self.integrator.command(velocities, self.measured))
+        for spec, idx, pub in self.outputs:
+            values = positions if spec.position else velocities
+            if values is None:
+                continue
+            part = values[idx]
+            pub.publish(convert.float_array(part) if spec.message == "float64_multi_array"
+                        else trajectory_bytes(spec, part, self.period))
+
+    def get_subscription_count(self) -> int:
+        """The fewest subscriptions matched on one output (0: some output has no reader)."""
+        return min(pub.get_subscription_count() for _, _, pub in self.outputs)

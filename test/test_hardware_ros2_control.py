@@ -1,0 +1,144 @@
+"""The controller in front of a ros2_control-like cell (issue 29): test/data/fake_ros2_control.py, a plain
+rclpy script posing as two JointGroupVelocityControllers (each its own joint order) and a
+joint_state_broadcaster (scrambled order, two extra joints), driven through a profile written for it;
+a profile that does not match the graph is refused at start, naming what does not match."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dualarm_control.scenario import load_scenario
+
+DATA = Path(__file__).parent / "data"
+SHORT = DATA / "short.yaml"
+FAKE = DATA / "fake_ros2_control.py"
+HANG_GUARD_S = 180.0  # a hang guard, not a timing claim
+LEFT = [f"left_joint_{i}" for i in (7, 6, 5, 4, 3, 2, 1)]  # the fake controllers' joints parameters
+RIGHT = [f"right_joint_{i}" for i in (2, 1, 4, 3, 6, 5, 7)]
+
+
+def profile(tmp_path: Path, right_topic: str = "/right_velocity_controller/commands", left_joints: list[str] = LEFT,
+            startup_check: float = 20.0) -> Path:
+    """The profile a user writes for the fake cell (topics default to /<output>/commands)."""
+    path = tmp_path / "fake_cell.yaml"
+    path.write_text(f"""/**:
+  ros__parameters:
+    hardware:
+      outputs: [left_velocity_controller, right_velocity_controller]
+      left_velocity_controller:
+        joints: {json.dumps(left_joints)}
+      right_velocity_controller:
+        topic: {right_topic}
+        joints: {json.dumps(RIGHT)}
+      joint_states: [/joint_states]
+      startup_check: {startup_check}
+""")
+    return path
+
+
+class Node:
+    """A node process whose stderr (its log) is collected as it comes."""
+
+    def __init__(self, name: str, params: Path) -> None:
+        self.proc = subprocess.Popen([sys.executable, "-m", "dualarm_control.app.cli", "run", name, "--ros-args",
+                                      "-p", f"scenario:={SHORT}", "--params-file", str(params)],
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        self.lines: list[str] = []
+        self.reader = threading.Thread(target=self.read, daemon=True)
+        self.reader.start()
+
+    def read(self) -> None:
+        assert self.proc.stderr is not None
+        for line in self.proc.stderr:
+            self.lines.append(line)
+
+    @property
+    def log(self) -> str:
+        return "".join(self.lines)
+
+    def wait_for(self, text: str, limit: float = HANG_GUARD_S) -> None:
+        end = time.monotonic() + limit
+        while text not in self.log:
+            assert self.proc.poll() is None or text in self.log, f"exited {self.proc.returncode}: {self.log[-3000:]}"
+            assert time.monotonic() < end, f"hang guard: no {text!r} in {self.log[-3000:]}"
+            time.sleep(0.05)
+
+    def stop(self) -> str:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+        try:
+            self.proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        self.reader.join(timeout=10)
+        return self.log
+
+
+def fake(rename: dict[str, str] | None = None) -> subprocess.Popen[str]:
+    scenario = load_scenario(str(SHORT))
+    initial = dict(zip(scenario.robot.joint_names, np.asarray(scenario.initial_positions).tolist()))
+    return subprocess.Popen([sys.executable, str(FAKE), json.dumps(initial), json.dumps(rename or {})],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def stop(proc: subprocess.Popen[str]) -> tuple[str, str]:
+    if proc.poll() is None:
+        proc.terminate()
+    try:
+        return proc.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        return proc.communicate()
+
+
+def test_two_velocity_controllers_and_a_broadcaster_drive_the_cell(tmp_path: Path) -> None:
+    """The targets start once the controller found the profile on the graph (hardware.startup_check)."""
+    params = profile(tmp_path)
+    cell = fake()
+    controller = Node("controller_node", params)
+    trajectory = None
+    try:
+        controller.wait_for("hardware profile matches the graph")
+        trajectory = Node("trajectory_node", params)
+        out, err = cell.communicate(timeout=HANG_GUARD_S)
+    finally:
+        c_log = controller.stop()
+        t_log = trajectory.stop() if trajectory is not None else ""
+        stop(cell)
+    result = json.loads(out.strip().splitlines()[-1])
+    seen = f"fake: {out}{err[-2000:]}\ncontroller: {c_log[-3000:]}\ntrajectory: {t_log[-2000:]}"
+    assert result["complete"], seen
+    assert result["received"]["left_velocity_controller"] > 100, seen
+    assert result["received"]["right_velocity_controller"] > 100, seen
+    assert result["position_error_m"] < 1e-3, seen
+
+
+@pytest.mark.parametrize(("change", "rename", "words"), [
+    ({"right_topic": "/right_arm_controller/commands", "startup_check": 8.0}, None,
+     ["no subscriber on /right_arm_controller/commands"]),
+    ({"startup_check": 8.0}, {"left_joint_7": "lbr_A7"}, ["joint left_joint_7 is on no joint-state topic"]),
+    ({"left_joints": [*LEFT[:6], "left_joint_8"]}, None, ["hardware.left_velocity_controller.joints",
+                                                           "left_joint_8"]),
+])
+def test_a_profile_that_does_not_match_the_graph_is_refused_at_start(
+        tmp_path: Path, change: dict[str, object], rename: dict[str, str] | None, words: list[str]) -> None:
+    params = profile(tmp_path, **change)  # type: ignore[arg-type]
+    cell = fake(rename)
+    controller = Node("controller_node", params)
+    try:
+        code = controller.proc.wait(timeout=HANG_GUARD_S)
+    finally:
+        log = controller.stop()
+        stop(cell)
+    assert code == 2, log[-3000:]
+    for word in words:
+        assert word in log, log[-3000:]
