@@ -96,7 +96,7 @@ def run_one(spec: SweepSpec, key: RunKey) -> dict[str, Any]:
         summary = summarize_run(record, scenario, model)
         row.update({c: float(summary[c]) for c in METRIC_COLUMNS if c in summary})
         row.update(steps=len(record.time), task_duration_s=task.duration)
-    except Exception as exc:  # a run's failure is its row, not the sweep's crash
+    except Exception as exc:  # noqa: BLE001 -- a run's failure is its row, not the sweep's crash
         row["error"] = f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}"
     row["wall_time_s"] = time.perf_counter() - start
     return row
