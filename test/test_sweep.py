@@ -18,6 +18,7 @@ from typing import Any
 import pytest
 
 from dualarm_control.app.cli import main
+from dualarm_control.errors import DualArmError
 from dualarm_control.sweep.execute import run_sweep
 from dualarm_control.sweep.run import WALL_COLUMNS, grid
 from dualarm_control.sweep.spec import SweepSpec, load_spec
@@ -89,6 +90,11 @@ def test_a_raising_run_is_a_row_with_its_error(tmp_path: Path) -> None:
     assert (result.ran, result.failed) == (1, 1)
     (row,) = read_table(tmp_path).to_pylist()
     assert "no feasible draw in 2 attempts" in row["error"] and row["steps"] == 0
+
+
+def test_another_spec_into_the_same_output_is_refused(reference: Path) -> None:
+    with pytest.raises(DualArmError, match=r"sweep\.settle_time was 0\.2, is 0\.3"):
+        run_sweep(smoke(4, settle_time=0.3), reference, workers=0, show_progress=False)
 
 
 def test_cli_sweep_and_report(reference: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -7,19 +7,23 @@
   by its run key, with ``retries`` (a task lost with its worker is run again elsewhere).
 * **Nothing lost**: rows are written every ``batch_size`` results and at the end, also on Ctrl-C
   (then the KeyboardInterrupt goes on); a run that raises is already a row (:func:`run_one`).
+* **Nothing wrong**: ``DIR/spec.json`` holds the spec the rows were made with (all but the number of
+  tasks); a sweep of a different spec into the same DIR is refused, naming the first key that differs.
 """
 
 from __future__ import annotations
 
+import json
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
+from dualarm_control.errors import DualArmError
 from dualarm_control.sweep.run import RunKey, grid, run_one
 from dualarm_control.sweep.spec import SweepSpec
 from dualarm_control.sweep.store import done_keys, write_part
@@ -35,6 +39,25 @@ class SweepResult:
     skipped: int
     ran: int
     failed: int
+
+
+SPEC_FILE = "spec.json"
+
+
+def check_spec(spec: SweepSpec, out: Path) -> None:
+    """Record ``spec`` in ``out`` or check it is the one recorded (DualArmError naming the key that differs)."""
+    doc = json.loads(json.dumps(asdict(replace(spec, tasks=1))))
+    doc.pop("tasks")
+    path = out / SPEC_FILE
+    if path.exists():
+        old = json.loads(path.read_text())
+        for key in sorted(set(doc) | set(old)):
+            if doc.get(key) != old.get(key):
+                raise DualArmError(f"{out} holds the rows of another sweep spec: sweep.{key} was {old.get(key)!r}, "
+                                   f"is {doc.get(key)!r} (use another --output)")
+        return
+    out.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(doc, indent=2) + "\n")
 
 
 def missing_runs(spec: SweepSpec, out: Path) -> tuple[list[RunKey], int]:
@@ -59,7 +82,7 @@ def _on_dask(spec: SweepSpec, keys: list[RunKey], stack: ExitStack, scheduler: s
         client = stack.enter_context(Client(cluster))
     else:
         client = stack.enter_context(Client(scheduler))
-    futures = [client.submit(run_one, spec, key, key=f"sweep-run-{key.text}", retries=spec.retries, pure=False)
+    futures = [client.submit(run_one, spec, key, key=f"sweep-{spec.name}-{key.text}", retries=spec.retries, pure=False)
                for key in keys]
     for future in as_completed(futures):
         yield future.result()
@@ -69,6 +92,7 @@ def _on_dask(spec: SweepSpec, keys: list[RunKey], stack: ExitStack, scheduler: s
 def run_sweep(spec: SweepSpec, out: Path, scheduler: str | None = None, workers: int = 2,
               show_progress: bool = True, on_row: Callable[[dict[str, Any]], None] | None = None) -> SweepResult:
     """Run the missing runs of ``spec`` into the Parquet dataset ``out`` (module docstring)."""
+    check_spec(spec, out)
     keys, total = missing_runs(spec, out)
     failed, ran = 0, 0
     batch: list[dict[str, Any]] = []
