@@ -55,9 +55,21 @@ def test_rows_hold_the_metrics(reference: Path) -> None:
 
 
 def test_local_cluster_rows_equal_one_process(reference: Path, tmp_path: Path) -> None:
-    """A LocalCluster of 2 workers on 127.0.0.1 gives the same rows, bitwise."""
+    """A LocalCluster of 2 workers on 127.0.0.1, interrupted after 4 rows (the cluster shut down, the rows
+    kept) and started again: the same rows as one process, bitwise, each key once."""
+    seen: list[str] = []
+
+    def interrupt(row: dict[str, Any]) -> None:
+        seen.append(row["key"])
+        if len(seen) == 4:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(smoke(4), tmp_path, workers=2, show_progress=False, on_row=interrupt)
+    assert done_keys(tmp_path) == set(seen)
     result = run_sweep(smoke(4), tmp_path, workers=2, show_progress=False)
-    assert result.ran == 12
+    assert (result.skipped, result.ran) == (4, 8)
+    assert sum(len(read_table_of(p)) for p in parts(tmp_path)) == 12
     assert deterministic(tmp_path) == deterministic(reference)
 
 
