@@ -18,12 +18,12 @@ from typing import Any
 import pytest
 
 from dualarm_control.app.cli import main
+from dualarm_control.app.sweep.execute import run_sweep
+from dualarm_control.app.sweep.run import WALL_COLUMNS, grid
+from dualarm_control.app.sweep.spec import SweepSpec, load_spec
+from dualarm_control.app.sweep.store import done_keys, parts, read_table
+from dualarm_control.app.sweep.tasks import TaskSampling
 from dualarm_control.errors import DualArmError
-from dualarm_control.sweep.execute import run_sweep
-from dualarm_control.sweep.run import WALL_COLUMNS, grid
-from dualarm_control.sweep.spec import SweepSpec, load_spec
-from dualarm_control.sweep.store import done_keys, parts, read_table
-from dualarm_control.sweep.tasks import TaskSampling
 
 SMOKE = Path(__file__).resolve().parents[1] / "config" / "sweeps" / "smoke.yaml"
 

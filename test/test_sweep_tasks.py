@@ -8,15 +8,15 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from dualarm_control.kinematics import DualArmModel
-from dualarm_control.scenario import load_scenario
-from dualarm_control.sweep.spec import SpecError, load_spec, parse_spec
-from dualarm_control.sweep.tasks import (
+from dualarm_control.app.sweep.spec import SpecError, load_spec, parse_spec
+from dualarm_control.app.sweep.tasks import (
     IK_TOLERANCE,
     TaskSampler,
     TaskSampling,
     task_generator,
 )
+from dualarm_control.kinematics import DualArmModel
+from dualarm_control.scenario import load_scenario
 
 SAMPLING = TaskSampling(goal_translation=0.03, goal_rotation=np.radians(8.0))
 

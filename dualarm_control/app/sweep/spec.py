@@ -28,10 +28,10 @@ from typing import Any
 
 import yaml
 
+from dualarm_control.app.sweep.tasks import TaskSampling
 from dualarm_control.controller import ControllerParams, controller_params
 from dualarm_control.errors import DualArmError
 from dualarm_control.robot import load_robot, robot_defaults
-from dualarm_control.sweep.tasks import TaskSampling
 
 
 class SpecError(DualArmError):

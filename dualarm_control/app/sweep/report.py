@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from dualarm_control.app.sweep.store import read_table
 from dualarm_control.kinematics import FloatArray
-from dualarm_control.sweep.store import read_table
 
 REFERENCE = "standard_qp"
 COMPARED = ("sparse_qp", "hierarchical_sparse_qp")

@@ -17,10 +17,10 @@ from typing import Any
 
 from dualarm_control.app.record.report import METRIC_KEYS, TRACKING_KEYS, summarize_run
 from dualarm_control.app.run.experiment import run_scenario
+from dualarm_control.app.sweep.spec import SweepSpec
+from dualarm_control.app.sweep.tasks import RelativeTask, TaskSampler, TaskSampling
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.scenario import Scenario, load_scenario
-from dualarm_control.sweep.spec import SweepSpec
-from dualarm_control.sweep.tasks import RelativeTask, TaskSampler, TaskSampling
 
 KEY_COLUMNS = ("robot", "solver", "variant", "seed", "task")
 METRIC_COLUMNS = METRIC_KEYS + TRACKING_KEYS

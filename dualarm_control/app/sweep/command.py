@@ -40,7 +40,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if args.spec == "report":
         if args.table is None:
             raise DualArmError("sweep report: give the sweep's output directory (TABLE)")
-        from dualarm_control.sweep.report import report
+        from dualarm_control.app.sweep.report import report
 
         table = Path(args.table)
         if not table.is_dir():
@@ -53,8 +53,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         raise DualArmError(f"sweep: unexpected argument {args.table!r} (did you mean 'sweep report TABLE'?)")
     if args.workers < 0 or (args.tasks is not None and args.tasks < 1):
         raise DualArmError("sweep: --workers must be >= 0 and --tasks >= 1")
-    from dualarm_control.sweep.execute import run_sweep
-    from dualarm_control.sweep.spec import load_spec
+    from dualarm_control.app.sweep.execute import run_sweep
+    from dualarm_control.app.sweep.spec import load_spec
 
     spec = load_spec(Path(args.spec)).with_tasks(args.tasks)
     out = Path(args.output) if args.output else Path(DEFAULT_OUTPUT) / spec.name

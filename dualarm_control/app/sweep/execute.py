@@ -23,10 +23,10 @@ from typing import Any
 
 from tqdm import tqdm
 
+from dualarm_control.app.sweep.run import RunKey, grid, run_one
+from dualarm_control.app.sweep.spec import SweepSpec
+from dualarm_control.app.sweep.store import done_keys, write_part
 from dualarm_control.errors import DualArmError
-from dualarm_control.sweep.run import RunKey, grid, run_one
-from dualarm_control.sweep.spec import SweepSpec
-from dualarm_control.sweep.store import done_keys, write_part
 
 LOCALHOST = "127.0.0.1"
 

@@ -18,7 +18,7 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from dualarm_control.sweep.run import COLUMNS, KEY_COLUMNS
+from dualarm_control.app.sweep.run import COLUMNS, KEY_COLUMNS
 
 STRING_COLUMNS = ("key", "robot", "solver", "variant", "error")
 INT_COLUMNS = ("seed", "task", "steps")
