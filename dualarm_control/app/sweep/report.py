@@ -3,9 +3,9 @@
 Per task, the ratio l0(solver)/l0(standard_qp) of the time-averaged active-joint counts (Table I's
 l0, metrics.json's ``l0_mean``), paired by task: only tasks whose runs of both solvers have no error.
 The median of each ratio with a percentile-bootstrap 95 % confidence interval (``resamples``
-resamples of the tasks, seeded: the same table gives the same interval), the final position error
-and the cycle time p99 per solver (medians), as a Markdown table; box plots of the ratios, and of
-the final errors and cycle times per solver (PNG).
+resamples of the tasks, seeded: the same table gives the same interval), the final position error,
+the largest tracking error and the cycle times per solver (medians), as a Markdown table; box plots of the ratios, and of
+the final and tracking errors and cycle times per solver (PNG).
 """
 
 from __future__ import annotations
@@ -84,9 +84,9 @@ def markdown(rows: Sequence[dict[str, Any]], seed: int = 0) -> str:
     for s in paired_ratios(rows, seed):
         lines.append(f"| {s.robot} | {s.variant} | l0({s.solver}) / l0({REFERENCE}) | {s.tasks} | {s.median:.3f} | "
                      f"[{s.low:.3f}, {s.high:.3f}] |")
-    header = ("| robot | variant | solver | runs | errors | median l0 | median final error [m] | "
+    header = ("| robot | variant | solver | runs | errors | median l0 | median final error [m] | median max tracking error [m] | "
               "median cycle p50 [ms] | median cycle p99 [ms] | solver failures |")
-    lines += ["", header, "|---|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+    lines += ["", header, "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     errors: dict[tuple[str, str, str], int] = defaultdict(int)
     for row in rows:
         errors[(row["robot"], row["variant"], row["solver"])] += row["error"] is not None
@@ -94,13 +94,14 @@ def markdown(rows: Sequence[dict[str, Any]], seed: int = 0) -> str:
         for solver, runs in sorted(solvers.items()):
             lines.append(f"| {robot} | {variant} | {solver} | {len(runs)} | {errors[(robot, variant, solver)]} | "
                          f"{_median(runs, 'l0_mean'):.3f} | {_median(runs, 'final_position_error_m'):.2e} | "
+                         f"{_median(runs, 'max_tracking_error_m'):.2e} | "
                          f"{1e3 * _median(runs, 'cycle_time_p50_s'):.3f} | {1e3 * _median(runs, 'cycle_time_p99_s'):.3f} | "
                          f"{int(sum(r['solver_failures'] for r in runs.values()))} |")
     return "\n".join(lines) + "\n"
 
 
 def plot(rows: Sequence[dict[str, Any]], out: Path, seed: int = 0) -> list[Path]:
-    """Box plots: the paired ratios per robot, final errors and cycle times p99 per solver (PNG paths)."""
+    """Box plots: the paired ratios per robot; final and tracking errors, cycle times p99 per solver (PNG paths)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -124,13 +125,14 @@ def plot(rows: Sequence[dict[str, Any]], out: Path, seed: int = 0) -> list[Path]
     cells = [(f"{r}\n{s.replace('_qp', '')}\n{v}", runs) for (r, v), solvers in sorted(grouped(rows).items())
              for s, runs in sorted(solvers.items())]
     for column, scale, label, name in (("final_position_error_m", 1.0, "final position error [m]", "final_errors.png"),
+                                       ("max_tracking_error_m", 1.0, "max tracking error [m]", "tracking_errors.png"),
                                        ("cycle_time_p99_s", 1e3, "cycle time p99 [ms]", "cycle_times.png")):
         if not cells:
             break
         fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(cells)), 4.0))
         ax.boxplot([[scale * r[column] for r in runs.values() if np.isfinite(r[column])] for _, runs in cells])
         ax.set_xticks(range(1, len(cells) + 1), [c for c, _ in cells], fontsize=8)
-        if column.startswith("final"):
+        if column.endswith("error_m"):
             ax.set_yscale("log")
         ax.set_ylabel(label)
         fig.tight_layout()
