@@ -1,7 +1,8 @@
 """Running a sweep: the missing runs of the grid, on Dask (or in this process), rows to Parquet as they come.
 
 * **Cluster**: ``scheduler`` (``tcp://HOST:PORT``, an existing ``dask scheduler``) or else a
-  ``LocalCluster`` of ``workers`` processes (one thread each) on 127.0.0.1, no dashboard;
+  ``LocalCluster`` of ``workers`` processes (one thread each) on 127.0.0.1, no dashboard, no
+  worker profiler;
   ``workers=0`` runs every run back to back in this process (no Dask: the reference run).
 * **Nothing twice**: the keys already in the output are skipped; each run is one Dask task keyed
   by its run key, with ``retries`` (a task lost with its worker is run again elsewhere).
@@ -74,9 +75,11 @@ def _in_process(spec: SweepSpec, keys: list[RunKey]) -> Iterator[dict[str, Any]]
 
 def _on_dask(spec: SweepSpec, keys: list[RunKey], stack: ExitStack, scheduler: str | None,
              workers: int) -> Iterator[dict[str, Any]]:
+    import dask
     from distributed import Client, LocalCluster, as_completed
 
-    if scheduler is None:
+    if scheduler is None:  # the workers' statistical profiler off: it samples the run's thread every 10 ms
+        stack.enter_context(dask.config.set({"distributed.worker.profile.enabled": False}))
         cluster = stack.enter_context(LocalCluster(host=LOCALHOST, n_workers=workers, threads_per_worker=1,
                                                    processes=True, dashboard_address=None))
         client = stack.enter_context(Client(cluster))
