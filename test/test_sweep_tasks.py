@@ -86,4 +86,7 @@ def test_shipped_specs_load() -> None:
     assert load_spec(config / "smoke.yaml").tasks <= 5
     big = load_spec(config / "table1_distribution.yaml")
     assert big.tasks == 1000 and "lwr4_cell" in big.robots and len(big.solvers) == 3
+    assert big.with_robots("ur5_pair,lwr4_cell").robots == ("ur5_pair", "lwr4_cell")
+    with pytest.raises(SpecError, match="--robots 'nao'"):
+        big.with_robots("nao")
     assert load_spec(config / "table1_near_limits.yaml").sampling.joint_margin < big.sampling.joint_margin

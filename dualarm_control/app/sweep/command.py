@@ -23,6 +23,7 @@ def add_sweep_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[t
     swp.add_argument("spec", metavar="SPEC.yaml|report", help="the sweep spec, or 'report'")
     swp.add_argument("table", nargs="?", default=None, metavar="TABLE", help="report: the sweep's output directory")
     swp.add_argument("--tasks", type=int, default=None, metavar="N", help="number of tasks (default: the spec's)")
+    swp.add_argument("--robots", default=None, metavar="NAME,...", help="only these of the spec's robots")
     swp.add_argument("--output", default=None, metavar="DIR",
                      help=f"sweep: the Parquet dataset (default: {DEFAULT_OUTPUT}/<spec name>); report: where "
                      "report.md and the figures go (default: TABLE/report)")
@@ -56,7 +57,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from dualarm_control.app.sweep.execute import run_sweep
     from dualarm_control.app.sweep.spec import load_spec
 
-    spec = load_spec(Path(args.spec)).with_tasks(args.tasks)
+    spec = load_spec(Path(args.spec)).with_tasks(args.tasks).with_robots(args.robots)
     out = Path(args.output) if args.output else Path(DEFAULT_OUTPUT) / spec.name
     where = args.scheduler or ("this process" if args.workers == 0 else f"a local cluster of {args.workers} workers")
     print(f"sweep {spec.name!r}: {len(spec.robots)} robots x {len(spec.solvers)} solvers x {len(spec.variants)} "

@@ -74,6 +74,16 @@ class SweepSpec:
         """The spec with ``--tasks`` applied (None: unchanged)."""
         return self if tasks is None else replace(self, tasks=tasks)
 
+    def with_robots(self, robots: str | None) -> SweepSpec:
+        """The spec with ``--robots NAME,...`` applied (a subset of its robots; None: unchanged)."""
+        if robots is None:
+            return self
+        chosen = tuple(r.strip() for r in robots.split(",") if r.strip())
+        unknown = [r for r in chosen if r not in self.robots]
+        if not chosen or unknown:
+            raise SpecError(f"--robots {robots!r}: expected some of the spec's robots: {', '.join(self.robots)}")
+        return replace(self, robots=chosen)
+
     def params(self, robot: str, solver: str, variant: str) -> ControllerParams:
         """Controller parameters of one grid cell: the robot's defaults, the variant's, the solver."""
         overrides = dict(dict(self.variants)[variant])
