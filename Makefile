@@ -11,7 +11,7 @@ OUT ?= out
 $(VENV)/.installed: setup.py
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[ros,test,view,robots]'
+	$(PY) -m pip install --quiet -e '.[ros,test,view,robots,sweep]'
 	touch $@
 
 demo: $(VENV)/.installed
@@ -21,7 +21,7 @@ experiment: $(VENV)/.installed
 	$(VENV)/bin/dualarm experiment assembly --output $(OUT)/experiment
 
 $(VENV)/.bench-installed: $(VENV)/.installed
-	$(PY) -m pip install --quiet -e '.[ros,test,view,robots,bench]'
+	$(PY) -m pip install --quiet -e '.[ros,test,view,robots,sweep,bench]'
 	touch $@
 
 bench: $(VENV)/.bench-installed

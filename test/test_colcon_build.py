@@ -47,6 +47,7 @@ def test_ament_layout(workspace: Path) -> None:
         assert (share / "launch" / name).is_file()
     assert (share / "config" / "solvers" / "sparse_qp.yaml").is_file()
     assert (share / "config" / "scenarios" / "assembly.yaml").is_file()
+    assert (share / "config" / "sweeps" / "table1_distribution.yaml").is_file()
     for node in EXECUTABLES:
         assert os.access(prefix / "lib" / "dualarm_control" / node, os.X_OK)
 

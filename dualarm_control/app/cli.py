@@ -693,6 +693,9 @@ def build_parser() -> argparse.ArgumentParser:
     from dualarm_control.ros.drive import add_drive_parsers
 
     add_drive_parsers(sub)
+    from dualarm_control.app.sweep.command import add_sweep_parser
+
+    add_sweep_parser(sub)
     return parser
 
 

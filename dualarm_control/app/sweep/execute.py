@@ -1,0 +1,122 @@
+"""Running a sweep: the missing runs of the grid, on Dask (or in this process), rows to Parquet as they come.
+
+* **Cluster**: ``scheduler`` (``tcp://HOST:PORT``, an existing ``dask scheduler``) or else a
+  ``LocalCluster`` of ``workers`` processes (one thread each) on 127.0.0.1, no dashboard, no
+  worker profiler;
+  ``workers=0`` runs every run back to back in this process (no Dask: the reference run).
+* **Nothing twice**: the keys already in the output are skipped; each run is one Dask task keyed
+  by its run key, with ``retries`` (a task lost with its worker is run again elsewhere).
+* **Nothing lost**: rows are written every ``batch_size`` results and at the end, also on Ctrl-C
+  (then the KeyboardInterrupt goes on); a run that raises is already a row (:func:`run_one`).
+* **Nothing wrong**: ``DIR/spec.json`` holds the spec the rows were made with (all but the number of
+  tasks); a sweep of a different spec into the same DIR is refused, naming the first key that differs.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from dualarm_control.app.sweep.run import RunKey, grid, run_one
+from dualarm_control.app.sweep.spec import SweepSpec
+from dualarm_control.app.sweep.store import done_keys, write_part
+from dualarm_control.errors import DualArmError
+
+LOCALHOST = "127.0.0.1"
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    """What a sweep did: ``total`` runs in the grid, ``skipped`` (already in the output), ``ran``, ``failed``."""
+
+    total: int
+    skipped: int
+    ran: int
+    failed: int
+
+
+SPEC_FILE = "spec.json"
+
+
+def check_spec(spec: SweepSpec, out: Path) -> None:
+    """Record ``spec`` in ``out`` or check it is the one recorded (DualArmError naming the key that differs)."""
+    doc = json.loads(json.dumps(asdict(replace(spec, tasks=1))))
+    doc.pop("tasks")
+    path = out / SPEC_FILE
+    if path.exists():
+        old = json.loads(path.read_text())
+        for key in sorted(set(doc) | set(old)):
+            if doc.get(key) != old.get(key):
+                raise DualArmError(f"{out} holds the rows of another sweep spec: sweep.{key} was {old.get(key)!r}, "
+                                   f"is {doc.get(key)!r} (use another --output)")
+        return
+    out.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(doc, indent=2) + "\n")
+
+
+def missing_runs(spec: SweepSpec, out: Path) -> tuple[list[RunKey], int]:
+    """The grid's runs without a row in ``out``, and the grid's size."""
+    keys = grid(spec)
+    done = done_keys(out)
+    return [k for k in keys if k.text not in done], len(keys)
+
+
+def _in_process(spec: SweepSpec, keys: list[RunKey]) -> Iterator[dict[str, Any]]:
+    for key in keys:
+        yield run_one(spec, key)
+
+
+def _on_dask(spec: SweepSpec, keys: list[RunKey], stack: ExitStack, scheduler: str | None,
+             workers: int) -> Iterator[dict[str, Any]]:
+    import dask
+    from distributed import Client, LocalCluster, as_completed
+
+    if scheduler is None:  # the workers' statistical profiler off: it samples the run's thread every 10 ms
+        stack.enter_context(dask.config.set({"distributed.worker.profile.enabled": False}))
+        cluster = stack.enter_context(LocalCluster(host=LOCALHOST, n_workers=workers, threads_per_worker=1,
+                                                   processes=True, dashboard_address=None))
+        client = stack.enter_context(Client(cluster))
+    else:
+        client = stack.enter_context(Client(scheduler))
+    futures = [client.submit(run_one, spec, key, key=f"sweep-{spec.name}-{key.text}", retries=spec.retries, pure=False)
+               for key in keys]
+    for future in as_completed(futures):
+        yield future.result()
+        future.release()
+
+
+def run_sweep(spec: SweepSpec, out: Path, scheduler: str | None = None, workers: int = 2,
+              show_progress: bool = True, on_row: Callable[[dict[str, Any]], None] | None = None) -> SweepResult:
+    """Run the missing runs of ``spec`` into the Parquet dataset ``out`` (module docstring)."""
+    check_spec(spec, out)
+    keys, total = missing_runs(spec, out)
+    failed, ran = 0, 0
+    batch: list[dict[str, Any]] = []
+    bar = tqdm(total=total, initial=total - len(keys), desc=f"sweep {spec.name}", unit="run", file=sys.stderr,
+               disable=not show_progress, mininterval=0.5 if sys.stderr.isatty() else 10.0, smoothing=0.05)
+    with ExitStack() as stack:
+        rows = (_in_process(spec, keys) if workers == 0 and scheduler is None
+                else _on_dask(spec, keys, stack, scheduler, workers)) if keys else iter(())
+        try:
+            for row in rows:
+                batch.append(row)
+                ran += 1
+                failed += row["error"] is not None
+                bar.update(1)
+                bar.set_postfix(failures=failed, refresh=False)
+                if on_row is not None:
+                    on_row(row)
+                if len(batch) >= spec.batch_size:
+                    write_part(out, batch)
+                    batch = []
+        finally:  # Ctrl-C, a lost scheduler: what arrived is written
+            write_part(out, batch)
+            bar.close()
+    return SweepResult(total, total - len(keys), ran, failed)

@@ -1,0 +1,151 @@
+"""``dualarm sweep report TABLE``: Table I as a distribution, per robot (and variant).
+
+Per task, the ratio l0(solver)/l0(standard_qp) of the time-averaged active-joint counts (Table I's
+l0, metrics.json's ``l0_mean``), paired by task: only tasks whose runs of both solvers have no error.
+The median of each ratio with a percentile-bootstrap 95 % confidence interval (``resamples``
+resamples of the tasks, seeded: the same table gives the same interval), the final position error,
+the largest tracking error and the cycle times per solver (medians), as a Markdown table; box plots of the ratios, and of
+the final and tracking errors and cycle times per solver (PNG).
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dualarm_control.app.sweep.store import read_table
+from dualarm_control.kinematics import FloatArray
+
+REFERENCE = "standard_qp"
+COMPARED = ("sparse_qp", "hierarchical_sparse_qp")
+RESAMPLES = 2000
+
+
+@dataclass(frozen=True)
+class RatioSummary:
+    """The paired ratio of one solver to the reference on one robot and variant."""
+
+    robot: str
+    variant: str
+    solver: str
+    tasks: int
+    median: float
+    low: float
+    high: float
+    ratios: FloatArray
+
+
+def bootstrap_median(values: FloatArray, resamples: int = RESAMPLES, seed: int = 0) -> tuple[float, float, float]:
+    """Median of ``values`` and its percentile-bootstrap 95 % interval (NaN for no values)."""
+    if values.size == 0:
+        return float("nan"), float("nan"), float("nan")
+    rng = np.random.default_rng(seed)
+    medians = np.median(values[rng.integers(0, values.size, (resamples, values.size))], axis=1)
+    low, high = np.percentile(medians, [2.5, 97.5])
+    return float(np.median(values)), float(low), float(high)
+
+
+def grouped(rows: Sequence[dict[str, Any]]) -> dict[tuple[str, str], dict[str, dict[int, dict[str, Any]]]]:
+    """(robot, variant) -> solver -> task -> row, runs with an error left out."""
+    out: dict[tuple[str, str], dict[str, dict[int, dict[str, Any]]]] = defaultdict(lambda: defaultdict(dict))
+    for row in rows:
+        if row["error"] is None:
+            out[(row["robot"], row["variant"])][row["solver"]][row["task"]] = row
+    return out
+
+
+def paired_ratios(rows: Sequence[dict[str, Any]], seed: int = 0) -> list[RatioSummary]:
+    """The ratios of :data:`COMPARED` to :data:`REFERENCE`, paired by task, per robot and variant."""
+    out = []
+    for (robot, variant), solvers in sorted(grouped(rows).items()):
+        reference = solvers.get(REFERENCE, {})
+        for solver in COMPARED:
+            runs = solvers.get(solver, {})
+            tasks = sorted(t for t in set(reference) & set(runs) if reference[t]["l0_mean"] > 0)
+            ratios = np.array([runs[t]["l0_mean"] / reference[t]["l0_mean"] for t in tasks], dtype=float)
+            out.append(RatioSummary(robot, variant, solver, len(tasks), *bootstrap_median(ratios, seed=seed),
+                                    ratios))
+    return out
+
+
+def _median(rows: dict[int, dict[str, Any]], column: str) -> float:
+    values = [r[column] for r in rows.values() if np.isfinite(r[column])]
+    return float(np.median(values)) if values else float("nan")
+
+
+def markdown(rows: Sequence[dict[str, Any]], seed: int = 0) -> str:
+    """The report's Markdown: the ratio table and the per-solver table."""
+    lines = ["| robot | variant | ratio | tasks | median | 95 % CI |", "|---|---|---|---:|---:|---:|"]
+    for s in paired_ratios(rows, seed):
+        lines.append(f"| {s.robot} | {s.variant} | l0({s.solver}) / l0({REFERENCE}) | {s.tasks} | {s.median:.3f} | "
+                     f"[{s.low:.3f}, {s.high:.3f}] |")
+    header = ("| robot | variant | solver | runs | errors | median l0 | median final error [m] | median max tracking error [m] | "
+              "median cycle p50 [ms] | median cycle p99 [ms] | solver failures |")
+    lines += ["", header, "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    errors: dict[tuple[str, str, str], int] = defaultdict(int)
+    for row in rows:
+        errors[(row["robot"], row["variant"], row["solver"])] += row["error"] is not None
+    for (robot, variant), solvers in sorted(grouped(rows).items()):
+        for solver, runs in sorted(solvers.items()):
+            lines.append(f"| {robot} | {variant} | {solver} | {len(runs)} | {errors[(robot, variant, solver)]} | "
+                         f"{_median(runs, 'l0_mean'):.3f} | {_median(runs, 'final_position_error_m'):.2e} | "
+                         f"{_median(runs, 'max_tracking_error_m'):.2e} | "
+                         f"{1e3 * _median(runs, 'cycle_time_p50_s'):.3f} | {1e3 * _median(runs, 'cycle_time_p99_s'):.3f} | "
+                         f"{int(sum(r['solver_failures'] for r in runs.values()))} |")
+    return "\n".join(lines) + "\n"
+
+
+def plot(rows: Sequence[dict[str, Any]], out: Path, seed: int = 0) -> list[Path]:
+    """Box plots: the paired ratios per robot; final and tracking errors, cycle times p99 per solver (PNG paths)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    ratios = [s for s in paired_ratios(rows, seed) if s.tasks]
+    if ratios:
+        fig, ax = plt.subplots(figsize=(max(6.0, 1.3 * len(ratios)), 4.0))
+        ax.boxplot([s.ratios for s in ratios], showfliers=True)
+        ax.set_xticks(range(1, len(ratios) + 1), [f"{s.robot}\n{s.solver.replace('_qp', '')}\n{s.variant}"
+                                                  for s in ratios], fontsize=8)
+        ax.axhline(1.0, color="grey", lw=0.8, ls="--")
+        ax.set_ylabel(f"l0(solver) / l0({REFERENCE}), paired by task")
+        ax.set_title("active joints relative to the standard QP")
+        fig.tight_layout()
+        fig.savefig(out / "l0_ratios.png", dpi=120)
+        plt.close(fig)
+        written.append(out / "l0_ratios.png")
+    cells = [(f"{r}\n{s.replace('_qp', '')}\n{v}", runs) for (r, v), solvers in sorted(grouped(rows).items())
+             for s, runs in sorted(solvers.items())]
+    for column, scale, label, name in (("final_position_error_m", 1.0, "final position error [m]", "final_errors.png"),
+                                       ("max_tracking_error_m", 1.0, "max tracking error [m]", "tracking_errors.png"),
+                                       ("cycle_time_p99_s", 1e3, "cycle time p99 [ms]", "cycle_times.png")):
+        if not cells:
+            break
+        fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(cells)), 4.0))
+        ax.boxplot([[scale * r[column] for r in runs.values() if np.isfinite(r[column])] for _, runs in cells])
+        ax.set_xticks(range(1, len(cells) + 1), [c for c, _ in cells], fontsize=8)
+        if column.endswith("error_m"):
+            ax.set_yscale("log")
+        ax.set_ylabel(label)
+        fig.tight_layout()
+        fig.savefig(out / name, dpi=120)
+        plt.close(fig)
+        written.append(out / name)
+    return written
+
+
+def report(table: Path, out: Path, seed: int = 0) -> tuple[str, list[Path]]:
+    """The Markdown (also written to ``out/report.md``) and the figures of the dataset ``table``."""
+    rows = read_table(table).to_pylist()
+    text = markdown(rows, seed)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "report.md").write_text(text)
+    return text, [out / "report.md", *plot(rows, out, seed)]
