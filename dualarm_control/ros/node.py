@@ -308,16 +308,22 @@ def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text
                 return EXIT_PARAMS
             raise
         finally:
+            watchdog = ExitWatchdog(EXIT_STUCK_S)
             if shell is not None:
+                watchdog.stage = "close"
                 close = getattr(shell, "close", None)
                 if close is not None:
                     close()
                 if getattr(shell, "lockstep", False):
+                    watchdog.stage = "flush"
                     flush_publishers(shell_nodes(shell), ACK_TIMEOUT_S)
+                watchdog.stage = "teardown"
                 for node in shell_nodes(shell):
                     node.destroy_node()
+            watchdog.stage = "teardown"
             if context is not None:
                 context.try_shutdown()
+            watchdog.cancel()
     return EXIT_OK
 
 
@@ -326,6 +332,50 @@ ACK_TIMEOUT_S = 15.0
 a deadline for a recorder starved on a busy machine (a trajectory node's flush took 5.4 s under
 ``stress-ng --cpu 1``, its recorder 2800 samples behind), below the launcher's grace before SIGTERM
 (``app.run.launcher.STOP_GRACE_S``, 5 s more than this)."""
+
+
+EXIT_STUCK_S = ACK_TIMEOUT_S + 3.0
+"""How long a node's way out (``close``, the lockstep flush, destroying the nodes, rclpy's shutdown) may take
+before :class:`ExitWatchdog` ends the process: below the launcher's grace before SIGTERM
+(``app.run.launcher.STOP_GRACE_S``)."""
+
+
+class ExitWatchdog:
+    """Ends a node process whose way out is stuck (started as that begins, :meth:`cancel` at its end).
+
+    Under ``stress-ng --cpu 1`` a lockstep sim_node logged its last line ("stopping after ..."), its bag
+    complete, and was still alive 20 s later, when the launcher's SIGTERM ended it (exit -15, the launch
+    failed). After ``seconds`` this prints which stage was stuck and every thread's stack to stderr,
+    then exits: 0 when the stage is ``teardown`` (everything published was delivered or its
+    wait timed out; what is left is the middleware's own teardown), 1 otherwise.
+
+    Attributes:
+        stage: ``close``, ``flush`` or ``teardown`` (set by the caller as it goes).
+    """
+
+    def __init__(self, seconds: float, exit: Callable[[int], None] | None = None) -> None:
+        import os
+
+        self.stage = "close"
+        self.seconds = seconds
+        self._exit = exit or os._exit
+        self._timer = threading.Timer(seconds, self._fire)
+        self._timer.daemon = True
+        self._timer.start()
+
+    def _fire(self) -> None:
+        import traceback
+
+        try:
+            stacks = "".join(f"Thread {ident:#x}:\n" + "".join(traceback.format_stack(frame))
+                             for ident, frame in sys._current_frames().items())
+            print(f"exit watchdog: the way out is stuck in '{self.stage}' after {self.seconds:.0f} s; every "
+                  f"thread's stack:\n{stacks}", file=sys.stderr, flush=True)
+        finally:
+            self._exit(EXIT_OK if self.stage == "teardown" else EXIT_ERROR)
+
+    def cancel(self) -> None:
+        self._timer.cancel()
 
 
 def flush_publishers(nodes: Sequence[Any], timeout_s: float) -> bool:

@@ -1,0 +1,49 @@
+"""ros.node.ExitWatchdog: a node whose way out is stuck ends with the stage named and every stack."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from dualarm_control.ros.node import EXIT_STUCK_S, ExitWatchdog
+
+
+def fired(stage: str | None, capsys: pytest.CaptureFixture[str]) -> tuple[list[int], str]:
+    codes: list[int] = []
+    done = threading.Event()
+
+    def fake_exit(code: int) -> None:
+        codes.append(code)
+        done.set()
+
+    watchdog = ExitWatchdog(0.05, exit=fake_exit)
+    if stage is None:
+        watchdog.cancel()
+        time.sleep(0.3)  # the timer would have fired by now: nothing may happen
+    else:
+        watchdog.stage = stage
+        assert done.wait(30.0), "the watchdog did not fire within 30 s"
+    return codes, capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("stage", "code"), [("teardown", 0), ("flush", 1), ("close", 1)])
+def test_a_stuck_way_out_exits_naming_the_stage_with_every_stack(stage: str, code: int,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    codes, err = fired(stage, capsys)
+    assert codes == [code]
+    assert f"stuck in '{stage}'" in err
+    assert "Thread 0x" in err and "_fire" in err  # every stack, the watchdog thread's too
+
+
+def test_a_way_out_that_ends_cancels_it(capsys: pytest.CaptureFixture[str]) -> None:
+    codes, err = fired(None, capsys)
+    assert codes == [] and err == ""
+
+
+def test_it_fires_before_the_launchers_sigterm() -> None:
+    from dualarm_control.app.run.launcher import STOP_GRACE_S
+    from dualarm_control.ros.node import ACK_TIMEOUT_S
+
+    assert ACK_TIMEOUT_S < EXIT_STUCK_S < STOP_GRACE_S
