@@ -47,3 +47,15 @@ def test_it_fires_before_the_launchers_sigterm() -> None:
     from dualarm_control.ros.node import ACK_TIMEOUT_S
 
     assert ACK_TIMEOUT_S < EXIT_STUCK_S < STOP_GRACE_S
+
+
+def test_the_c_level_dump_is_armed_and_cancelled() -> None:
+    """The C-level dump (for a way out stuck holding the GIL) is armed with the watchdog and cancelled
+    with it: arming another one then works, and nothing fires after cancel."""
+    import faulthandler
+
+    watchdog = ExitWatchdog(60.0, exit=lambda code: None)
+    assert watchdog._c_dump
+    watchdog.cancel()
+    assert not watchdog._c_dump
+    faulthandler.cancel_dump_traceback_later()  # idempotent: nothing was left armed

@@ -362,10 +362,12 @@ class ExitWatchdog:
         self._timer = threading.Timer(seconds, self._fire)
         self._timer.daemon = True
         self._timer.start()
+        self._c_dump = _dump_stacks_later(seconds + C_DUMP_DELAY_S)
 
     def _fire(self) -> None:
         import traceback
 
+        self._cancel_c_dump()
         try:
             stacks = "".join(f"Thread {ident:#x}:\n" + "".join(traceback.format_stack(frame))
                              for ident, frame in sys._current_frames().items())
@@ -376,6 +378,35 @@ class ExitWatchdog:
 
     def cancel(self) -> None:
         self._timer.cancel()
+        self._cancel_c_dump()
+
+    def _cancel_c_dump(self) -> None:
+        if self._c_dump:
+            import faulthandler
+
+            faulthandler.cancel_dump_traceback_later()
+            self._c_dump = False
+
+
+C_DUMP_DELAY_S = 1.0
+"""After the watchdog's own time, Python's faulthandler dumps every thread's stack from C: it needs no GIL,
+so it also shows a way out stuck in a C call that holds it (then the watchdog's thread cannot run: under
+stress a real-time controller_node logged its summary and was SIGTERMed 20 s later, no watchdog line)."""
+
+
+def _dump_stacks_later(seconds: float) -> bool:
+    """faulthandler's C-level dump of every stack to the process's stderr (fd 2) after ``seconds``; False
+    when there is no such stream."""
+    import faulthandler
+
+    stream = sys.__stderr__
+    if stream is None:
+        return False
+    try:
+        faulthandler.dump_traceback_later(seconds, exit=False, file=stream)
+    except (AttributeError, ValueError, OSError):  # no real stderr (closed, or no fileno)
+        return False
+    return True
 
 
 def flush_publishers(nodes: Sequence[Any], timeout_s: float) -> bool:
