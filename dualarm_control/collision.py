@@ -591,10 +591,9 @@ class CollisionModel:
             self._slack_q = None
             if within is not None:
                 return self._none
-        elif self._slack_q is not None:  # what is known, moved to q: d(q) >= d(q') - sum_j c_j |q_j - q'_j|
-            self._slack -= self._pair_motion @ np.abs(q - self._slack_q)
-            self._slack_q = q.copy()
         else:
+            if self._slack_q is not None:  # what is known, moved to q: d(q) >= d(q') - sum_j c_j |q_j - q'_j|
+                self._slack -= self._pair_motion @ np.abs(q - self._slack_q)
             self._slack_q = q.copy()
         candidates = self._all_shape_pairs
         if within is not None:  # pairs whose distance may be < within, from what is known (no kinematics)
