@@ -27,7 +27,7 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from waiting import exited, tail, wait_until
+from waiting import exited, node_env, tail, wait_until
 
 from dualarm_control.controller import CONTROLLER_PARAMETERS, controller_params
 from dualarm_control.errors import DualArmError
@@ -187,7 +187,7 @@ class NodeProcess:
         args = [arg for p in ("thread_priority:=0", *params) for arg in ("-p", p)]
         self.popen = subprocess.Popen([sys.executable, "-u", "-m", "dualarm_control.app.cli", "run", node,
                                        "--ros-args", *args], cwd=REPO, stdout=subprocess.PIPE,
-                                      stderr=subprocess.STDOUT, text=True)
+                                      stderr=subprocess.STDOUT, text=True, env=node_env())
         self.lines: list[str] = []
         threading.Thread(target=self._pump, daemon=True).start()
 

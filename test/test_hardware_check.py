@@ -9,6 +9,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from waiting import node_env
 
 HARDWARE = Path(__file__).parents[1] / "config" / "hardware"
 CHECK_TIMEOUT_S = "20"  # the check answers as soon as the graph matches; discovery took up to ~4 s here
@@ -24,7 +25,7 @@ def lbr_sim() -> Iterator[None]:
     """The simulator in real time on the lbr_dual_position profile (no controller: it holds the arms)."""
     proc = subprocess.Popen([sys.executable, "-m", "dualarm_control.app.cli", "run", "sim_node", "--ros-args",
                              "--params-file", str(HARDWARE / "lbr_dual_position.yaml")],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=node_env())
     try:
         yield
     finally:

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from waiting import node_env
 
 from dualarm_control.app.run.launcher import launch_scenario
 from dualarm_control.hardware import HardwareProfile, load_profile
@@ -154,7 +155,7 @@ def dualarm_node(name: str, *args: str) -> Any:
     return subprocess.Popen([sys.executable, "-m", "dualarm_control.app.cli", "run", name, "--ros-args",
                              "-p", f"scenario:={SHORT}", "--params-file",
                              str(ROOT / "config" / "hardware" / "lbr_dual_position.yaml"), *args],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=node_env())
 
 
 def test_position_commands_hold_the_arms_after_the_controller_is_killed() -> None:

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from waiting import node_env
 
 from dualarm_control.scenario import load_scenario
 
@@ -50,7 +51,7 @@ class Node:
     def __init__(self, name: str, params: Path) -> None:
         self.proc = subprocess.Popen([sys.executable, "-m", "dualarm_control.app.cli", "run", name, "--ros-args",
                                       "-p", f"scenario:={SHORT}", "--params-file", str(params)],
-                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=node_env())
         self.lines: list[str] = []
         self.reader = threading.Thread(target=self.read, daemon=True)
         self.reader.start()

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from waiting import DEADLINE_S, exited, tail, wait_for_line, wait_until
+from waiting import DEADLINE_S, exited, node_env, tail, wait_for_line, wait_until
 
 REPO = Path(__file__).resolve().parents[1]
 SLOW = Path(__file__).parent / "data" / "slow.yaml"
@@ -200,7 +200,7 @@ def test_plain_rclpy_script_drives_the_simulator(tmp_path: Path) -> None:
     script.write_text(FOREIGN_DRIVER)
     sim = subprocess.Popen([sys.executable, "-m", "dualarm_control.app.cli", "run", "sim_node", "--ros-args",
                             "-p", "command_timeout:=0.2"], cwd=REPO, stdout=subprocess.DEVNULL,
-                           stderr=subprocess.DEVNULL)
+                           stderr=subprocess.DEVNULL, env=node_env())
     try:
         out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120, check=False)
     finally:

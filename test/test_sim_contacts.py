@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pybullet as p
 import pytest
-from waiting import exited, wait_until
+from waiting import exited, node_env, wait_until
 
 from dualarm_control.collision import CollisionModel
 from dualarm_control.errors import DimensionError
@@ -223,7 +223,7 @@ def test_sim_node_reports_contacts_on_diagnostics(tmp_path: Path) -> None:
                                 "points": [{"configuration_rad": into_contact(0.95).tolist()}]}))
     sim = subprocess.Popen([sys.executable, "-u", "-m", "dualarm_sim.sim_node", "--ros-args", "-p",
                             "thread_priority:=0", "-p", f"plan:={plan}"],
-                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=node_env())
     context = init_rclpy([])
     node = rclpy.create_node("contact_listener", context=context)
     statuses: list[dict[str, str]] = []

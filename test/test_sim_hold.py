@@ -12,7 +12,7 @@ import sys
 
 import numpy as np
 import pytest
-from waiting import exited, wait_until
+from waiting import exited, node_env, wait_until
 
 from dualarm_control.scenario import load_scenario
 from dualarm_sim.cell import DualArmCell
@@ -45,7 +45,8 @@ def test_sim_node_alone_holds_still_without_a_command() -> None:
     from dualarm_control.ros.node import init_rclpy
 
     sim = subprocess.Popen([sys.executable, "-u", "-m", "dualarm_sim.sim_node", "--ros-args", "-p",
-                            "thread_priority:=0"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                            "thread_priority:=0"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                           env=node_env())
     context = init_rclpy([])
     node = rclpy.create_node("hold_listener", context=context)
     states: list[tuple[float, np.ndarray]] = []

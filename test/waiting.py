@@ -10,6 +10,7 @@ for and what it saw, never returns as if done.
 
 from __future__ import annotations
 
+import os
 import subprocess
 import time
 from collections.abc import Callable, Sequence
@@ -21,6 +22,15 @@ DEADLINE_S = 60.0
 """The default deadline [s]: start-up and discovery take seconds on a busy 2-core machine."""
 GRACE_S = 1.0
 """After ``gone``: one more look at the condition this much later [s] (a reader thread drains the pipe)."""
+
+
+def node_env() -> dict[str, str]:
+    """The environment for a node a test starts itself: the node gets SIGTERM when this pytest process
+    dies (``ros.env.stop_with_launcher``, as under ``dualarm launch``), so that a killed test run leaves
+    no node publishing on its domain into the next run's tests."""
+    from dualarm_control.ros.env import LAUNCHER_PID_VARIABLE
+
+    return {**os.environ, LAUNCHER_PID_VARIABLE: str(os.getpid())}
 
 
 def wait_until(condition: Callable[[], T | None], seen: Callable[[], object], *, what: str,
