@@ -169,9 +169,9 @@ class RelativeController:
     The constraints of a cycle are its limits (:class:`~dualarm_control.limits.Limit`), in order:
     the joint position and velocity limits (eq 21-23), the acceleration bound when set, the
     collision limit when ``params.collision.enabled``. ``collision`` is the robot's collision
-    model, built here when None (the robot's and the parameters' allowed pairs removed); a
-    controller taking over from another (:meth:`continue_from`) keeps the old one's when the allowed
-    pairs are the same.
+    model, when None the model's shared one (:meth:`CollisionModel.shared`: the robot's and the
+    parameters' allowed pairs removed); a controller taking over from another
+    (:meth:`continue_from`) keeps the old one's when the allowed pairs are the same.
     """
 
     def __init__(self, model: DualArmModel, params: ControllerParams | None = None,
@@ -193,7 +193,7 @@ class RelativeController:
         if self.params.collision.enabled:
             allowed = allowed_pairs(model, self.params.collision)
             if collision is None or collision.allowed_given != frozenset(frozenset(p) for p in allowed):
-                collision = CollisionModel(model, allowed=allowed)
+                collision = CollisionModel.shared(model, allowed)
             self.collision_model = collision
             self.collision_limit = CollisionLimit(collision, self.params.collision)
         self.constraints: tuple[Limit, ...] = self._limits()

@@ -219,6 +219,9 @@ class DualArmModel:
         self._f2 = self.model.getFrameId(RIGHT_TOOL)
         self._frame_ids: dict[str, int] = {}
         self._owner: object | None = None  # the Configuration whose q is in self.data
+        self.derived: dict[object, object] = {}
+        """Objects built from this model once and shared by its users in this process (the collision
+        models per allowed pairs: :meth:`dualarm_control.collision.CollisionModel.shared`)."""
 
     @property
     def description(self) -> RobotDescription:

@@ -263,3 +263,31 @@ def test_contact_pairs_enable_only_the_named_links() -> None:
         assert c.contact_force("left_flange", "right_tool") == 0.0  # 5 cm apart at the start
     with pytest.raises(ValueError, match="unknown link 'nope'"):
         DualArmCell(CellConfig(urdf=PAN_URDF, contact_pairs=(("left_flange", "nope"),)))
+
+
+def test_visual_shapes_change_no_physics() -> None:
+    """The cell loads without the URDF's visual meshes by default (CellConfig.visual_shapes): the
+    same motion and contacts bit for bit as with them, on a robot whose meshes pybullet would load
+    (the Panda pair, self-collision on), the arms driven into each other."""
+    from dualarm_control.robot import load_robot
+
+    robot = load_robot("panda_pair")
+    samples = []
+    for visual in (False, True):
+        config = CellConfig.for_robot(robot, visual_shapes=visual)
+        with DualArmCell(config, initial_positions=robot.ready) as c:
+            n = len(c.joint_names)
+            qd = np.zeros(n)
+            qd[0], qd[n // 2] = -1.0, 1.0  # both shoulders turned inwards: the wrists meet after ~90 periods
+            trace, contacts = [], []
+            for _ in range(200):
+                c.apply_command(qd)
+                s = c.step()
+                trace.append(np.concatenate((s.positions, s.velocities)))
+                contacts.append(c.contacts())
+            samples.append((np.array(trace), contacts))
+    (plain, contacts_plain), (visual, contacts_visual) = samples
+    assert np.abs(plain[-1, :n] - plain[0, :n]).max() > 0.1  # it moved
+    assert sum(bool(c) for c in contacts_plain) > 50, "the arms should have met"
+    np.testing.assert_array_equal(plain, visual)
+    assert contacts_plain == contacts_visual

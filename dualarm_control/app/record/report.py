@@ -126,7 +126,7 @@ def goal_metrics(record: RunRecord, commands: Sequence[Any], model: DualArmModel
     """How each goal of a script ended (:func:`~dualarm_control.drive_monitor.judge_goals`, stalls
     explained by the robot's collision model) and the smallest link-pair distance over the run [m]
     (coal, on the recorded positions, the robot's ``collision_allowed`` pairs excluded)."""
-    collision = CollisionModel(model, allowed=model.description.collision_allowed)
+    collision = CollisionModel.shared(model, model.description.collision_allowed)
     outcomes = judge_goals(model, commands, record.time, record.positions, record.final_positions, collision)
     closest = (np.inf, "")
     for q in record.positions[np.all(np.isfinite(record.positions), axis=1)]:

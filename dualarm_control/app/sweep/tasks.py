@@ -109,7 +109,7 @@ class TaskSampler:
     def __init__(self, model: DualArmModel, sampling: TaskSampling, limits: MotionLimits, settle_time: float,
                  allowed: tuple[tuple[str, str], ...] = ()) -> None:
         self.model, self.sampling, self.limits, self.settle_time = model, sampling, limits, settle_time
-        self.collision = CollisionModel(model, allowed=tuple(model.description.collision_allowed) + tuple(allowed))
+        self.collision = CollisionModel.shared(model, tuple(model.description.collision_allowed) + tuple(allowed))
         span = model.q_max - model.q_min
         finite = np.isfinite(span)
         span = np.where(finite, span, 2 * math.pi)

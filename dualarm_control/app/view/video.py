@@ -90,7 +90,7 @@ class CellCamera:
         with tempfile.TemporaryDirectory(prefix="dualarm_video_") as tmp:
             path = Path(tmp) / "robot_description.urdf"
             path.write_text(urdf_text)
-            self.cell = DualArmCell(CellConfig(urdf=path, joints=joint_names))  # posed by name: q in that order
+            self.cell = DualArmCell(CellConfig(urdf=path, joints=joint_names, visual_shapes=True))  # posed by name: q in that order
         self.lower, self.upper = self.cell.position_limits
         self._view = p.computeViewMatrix(CAMERA_EYE, CAMERA_TARGET, (0.0, 0.0, 1.0))
         self._projection = p.computeProjectionMatrixFOV(FIELD_OF_VIEW_DEG, width / height, 0.05, 20.0)
