@@ -415,8 +415,12 @@ class DualArmCell:
             if ab not in intended:
                 self._pair_names[ab] = (pair[0], pair[1])
         keep = intended | set(self._pair_names)
-        for i in range(-1, n_links):
-            for j in range(i + 1, n_links):
+        # only links with collision shapes: a link without has no collider, so no filter of its pairs
+        # is ever consulted (Baxter: 666 of 1711 pairs; each call costs ~0.1 ms)
+        shaped = [i for i in range(-1, n_links)
+                  if p.getCollisionShapeData(self._body, i, physicsClientId=self._client)]
+        for k, i in enumerate(shaped):
+            for j in shaped[k + 1:]:
                 p.setCollisionFilterPair(self._body, self._body, i, j, int((i, j) in keep),
                                          physicsClientId=self._client)
 
