@@ -19,7 +19,7 @@ import pytest
 
 from dualarm_control.app.cli import main
 from dualarm_control.app.sweep.execute import run_sweep
-from dualarm_control.app.sweep.run import WALL_COLUMNS, grid
+from dualarm_control.app.sweep.run import WALL_COLUMNS, grid, task_groups
 from dualarm_control.app.sweep.spec import SweepSpec, load_spec
 from dualarm_control.app.sweep.store import done_keys, parts, read_table
 from dualarm_control.app.sweep.tasks import TaskSampling
@@ -43,6 +43,20 @@ def reference(tmp_path_factory: pytest.TempPathFactory) -> Path:
     result = run_sweep(smoke(4), out, workers=0, show_progress=False)
     assert result.ran == result.total == 12 and result.failed == 0
     return out
+
+
+def test_a_dask_task_is_the_missing_runs_of_one_sampled_task() -> None:
+    """What one worker gets: every missing run of one task, and only those, in grid order."""
+    spec = smoke(3)
+    keys = grid(spec)
+    groups = task_groups(keys)
+    assert [k for g in groups for k in g] == keys
+    for group in groups:
+        assert len({(k.robot, k.variant, k.seed, k.task) for k in group}) == 1
+        assert [k.solver for k in group] == list(spec.solvers)
+    partly_done = [k for k in keys if not (k.task == 1 and k.solver == spec.solvers[0])]
+    assert len(spec.robots) == len(spec.variants) == 1
+    assert [len(g) for g in task_groups(partly_done)] == [len(spec.solvers) - (task == 1) for task in range(3)]
 
 
 def test_rows_hold_the_metrics(reference: Path) -> None:

@@ -4,8 +4,9 @@
   ``LocalCluster`` of ``workers`` processes (one thread each) on 127.0.0.1, no dashboard, no
   worker profiler;
   ``workers=0`` runs every run back to back in this process (no Dask: the reference run).
-* **Nothing twice**: the keys already in the output are skipped; each run is one Dask task keyed
-  by its run key, with ``retries`` (a task lost with its worker is run again elsewhere).
+* **Nothing twice**: the keys already in the output are skipped; the missing runs of one task (its
+  solvers) are one Dask task, keyed by their run keys, with ``retries`` (a task lost with its
+  worker is run again elsewhere): the task is sampled once, on one worker, as in one process.
 * **Nothing lost**: rows are written every ``batch_size`` results and at the end, also on Ctrl-C
   (then the KeyboardInterrupt goes on); a run that raises is already a row (:func:`run_one`).
 * **Nothing wrong**: ``DIR/spec.json`` holds the spec the rows were made with (all but the number of
@@ -24,7 +25,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from dualarm_control.app.sweep.run import RunKey, grid, run_one
+from dualarm_control.app.sweep.run import RunKey, grid, run_one, run_runs, task_groups
 from dualarm_control.app.sweep.spec import SweepSpec
 from dualarm_control.app.sweep.store import done_keys, write_part
 from dualarm_control.errors import DualArmError
@@ -85,10 +86,10 @@ def _on_dask(spec: SweepSpec, keys: list[RunKey], stack: ExitStack, scheduler: s
         client = stack.enter_context(Client(cluster))
     else:
         client = stack.enter_context(Client(scheduler))
-    futures = [client.submit(run_one, spec, key, key=f"sweep-{spec.name}-{key.text}", retries=spec.retries, pure=False)
-               for key in keys]
+    futures = [client.submit(run_runs, spec, group, key=f"sweep-{spec.name}-{'+'.join(k.text for k in group)}",
+                             retries=spec.retries, pure=False) for group in task_groups(keys)]
     for future in as_completed(futures):
-        yield future.result()
+        yield from future.result()
         future.release()
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import time
 import traceback
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from functools import lru_cache
 from typing import Any
@@ -100,3 +101,17 @@ def run_one(spec: SweepSpec, key: RunKey) -> dict[str, Any]:
         row["error"] = f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}"
     row["wall_time_s"] = time.perf_counter() - start
     return row
+
+
+def task_groups(keys: Sequence[RunKey]) -> list[list[RunKey]]:
+    """``keys`` grouped by task (robot, variant, seed, task index), in order of first appearance: the
+    runs of one sampled task, the unit of work sent to a Dask worker."""
+    groups: dict[tuple[str, str, int, int], list[RunKey]] = {}
+    for key in keys:
+        groups.setdefault((key.robot, key.variant, key.seed, key.task), []).append(key)
+    return list(groups.values())
+
+
+def run_runs(spec: SweepSpec, keys: Sequence[RunKey]) -> list[dict[str, Any]]:
+    """The rows of ``keys`` (:func:`run_one` each), in order."""
+    return [run_one(spec, key) for key in keys]
