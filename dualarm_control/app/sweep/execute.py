@@ -2,7 +2,7 @@
 
 * **Cluster**: ``scheduler`` (``tcp://HOST:PORT``, an existing ``dask scheduler``) or else a
   ``LocalCluster`` of ``workers`` processes (one thread each) on 127.0.0.1, no dashboard, no
-  worker profiler;
+  worker profiler, the workers' event loops woken seldom (:data:`LOCAL_WORKER_CONFIG`);
   ``workers=0`` runs every run back to back in this process (no Dask: the reference run).
 * **Nothing twice**: the keys already in the output are skipped; the missing runs of one task (its
   solvers) are one Dask task, keyed by their run keys, with ``retries`` (a task lost with its
@@ -31,6 +31,17 @@ from dualarm_control.app.sweep.store import done_keys, write_part
 from dualarm_control.errors import DualArmError
 
 LOCALHOST = "127.0.0.1"
+LOCAL_WORKER_CONFIG = {
+    "distributed.worker.profile.enabled": False,  # the statistical profiler samples the run's thread every 10 ms
+    "distributed.admin.tick.interval": "10s",  # the event loop's blocking check (default 20 ms)
+    "distributed.admin.system-monitor.interval": "60s",  # psutil's CPU/memory/network figures (default 0.5 s)
+    "distributed.worker.memory.monitor-interval": "5s",  # the memory limits' check (default 0.1 s)
+}
+"""The dask settings of a sweep's own LocalCluster: a run is CPU-bound Python in the worker's one
+thread, and every wake-up of the worker's event loop takes the GIL from it. Measured here (16
+LWR4 tasks, 45 runs, one worker against the same runs back to back in one process): +58 % and
++64 % with dask's defaults, +2 % to +5 % with these (docs/sweep.md). An existing cluster
+(``--scheduler``) keeps its own settings."""
 
 
 @dataclass(frozen=True)
@@ -79,8 +90,8 @@ def _on_dask(spec: SweepSpec, keys: list[RunKey], stack: ExitStack, scheduler: s
     import dask
     from distributed import Client, LocalCluster, as_completed
 
-    if scheduler is None:  # the workers' statistical profiler off: it samples the run's thread every 10 ms
-        stack.enter_context(dask.config.set({"distributed.worker.profile.enabled": False}))
+    if scheduler is None:
+        stack.enter_context(dask.config.set(LOCAL_WORKER_CONFIG))
         cluster = stack.enter_context(LocalCluster(host=LOCALHOST, n_workers=workers, threads_per_worker=1,
                                                    processes=True, dashboard_address=None))
         client = stack.enter_context(Client(cluster))
