@@ -35,12 +35,14 @@ LOCAL_WORKER_CONFIG = {
     "distributed.worker.profile.enabled": False,  # the statistical profiler samples the run's thread every 10 ms
     "distributed.admin.tick.interval": "10s",  # the event loop's blocking check (default 20 ms)
     "distributed.admin.system-monitor.interval": "60s",  # psutil's CPU/memory/network figures (default 0.5 s)
-    "distributed.worker.memory.monitor-interval": "5s",  # the memory limits' check (default 0.1 s)
+    "distributed.worker.memory.monitor-interval": "60s",  # the memory limits' check (default 0.1 s)
 }
 """The dask settings of a sweep's own LocalCluster: a run is CPU-bound Python in the worker's one
 thread, and every wake-up of the worker's event loop takes the GIL from it. Measured here (16
-LWR4 tasks, 45 runs, one worker against the same runs back to back in one process): +58 % and
-+64 % with dask's defaults, +2 % to +5 % with these (docs/sweep.md). An existing cluster
+LWR4 tasks, 45 runs, one worker against the same runs back to back in one process, each figure
+one run): +58 % and +64 % with dask's defaults; +2.4 % to +10.7 % (median 4.4 %, 4 runs) with
+these; +8.5 % to +19.8 % with the memory check every 5 s (docs/sweep.md). A run's memory is
+flat (about 400 MB), so a minute between memory checks costs nothing. An existing cluster
 (``--scheduler``) keeps its own settings."""
 
 
