@@ -15,6 +15,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import psutil
 import pytest
 
 from dualarm_control.app.cli import main
@@ -134,6 +135,46 @@ def test_cli_sweep_and_report(reference: Path, tmp_path: Path, capsys: pytest.Ca
     assert main(["sweep", "report"]) == 2
 
 
+def test_cli_scaling_runs_the_same_rows_three_ways(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``dualarm sweep scaling``: the same runs in this process, on one worker and on two; the table
+    and the JSON hold every layout (timings are not judged), and the three layouts' rows are the same."""
+    import json
+
+    assert main(["sweep", "scaling", str(SMOKE), "--tasks", "2", "--output", str(tmp_path)]) == 0
+    text = capsys.readouterr().out
+    for layout in ("| this process | 6 | 0 |", "| 1 worker | 6 | 0 |", "| 2 workers | 6 | 0 |"):
+        assert layout in text
+    doc = json.loads((tmp_path / "scaling.json").read_text())
+    assert [r["workers"] for r in doc["layouts"]] == [0, 1, 2]
+    assert {"two_over_one_wall", "two_over_one_steady", "one_worker_overhead"} <= set(doc)
+    rows = [sorted(deterministic(tmp_path / f"rows_{w}"), key=lambda r: r["key"]) for w in (0, 1, 2)]
+    assert rows[0] == rows[1] == rows[2]
+    assert main(["sweep", "scaling"]) == 2
+
+
+def test_the_local_cluster_listens_on_loopback_only(tmp_path: Path) -> None:
+    """Every socket the local cluster listens on (scheduler, its HTTP server, workers, nannies: this
+    process and its children) is on 127.0.0.1, and none on the dashboard's 8787."""
+
+    seen: list[tuple[str, int]] = []
+
+    def listening(_: dict[str, Any]) -> None:
+        if not seen:
+            me = psutil.Process()
+            seen.extend(listening_sockets([me, *me.children(recursive=True)]))
+
+    run_sweep(smoke(1), tmp_path, workers=2, show_progress=False, on_row=listening)
+    assert len(seen) >= 5, seen  # the scheduler, its HTTP server, two workers, two nannies
+    assert {ip for ip, _ in seen} == {"127.0.0.1"}, seen
+    assert 8787 not in {port for _, port in seen}, seen
+
+
+def listening_sockets(procs: list[psutil.Process]) -> list[tuple[str, int]]:
+    """(address, port) of every socket ``procs`` listen on."""
+    return [(c.laddr.ip, c.laddr.port) for proc in procs for c in proc.net_connections(kind="inet")
+            if c.status == psutil.CONN_LISTEN]
+
+
 def _wait_for(condition: Any, deadline_s: float, what: str) -> None:
     end = time.monotonic() + deadline_s
     while not condition():
@@ -144,14 +185,16 @@ def _wait_for(condition: Any, deadline_s: float, what: str) -> None:
 
 @pytest.mark.slow
 def test_worker_killed_mid_sweep(tmp_path: Path) -> None:
-    """A scheduler and two workers as processes on 127.0.0.1; one worker SIGKILLed after 3 rows: the sweep
-    completes, every key exactly once, the rows bitwise those of a one-process run."""
+    """A scheduler and two workers as processes on 127.0.0.1 (every socket they listen on, their HTTP
+    servers' too); one worker SIGKILLed after 3 rows: the sweep completes, every key exactly once, the
+    rows bitwise those of a one-process run."""
     dask = str(Path(sys.executable).with_name("dask"))
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(Path(__file__).resolve().parents[1]),
                                                                      os.environ.get("PYTHONPATH")]))}
     address_file = tmp_path / "scheduler.json"
-    procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
-                               "--scheduler-file", str(address_file)], env=env, stderr=subprocess.DEVNULL)]
+    loopback = ["--host", "127.0.0.1", "--no-dashboard", "--dashboard-address", "127.0.0.1:0"]  # its HTTP server too
+    procs = [subprocess.Popen([dask, "scheduler", *loopback, "--port", "0", "--scheduler-file", str(address_file)],
+                              env=env, stderr=subprocess.DEVNULL)]
     try:
         _wait_for(address_file.exists, 60, "the scheduler's address")
         import json
@@ -160,12 +203,14 @@ def test_worker_killed_mid_sweep(tmp_path: Path) -> None:
         address = json.loads(address_file.read_text())["address"]
         assert address.startswith("tcp://127.0.0.1:")
         for _ in range(2):
-            procs.append(subprocess.Popen([dask, "worker", address, "--host", "127.0.0.1", "--nthreads", "1",
-                                           "--no-nanny", "--no-dashboard"], env=env, stderr=subprocess.DEVNULL))
+            procs.append(subprocess.Popen([dask, "worker", address, *loopback, "--nthreads", "1", "--no-nanny"],
+                                          env=env, stderr=subprocess.DEVNULL))
         from distributed import Client
 
         with Client(address) as client:
             _wait_for(lambda: len(client.scheduler_info()["workers"]) == 2, 60, "two workers")
+        sockets = listening_sockets([psutil.Process(p.pid) for p in procs])
+        assert len(sockets) >= 6 and {ip for ip, _ in sockets} == {"127.0.0.1"}, sockets
         spec = smoke(6, batch_size=2)
         rows: list[str] = []
 

@@ -19,14 +19,17 @@ def add_sweep_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[t
         description="Run the grid of SPEC.yaml (robots x solvers x variants x tasks, config/sweeps/) as Dask tasks "
         "(a local cluster on 127.0.0.1 by default) into the Parquet dataset DIR; runs already in DIR are skipped. "
         "'dualarm sweep report TABLE' writes the paired l0 ratios (medians, bootstrap 95 %% CIs), report.md and "
-        "box plots.")
-    swp.add_argument("spec", metavar="SPEC.yaml|report", help="the sweep spec, or 'report'")
-    swp.add_argument("table", nargs="?", default=None, metavar="TABLE", help="report: the sweep's output directory")
+        "box plots. 'dualarm sweep scaling SPEC.yaml' runs the same runs in this process, on one local worker and "
+        "on two, one after the other, and writes the rates and their ratios (scaling.md, scaling.json).")
+    swp.add_argument("spec", metavar="SPEC.yaml|report|scaling", help="the sweep spec, or 'report' or 'scaling'")
+    swp.add_argument("table", nargs="?", default=None, metavar="TABLE|SPEC.yaml",
+                     help="report: the sweep's output directory; scaling: the spec")
     swp.add_argument("--tasks", type=int, default=None, metavar="N", help="number of tasks (default: the spec's)")
     swp.add_argument("--robots", default=None, metavar="NAME,...", help="only these of the spec's robots")
     swp.add_argument("--output", default=None, metavar="DIR",
                      help=f"sweep: the Parquet dataset (default: {DEFAULT_OUTPUT}/<spec name>); report: where "
-                     "report.md and the figures go (default: TABLE/report)")
+                     "report.md and the figures go (default: TABLE/report); scaling: where the layouts' rows, "
+                     f"scaling.md and scaling.json go (default: {DEFAULT_OUTPUT}/<spec name>_scaling)")
     swp.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                      help="an existing Dask scheduler (default: a local cluster on 127.0.0.1)")
     swp.add_argument("--workers", type=int, default=2, metavar="N",
@@ -47,6 +50,20 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         if not table.is_dir():
             raise DualArmError(f"sweep report: {table} is not a sweep output directory")
         text, paths = report(table, Path(args.output) if args.output else table / "report", args.seed)
+        print(text)
+        print("wrote " + ", ".join(str(p) for p in paths))
+        return 0
+    if args.spec == "scaling":
+        if args.table is None:
+            raise DualArmError("sweep scaling: give the sweep spec (SPEC.yaml)")
+        if args.tasks is not None and args.tasks < 1:
+            raise DualArmError("sweep: --tasks must be >= 1")
+        from dualarm_control.app.sweep.scaling import scaling
+        from dualarm_control.app.sweep.spec import load_spec
+
+        spec = load_spec(Path(args.table)).with_tasks(args.tasks).with_robots(args.robots)
+        out = Path(args.output) if args.output else Path(DEFAULT_OUTPUT) / f"{spec.name}_scaling"
+        text, paths = scaling(spec, out, progress=lambda m: print(m, file=sys.stderr))
         print(text)
         print("wrote " + ", ".join(str(p) for p in paths))
         return 0

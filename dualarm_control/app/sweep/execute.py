@@ -94,8 +94,10 @@ def _on_dask(spec: SweepSpec, keys: list[RunKey], stack: ExitStack, scheduler: s
 
     if scheduler is None:
         stack.enter_context(dask.config.set(LOCAL_WORKER_CONFIG))
+        # no dashboard; the scheduler's HTTP server (health, metrics) on a free port of 127.0.0.1, not 8787
         cluster = stack.enter_context(LocalCluster(host=LOCALHOST, n_workers=workers, threads_per_worker=1,
-                                                   processes=True, dashboard_address=None))
+                                                   processes=True, dashboard_address=None,
+                                                   scheduler_kwargs={"dashboard_address": f"{LOCALHOST}:0"}))
         client = stack.enter_context(Client(cluster))
     else:
         client = stack.enter_context(Client(scheduler))
