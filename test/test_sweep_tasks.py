@@ -69,6 +69,11 @@ def test_spec_errors_name_the_key(tmp_path: Path) -> None:
         parse_spec({"sampling": {"clerance": 0.1}})
     with pytest.raises(SpecError, match=r"sweep\.sampling\.clearance: got -1"):
         parse_spec({"sampling": {"clearance": -1}})
+    with pytest.raises(SpecError, match=r"sweep\.sampling\.clearance: 0\.02 m is below the collision limit's safety "
+                       r"distance 0\.032 m .* 'standard_qp' on 'lwr4_cell'"):
+        parse_spec({"robots": ["lwr4_cell"], "solvers": ["standard_qp"], "sampling": {"clearance": 0.02}})
+    assert parse_spec({"robots": ["lwr4_cell"], "solvers": ["standard_qp"], "sampling": {"clearance": 0.02},
+                       "variants": {"off": {"collision.enabled": False}}}).sampling.clearance == 0.02
     with pytest.raises(SpecError, match=r"sweep\.tasks: got 0"):
         parse_spec({"tasks": 0})
     with pytest.raises(SpecError, match=r"sweep\.variants\.fast .*nonexistent_qp"):

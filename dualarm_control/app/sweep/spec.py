@@ -169,7 +169,14 @@ def parse_spec(raw: Any, default_name: str = "sweep") -> SweepSpec:
     for robot in spec.robots:  # every grid cell's parameters, before anything runs
         for solver in spec.solvers:
             for variant, _ in spec.variants:
-                spec.params(robot, solver, variant)
+                collision = spec.params(robot, solver, variant).collision
+                safety = collision.kept_distances[1]
+                if collision.enabled and spec.sampling.clearance < safety:
+                    raise SpecError(
+                        f"sweep.sampling.clearance: {spec.sampling.clearance:g} m is below the collision limit's "
+                        f"safety distance {safety:g} m (collision.safety_distance + 2 shape_margin) of "
+                        f"variant {variant!r} with {solver!r} on {robot!r}: a start or goal that close "
+                        "stops at the limit instead of being reached")
     return spec
 
 

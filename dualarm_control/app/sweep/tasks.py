@@ -46,7 +46,7 @@ class TaskSampling:
     joint_margin: float = 0.1
     start_spread: float = 0.5
     manipulability_floor: float = 0.2
-    clearance: float = 0.02
+    clearance: float = 0.04
     max_tool_distance: float = 0.8
     goal_translation: float = 0.05
     goal_rotation: float = math.radians(15.0)
