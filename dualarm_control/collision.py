@@ -326,6 +326,10 @@ class CollisionModel:
         self.request = _request(gjk_tolerance)
         """The request of every shape pair (absolute tolerance, no warm start: module docstring)."""
         self._fallbacks = [_request(t) for t in FALLBACK_GJK_TOLERANCES if t > gjk_tolerance]
+        self.geometry_data = self.geometry.createData()
+        """The shapes' placements in the world at the last call that computed a distance (``oMg``,
+        ``pin.updateGeometryPlacements``). Its per-pair distance functors are not used: they keep
+        GJK's state from call to call (the same q then gives other witness points, measured)."""
         self._results = [coal.DistanceResult() for _ in self.geometry.collisionPairs]
         self._names = [g.name for g in self.geometry.geometryObjects]
         self._index_shape_pairs()
@@ -362,8 +366,6 @@ class CollisionModel:
         self._all_shape_pairs = np.arange(len(shapes), dtype=np.intp)
         objects = self.geometry.geometryObjects
         self._shape_joint = np.array([obj.parentJoint for obj in objects], dtype=np.intp)
-        self._shape_joint_list: list[int] = self._shape_joint.tolist()
-        self._shape_placements = [pin.SE3(obj.placement) for obj in objects]  # in the parent joint's frame
         self._shape_a_list: list[int] = self._shape_a.tolist()
         self._shape_b_list: list[int] = self._shape_b.tolist()
         self._place_rotation = np.array([obj.placement.rotation for obj in objects]).reshape(-1, 3, 3)
@@ -624,19 +626,18 @@ class CollisionModel:
             spheres = self._sphere_bounds(candidates)
             self._slack[candidates] = spheres
             active = candidates[spheres < within]
+        pin.updateGeometryPlacements(self.model, self.data, self.geometry, self.geometry_data)  # oMg = oMi * placement
+        placed, shapes, request, results = self.geometry_data.oMg, self._shapes, self.request, self._results
         shape_a, shape_b, owner = self._shape_a_list, self._shape_b_list, self._shape_pair_owner
-        active_list = active.tolist()
-        placed = self._place({g for k in active_list for g in (shape_a[k], shape_b[k])})
-        shapes, request, results = self._shapes, self.request, self._results
         best: dict[int, tuple[float, int]] = {}  # link pair -> (d, shape pair)
         found = []
-        for k in active_list:
+        for k in active.tolist():
             res = results[k]
             res.clear()
             ga, gb = shape_a[k], shape_b[k]
             d = coal.distance(shapes[ga], placed[ga], shapes[gb], placed[gb], request, res)
             if not -_FAILED < d < _FAILED:  # also NaN
-                d = self._retry(k, placed[ga], placed[gb])
+                d = self._retry(k)
             found.append(d)
             i = owner[k]
             if i not in best or d < best[i][0]:
@@ -645,41 +646,36 @@ class CollisionModel:
         chosen = sorted((i, k) for i, (d, k) in best.items() if within is None or d < within)
         if not chosen:
             return self._none
-        chosen_results = [results[k] for _, k in chosen]
-        dist = np.array([best[i][0] for i, _ in chosen])  # coal.distance returns the result's min_distance
+        pairs = [i for i, _ in chosen]
+        shape_pairs = [k for _, k in chosen]
+        chosen_results = [results[k] for k in shape_pairs]
+        dist = np.array([best[i][0] for i in pairs])  # coal.distance returns the result's min_distance
         points = np.array([[res.getNearestPoint1() for res in chosen_results],
                            [res.getNearestPoint2() for res in chosen_results]])
         normals = np.array([res.normal for res in chosen_results])
-        if not math.isfinite(float(points.sum() + normals.sum())):  # a finite distance with NaN points: GJK failed
+        squares = (normals * normals).sum(axis=1)
+        if not math.isfinite(float(points.sum() + squares.sum())):  # a finite distance with NaN points: GJK failed
             bad = ~(np.isfinite(points).all(axis=(0, 2)) & np.isfinite(normals).all(axis=1))
             for r in np.flatnonzero(bad).tolist():
-                k = chosen[r][1]
-                res = results[k]
-                dist[r] = self._retry(k, placed[shape_a[k]], placed[shape_b[k]])
+                res = results[shape_pairs[r]]
+                dist[r] = self._retry(shape_pairs[r])
                 points[0, r], points[1, r], normals[r] = res.getNearestPoint1(), res.getNearestPoint2(), res.normal
-        normals /= np.sqrt((normals * normals).sum(axis=1))[:, None]  # np.linalg.norm(normals, axis=1), as it computes it
+            squares = (normals * normals).sum(axis=1)
+        normals /= np.sqrt(squares)[:, None]  # np.linalg.norm(normals, axis=1), as it computes it
         if polish:
-            for r, (_, k) in enumerate(chosen):
-                ga, gb = shape_a[k], shape_b[k]
-                points[0, r], points[1, r], normals[r] = self._polish(ga, gb, dist[r], points[0, r], points[1, r],
-                                                                      normals[r], placed[ga], placed[gb])
-        shape_pairs = [k for _, k in chosen]
-        return NearPairs(tuple(i for i, _ in chosen), tuple(self.pairs[i] for i, _ in chosen),
+            for r, k in enumerate(shape_pairs):
+                points[0, r], points[1, r], normals[r] = self._polish(k, dist[r], points[0, r], points[1, r], normals[r])
+        return NearPairs(tuple(pairs), tuple(self.pairs[i] for i in pairs),
                          tuple(self._shape_pair_names[k] for k in shape_pairs), dist, points, normals,
                          self._rows(np.array(shape_pairs, dtype=np.intp), points, normals))
 
-    def _place(self, shapes: set[int]) -> dict[int, pin.SE3]:
-        """The shapes' placements in the world at the current ``data.oMi``, per shape index: oMg = oMi
-        * the shape's placement in its joint's frame (as ``pin.updateGeometryPlacements``). coal takes
-        a pinocchio SE3 where it takes a Transform3s (the same values, bit for bit)."""
-        oMi, joint, local = self.data.oMi, self._shape_joint_list, self._shape_placements
-        return {g: oMi[joint[g]] * local[g] for g in shapes}
-
-    def _retry(self, k: int, tf_a: pin.SE3, tf_b: pin.SE3) -> float:
-        """Shape pair k again with the fallback requests, tightest first (GJK or EPA failed: coal
-        then returns -DBL_MAX or an infinite distance and NaN points); CollisionError if all fail."""
+    def _retry(self, k: int) -> float:
+        """Shape pair k again, at the shapes' placements of the call (``geometry_data.oMg``), with the
+        fallback requests, tightest first (GJK or EPA failed: coal then returns -DBL_MAX or an infinite
+        distance and NaN points); CollisionError if all fail."""
         res = self._results[k]
         ga, gb = int(self._shape_a[k]), int(self._shape_b[k])
+        tf_a, tf_b = self.geometry_data.oMg[ga], self.geometry_data.oMg[gb]
         d = math.nan
         for request in self._fallbacks:
             res.clear()
@@ -691,10 +687,10 @@ class CollisionModel:
                              f"{d!r}) at GJK tolerances {self.request.gjk_tolerance:g} to "
                              f"{max(FALLBACK_GJK_TOLERANCES + (self.request.gjk_tolerance,)):g}")
 
-    def _polish(self, ga: int, gb: int, d: float, pa: FloatArray, pb: FloatArray, n: FloatArray,
-                placed_a: pin.SE3, placed_b: pin.SE3) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Witness points and normal of shapes ga (A) and gb (B), placed as :meth:`_place` gives them,
-        refined on their closest features.
+    def _polish(self, k: int, d: float, pa: FloatArray, pb: FloatArray,
+                n: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Witness points and normal of shape pair k's shapes A and B, at their placements of the call
+        (``geometry_data.oMg``), refined on their closest features.
 
         GJK certifies d (its duality gap, 1e-12 m^2) but not where the witness points lie along the
         surfaces: there d changes only to second order, so each point may be off by about
@@ -710,6 +706,8 @@ class CollisionModel:
         edge or facet, a segment parallel to a face, or a result more than
         :data:`WITNESS_POLISH_LIMIT` from GJK's.
         """
+        ga, gb = self._shape_a_list[k], self._shape_b_list[k]
+        placed_a, placed_b = self.geometry_data.oMg[ga], self.geometry_data.oMg[gb]
         fa = _feature(self._shapes[ga], placed_a.rotation, placed_a.translation, pa, self._hull_points[ga])
         fb = _feature(self._shapes[gb], placed_b.rotation, placed_b.translation, pb, self._hull_points[gb])
         if fa is None or fb is None or (fa[0] == "face" and fb[0] == "face"):
@@ -742,8 +740,9 @@ class CollisionModel:
         return new_a, new_b, new_n
 
     def shape_placement(self, index: int) -> pin.SE3:
-        """Shape ``index``'s placement in the world at the last :meth:`distances` call (:meth:`_place`)."""
-        return self.data.oMi[self._shape_joint_list[index]] * self._shape_placements[index]
+        """Shape ``index``'s placement in the world at the last :meth:`distances` call that computed a
+        distance (pinocchio's ``oMg``: oMi * the shape's placement in its joint's frame)."""
+        return pin.SE3(self.geometry_data.oMg[index])
 
     def _sphere_bounds(self, shape_pairs: npt.NDArray[np.intp]) -> FloatArray:
         """Lower bounds [m] of the distance of ``shape_pairs`` at the last call's joint placements,
@@ -763,10 +762,10 @@ class CollisionModel:
         n^T J_p = (n^T J_lin + (p x n)^T J_ang) masked by that link's joint support.
         """
         m = len(shape_pairs)
-        n = np.concatenate((-normals, normals))  # -n on A, +n on B: dd_dq = (-n)^T J_pa + n^T J_pb
+        n = np.concatenate((normals, normals))  # n at both points: dd_dq = n^T J_pb - n^T J_pa
         contribution = witness_rows(n, points.reshape(2 * m, 3), self.data.J).reshape(2, m, -1)
         contribution *= self._pair_support[:, shape_pairs]
-        result: FloatArray = contribution[0] + contribution[1]
+        result: FloatArray = contribution[1] - contribution[0]
         return result
 
     def closest(self, q: FloatArray) -> PairDistance:

@@ -102,7 +102,7 @@ class CollisionLimit:
         if not near.index:
             return bounds
         self._rows = a, b = velocity_damper(near.rows, near.distance, influence, safety, self.params.gain)
-        labels = tuple(self._labels[i] for i in near.index)
+        labels = tuple([self._labels[i] for i in near.index])
         if bounds.rows.shape[0]:
             a, b, labels = np.vstack((bounds.rows, a)), np.concatenate((bounds.bound, b)), bounds.labels + labels
         bounds.rows, bounds.bound, bounds.labels = a, b, labels
@@ -116,5 +116,5 @@ class CollisionLimit:
             return CollisionReport(math.inf, None, 0, 0, d_i)
         a, b = self._rows
         active = int(np.count_nonzero(a @ velocities >= b - ACTIVE_TOLERANCE))
-        r = int(np.argmin(near.distance))
+        r = int(near.distance.argmin())
         return CollisionReport(float(near.distance[r]), near.links[r], len(near), active, d_i)
