@@ -223,7 +223,12 @@ class NearPairs:
         index: each pair's index in :attr:`CollisionModel.pairs`, (m,).
         links: each pair's links (link_a, link_b). geometries: its closest shapes.
         distance: d [m], (m,). points: p_a, p_b [m], (2, m, 3). normals: n, (m, 3).
-        rows: dd_dq [m/rad], (m, n).
+        rows: dd_dq [m/rad], (m, n); None when the call deferred them (:meth:`CollisionModel.rows`
+            builds them from ``shape_pairs`` and ``jacobian``).
+        speed: how fast each pair's distance can change, C [m/rad] (m, n): |dd_dq qd| <= C |qd| for
+            every qd (the reach of the pair's two links about each joint, :attr:`CollisionModel._pair_motion`).
+        shape_pairs: each pair's closest shape pair (its index in the geometry's collision pairs), (m,).
+        jacobian: pinocchio's joint Jacobians ``data.J`` at the call's q, (6, n) (for deferred rows).
     """
 
     index: tuple[int, ...]
@@ -232,7 +237,10 @@ class NearPairs:
     distance: FloatArray
     points: FloatArray
     normals: FloatArray
-    rows: FloatArray
+    rows: FloatArray | None
+    speed: FloatArray
+    shape_pairs: npt.NDArray[np.intp]
+    jacobian: FloatArray
 
     def __len__(self) -> int:
         return len(self.index)
@@ -240,12 +248,16 @@ class NearPairs:
     @classmethod
     def empty(cls, n: int) -> NearPairs:
         """No pair, for n joints."""
-        return cls((), (), (), np.zeros(0), np.zeros((2, 0, 3)), np.zeros((0, 3)), np.zeros((0, n)))
+        return cls((), (), (), np.zeros(0), np.zeros((2, 0, 3)), np.zeros((0, 3)), np.zeros((0, n)),
+                   np.zeros((0, n)), np.zeros(0, dtype=np.intp), np.zeros((6, n)))
 
     def pair_distances(self) -> list[PairDistance]:
-        """One :class:`PairDistance` per pair."""
+        """One :class:`PairDistance` per pair (ValueError when the rows were deferred)."""
+        if self.rows is None:
+            raise ValueError("pair_distances: the rows were deferred (CollisionModel.rows builds them)")
+        rows = self.rows
         return [PairDistance(*self.links[r], *self.geometries[r], d, self.points[0, r], self.points[1, r],
-                             self.normals[r], self.rows[r]) for r, d in enumerate(self.distance.tolist())]
+                             self.normals[r], rows[r]) for r, d in enumerate(self.distance.tolist())]
 
 
 @dataclass(frozen=True)
@@ -579,7 +591,7 @@ class CollisionModel:
         :meth:`near` as one :class:`PairDistance` per pair, in the order of :attr:`pairs`."""
         return self.near(q, within, polish).pair_distances()
 
-    def near(self, q: FloatArray, within: float | None = None, polish: bool = False) -> NearPairs:
+    def near(self, q: FloatArray, within: float | None = None, polish: bool = False, rows: bool = True) -> NearPairs:
         """The pairs' distances, witness points, normals and rows dd_dq at q, as arrays (module docstring).
 
         Args:
@@ -599,6 +611,8 @@ class CollisionModel:
             polish: refine the witness points and normals of the pairs returned on the shapes' closest
                 features (:meth:`_polish`; rows to 1e-6 m/rad instead of 1e-5, at up to 100 us per pair): the
                 distances are coal's either way; False (the default) gives GJK's points and normals.
+            rows: compute the rows dd_dq now; False defers them (``NearPairs.rows`` None, :meth:`rows`
+                builds the same rows later, from what the call kept).
 
         Returns:
             the pairs (those within), in the order of :attr:`pairs`.
@@ -650,9 +664,8 @@ class CollisionModel:
         shape_pairs = [k for _, k in chosen]
         chosen_results = [results[k] for k in shape_pairs]
         dist = np.array([best[i][0] for i in pairs])  # coal.distance returns the result's min_distance
-        points = np.array([[res.getNearestPoint1() for res in chosen_results],
-                           [res.getNearestPoint2() for res in chosen_results]])
-        normals = np.array([res.normal for res in chosen_results])
+        witness = np.array([(res.getNearestPoint1(), res.getNearestPoint2(), res.normal) for res in chosen_results])
+        points, normals = witness[:, :2].transpose(1, 0, 2), witness[:, 2]  # (2, m, 3) and (m, 3), views
         squares = (normals * normals).sum(axis=1)
         if not math.isfinite(float(points.sum() + squares.sum())):  # a finite distance with NaN points: GJK failed
             bad = ~(np.isfinite(points).all(axis=(0, 2)) & np.isfinite(normals).all(axis=1))
@@ -665,9 +678,19 @@ class CollisionModel:
         if polish:
             for r, k in enumerate(shape_pairs):
                 points[0, r], points[1, r], normals[r] = self._polish(k, dist[r], points[0, r], points[1, r], normals[r])
+        index = np.array(shape_pairs, dtype=np.intp)
+        jacobian = self.data.J.copy()
         return NearPairs(tuple(pairs), tuple(self.pairs[i] for i in pairs),
                          tuple(self._shape_pair_names[k] for k in shape_pairs), dist, points, normals,
-                         self._rows(np.array(shape_pairs, dtype=np.intp), points, normals))
+                         _witness_pair_rows(index, points, normals, jacobian, self._pair_support) if rows else None,
+                         self._pair_motion[index], index, jacobian)
+
+    def rows(self, near: NearPairs) -> FloatArray:
+        """The rows dd_dq [m/rad] (m, n) of ``near``'s pairs: ``near.rows``, or, when the call deferred
+        them, the same rows built now from the witness points, normals and Jacobians it kept."""
+        if near.rows is not None:
+            return near.rows
+        return _witness_pair_rows(near.shape_pairs, near.points, near.normals, near.jacobian, self._pair_support)
 
     def _retry(self, k: int) -> float:
         """Shape pair k again, at the shapes' placements of the call (``geometry_data.oMg``), with the
@@ -753,26 +776,32 @@ class CollisionModel:
         a, b = self._shape_a[shape_pairs], self._shape_b[shape_pairs]
         return np.linalg.norm(centres[a] - centres[b], axis=1) - self._radii[a] - self._radii[b]
 
-    def _rows(self, shape_pairs: npt.NDArray[np.intp], points: FloatArray, normals: FloatArray) -> FloatArray:
-        """dd_dq = n^T (J_pb - J_pa) for m shape pairs, (m, n), from the WORLD joint Jacobians.
-
-        pinocchio's ``data.J`` (6, n) holds every joint's motion [v_0; w] in the world, v_0 the
-        velocity of the point at the world origin: the point p of a link moves at v_0 + w x p, so
-        J_p = (J_lin - S(p) J_ang) restricted to the joints that move the link, and
-        n^T J_p = (n^T J_lin + (p x n)^T J_ang) masked by that link's joint support.
-        """
-        m = len(shape_pairs)
-        n = np.concatenate((normals, normals))  # n at both points: dd_dq = n^T J_pb - n^T J_pa
-        contribution = witness_rows(n, points.reshape(2 * m, 3), self.data.J).reshape(2, m, -1)
-        contribution *= self._pair_support[:, shape_pairs]
-        result: FloatArray = contribution[1] - contribution[0]
-        return result
-
     def closest(self, q: FloatArray) -> PairDistance:
         """The pair with the smallest distance at q (ValueError when the model has no pair)."""
         if not self.pairs:
             raise ValueError("the collision model has no pair")
         return min(self.distances(q), key=lambda p: p.distance)
+
+
+def _witness_pair_rows(shape_pairs: npt.NDArray[np.intp], points: FloatArray, normals: FloatArray,
+                       jacobian: FloatArray, support: FloatArray) -> FloatArray:
+    """dd_dq = n^T (J_pb - J_pa) for m shape pairs, (m, n), from the WORLD joint Jacobians.
+
+    pinocchio's ``data.J`` (6, n) holds every joint's motion [v_0; w] in the world, v_0 the
+    velocity of the point at the world origin: the point p of a link moves at v_0 + w x p, so
+    J_p = (J_lin - S(p) J_ang) restricted to the joints that move the link, and
+    n^T J_p = (n^T J_lin + (p x n)^T J_ang) masked by that link's joint support.
+
+    Args:
+        shape_pairs: (m,) shape pair indices. points: p_a, p_b [m], (2, m, 3). normals: n (m, 3).
+        jacobian: ``data.J`` (6, n). support: each shape pair's joint support masks, (2, pairs, n).
+    """
+    m = len(shape_pairs)
+    n = np.concatenate((normals, normals))  # n at both points: dd_dq = n^T J_pb - n^T J_pa
+    contribution = witness_rows(n, points.reshape(2 * m, 3), jacobian).reshape(2, m, -1)
+    contribution *= support[:, shape_pairs]
+    result: FloatArray = contribution[1] - contribution[0]
+    return result
 
 
 _NEXT, _PREV = np.array([1, 2, 0]), np.array([2, 0, 1])
@@ -845,11 +874,17 @@ def velocity_damper(dd_dq: FloatArray, distance: FloatArray, influence: float, s
     Returns:
         A = -dd_dq [m/rad], (m, n), and b [m/s], (m,).
     """
-    if not (0.0 <= safety < influence and gain > 0.0 and math.isfinite(influence + gain)):
-        CollisionParams(influence_distance=influence, safety_distance=safety, gain=gain)  # raises, naming the key
     if dd_dq.ndim != 2 or distance.shape != (dd_dq.shape[0],):
         raise DimensionError(f"velocity_damper: rows {dd_dq.shape} and distances {distance.shape} do not match")
-    return -dd_dq, gain * (distance - safety) / (influence - safety)
+    return -dd_dq, velocity_damper_bound(distance, influence, safety, gain)
+
+
+def velocity_damper_bound(distance: FloatArray, influence: float, safety: float, gain: float) -> FloatArray:
+    """b = xi (d - d_s) / (d_i - d_s) [m/s], (m,), of :func:`velocity_damper`'s rows, for m distances d [m]."""
+    if not (0.0 <= safety < influence and gain > 0.0 and math.isfinite(influence + gain)):
+        CollisionParams(influence_distance=influence, safety_distance=safety, gain=gain)  # raises, naming the key
+    result: FloatArray = gain * (distance - safety) / (influence - safety)
+    return result
 
 
 def velocity_damper_rows(distances: Sequence[PairDistance], influence: float, safety: float,

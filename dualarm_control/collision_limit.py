@@ -8,7 +8,10 @@ than the influence distance d_i give one hard row each (:func:`~dualarm_control.
 with d_s' = d_s + 2 m and d_i' = d_i + 2 m, m the shape margin (``collision.shape_margin``, 1 mm:
 pybullet's collision margin; the limit keeps d_s between the shapes as the simulator grows them).
 
-which every solver takes in its own variables (docs/collision.md, "Limits"). What the limit saw
+which every solver takes in its own variables (docs/collision.md, "Limits"). The rows' matrix is
+deferred (:class:`~dualarm_control.limits.DeferredRows`): it is built only when a solver's result
+is not vouched for by how fast the pairs' distances can change at most (the reach of their links
+about each joint), which in most cycles with pairs in range it is. What the limit saw
 is kept for the cycle's report (:class:`CollisionReport`: the closest pair, its distance, the rows
 and how many of them are at their bound).
 """
@@ -16,7 +19,7 @@ and how many of them are at their bound).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -26,9 +29,10 @@ from dualarm_control.collision import (
     NearPairs,
     PairDistance,
     velocity_damper,
+    velocity_damper_bound,
 )
 from dualarm_control.kinematics import DualArmModel, FloatArray
-from dualarm_control.limits import Bounds
+from dualarm_control.limits import Bounds, DeferredRows
 
 ACTIVE_TOLERANCE = 1e-6
 """A row is active (at its bound) when A qd >= b - 1e-6 m/s."""
@@ -87,25 +91,28 @@ class CollisionLimit:
         self.collision = collision
         self.params = params
         self.last = NearPairs.empty(collision.model.nv)
-        self._rows = (np.zeros((0, collision.model.nv)), np.zeros(0))
+        self._rows = DeferredRows.of(np.zeros((0, collision.model.nv)), np.zeros(0))
         self._labels = tuple(f"{a} – {b}" for a, b in collision.pairs)
         self._kept = params.kept_distances
 
     @property
     def near(self) -> list[PairDistance]:
         """The pairs of the last cycle closer than d_i (one object each: for a report, not the cycle)."""
-        return self.last.pair_distances()
+        last = self.last
+        if last.rows is None:
+            self.last = last = replace(last, rows=self.collision.rows(last))
+        return last.pair_distances()
 
     def apply(self, q: FloatArray, previous: FloatArray, bounds: Bounds) -> Bounds:
         influence, safety = self._kept
-        self.last = near = self.collision.near(q, within=influence)
+        self.last = near = self.collision.near(q, within=influence, rows=False)
         if not near.index:
             return bounds
-        self._rows = a, b = velocity_damper(near.rows, near.distance, influence, safety, self.params.gain)
-        labels = tuple([self._labels[i] for i in near.index])
-        if bounds.rows.shape[0]:
-            a, b, labels = np.vstack((bounds.rows, a)), np.concatenate((bounds.bound, b)), bounds.labels + labels
-        bounds.rows, bounds.bound, bounds.labels = a, b, labels
+        gain, collision = self.params.gain, self.collision
+        self._rows = rows = DeferredRows(near.speed, velocity_damper_bound(near.distance, influence, safety, gain),
+                                         lambda: velocity_damper(collision.rows(near), near.distance, influence,
+                                                                 safety, gain)[0])
+        bounds.add_rows(rows, tuple([self._labels[i] for i in near.index]))
         return bounds
 
     def report(self, velocities: FloatArray) -> CollisionReport:
@@ -114,7 +121,9 @@ class CollisionLimit:
         near = self.last
         if not near.index:
             return CollisionReport(math.inf, None, 0, 0, d_i)
-        a, b = self._rows
-        active = int(np.count_nonzero(a @ velocities >= b - ACTIVE_TOLERANCE))
+        rows = self._rows
+        # a row vouched for by its speed bound (C |qd| <= b - 1e-6) is not active; else A qd decides
+        active = 0 if rows.meets(velocities) else int(np.count_nonzero(rows.matrix @ velocities
+                                                                        >= rows.bound - ACTIVE_TOLERANCE))
         r = int(near.distance.argmin())
         return CollisionReport(float(near.distance[r]), near.links[r], len(near), active, d_i)

@@ -297,8 +297,8 @@ class RelativeController:
         bounds = apply_limits(self.constraints, q, self._previous)
         repulsive = self._repulsive(q) if self.solver.uses_repulsive else self._zeros
         problem = assemble_problem(rows, bounds.lower, bounds.upper, repulsive)
-        if bounds.rows.shape[0]:
-            problem.limit_rows, problem.limit_bound, problem.limit_labels = bounds.rows, bounds.bound, bounds.labels
+        if bounds.rows is not None:
+            problem.limit_deferred, problem.limit_bound, problem.limit_labels = bounds.rows, bounds.bound, bounds.labels
         result = self.solver.solve(problem)
         self._previous = result.velocities
         return result

@@ -6,6 +6,7 @@ All vectors have shape (n,): positions in rad, velocities in rad/s, the period T
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -187,27 +188,96 @@ def acceleration_bounds(
 
 # ---------------------------------------------------------------------- limits as one abstraction
 
+ROW_SPEED_MARGIN = 1e-6
+"""m/s: how far below its bound b a row's speed bound C |qd| must lie for :meth:`DeferredRows.meets`
+to vouch for qd (witness points within 1e-9 m of their shapes, rounding; the collision report's
+"active" tolerance is the same)."""
+
+
+class DeferredRows:
+    """The matrix A (m, n) of hard rows ``A qd <= b``, built on first use, and a bound that often
+    makes building it unnecessary.
+
+    ``speed`` C (m, n) >= 0 bounds every row: |A_i qd| <= C_i |qd| for every qd (the collision
+    limit's rows are distance velocities, C the reach of the pair's links about each joint [m/rad]:
+    no point of a link moves faster than sum_j reach_j |qd_j|). Where C |qd| <= b - margin, qd meets
+    every row whatever A is (:meth:`meets`): a solver's relaxation (its QP without the rows) that
+    meets the bound is the solution with them, and A is never built. A is built when a solver needs
+    it (a row may be active) and then kept: the same rows, the same decisions as with A built at once.
+
+    Args:
+        speed: C [m/rad], (m, n), >= 0.
+        bound: b [m/s], (m,).
+        build: returns A (m, n), called at most once.
+    """
+
+    __slots__ = ("speed", "bound", "_below", "_build", "_matrix")
+
+    def __init__(self, speed: FloatArray, bound: FloatArray, build: Callable[[], FloatArray]) -> None:
+        self.speed = speed
+        self.bound = bound
+        self._below = bound - ROW_SPEED_MARGIN
+        self._build: Callable[[], FloatArray] | None = build
+        self._matrix: FloatArray | None = None
+
+    @classmethod
+    def of(cls, matrix: FloatArray, bound: FloatArray) -> DeferredRows:
+        """Rows already built (C = |A|)."""
+        rows = cls(np.abs(matrix), bound, lambda: matrix)
+        rows._matrix, rows._build = matrix, None
+        return rows
+
+    @property
+    def built(self) -> bool:
+        """Whether A has been built."""
+        return self._matrix is not None
+
+    @property
+    def matrix(self) -> FloatArray:
+        """A (m, n), built on the first call."""
+        if self._matrix is None:
+            assert self._build is not None
+            self._matrix, self._build = self._build(), None
+        return self._matrix
+
+    def meets(self, qd: FloatArray) -> bool:
+        """True when C |qd| <= b - :data:`ROW_SPEED_MARGIN` in every row, so that A qd <= b (qd (n,)
+        [rad/s]); False says nothing (A qd may still meet b)."""
+        return bool((self.speed @ np.abs(qd) <= self._below).all())
+
+    def stacked(self, other: DeferredRows) -> DeferredRows:
+        """These rows, then ``other``'s."""
+        return DeferredRows(np.vstack((self.speed, other.speed)), np.concatenate((self.bound, other.bound)),
+                            lambda: np.vstack((self.matrix, other.matrix)))
+
+
 @dataclass(slots=True)
 class Bounds:
     """What the limits give one cycle's QP over the joint velocities qd [rad/s], (n,).
 
-    The box ``lower <= qd <= upper`` (n,) and the general rows ``rows @ qd <= bound`` ((m, n), (m,),
-    m >= 0), each row labelled (``labels``, m strings: the collision pair it keeps apart). Every
-    solver takes both as hard constraints in its own variables (docs/collision.md, "Limits").
+    The box ``lower <= qd <= upper`` (n,) and the general rows ``A qd <= bound`` (A (m, n) in
+    ``rows``, built when first needed: :class:`DeferredRows`; bound (m,), m >= 0), each row labelled
+    (``labels``, m strings: the collision pair it keeps apart). Every solver takes both as hard
+    constraints in its own variables (docs/collision.md, "Limits").
 
     A per-cycle record: slotted, not frozen (cheaper to build, docs/bench.md).
     """
 
     lower: FloatArray
     upper: FloatArray
-    rows: FloatArray
+    rows: DeferredRows | None
     bound: FloatArray
     labels: tuple[str, ...] = ()
 
     @classmethod
     def free(cls, n: int) -> Bounds:
         """No constraint yet: the box (-inf, inf) and no row."""
-        return cls(np.full(n, -np.inf), np.full(n, np.inf), np.zeros((0, n)), np.zeros(0))
+        return cls(np.full(n, -np.inf), np.full(n, np.inf), None, np.zeros(0))
+
+    def add_rows(self, rows: DeferredRows, labels: tuple[str, ...]) -> None:
+        """Append m rows ``A qd <= b`` (``rows``, m labels) after those already given."""
+        self.rows = rows if self.rows is None else self.rows.stacked(rows)
+        self.bound, self.labels = self.rows.bound, self.labels + labels
 
 
 class Limit(Protocol):

@@ -27,6 +27,7 @@ import numpy.typing as npt
 # scipy.optimize imported here, not in the fallback: a first import inside the loop takes ~0.3 s
 from scipy.optimize import lsq_linear
 
+from dualarm_control.limits import DeferredRows
 from dualarm_control.qp import DEFAULT_BACKEND, QPSettings, QPSolution, make_backend
 from dualarm_control.solvers.slack_qp import slack_qp
 
@@ -73,6 +74,9 @@ class ControlProblem:
             solver takes them as hard constraints (docs/collision.md, "Limits").
         limit_bound: their right-hand side [m/s], (m_l,).
         limit_labels: what each row keeps apart (the link pair), m_l strings, for reports.
+        limit_deferred: the rows given instead as :class:`~dualarm_control.limits.DeferredRows`
+            (limit_rows None): built only when a solver needs them (:meth:`limit_matrix`); where
+            their speed bound vouches for a qd (:meth:`limit_excess`), they are not.
     """
 
     jacobian: FloatArray
@@ -87,17 +91,29 @@ class ControlProblem:
     limit_rows: FloatArray | None = None
     limit_bound: FloatArray | None = None
     limit_labels: tuple[str, ...] = ()
+    limit_deferred: DeferredRows | None = None
 
     @property
     def has_limit_rows(self) -> bool:
         """Whether the problem has at least one hard limit row."""
-        return self.limit_rows is not None and self.limit_rows.shape[0] > 0
+        return (self.limit_rows is not None and self.limit_rows.shape[0] > 0) or self.limit_deferred is not None
+
+    def limit_matrix(self) -> FloatArray | None:
+        """A of the hard limit rows (m_l, n), built now when deferred; None without rows."""
+        if self.limit_rows is None and self.limit_deferred is not None:
+            self.limit_rows = self.limit_deferred.matrix
+        return self.limit_rows
 
     def limit_excess(self, qd: FloatArray) -> float:
-        """How far qd (n,) [rad/s] breaks the hard limit rows at their worst: max(A qd - b, 0) [m/s]."""
-        if self.limit_rows is None or self.limit_bound is None or self.limit_rows.shape[0] == 0:
+        """How far qd (n,) [rad/s] breaks the hard limit rows at their worst: max(A qd - b, 0) [m/s]
+        (0 without building deferred rows where their speed bound vouches for qd)."""
+        if self.limit_bound is None or not self.has_limit_rows:
             return 0.0
-        return float((self.limit_rows @ qd - self.limit_bound).max(initial=0.0))
+        if self.limit_rows is None and self.limit_deferred is not None and self.limit_deferred.meets(qd):
+            return 0.0
+        a = self.limit_matrix()
+        assert a is not None
+        return float((a @ qd - self.limit_bound).max(initial=0.0))
 
     def without_limit_rows(self) -> ControlProblem:
         """The same problem without the limits' rows (its relaxation: a solution of it that meets the
@@ -129,7 +145,7 @@ class ControlProblem:
                     return f"non-finite values in {name}"
         if self.inequality_jacobian is not None or self.inequality_bound is not None \
                 or self.equality_weights is not None or self.inequality_weights is not None \
-                or self.limit_rows is not None or self.limit_bound is not None:
+                or self.limit_rows is not None or self.limit_bound is not None or self.limit_deferred is not None:
             optional = self._problem_with_optional_rows(m, n)
             if optional:
                 return optional
@@ -151,6 +167,8 @@ class ControlProblem:
             if not math.isfinite(a.sum() + h.sum()):
                 return "non-finite values in the inequality rows"
         a, h = self.limit_rows, self.limit_bound
+        if a is None and self.limit_deferred is not None:  # checked without building the rows: their speed bound
+            a = self.limit_deferred.speed
         if (a is None) != (h is None):
             return "limit_rows and limit_bound must be given together"
         if a is not None and h is not None:
@@ -365,8 +383,9 @@ class Solver:
         """How far beyond a hard limit row the result of ``_solve`` may lie [m/s]: ``bound_tolerance``
         times (1 + the largest row 1-norm [m/rad]), the most a result within ``bound_tolerance`` of
         the rows in each joint can differ in a row (and what the clip into the box can add)."""
-        assert problem.limit_rows is not None
-        return self.box_tolerance(problem) * (1.0 + float(np.abs(problem.limit_rows).sum(axis=1).max(initial=0.0)))
+        rows = problem.limit_matrix()
+        assert rows is not None
+        return self.box_tolerance(problem) * (1.0 + float(np.abs(rows).sum(axis=1).max(initial=0.0)))
 
 
 def fallback(problem: ControlProblem, qd: FloatArray | None, status: str, detail: str) -> tuple[FloatArray, str, str]:
@@ -422,10 +441,11 @@ def separating_step(problem: ControlProblem) -> tuple[FloatArray, float] | None:
     Returns:
         (qd [rad/s] (n,), inside the box, the largest slack [m/s]); None when the QP fails.
     """
-    assert problem.limit_rows is not None and problem.limit_bound is not None
-    m = problem.limit_rows.shape[0]
+    rows = problem.limit_matrix()
+    assert rows is not None and problem.limit_bound is not None
+    m = rows.shape[0]
     qp = slack_qp(problem.jacobian, problem.reference, problem.equality_weights, problem.lower, problem.upper,
-                  FALLBACK_DAMPING, problem.limit_rows, problem.limit_bound, np.full(m, SEPARATING_WEIGHT))
+                  FALLBACK_DAMPING, rows, problem.limit_bound, np.full(m, SEPARATING_WEIGHT))
     n = problem.lower.shape[0]
     solution = make_backend("daqp").solve(qp)
     if solution.x is None or not math.isfinite(float(solution.x.sum())):
@@ -436,8 +456,9 @@ def separating_step(problem: ControlProblem) -> tuple[FloatArray, float] | None:
 
 def row_violation_text(problem: ControlProblem, qd: FloatArray, tolerance: float) -> str:
     """The worst limit row broken by qd (n,) [rad/s], for a "bounds_violated" detail."""
-    assert problem.limit_rows is not None and problem.limit_bound is not None
-    over = problem.limit_rows @ qd - problem.limit_bound
+    rows = problem.limit_matrix()
+    assert rows is not None and problem.limit_bound is not None
+    over = rows @ qd - problem.limit_bound
     i = int(np.argmax(over))
     label = problem.limit_labels[i] if i < len(problem.limit_labels) else f"row {i}"
     return f"limit row {label} broken by {over[i]:.3g} m/s (tolerance {tolerance:.3g} m/s)"

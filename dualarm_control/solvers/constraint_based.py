@@ -68,7 +68,7 @@ def constraint_qp(problem: ControlProblem, regularization: float) -> QPProblem:
     """
     return slack_qp(problem.jacobian, problem.reference, problem.equality_weights, problem.lower, problem.upper,
                     regularization, problem.inequality_jacobian, problem.inequality_bound,
-                    problem.inequality_weights, problem.limit_rows, problem.limit_bound)
+                    problem.inequality_weights, problem.limit_matrix(), problem.limit_bound)
 
 
 @register("constraint_based")

@@ -51,8 +51,9 @@ class PseudoInverse(Solver):
                 scale = min(scale, min(lo, 0.0) / value)
         notes = []
         if problem.has_limit_rows:  # the same shrink fits the rows with b >= 0 (rest meets them)
-            assert problem.limit_rows is not None and problem.limit_bound is not None
-            rows, bound = problem.limit_rows @ qd, problem.limit_bound
+            matrix = problem.limit_matrix()
+            assert matrix is not None and problem.limit_bound is not None
+            rows, bound = matrix @ qd, problem.limit_bound
             over = (rows > bound) & (bound >= 0.0)
             if over.any():
                 row_scale = float(np.min(bound[over] / rows[over]))
@@ -71,8 +72,9 @@ class PseudoInverse(Solver):
                 notes.append(f"joints {np.flatnonzero(beyond)[moved].tolist()} (beyond a position limit) "
                              "set to their nearest bound")
         if problem.has_limit_rows and problem.limit_excess(qd) > ROUND_OFF:
-            assert problem.limit_rows is not None and problem.limit_bound is not None
-            i = int(np.argmax(problem.limit_rows @ qd - problem.limit_bound))
+            matrix = problem.limit_matrix()
+            assert matrix is not None and problem.limit_bound is not None
+            i = int(np.argmax(matrix @ qd - problem.limit_bound))
             label = problem.limit_labels[i] if i < len(problem.limit_labels) else f"row {i}"
             return None, "infeasible", 0, (f"limit row {label} not met by eq (13) shrunk into the bounds "
                                            f"(b = {problem.limit_bound[i]:.3g} m/s)")
@@ -152,8 +154,9 @@ def limit_rows_of(problem: ControlProblem, columns: int = 1) -> dict[str, FloatA
     """
     if not problem.has_limit_rows:
         return {}
-    assert problem.limit_rows is not None and problem.limit_bound is not None
-    a = problem.limit_rows if columns == 1 else np.hstack((problem.limit_rows, -problem.limit_rows))
+    rows = problem.limit_matrix()
+    assert rows is not None and problem.limit_bound is not None
+    a = rows if columns == 1 else np.hstack((rows, -rows))
     return {"C": a, "l": np.full(a.shape[0], -INFINITY), "u": problem.limit_bound}
 
 
