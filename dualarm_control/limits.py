@@ -211,7 +211,7 @@ class DeferredRows:
         build: returns A (m, n), called at most once.
     """
 
-    __slots__ = ("speed", "bound", "_below", "_build", "_matrix")
+    __slots__ = ("_below", "_build", "_matrix", "bound", "speed")
 
     def __init__(self, speed: FloatArray, bound: FloatArray, build: Callable[[], FloatArray]) -> None:
         self.speed = speed

@@ -578,3 +578,46 @@ def test_a_non_finite_q_forgets_what_is_known_and_gives_no_pair() -> None:
     want = CollisionModel(m, allowed=m.description.collision_allowed).distances(near, within=0.5)
     got = used.distances(near, within=0.5)
     assert want and [(d.link_a, d.link_b, d.distance) for d in got] == [(d.link_a, d.link_b, d.distance) for d in want]
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_speed_bound_holds_for_every_pair_and_velocity(robot: str) -> None:
+    """``NearPairs.speed`` C bounds how fast each pair's distance can change: |dd_dq qd| <= C |qd| for
+    any qd (the reach of the pair's links about each joint), checked on 20 near-contact configurations
+    with 50 random velocities each (uniform in the velocity limits, and single-joint velocities, where
+    the bound is tightest). The deferred rows of the collision limit rely on it; the bound must also
+    not be vacuous (it must vouch for slow motions: C |qd| < 0.5 m/s for qd = 2 % of the limits)."""
+    c = collision_model(robot)
+    m = c.kinematics
+    rng = np.random.default_rng(11)
+    worst, slow_bounds = 0.0, []
+    for q in near_contact(c, 20, seed=5):
+        near = c.near(q, within=NEAR)
+        assert near.rows is not None and near.speed.shape == near.rows.shape
+        assert np.all(near.speed >= 0.0)
+        velocities = [rng.uniform(-m.qd_max, m.qd_max) for _ in range(40)]
+        velocities += [m.qd_max * np.eye(m.nq)[rng.integers(m.nq)] * rng.choice([-1.0, 1.0]) for _ in range(10)]
+        for qd in velocities:
+            actual, bound = np.abs(near.rows @ qd), near.speed @ np.abs(qd)
+            assert np.all(actual <= bound + 1e-12), (actual - bound).max()
+            worst = max(worst, float((actual[bound > 0] / bound[bound > 0]).max(initial=0.0)))
+        slow_bounds.append(float((near.speed @ (0.02 * m.qd_max)).max()))
+    print(f"{robot}: largest |d_dot| / bound {worst:.3f}; bound at 2 % of the limits {max(slow_bounds):.3f} m/s")
+    assert max(slow_bounds) < 0.5
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_deferred_rows_are_the_rows_computed_at_once(robot: str) -> None:
+    """``near(q, within, rows=False)`` keeps what the rows need; ``CollisionModel.rows`` builds from it the
+    rows ``near(q, within)`` computes at once, bit for bit, even after other calls moved the model on."""
+    c = collision_model(robot)
+    for q in near_contact(c, 5, seed=6):
+        now = c.near(q, within=NEAR)
+        later = c.near(q, within=NEAR, rows=False)
+        assert later.rows is None
+        c.near(np.asarray(c.kinematics.description.ready, dtype=float))  # the model's data move on
+        assert now.rows is not None
+        assert np.array_equal(c.rows(later), now.rows)
+        assert np.array_equal(later.speed, now.speed) and np.array_equal(later.distance, now.distance)
+        with pytest.raises(ValueError, match="deferred"):
+            later.pair_distances()

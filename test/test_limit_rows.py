@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import qpsolvers
 
+from dualarm_control.limits import DeferredRows
 from dualarm_control.solvers import (
     ControlProblem,
     SolverParams,
@@ -146,3 +147,42 @@ def test_bad_rows_are_invalid_input() -> None:
     problem = problem_with_rows(1)
     problem.limit_bound = np.zeros(5)
     assert "limit_rows" in make_solver("standard_qp").solve(problem).detail
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+@pytest.mark.parametrize(("seed", "bound"), [(0, 0.05), (1, 0.05), (2, 0.0), (3, 100.0), (4, -0.01)])
+def test_deferred_rows_give_what_the_rows_give(name: str, seed: int, bound: float) -> None:
+    """The rows given as :class:`DeferredRows` (C = |A|, a valid speed bound) give every solver's
+    result, status and detail bit for bit as the rows given at once; rows far from binding (b = 100 m/s)
+    are never built, rows that bind are."""
+    eager = problem_with_rows(seed, bound=bound)
+    assert eager.limit_rows is not None and eager.limit_bound is not None
+    built = []
+
+    def build() -> np.ndarray:
+        built.append(True)
+        assert eager.limit_rows is not None
+        return eager.limit_rows
+
+    deferred = ControlProblem(eager.jacobian, eager.reference, eager.lower, eager.upper, eager.repulsive,
+                              limit_bound=eager.limit_bound, limit_labels=eager.limit_labels,
+                              limit_deferred=DeferredRows(np.abs(eager.limit_rows), eager.limit_bound, build))
+    want, got = make_solver(name).solve(eager), make_solver(name).solve(deferred)
+    assert (got.status, got.detail) == (want.status, want.detail)
+    assert np.array_equal(got.velocities, want.velocities)
+    if bound == 100.0 and name != "pseudo_inverse":  # the pseudo-inverse shrinks along the rows: it reads them
+        assert not built
+    if bound <= 0.0:
+        assert built
+
+
+def test_deferred_rows_build_once_and_stack() -> None:
+    a, b = np.array([[1.0, -2.0]]), np.array([[0.5, 0.5], [-1.0, 0.0]])
+    calls = []
+    first = DeferredRows(np.abs(a), np.array([1.0]), lambda: calls.append(1) or a)
+    both = first.stacked(DeferredRows.of(b, np.array([2.0, 3.0])))
+    assert np.array_equal(both.bound, [1.0, 2.0, 3.0]) and np.array_equal(both.speed, np.abs(np.vstack((a, b))))
+    assert both.meets(np.array([0.1, 0.1]))  # 0.3 <= 1, 0.1 <= 2, 0.1 <= 3
+    assert not both.meets(np.array([1.0, 0.0])) and not calls  # the bound says nothing: nothing built yet
+    assert np.array_equal(both.matrix, np.vstack((a, b))) and np.array_equal(both.matrix, np.vstack((a, b)))
+    assert calls == [1]

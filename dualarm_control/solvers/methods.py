@@ -378,10 +378,6 @@ class HierarchicalSparseQP(Solver):
             return qd1, status, iters, detail  # no secondary motion, or a failure for solve() to handle
         qd1 = np.minimum(np.maximum(qd1, problem.lower), problem.upper)  # absorbs QP1's tolerance
         lower2, upper2 = problem.lower - qd1, problem.upper - qd1
-        rows2: dict[str, FloatArray] = {}
-        if problem.has_limit_rows:  # hard in QP2 too: A (qd1 + qd2) <= b
-            rows2 = limit_rows_of(problem)
-            rows2["u"] = rows2["u"] - rows2["C"] @ qd1
         qd2 = null_space_projection(problem.jacobian, problem.repulsive)
         if qd2 is not None and inside(qd2, lower2, upper2) and problem.limit_excess(qd1 + qd2) <= 0.0:
             return qd1 + qd2, status, iters, detail  # eq (27)'s optimum: no bound and no row is active
@@ -391,7 +387,9 @@ class HierarchicalSparseQP(Solver):
             lb=lower2, ub=upper2,
         )
         sol = self._secondary.solve(qp2)  # the relaxation first: rows its optimum meets are not active
-        if rows2 and (sol.x is None or problem.limit_excess(qd1 + sol.x) > 0.0):
+        if problem.has_limit_rows and (sol.x is None or problem.limit_excess(qd1 + sol.x) > 0.0):
+            rows2 = limit_rows_of(problem)  # hard in QP2 too: A (qd1 + qd2) <= b
+            rows2["u"] = rows2["u"] - rows2["C"] @ qd1
             sol = self._secondary.solve(QPProblem(H=qp2.H, g=qp2.g, A=qp2.A, b=qp2.b, lb=lower2, ub=upper2, **rows2))
         if sol.x is None:
             return qd1, status, iters + sol.iterations, f"secondary QP {sol.status}; primary task only"
