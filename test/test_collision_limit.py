@@ -9,27 +9,16 @@ while the pair approaches slowly, built once the damper holds it).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+from test_properties import Target
 
 from dualarm_control.controller import ControllerParams, RelativeController
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.limits import DeferredRows
 
 PERIOD = 0.005
-
-
-@dataclass(frozen=True)
-class Target:
-    """A fixed relative goal (a RelativeTarget): pose, zero twist."""
-
-    position: np.ndarray
-    rotation: np.ndarray
-    linear_velocity: np.ndarray
-    angular_velocity: np.ndarray
 
 
 @pytest.mark.parametrize("solver", ["hierarchical_sparse_qp", "sparse_qp", "standard_qp"])
