@@ -163,7 +163,7 @@ class TestOneRunningLaunch:
             assert expected in names
         text = dualarm("param", "describe", "/controller_node", "control_period").stdout
         assert "Type: double" in text and "Read only: true" in text and "a value > 0" in text
-        missing = dualarm("param", "get", "/no_such_node", "solver", "--timeout", "3")
+        missing = dualarm("param", "get", "/no_such_node", "solver", "--timeout", "1")  # no such node: any wait
         assert missing.returncode == 2 and "not found" in missing.stderr
 
     def test_plain_rclpy_script_sees_the_graph(self, running_slow: Launch, tmp_path: Path) -> None:
