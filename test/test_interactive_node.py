@@ -131,9 +131,13 @@ def test_goal_into_collision_stalls_at_the_safety_distance_naming_the_pair(cell:
     cell.wait_for("collision constraint active:")
 
 
+@pytest.mark.slow
 def test_collision_parameters_are_live_and_validated(cell: Launch) -> None:
     """`dualarm param set /controller_node collision.safety_distance 0.05` is taken; a safety distance
-    beyond the influence distance is refused naming the key, and the running value stays."""
+    beyond the influence distance is refused naming the key, and the running value stays. ``slow``
+    (6-11 s): in the default run the collision parameters' validation and live change are
+    test_collision_params.py's (in one process), and a running node's parameter refused with its
+    reason while the run goes on is test_ros_live.py's."""
     cli = [sys.executable, "-m", "dualarm_control.app.cli"]
 
     def param(*args: str) -> subprocess.CompletedProcess[str]:
