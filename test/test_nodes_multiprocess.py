@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -31,19 +32,29 @@ def run_cli(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess[st
                           timeout=timeout, check=False)
 
 
-@pytest.mark.parametrize(
-    ("node", "ros_args", "expected"),
-    [
-        ("controller_node", ["-p", "solver:=nope"], ["solver", "nope", "sparse_qp", "standard_qp"]),
-        ("controller_node", ["-p", "gain:=10"], ["gain", "10.0"]),
-        ("controller_node", ["--params-file", "/nonexistent/params.yaml"], ["/nonexistent/params.yaml"]),
-        ("sim_node", ["-p", "scenario:=mars"], ["mars", "assembly"]),
-        ("trajectory_node", ["-p", "control_period:=-0.005"], ["control_period", "-0.005", "> 0"]),
-    ],
-)
-def test_bad_parameters_exit_2(node: str, ros_args: list[str], expected: list[str]) -> None:
+BAD_PARAMETERS = [
+    ("controller_node", ["-p", "solver:=nope"], ["solver", "nope", "sparse_qp", "standard_qp"]),
+    ("controller_node", ["-p", "gain:=10"], ["gain", "10.0"]),
+    ("controller_node", ["--params-file", "/nonexistent/params.yaml"], ["/nonexistent/params.yaml"]),
+    ("sim_node", ["-p", "scenario:=mars"], ["mars", "assembly"]),
+    ("trajectory_node", ["-p", "control_period:=-0.005"], ["control_period", "-0.005", "> 0"]),
+]
+"""(node, ROS arguments, words of the message): bad values of the nodes' parameters."""
+
+
+@pytest.fixture(scope="module")
+def bad_parameter_runs() -> list[subprocess.CompletedProcess[str]]:
+    """``dualarm run NODE --ros-args ...`` for each of :data:`BAD_PARAMETERS`, all at once (each refuses
+    its parameters and exits at its start); the results in that order."""
+    with ThreadPoolExecutor(max_workers=len(BAD_PARAMETERS)) as pool:
+        return list(pool.map(lambda case: run_cli("run", case[0], "--ros-args", *case[1]), BAD_PARAMETERS))
+
+
+@pytest.mark.parametrize(("node", "ros_args", "expected"), BAD_PARAMETERS)
+def test_bad_parameters_exit_2(bad_parameter_runs: list[subprocess.CompletedProcess[str]], node: str,
+                               ros_args: list[str], expected: list[str]) -> None:
     """A bad value exits with code 2 and a message naming the key, value and valid values."""
-    result = run_cli("run", node, "--ros-args", *ros_args)
+    result = bad_parameter_runs[BAD_PARAMETERS.index((node, ros_args, expected))]
     assert result.returncode == 2, result.stderr
     for word in expected:
         assert word in result.stderr
