@@ -9,7 +9,9 @@ processes are scheduled), so what the tests assert is the same either way.
 
 Each launch gets a ROS_DOMAIN_ID of its own (not the session's, not another launch's), so that
 the graphs do not see each other. When ``DUALARM_TEST_DOMAIN_ID`` fixes the test domain (a machine
-where only that domain is free), the launches run one after the other on it.
+where only that domain is free), the launches run one after the other on it. The same goes for a
+launch in the background while in-process tests go on (:func:`in_background`), and for a
+computation in this process while launches run (:func:`meanwhile`).
 """
 
 from __future__ import annotations
@@ -62,8 +64,9 @@ def selected_tests(request: pytest.FixtureRequest) -> set[str]:
 @contextmanager
 def in_background(job: Callable[[dict[str, str]], T]) -> Iterator[Future[T]]:
     """``job`` (a launch, say) started in a thread with the environment of a ROS domain of its own
-    (:func:`own_domains`; the session's when that is fixed), while the tests go on: its future. The
-    context waits for it on the way out, so that nothing of it outlives the fixture."""
+    (:func:`own_domains`; the session's when that is fixed: use it where the tests that go on meanwhile
+    use no ROS), while the tests go on: its future. The context waits for it on the way out, so that
+    nothing of it outlives the fixture."""
     envs = own_domains(1)
     with ThreadPoolExecutor(max_workers=1) as pool:
         yield pool.submit(job, envs[0] if envs else {})
