@@ -1,12 +1,13 @@
 # Two commands do all the set-up on a fresh machine (Python 3.10+ with venv):
 #   make demo   - the assembly task, a bag and a report (creates .venv on first use)
 #   make test   - lint, type check and the test suite (creates .venv on first use)
+#   make test-slow - the long experiments left out of `make test` (pytest -m slow; docs/testing.md)
 PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 OUT ?= out
 
-.PHONY: demo test experiment bench lint clean
+.PHONY: demo test test-slow experiment bench lint clean
 
 $(VENV)/.installed: setup.py
 	$(PYTHON) -m venv $(VENV)
@@ -33,6 +34,9 @@ lint: $(VENV)/.installed
 
 test: lint
 	$(PY) -m pytest -q
+
+test-slow: $(VENV)/.installed
+	$(PY) -m pytest -q -m slow
 
 clean:
 	rm -rf $(VENV) $(OUT) build *.egg-info .pytest_cache .mypy_cache .ruff_cache

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import signal
 import subprocess
 import sys
@@ -20,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from launching import side_by_side
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
@@ -73,9 +75,11 @@ TOPICS = ("/joint_states", "/velocity_controller/commands", "/diagnostics")
 class Proc:
     """A child process whose stdout lines are collected by a thread (bounded waits)."""
 
-    def __init__(self, args: list[str], stderr_path: Path) -> None:
+    def __init__(self, args: list[str], stderr_path: Path, env: dict[str, str] | None = None) -> None:
+        """``env`` adds to the environment (a ROS domain of its own)."""
         self._stderr = stderr_path.open("w")
-        self.popen = subprocess.Popen(args, cwd=REPO, stdout=subprocess.PIPE, stderr=self._stderr, text=True)
+        self.popen = subprocess.Popen(args, cwd=REPO, stdout=subprocess.PIPE, stderr=self._stderr, text=True,
+                                      env={**os.environ, **env} if env else None)
         self.lines: list[str] = []
         self.stderr_path = stderr_path
         threading.Thread(target=self._pump, daemon=True).start()
@@ -111,13 +115,15 @@ def dualarm(*args: str) -> list[str]:
     return [sys.executable, "-m", "dualarm_control.app.cli", *args]
 
 
-def record_with_publisher(tmp_path: Path, name: str, sig: int, n: int = N_MSGS) -> tuple[Path, int, str]:
-    """Record while the publisher sends ``n`` messages per topic, then stop the recorder with ``sig``."""
+def record_with_publisher(tmp_path: Path, name: str, sig: int, n: int = N_MSGS,
+                          env: dict[str, str] | None = None) -> tuple[Path, int, str]:
+    """Record while the publisher sends ``n`` messages per topic, then stop the recorder with ``sig``;
+    ``env`` adds to both processes' environment (a ROS domain of their own)."""
     bag = tmp_path / name
     script = tmp_path / "publisher.py"
     script.write_text(PUBLISHER)
-    rec = Proc(dualarm("bag", "record", "-o", str(bag), *TOPICS), tmp_path / f"{name}.rec.err")
-    pub = Proc([sys.executable, str(script), str(n)], tmp_path / f"{name}.pub.err")
+    rec = Proc(dualarm("bag", "record", "-o", str(bag), *TOPICS), tmp_path / f"{name}.rec.err", env)
+    pub = Proc([sys.executable, str(script), str(n)], tmp_path / f"{name}.pub.err", env)
     try:
         # deadlines, not speeds: each process starts (imports, discovery) in seconds on a loaded machine
         rec.wait_line("bag: ready", 120.0)
@@ -146,9 +152,35 @@ def read_bag(bag: Path) -> dict[str, list[object]]:
     return out
 
 
+SIGTERM_MSGS = 10
+"""Messages per topic of the recording stopped by SIGTERM."""
+
+
 @pytest.fixture(scope="module")
-def sigint_bag(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, int, str]]:
-    yield record_with_publisher(tmp_path_factory.mktemp("bag"), "sigint_bag", signal.SIGINT)
+def recordings(request: pytest.FixtureRequest,
+               tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Path, int, str]]:
+    """The recordings the selected tests use, side by side (each recorder and its publisher on a ROS
+    domain of their own): stopped by SIGINT (:data:`N_MSGS` messages per topic) and by SIGTERM
+    (:data:`SIGTERM_MSGS`); by signal name, each its bag, the recorder's exit code and its stderr."""
+    used = {name for item in request.session.items if item.module is request.module
+            for name, fixture in (("sigint", "sigint_bag"), ("sigterm", "sigterm_bag")) if fixture in item.fixturenames}
+    runs = {"sigint": (signal.SIGINT, N_MSGS), "sigterm": (signal.SIGTERM, SIGTERM_MSGS)}
+
+    def record(name: str, env: dict[str, str]) -> tuple[Path, int, str]:
+        sig, n = runs[name]
+        return record_with_publisher(tmp_path_factory.mktemp(name), f"{name}_bag", sig, n, env)
+
+    return side_by_side({name: lambda env, name=name: record(name, env) for name in sorted(used)})
+
+
+@pytest.fixture(scope="module")
+def sigint_bag(recordings: dict[str, tuple[Path, int, str]]) -> Iterator[tuple[Path, int, str]]:
+    yield recordings["sigint"]
+
+
+@pytest.fixture(scope="module")
+def sigterm_bag(recordings: dict[str, tuple[Path, int, str]]) -> tuple[Path, int, str]:
+    return recordings["sigterm"]
 
 
 # ----------------------------------------------------------------------------- record
@@ -202,13 +234,13 @@ def test_bag_info(sigint_bag: tuple[Path, int, str]) -> None:
             "Serialization Format: cdr") in out.stdout
 
 
-def test_sigterm_also_leaves_a_valid_bag(tmp_path: Path) -> None:
-    bag, code, err = record_with_publisher(tmp_path, "sigterm_bag", signal.SIGTERM, n=10)
+def test_sigterm_also_leaves_a_valid_bag(sigterm_bag: tuple[Path, int, str]) -> None:
+    bag, code, err = sigterm_bag
     assert code == 0, err
     assert "bag closed (signal SIGTERM)" in err
     with AnyReader([bag], default_typestore=TS) as reader:
-        assert reader.topics["/velocity_controller/commands"].msgcount == 10
-        assert reader.message_count == 30
+        assert reader.topics["/velocity_controller/commands"].msgcount == SIGTERM_MSGS
+        assert reader.message_count == 3 * SIGTERM_MSGS
 
 
 def test_duration_stops_and_closes(tmp_path: Path) -> None:

@@ -343,11 +343,15 @@ def fifo_permitted() -> bool:
     return subprocess.run([sys.executable, "-S", "-c", probe], check=False, capture_output=True).returncode == 0
 
 
+@pytest.mark.slow
 def test_realtime_bench_measures_every_nodes_cpu(tmp_path: Path) -> None:
     """Two real launches at 200 Hz, each cut after 15 s, with the default and with normal scheduling:
     CPU figures for the three node processes, finite and positive, main + other threads = the
     process's total within the tick truncation of each thread's counter, the scheduling each node
-    ran under; the tables and the JSON are written (no timing thresholds)."""
+    ran under; the tables and the JSON are written (no timing thresholds). ``slow`` (33 s): the
+    default run covers the parts on recorded or simulated samples (the tests above and below: the
+    steady window, the per-thread split, the per-node figures, the scheduling names, the floor probe
+    in its own process)."""
     from dualarm_control.app.bench.cpu import CLOCK_TICKS
     from dualarm_control.app.bench.realtime import (
         format_cpu,

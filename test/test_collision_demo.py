@@ -6,18 +6,22 @@ controller (pybullet's closest points on the URDF's collision shapes, ``dualarm_
 by coal, and ends the three collision goals
 ``stalled`` with "collision constraint: <pair> at 0.0xx m"; the safe goals are reached. With
 ``collision.enabled: false`` the same scenario drives the links into each other, until the
-simulator's contacts stop them (the check can fail: d < 1 mm). In one process and over ROS (lockstep: the bag's numbers equal the in-process run's; real
-time), on the LWR4 cell; on Baxter behind the ``slow`` marker (a Baxter run takes about a minute in
-one process, with 515 link pairs).
+simulator's contacts stop them (the check can fail: d < 1 mm). In one process and over ROS in lockstep
+(the bag's numbers equal the in-process run's) on the LWR4 cell; behind the ``slow`` marker, over ROS
+in real time on the LWR4 cell (46 s: the lockstep run over ROS and the in-process run stay in the
+default run) and on Baxter (a Baxter run takes about a minute in one process, with 515 link pairs).
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
+from concurrent.futures import Future
 from pathlib import Path
 from typing import Any
 
 import pytest
+from launching import in_background, selected_tests
 from test_ros_live import Launch, dualarm
 
 from dualarm_control.app.record.bag import read_bag
@@ -64,8 +68,26 @@ def assert_stops_at_the_safety_distance(summary: dict[str, Any]) -> None:
         assert SAFETY - 1e-3 <= distance < 0.10, part  # held near d_s, inside the influence distance
 
 
+LOCKSTEP_TEST = "test_lockstep_over_ros_equals_the_in_process_run"
+
+
 @pytest.fixture(scope="module")
-def lwr4_on() -> dict[str, Any]:
+def lwr4_lockstep_over_ros(request: pytest.FixtureRequest,
+                           tmp_path_factory: pytest.TempPathFactory) -> Iterator[Future[dict[str, Any]] | None]:
+    """The lockstep run over ROS on the LWR4 cell (when its test is selected), started in the background
+    on a ROS domain of its own, so that it runs while this process computes the in-process runs (the
+    other tests of the module use no ROS); its future. It has ended when the module's tests have."""
+    if LOCKSTEP_TEST not in selected_tests(request):
+        yield None
+        return
+    out = tmp_path_factory.mktemp("lockstep_over_ros")
+    with in_background(lambda env: run_over_ros(out, "lwr4_cell", "--lockstep", env=env)) as run:
+        yield run
+
+
+@pytest.fixture(scope="module")
+def lwr4_on(lwr4_lockstep_over_ros: Future[dict[str, Any]] | None) -> dict[str, Any]:
+    """The in-process run with the limit on (once the lockstep run over ROS is on its way)."""
     return in_process("lwr4_cell")
 
 
@@ -83,9 +105,11 @@ def test_with_the_limit_off_the_same_goals_go_through_the_other_arm() -> None:
     assert summary["pybullet_min_distance_m"] < 1e-3, summary["pybullet_min_pair"]
 
 
-def run_over_ros(tmp_path: Path, robot: str, *mode: str) -> dict[str, Any]:
+def run_over_ros(tmp_path: Path, robot: str, *mode: str, env: dict[str, str] | None = None) -> dict[str, Any]:
+    """The run's metrics from its bag, and ``pybullet_min_distance_m``; ``env`` adds to the launch's
+    environment (a ROS domain of its own)."""
     bag = tmp_path / "bag"
-    launch = Launch("collision_demo", "--robot", robot, "--solver", SOLVER, *mode, "--record", str(bag))
+    launch = Launch("collision_demo", "--robot", robot, "--solver", SOLVER, *mode, "--record", str(bag), env=env)
     try:
         code = launch.finish(timeout=900)
     finally:
@@ -106,8 +130,10 @@ def run_over_ros(tmp_path: Path, robot: str, *mode: str) -> dict[str, Any]:
     return {**metrics, **pybullet_check(recorded.robot, states.values)}
 
 
-def test_lockstep_over_ros_equals_the_in_process_run(tmp_path: Path, lwr4_on: dict[str, Any]) -> None:
-    bag = run_over_ros(tmp_path, "lwr4_cell", "--lockstep")
+def test_lockstep_over_ros_equals_the_in_process_run(lwr4_lockstep_over_ros: Future[dict[str, Any]] | None,
+                                                     lwr4_on: dict[str, Any]) -> None:
+    assert lwr4_lockstep_over_ros is not None
+    bag = lwr4_lockstep_over_ros.result()
     assert_stops_at_the_safety_distance(bag)
     assert bag["goal_outcomes"] == lwr4_on["goal_outcomes"]  # to the printed 0.01 mm and 1e-4 rad
     # Not bit for bit as the assembly (1e-9): held against the limit the commands alternate from one
@@ -118,7 +144,10 @@ def test_lockstep_over_ros_equals_the_in_process_run(tmp_path: Path, lwr4_on: di
         assert abs(bag[key] - lwr4_on[key]) <= 1e-3 * abs(lwr4_on[key]), (key, bag[key], lwr4_on[key])
 
 
+@pytest.mark.slow
 def test_real_time_over_ros_stops_at_the_safety_distance(tmp_path: Path) -> None:
+    """The same assertions as the lockstep run, in real time (``slow``: 46 s; the lockstep run over ROS
+    and the in-process run cover the same limit in the default run)."""
     assert_stops_at_the_safety_distance(run_over_ros(tmp_path, "lwr4_cell"))
 
 

@@ -158,6 +158,7 @@ def test_unknown_row_is_a_usage_error() -> None:
 
 @pytest.mark.slow
 def test_goal_into_collision_stalls_with_the_pair_and_no_contact(runs: Runs, tmp_path_factory: pytest.TempPathFactory) -> None:
-    """Issue 27's row (47 s; the same stall over ROS is in test_interactive_node.py's default run)."""
+    """Issue 27's row (47 s; over ROS the same stall is judged in lockstep in test_collision_demo.py's
+    default run, in real time in test_interactive_node.py's slow test)."""
     row = passed(runs, tmp_path_factory, "goal_into_collision")
     assert row.figures["contacts"] == 0 and row.figures["distance_m"] >= 0.029, row.observed

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from launching import side_by_side
 from waiting import node_env
 
 from dualarm_control.app.run.launcher import launch_scenario
@@ -92,12 +93,13 @@ class Run:
         self.final_error = errors[-1]
 
 
-def lockstep_run(name: str, scenario: str, bag: Path, timeout: float) -> Run:
-    """The scenario over the nodes in lockstep on profile ``name``, recorded (its topics) and read back."""
+def lockstep_run(name: str, scenario: str, bag: Path, timeout: float, env: dict[str, str] | None = None) -> Run:
+    """The scenario over the nodes in lockstep on profile ``name``, recorded (its topics) and read back;
+    ``env`` adds to the nodes' environment (a ROS domain of its own: launching.side_by_side)."""
     profile = profile_of(name)
     topics = (*profile.joint_states, *profile.topics, "/diagnostics", "/relative_target")
     params = [str(profile_file(name))]
-    assert launch_scenario(scenario, params, [], True, bag, timeout=timeout, record_topics=topics) == 0
+    assert launch_scenario(scenario, params, [], True, bag, timeout=timeout, record_topics=topics, env=env) == 0
     return Run(profile, read_bag(bag))
 
 
@@ -112,7 +114,10 @@ def assert_same_run(default: Run, got: Run) -> None:
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Run]:
-    return {name: lockstep_run(name, str(SHORT), tmp_path_factory.mktemp("hw") / name, 240.0) for name in PROFILES}
+    """The four profiles' lockstep runs, side by side (each on a ROS domain of its own)."""
+    out = tmp_path_factory.mktemp("hw")
+    return side_by_side({name: lambda env, name=name: lockstep_run(name, str(SHORT), out / name, 240.0, env)
+                         for name in PROFILES})
 
 
 @pytest.mark.parametrize("name", PROFILES)
@@ -204,9 +209,12 @@ def test_position_commands_hold_the_arms_after_the_controller_is_killed() -> Non
     assert drift < 1e-4, f"the arms drifted {drift:.2e} rad in 1 s after the controller was killed"
 
 
+@pytest.mark.slow
 def test_the_position_profile_in_real_time(tmp_path: Path) -> None:
     """lbr_dual_position in real time (two joint-state topics assembled by stamp, position commands):
-    the scenario completes with a final error below 1 mm."""
+    the scenario completes with a final error below 1 mm. ``slow`` (6 s): the default run has the
+    profile's lockstep run (Table I equal to the default profile's) and, in real time, the arms driven
+    on it until the controller is killed (the test above)."""
     profile = profile_of("lbr_dual_position")
     bag = tmp_path / "bag"
     topics = (*profile.joint_states, *profile.topics, "/diagnostics")

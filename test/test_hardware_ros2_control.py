@@ -6,6 +6,7 @@ a profile that does not match the graph is refused at start, naming what does no
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import threading
@@ -14,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from launching import side_by_side
 from waiting import node_env
 
 from dualarm_control.scenario import load_scenario
@@ -48,10 +50,11 @@ def profile(tmp_path: Path, right_topic: str = "/right_velocity_controller/comma
 class Node:
     """A node process whose stderr (its log) is collected as it comes."""
 
-    def __init__(self, name: str, params: Path) -> None:
+    def __init__(self, name: str, params: Path, env: dict[str, str] | None = None) -> None:
         self.proc = subprocess.Popen([sys.executable, "-m", "dualarm_control.app.cli", "run", name, "--ros-args",
                                       "-p", f"scenario:={SHORT}", "--params-file", str(params)],
-                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=node_env())
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                                     env={**node_env(), **(env or {})})
         self.lines: list[str] = []
         self.reader = threading.Thread(target=self.read, daemon=True)
         self.reader.start()
@@ -84,11 +87,13 @@ class Node:
         return self.log
 
 
-def fake(rename: dict[str, str] | None = None) -> subprocess.Popen[str]:
+def fake(rename: dict[str, str] | None = None, env: dict[str, str] | None = None) -> subprocess.Popen[str]:
+    """The fake cell; ``env`` adds to its environment (a ROS domain of its own)."""
     scenario = load_scenario(str(SHORT))
     initial = dict(zip(scenario.robot.joint_names, np.asarray(scenario.initial_positions).tolist()))
     return subprocess.Popen([sys.executable, str(FAKE), json.dumps(initial), json.dumps(rename or {})],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, **env} if env else None)
 
 
 def stop(proc: subprocess.Popen[str]) -> tuple[str, str]:
@@ -123,23 +128,42 @@ def test_two_velocity_controllers_and_a_broadcaster_drive_the_cell(tmp_path: Pat
     assert result["position_error_m"] < 1e-3, seen
 
 
-@pytest.mark.parametrize(("change", "rename", "words"), [
+MISMATCHES: list[tuple[dict[str, object], dict[str, str] | None, list[str]]] = [
     ({"right_topic": "/right_arm_controller/commands", "startup_check": 8.0}, None,
      ["no subscriber on /right_arm_controller/commands"]),
     ({"startup_check": 8.0}, {"left_joint_7": "lbr_A7"}, ["joint left_joint_7 is on no joint-state topic"]),
     ({"left_joints": [*LEFT[:6], "left_joint_8"]}, None, ["hardware.left_velocity_controller.joints",
                                                            "left_joint_8"]),
-])
+]
+"""(profile change, broadcaster renames, words of the refusal): profiles that do not match the fake cell."""
+
+
+@pytest.fixture(scope="module")
+def refusals(tmp_path_factory: pytest.TempPathFactory) -> list[tuple[int, str]]:
+    """Each profile of :data:`MISMATCHES` against its own fake cell, side by side (each pair on a ROS
+    domain of its own: the refusals wait out their startup_check together): the controller's exit
+    code and log."""
+    def refusal(case: int, env: dict[str, str]) -> tuple[int, str]:
+        change, rename, _ = MISMATCHES[case]
+        params = profile(tmp_path_factory.mktemp(f"mismatch{case}"), **change)  # type: ignore[arg-type]
+        cell = fake(rename, env)
+        controller = Node("controller_node", params, env)
+        try:
+            code = controller.proc.wait(timeout=HANG_GUARD_S)
+        finally:
+            log = controller.stop()
+            stop(cell)
+        return code, log
+
+    done = side_by_side({str(case): lambda env, case=case: refusal(case, env) for case in range(len(MISMATCHES))})
+    return [done[str(case)] for case in range(len(MISMATCHES))]
+
+
+@pytest.mark.parametrize(("change", "rename", "words"), MISMATCHES)
 def test_a_profile_that_does_not_match_the_graph_is_refused_at_start(
-        tmp_path: Path, change: dict[str, object], rename: dict[str, str] | None, words: list[str]) -> None:
-    params = profile(tmp_path, **change)  # type: ignore[arg-type]
-    cell = fake(rename)
-    controller = Node("controller_node", params)
-    try:
-        code = controller.proc.wait(timeout=HANG_GUARD_S)
-    finally:
-        log = controller.stop()
-        stop(cell)
+        refusals: list[tuple[int, str]], change: dict[str, object], rename: dict[str, str] | None,
+        words: list[str]) -> None:
+    code, log = refusals[MISMATCHES.index((change, rename, words))]
     assert code == 2, log[-3000:]
     for word in words:
         assert word in log, log[-3000:]

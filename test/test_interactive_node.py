@@ -109,11 +109,14 @@ def test_goal_out_of_the_joint_limits_ends_stalled_not_in_a_hang(cell: Launch) -
     cell.wait_for("goal stalled (stamp")
 
 
+@pytest.mark.slow
 def test_goal_into_collision_stalls_at_the_safety_distance_naming_the_pair(cell: Launch) -> None:
     """Issue 27, real time: from a safe pose, the goal through the left forearm (F2 35 cm behind F1)
     stops at the collision limit: `dualarm goal --wait` exits 1 with "stalled: ... (collision constraint:
     <left link> – <right link> at 0.0xx m; ...)", the distance within 1 mm of d_s = 0.03 m or above
-    it; the controller logs the constraint."""
+    it; the controller logs the constraint. ``slow`` (18 s): in the default run the same stall at the
+    collision limit, named with its pair and distance, is judged over ROS in lockstep
+    (test_collision_demo.py) and a stalled goal ends `dualarm goal --wait` with 1 (the test above)."""
     cli = [sys.executable, "-m", "dualarm_control.app.cli"]
     done = subprocess.run([*cli, "goal", "--xyz", "0", "0", "0.15", "--rpy", "3.14159265", "0", "0", "--wait",
                            "--timeout", "200"], cwd=REPO, check=False, capture_output=True, text=True, timeout=300)
@@ -128,9 +131,13 @@ def test_goal_into_collision_stalls_at_the_safety_distance_naming_the_pair(cell:
     cell.wait_for("collision constraint active:")
 
 
+@pytest.mark.slow
 def test_collision_parameters_are_live_and_validated(cell: Launch) -> None:
     """`dualarm param set /controller_node collision.safety_distance 0.05` is taken; a safety distance
-    beyond the influence distance is refused naming the key, and the running value stays."""
+    beyond the influence distance is refused naming the key, and the running value stays. ``slow``
+    (6-11 s): in the default run the collision parameters' validation and live change are
+    test_collision_params.py's (in one process), and a running node's parameter refused with its
+    reason while the run goes on is test_ros_live.py's."""
     cli = [sys.executable, "-m", "dualarm_control.app.cli"]
 
     def param(*args: str) -> subprocess.CompletedProcess[str]:

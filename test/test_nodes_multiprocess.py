@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 import pytest
+from launching import selected_tests, side_by_side
 
 from dualarm_control.app.run.experiment import run_scenario
 from dualarm_control.app.run.launcher import launch_scenario
@@ -30,19 +32,29 @@ def run_cli(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess[st
                           timeout=timeout, check=False)
 
 
-@pytest.mark.parametrize(
-    ("node", "ros_args", "expected"),
-    [
-        ("controller_node", ["-p", "solver:=nope"], ["solver", "nope", "sparse_qp", "standard_qp"]),
-        ("controller_node", ["-p", "gain:=10"], ["gain", "10.0"]),
-        ("controller_node", ["--params-file", "/nonexistent/params.yaml"], ["/nonexistent/params.yaml"]),
-        ("sim_node", ["-p", "scenario:=mars"], ["mars", "assembly"]),
-        ("trajectory_node", ["-p", "control_period:=-0.005"], ["control_period", "-0.005", "> 0"]),
-    ],
-)
-def test_bad_parameters_exit_2(node: str, ros_args: list[str], expected: list[str]) -> None:
+BAD_PARAMETERS = [
+    ("controller_node", ["-p", "solver:=nope"], ["solver", "nope", "sparse_qp", "standard_qp"]),
+    ("controller_node", ["-p", "gain:=10"], ["gain", "10.0"]),
+    ("controller_node", ["--params-file", "/nonexistent/params.yaml"], ["/nonexistent/params.yaml"]),
+    ("sim_node", ["-p", "scenario:=mars"], ["mars", "assembly"]),
+    ("trajectory_node", ["-p", "control_period:=-0.005"], ["control_period", "-0.005", "> 0"]),
+]
+"""(node, ROS arguments, words of the message): bad values of the nodes' parameters."""
+
+
+@pytest.fixture(scope="module")
+def bad_parameter_runs() -> list[subprocess.CompletedProcess[str]]:
+    """``dualarm run NODE --ros-args ...`` for each of :data:`BAD_PARAMETERS`, all at once (each refuses
+    its parameters and exits at its start); the results in that order."""
+    with ThreadPoolExecutor(max_workers=len(BAD_PARAMETERS)) as pool:
+        return list(pool.map(lambda case: run_cli("run", case[0], "--ros-args", *case[1]), BAD_PARAMETERS))
+
+
+@pytest.mark.parametrize(("node", "ros_args", "expected"), BAD_PARAMETERS)
+def test_bad_parameters_exit_2(bad_parameter_runs: list[subprocess.CompletedProcess[str]], node: str,
+                               ros_args: list[str], expected: list[str]) -> None:
     """A bad value exits with code 2 and a message naming the key, value and valid values."""
-    result = run_cli("run", node, "--ros-args", *ros_args)
+    result = bad_parameter_runs[BAD_PARAMETERS.index((node, ros_args, expected))]
     assert result.returncode == 2, result.stderr
     for word in expected:
         assert word in result.stderr
@@ -68,16 +80,45 @@ def _read_bag(bag: Path) -> dict[str, list[object]]:
     return out
 
 
+PLAN_TEST = "test_plan_run_by_the_nodes"
+
+
 @pytest.fixture(scope="module")
-def lockstep_bags(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """One recorded lockstep launch of the short scenario per solver (its solver parameter file)."""
-    bags = {}
-    for solver in SOLVERS:
-        bag = tmp_path_factory.mktemp("lockstep") / solver
+def launches(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The module's recorded lockstep launches that the run's selected tests use, side by side (each on a
+    ROS domain of its own): the short scenario per solver (its solver parameter file; the ``solver``
+    parameter of the tests using ``lockstep_bags``, sparse_qp otherwise), and the plan of
+    :data:`PLAN_TEST` (planned first); bag paths by solver name, and "plan"."""
+    solvers = {getattr(item, "callspec", None) and item.callspec.params.get("solver") or "sparse_qp"
+               for item in request.session.items
+               if item.module is request.module and "lockstep_bags" in item.fixturenames}
+    out = tmp_path_factory.mktemp("lockstep")
+
+    def solver_run(solver: str, env: dict[str, str]) -> Path:
         params = [str(Path(__file__).parents[1] / "config" / "solvers" / f"{solver}.yaml")]
-        assert launch_scenario(str(SHORT), params, [], True, bag, timeout=240.0) == 0
-        bags[solver] = bag
-    return bags
+        assert launch_scenario(str(SHORT), params, [], True, out / solver, timeout=240.0, env=env) == 0
+        return out / solver
+
+    def plan_run(env: dict[str, str]) -> Path:
+        """``dualarm plan corner_path`` (2 key-point starts, no execution in one process: the plan's quality
+        is test_planner.py's), then the lockstep launch that runs it."""
+        plan = run_cli("plan", "corner_path", "--starts", "2", "--no-execute", "--output", str(out / "plan"),
+                       timeout=300)
+        assert plan.returncode == 0, plan.stderr
+        assert launch_scenario("corner_path", [], [], True, out / "plan_bag", timeout=240.0,
+                               plan=out / "plan" / "plan.json", env=env) == 0
+        return out / "plan_bag"
+
+    jobs = {solver: lambda env, solver=solver: solver_run(solver, env) for solver in sorted(solvers)}
+    if PLAN_TEST in selected_tests(request):
+        jobs["plan"] = plan_run
+    return side_by_side(jobs)
+
+
+@pytest.fixture(scope="module")
+def lockstep_bags(launches: dict[str, Path]) -> dict[str, Path]:
+    """One recorded lockstep launch of the short scenario per solver (its solver parameter file)."""
+    return launches
 
 
 @pytest.mark.parametrize("solver", SOLVERS)
@@ -146,15 +187,14 @@ def test_table_one_means_from_the_bag_equal_in_process(lockstep_bags: dict[str, 
         assert got[key] == pytest.approx(expected[key], rel=1e-9, abs=1e-12), key
 
 
-def test_plan_run_by_the_nodes(tmp_path: Path) -> None:
+def test_plan_run_by_the_nodes(launches: dict[str, Path], tmp_path: Path) -> None:
     """``dualarm launch corner_path --plan``: the trajectory node streams the plan's joint trajectory,
-    the controller tracks it; the executed relative pose stays within 1 mm / 5 mrad of the reference."""
+    the controller tracks it; the executed relative pose stays within 1 mm / 5 mrad of the reference.
+    The plan's quality is test_planner.py's: 2 key-point starts and no execution in one process
+    (``--no-execute``) are enough for a plan to track (``launches`` plans and runs it)."""
     from dualarm_control.app.record.bag import report
 
-    plan = run_cli("plan", "corner_path", "--starts", "4", "--output", str(tmp_path / "plan"), timeout=300)
-    assert plan.returncode == 0, plan.stderr
-    bag = tmp_path / "bag"
-    assert launch_scenario("corner_path", [], [], True, bag, timeout=240.0, plan=tmp_path / "plan" / "plan.json") == 0
+    bag = launches["plan"]
     metrics = report(bag, tmp_path / "report")[0]["joint_tracking"]
     assert metrics["solver_failures"] == 0 and metrics["joint_velocity_limit_violations"] == 0
     assert metrics["max_tracking_error_m"] < 1e-3 and metrics["max_tracking_error_rad"] < 5e-3

@@ -7,6 +7,7 @@ private ROS_DOMAIN_ID.
 
 from __future__ import annotations
 
+import os
 import re
 import signal
 import subprocess
@@ -28,9 +29,11 @@ STREAMS = ("/joint_states", "/velocity_controller/commands")
 class Launch:
     """``dualarm launch`` in the background with its output lines collected."""
 
-    def __init__(self, *args: str) -> None:
+    def __init__(self, *args: str, env: dict[str, str] | None = None) -> None:
+        """``env`` adds to the environment (a ROS domain of its own, say)."""
         self.popen = subprocess.Popen([sys.executable, "-u", "-m", "dualarm_control.app.cli", "launch", *args],
-                                      cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                                      cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                      env={**os.environ, **env} if env else None)
         self.lines: list[str] = []
         self._reader = threading.Thread(target=self._pump, daemon=True)
         self._reader.start()
@@ -59,14 +62,26 @@ class Launch:
                 self.popen.kill()
 
 
-@pytest.fixture
-def launch_slow() -> Iterator[Launch]:
+def moving_slow() -> Iterator[Launch]:
+    """``dualarm launch`` of test/data/slow.yaml (it holds for minutes), once its motion has started."""
     launch = Launch(str(SLOW), "--solver", "sparse_qp")
     try:
         launch.wait_for("segment 1/1 'move'")
         yield launch
     finally:
         launch.kill()
+
+
+@pytest.fixture
+def launch_slow() -> Iterator[Launch]:
+    """A launch of its own, for a test that changes it (and ends it)."""
+    yield from moving_slow()
+
+
+@pytest.fixture(scope="class")
+def running_slow() -> Iterator[Launch]:
+    """One launch for the tests of a class that only read from it (parameters, the streams)."""
+    yield from moving_slow()
 
 
 def dualarm(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess[str]:
@@ -117,16 +132,6 @@ def test_live_solver_switch_and_refusal(launch_slow: Launch) -> None:
     assert "0 solver failures" in log and "1 parameter switches" in log
 
 
-def test_param_list_and_describe(launch_slow: Launch) -> None:
-    names = dualarm("param", "list", "/controller_node").stdout.split()
-    for expected in ("solver", "gain", "l1_weight", "qp_eps_abs", "use_sim_time", "control_period"):
-        assert expected in names
-    text = dualarm("param", "describe", "/controller_node", "control_period").stdout
-    assert "Type: double" in text and "Read only: true" in text and "a value > 0" in text
-    missing = dualarm("param", "get", "/no_such_node", "solver", "--timeout", "3")
-    assert missing.returncode == 2 and "not found" in missing.stderr
-
-
 FOREIGN_LISTENER = r'''
 import sys, time
 import rclpy
@@ -148,16 +153,29 @@ print(counts["js"], counts["cmd"], counts["diag"], flush=True)
 '''
 
 
-def test_plain_rclpy_script_sees_the_graph(launch_slow: Launch, tmp_path: Path) -> None:
-    """A script that knows nothing of this package receives the streams: 200 messages of each
-    (one second at 200 Hz; how fast they come is a benchmark figure, not this test's)."""
-    script = tmp_path / "listener.py"
-    script.write_text(FOREIGN_LISTENER)
-    out = subprocess.run([sys.executable, str(script), "200"], capture_output=True, text=True, timeout=120,
-                         check=False)
-    assert out.returncode == 0, out.stderr
-    js, cmd, diag = (int(v) for v in out.stdout.split())
-    assert js >= 200 and cmd >= 200 and diag >= 200, out.stdout
+class TestOneRunningLaunch:
+    """The tests that only read from a running launch share one (``running_slow``, class-scoped: it ends
+    before the tests below start nodes of their own on this session's domain)."""
+
+    def test_param_list_and_describe(self, running_slow: Launch) -> None:
+        names = dualarm("param", "list", "/controller_node").stdout.split()
+        for expected in ("solver", "gain", "l1_weight", "qp_eps_abs", "use_sim_time", "control_period"):
+            assert expected in names
+        text = dualarm("param", "describe", "/controller_node", "control_period").stdout
+        assert "Type: double" in text and "Read only: true" in text and "a value > 0" in text
+        missing = dualarm("param", "get", "/no_such_node", "solver", "--timeout", "1")  # no such node: any wait
+        assert missing.returncode == 2 and "not found" in missing.stderr
+
+    def test_plain_rclpy_script_sees_the_graph(self, running_slow: Launch, tmp_path: Path) -> None:
+        """A script that knows nothing of this package receives the streams: 200 messages of each
+        (one second at 200 Hz; how fast they come is a benchmark figure, not this test's)."""
+        script = tmp_path / "listener.py"
+        script.write_text(FOREIGN_LISTENER)
+        out = subprocess.run([sys.executable, str(script), "200"], capture_output=True, text=True, timeout=120,
+                             check=False)
+        assert out.returncode == 0, out.stderr
+        js, cmd, diag = (int(v) for v in out.stdout.split())
+        assert js >= 200 and cmd >= 200 and diag >= 200, out.stdout
 
 
 FOREIGN_DRIVER = r'''

@@ -6,12 +6,12 @@ answer the newcomer's later announcements, so the two matched only at the peer's
 periodic announcement, every 3 s by default. The nodes announce every 0.1 s
 (config/fastdds_discovery.xml, applied by dualarm_control/ros/env.py). The worst case is a
 node joining a cell that is already running (no later newcomer makes the peer announce
-itself again): here the trajectory node starts 10 times against one running sim_node, in
-real time. The default test asserts what does not depend on the machine's load: every start
-receives its first /joint_states (waited for with a deadline), and prints how long each took. How long is a wall-clock figure: the bound
-(1 s, 6x the normal 80 ms and far below the 2.6-3.3 s stall it catches; before the profile, 21
-of 30 such starts took over 0.5 s, up to 3.3 s: docs/bench.md, "Start-up") is asserted by the
-``slow`` test on the same starts.
+itself again): here the trajectory node starts several times against one running sim_node, in
+real time. The default test asserts what does not depend on the machine's load, on 3 starts: every
+start receives its first /joint_states (waited for with a deadline), and prints how long each
+took. How long is a wall-clock figure: the bound (1 s, 6x the normal 80 ms and far below the
+2.6-3.3 s stall it catches; before the profile, 21 of 30 such starts took over 0.5 s, up to
+3.3 s: docs/bench.md, "Start-up") is asserted by the ``slow`` test, on 10 starts.
 """
 
 from __future__ import annotations
@@ -34,6 +34,9 @@ from dualarm_control.ros.env import (
 )
 
 STARTS = 10
+"""Joins of the ``slow`` test (the wall-clock bound)."""
+FEW_STARTS = 3
+"""Joins of the default test (each gets its first joint state; about 1.5 s a join)."""
 FIRST_STATE_WITHIN_S = 1.0
 """The slow test's bound. The stall it catches (a lost discovery reply) lasts until the next periodic
 announcement: 2.6-3.3 s with Fast DDS's default 3 s. Measured with the package's profile: at most
@@ -70,15 +73,14 @@ def first_state_delay() -> float:
     return log_time(node.lines, "targets:") - log_time(node.lines, "scenario '")
 
 
-@pytest.fixture(scope="module")
-def joins() -> list[float]:
-    """:data:`STARTS` joins of the trajectory node to one running sim_node: seconds from each node
+def join_delays(starts: int) -> list[float]:
+    """``starts`` joins of the trajectory node to one running sim_node: seconds from each node
     being up to its first joint state."""
     cell = Launch(echo=False)
     try:
         sim = cell.start("sim_node", node_command("sim_node", REAL_TIME), LOG_FORMAT)
         wait_for(sim, "real-time at")  # the end of its __init__: publishing from the next period on
-        delays = [first_state_delay() for _ in range(STARTS)]
+        delays = [first_state_delay() for _ in range(starts)]
         assert sim.popen.poll() is None, "\n".join(sim.lines[-20:])
     finally:
         cell.stop()
@@ -86,10 +88,22 @@ def joins() -> list[float]:
     return delays
 
 
-def test_a_node_joining_a_running_cell_gets_its_first_joint_state(joins: list[float]) -> None:
-    """Each of the 10 joins got its first joint state after it was up (the wait for it fails after
-    120 s: a deadline, not a speed; how soon is the slow test's)."""
-    assert len(joins) == STARTS and all(delay >= 0.0 for delay in joins), joins
+@pytest.fixture(scope="module")
+def few_joins() -> list[float]:
+    """:data:`FEW_STARTS` joins (the default test's)."""
+    return join_delays(FEW_STARTS)
+
+
+@pytest.fixture(scope="module")
+def joins() -> list[float]:
+    """:data:`STARTS` joins (the ``slow`` test's)."""
+    return join_delays(STARTS)
+
+
+def test_a_node_joining_a_running_cell_gets_its_first_joint_state(few_joins: list[float]) -> None:
+    """Each of 3 joins got its first joint state after it was up (the wait for it fails after
+    120 s: a deadline, not a speed; how soon is the slow test's, on 10 joins)."""
+    assert len(few_joins) == FEW_STARTS and all(delay >= 0.0 for delay in few_joins), few_joins
 
 
 @pytest.mark.slow

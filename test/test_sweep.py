@@ -135,9 +135,12 @@ def test_cli_sweep_and_report(reference: Path, tmp_path: Path, capsys: pytest.Ca
     assert main(["sweep", "report"]) == 2
 
 
+@pytest.mark.slow
 def test_cli_scaling_runs_the_same_rows_three_ways(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``dualarm sweep scaling``: the same runs in this process, on one worker and on two; the table
-    and the JSON hold every layout (timings are not judged), and the three layouts' rows are the same."""
+    and the JSON hold every layout (timings are not judged), and the three layouts' rows are the same.
+    ``slow`` (5-6 s, benchmark machinery): in the default run the rows on a two-worker local cluster
+    equal one process's (``test_local_cluster_rows_equal_one_process``)."""
     import json
 
     assert main(["sweep", "scaling", str(SMOKE), "--tasks", "2", "--output", str(tmp_path)]) == 0

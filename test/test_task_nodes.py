@@ -17,6 +17,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
+from launching import meanwhile, selected_tests, side_by_side
 from waiting import exited, tail, wait_until
 
 from dualarm_control.app.record.bag import (
@@ -58,22 +60,45 @@ def in_process(duration: float, force: bool = False) -> dict[str, float | int | 
     return summarize_run(log, scenario)
 
 
-def test_lockstep_bag_metrics_equal_in_process(tmp_path: Path) -> None:
+FORCE_DURATION = 7.0  # s of task time of the force variant's lockstep run
+LOCKSTEP = {"test_lockstep_bag_metrics_equal_in_process": (DURATION, False),
+            "test_force_variant_lockstep_bag_metrics_equal_in_process": (FORCE_DURATION, True)}
+"""The lockstep runs (task time, force variant) by the test that compares them with the in-process run."""
+Lockstep = dict[str, tuple[Path, dict[str, float | int | str]]]
+
+
+@pytest.fixture(scope="module")
+def lockstep(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> Lockstep:
+    """The lockstep launches of the selected tests of :data:`LOCKSTEP`, recorded side by side (each on a
+    ROS domain of its own), while this process computes the in-process runs they must equal: by test,
+    the bag and the in-process metrics."""
+    tests = sorted(selected_tests(request) & set(LOCKSTEP))
+    out = tmp_path_factory.mktemp("lockstep")
+
+    def launch(test: str, env: dict[str, str]) -> Path:
+        duration, force = LOCKSTEP[test]
+        assert launch_scenario("pan_cleaning", [PARAMS], ["-p", f"duration:={duration!r}"], True, out / test,
+                               timeout=120.0, force=force, env=env) == 0
+        return out / test
+
+    bags, expected = meanwhile(lambda: side_by_side({t: lambda env, t=t: launch(t, env) for t in tests}),
+                               lambda: {t: in_process(*LOCKSTEP[t]) for t in tests})
+    return {t: (bags[t], expected[t]) for t in tests}
+
+
+def test_lockstep_bag_metrics_equal_in_process(lockstep: Lockstep, tmp_path: Path) -> None:
     """Lockstep launch of pan_cleaning -> dualarm report metrics == in-process metrics, exactly.
 
     Exact (==, not a tolerance): the lockstep simulator steps the same pybullet cell with the
     same commands, the controller solves from the same float64 joint states at the same task
     times t = k T, and the report evaluates the tasks with the same code; only the cycle
     times (wall clock) differ."""
-    bag = tmp_path / "bag"
-    assert launch_scenario("pan_cleaning", [PARAMS], ["-p", f"duration:={DURATION!r}"], True, bag,
-                           timeout=120.0) == 0
+    bag, expected = lockstep["test_lockstep_bag_metrics_equal_in_process"]
     results, kind, _ = report(bag, tmp_path / "report")
     assert kind == "tasks"  # read as a task run
     assert (tmp_path / "report" / "metrics.json").is_file()
     assert (tmp_path / "report" / "tool_path.png").is_file()
     from_bag = results["k=1"]
-    expected = in_process(DURATION)
     assert set(from_bag) == set(expected)
     for key, value in expected.items():
         if key not in WALL_CLOCK:
@@ -152,17 +177,13 @@ def test_task_mode_stale_state_watchdog_fires_target_watchdog_does_not() -> None
     assert "complete after" in text
 
 
-def test_force_variant_lockstep_bag_metrics_equal_in_process(tmp_path: Path) -> None:
+def test_force_variant_lockstep_bag_metrics_equal_in_process(lockstep: Lockstep) -> None:
     """Force variant over ROS, lockstep: the force loop runs on /wrench, the simulator's contact force
     is on /contact_force; every metric of the bag (force ones included) equals the in-process one, and
     contact is kept after the first touch."""
-    duration = 7.0
-    bag = tmp_path / "bag"
-    assert launch_scenario("pan_cleaning", [PARAMS], ["-p", f"duration:={duration!r}"], True, bag,
-                           timeout=120.0, force=True) == 0
+    bag, expected = lockstep["test_force_variant_lockstep_bag_metrics_equal_in_process"]
     log, scenario = read_task(bag)
     from_bag = summarize_run(log, scenario)
-    expected = in_process(duration, force=True)
     assert set(from_bag) == set(expected)
     for key, value in expected.items():
         if key not in WALL_CLOCK:

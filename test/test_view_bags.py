@@ -110,10 +110,11 @@ def test_bag_info_says_tf_is_computed(demo_bag: Path, capsys: pytest.CaptureFixt
     assert "Topic: /robot_description | Type: std_msgs/msg/String" in info
 
 
-@pytest.fixture
+@pytest.fixture(scope="module")
 def sim_node() -> Iterator[Process]:
     """sim_node in real time on the default scenario (no controller: it holds the arms), once it has
-    logged its scenario: the end of its ``__init__``, after it published /robot_description."""
+    logged its scenario: the end of its ``__init__``, after it published /robot_description. One for
+    the module: the tests only read from it (the latched description, the joint states)."""
     launch = Launch(echo=False)
     try:
         proc = launch.start("sim_node", [sys.executable, "-m", "dualarm_control.app.cli", "run", "sim_node"])
@@ -158,36 +159,44 @@ STATES = 10
 """Joint states a recorder reports before it is stopped."""
 
 
-def _record(bag: Path, *extra: str) -> str:
-    """Record /joint_states (and what sim_node latches) until the recorder reports more than
-    :data:`STATES` of them, then Ctrl-C; its stderr."""
+def recorded_states(rec: Process) -> int:
+    """The joint states a recorder reported, from its progress lines (every 2 s: "recorded N messages
+    in T s (/joint_states n, ...)")."""
+    counts = [int(m) for line in rec.lines for m in re.findall(r"/joint_states (\d+)", line)]
+    return max(counts, default=0)
+
+
+def wait_for_states(rec: Process) -> None:
+    """Until the recorder ``rec`` has reported more than :data:`STATES` joint states."""
+    wait_until(lambda: recorded_states(rec) > STATES, lambda: tail(rec.lines), what=f"{STATES} joint states recorded",
+               gone=exited(rec.popen, rec.name))
+
+
+def _record(*bags: tuple[Path, tuple[str, ...]]) -> None:
+    """One recorder per (bag, extra arguments), side by side: each records /joint_states (and what
+    sim_node latches) until it reports more than :data:`STATES` of them, then Ctrl-C."""
     launch = Launch(echo=False)
     try:
-        rec = launch.start("bag", [sys.executable, "-m", "dualarm_control.app.cli", "bag", "record", "-o", str(bag),
-                                   "/joint_states", *extra])
-
-        def states() -> int:  # from its progress lines, every 2 s: "recorded N messages in T s (/joint_states n, ...)"
-            counts = [int(m) for line in rec.lines for m in re.findall(r"/joint_states (\d+)", line)]
-            return max(counts, default=0)
-
-        wait_until(lambda: states() > STATES, lambda: tail(rec.lines), what=f"{STATES} joint states recorded",
-                   gone=exited(rec.popen, "the recorder"))
-        os.killpg(rec.popen.pid, signal.SIGINT)
-        assert rec.popen.wait(timeout=DEADLINE_S) == 0, tail(rec.lines)
-        return "\n".join(rec.lines)
+        recs = [launch.start(f"bag {bag.name}", [sys.executable, "-m", "dualarm_control.app.cli", "bag", "record",
+                                                  "-o", str(bag), "/joint_states", *extra]) for bag, extra in bags]
+        for rec in recs:
+            wait_for_states(rec)
+            os.killpg(rec.popen.pid, signal.SIGINT)
+        for rec in recs:
+            assert rec.popen.wait(timeout=DEADLINE_S) == 0, tail(rec.lines)
     finally:
         launch.stop()
 
 
 def test_late_recorder_keeps_description_and_no_tf_turns_tf_off(sim_node: Process, tmp_path: Path) -> None:
     """A recorder started after sim_node keeps /robot_description (not named) and writes /tf from
-    /joint_states; with --no-tf it writes no /tf and bag info says nothing about it."""
+    /joint_states; with --no-tf it writes no /tf and bag info says nothing about it (the two recorders
+    side by side)."""
     with_tf, without = tmp_path / "with_tf", tmp_path / "no_tf"
-    _record(with_tf)
+    _record((with_tf, ()), (without, ("--no-tf",)))
     topics = read_bag(with_tf)
     assert [m.data for _, m in topics["/robot_description"]] == [urdf_path().read_text()]  # type: ignore[attr-defined]
     assert len(topics["/tf"]) == len(topics["/joint_states"]) > STATES
-    _record(without, "--no-tf")
     topics = read_bag(without)
     assert "/robot_description" in topics and len(topics["/joint_states"]) > STATES
     assert "/tf" not in topics and "/tf_static" not in topics
