@@ -137,22 +137,27 @@ def test_cli_sweep_and_report(reference: Path, tmp_path: Path, capsys: pytest.Ca
 
 @pytest.mark.slow
 def test_cli_scaling_runs_the_same_rows_three_ways(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """``dualarm sweep scaling``: the same runs in this process, on one worker and on two; the table
-    and the JSON hold every layout (timings are not judged), and the three layouts' rows are the same.
+    """``dualarm sweep scaling``: the same runs in this process, on one worker and on two, and with
+    ``--interleave 1`` alternately on a kept worker and in this process; the table and the JSON hold
+    every layout (timings are not judged), and every layout's rows are the same.
     ``slow`` (5-6 s, benchmark machinery): in the default run the rows on a two-worker local cluster
     equal one process's (``test_local_cluster_rows_equal_one_process``)."""
     import json
 
-    assert main(["sweep", "scaling", str(SMOKE), "--tasks", "2", "--output", str(tmp_path)]) == 0
+    assert main(["sweep", "scaling", str(SMOKE), "--tasks", "2", "--output", str(tmp_path), "--interleave", "1"]) == 0
     text = capsys.readouterr().out
     for layout in ("| this process | 6 | 0 |", "| 1 worker | 6 | 0 |", "| 2 workers | 6 | 0 |"):
         assert layout in text
+    assert "One warm worker against this process, interleaved (1 rounds each" in text
     doc = json.loads((tmp_path / "scaling.json").read_text())
     assert [r["workers"] for r in doc["layouts"]] == [0, 1, 2]
-    assert {"two_over_one_wall", "two_over_one_steady", "one_worker_overhead"} <= set(doc)
+    assert {"two_over_one_wall", "two_over_one_steady", "one_worker_overhead", "interleaved_overhead"} <= set(doc)
+    assert len(doc["interleaved"]["worker_run_time_s"]) == len(doc["interleaved"]["process_run_time_s"]) == 2
     rows = [sorted(deterministic(tmp_path / f"rows_{w}"), key=lambda r: r["key"]) for w in (0, 1, 2)]
-    assert rows[0] == rows[1] == rows[2]
+    rows += [sorted(deterministic(tmp_path / f"interleaved_{i}"), key=lambda r: r["key"]) for i in range(4)]
+    assert all(r == rows[0] for r in rows)
     assert main(["sweep", "scaling"]) == 2
+    assert main(["sweep", "scaling", str(SMOKE), "--interleave", "-1"]) == 2
 
 
 def test_the_local_cluster_listens_on_loopback_only(tmp_path: Path) -> None:

@@ -34,6 +34,9 @@ def add_sweep_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[t
                      help="an existing Dask scheduler (default: a local cluster on 127.0.0.1)")
     swp.add_argument("--workers", type=int, default=2, metavar="N",
                      help="local cluster worker processes (default: %(default)s; 0: in this process, no Dask)")
+    swp.add_argument("--interleave", type=int, default=0, metavar="ROUNDS",
+                     help="scaling: also measure one warm worker against this process, interleaved, ROUNDS "
+                     "rounds each after one left out (the fair overhead figure; default: %(default)s, off)")
     swp.add_argument("--seed", type=int, default=0, help="report: bootstrap seed (default: %(default)s)")
     swp.add_argument("--no-progress", action="store_true", help="no progress bar")
     swp.set_defaults(func=cmd_sweep)
@@ -63,7 +66,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
         spec = load_spec(Path(args.table)).with_tasks(args.tasks).with_robots(args.robots)
         out = Path(args.output) if args.output else Path(DEFAULT_OUTPUT) / f"{spec.name}_scaling"
-        text, paths = scaling(spec, out, progress=lambda m: print(m, file=sys.stderr))
+        if args.interleave < 0:
+            raise DualArmError(f"sweep scaling: --interleave {args.interleave}: expected rounds >= 0")
+        text, paths = scaling(spec, out, progress=lambda m: print(m, file=sys.stderr), rounds=args.interleave)
         print(text)
         print("wrote " + ", ".join(str(p) for p in paths))
         return 0

@@ -87,18 +87,25 @@ def _in_process(spec: SweepSpec, keys: list[RunKey]) -> Iterator[dict[str, Any]]
         yield run_one(spec, key)
 
 
+def local_cluster(stack: ExitStack, workers: int) -> Any:
+    """A sweep's own LocalCluster of ``workers`` one-thread worker processes on 127.0.0.1, with
+    :data:`LOCAL_WORKER_CONFIG`, closed with ``stack``: no dashboard; the scheduler's HTTP server
+    (health, metrics) on a free port of 127.0.0.1, not 8787."""
+    import dask
+    from distributed import LocalCluster
+
+    stack.enter_context(dask.config.set(LOCAL_WORKER_CONFIG))
+    return stack.enter_context(LocalCluster(host=LOCALHOST, n_workers=workers, threads_per_worker=1, processes=True,
+                                            dashboard_address=None,
+                                            scheduler_kwargs={"dashboard_address": f"{LOCALHOST}:0"}))
+
+
 def _on_dask(spec: SweepSpec, keys: list[RunKey], stack: ExitStack, scheduler: str | None,
              workers: int) -> Iterator[dict[str, Any]]:
-    import dask
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import Client, as_completed
 
     if scheduler is None:
-        stack.enter_context(dask.config.set(LOCAL_WORKER_CONFIG))
-        # no dashboard; the scheduler's HTTP server (health, metrics) on a free port of 127.0.0.1, not 8787
-        cluster = stack.enter_context(LocalCluster(host=LOCALHOST, n_workers=workers, threads_per_worker=1,
-                                                   processes=True, dashboard_address=None,
-                                                   scheduler_kwargs={"dashboard_address": f"{LOCALHOST}:0"}))
-        client = stack.enter_context(Client(cluster))
+        client = stack.enter_context(Client(local_cluster(stack, workers)))
     else:
         client = stack.enter_context(Client(scheduler))
     futures = [client.submit(run_runs, spec, group, key=f"sweep-{spec.name}-{'+'.join(k.text for k in group)}",

@@ -5,6 +5,10 @@ Per layout: the wall time, the rate from the first row to the last (the local cl
 left out) and the sum of the runs' own wall times; then the two-worker rate over the one-worker
 rate and each layout's run time over the runs in this process. Timings are of this machine at
 this moment: ratios from one call, never a pass/fail verdict.
+
+With ``rounds`` > 0 (``--interleave ROUNDS``), also the one-worker overhead measured fairly
+(:func:`interleaved_overhead`): the layouts one after the other compare a fresh worker process
+with this warm one, and the machine's speed drifts over minutes.
 """
 
 from __future__ import annotations
@@ -38,8 +42,35 @@ def measure_layout(spec: SweepSpec, out: Path, workers: int) -> dict[str, Any]:
             "run_time_s": float(sum(r["wall_time_s"] for r in rows))}
 
 
+def interleaved_overhead(spec: SweepSpec, out: Path, rounds: int,
+                         progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """One warm worker against this process: the whole of ``spec`` on a one-worker local cluster kept
+    for every round, and back to back in this process, alternately (worker, this process; then this
+    process, worker; ...: a drift of the machine's speed falls on both), ``rounds`` times each after
+    one round each that is left out (each process's start: imports, models, memory). Returns the run
+    times [s] of the measured rounds and ``overhead``, the worker's sum over this process's, minus 1."""
+    from contextlib import ExitStack
+
+    from dualarm_control.app.sweep.execute import local_cluster
+
+    times: dict[int, list[float]] = {0: [], 1: []}
+    with ExitStack() as stack:
+        address = local_cluster(stack, 1).scheduler_address
+        order = [1, 0] + [w for r in range(rounds) for w in ((0, 1) if r % 2 == 0 else (1, 0))]
+        for i, workers in enumerate(order):
+            if progress is not None:
+                progress(f"scaling: interleaved {i + 1}/{len(order)}, {'one worker' if workers else 'this process'}")
+            segment = out / f"interleaved_{i}"
+            shutil.rmtree(segment, ignore_errors=True)
+            run_sweep(spec, segment, scheduler=address if workers else None, workers=0, show_progress=False)
+            times[workers].append(float(sum(r["wall_time_s"] for r in read_table(segment).to_pylist())))
+    worker, here = times[1][1:], times[0][1:]
+    return {"rounds": rounds, "worker_run_time_s": times[1], "process_run_time_s": times[0],
+            "overhead": sum(worker) / sum(here) - 1.0}
+
+
 def scaling(spec: SweepSpec, out: Path, layouts: Sequence[int] = LAYOUTS,
-            progress: Callable[[str], None] | None = None) -> tuple[str, list[Path]]:
+            progress: Callable[[str], None] | None = None, rounds: int = 0) -> tuple[str, list[Path]]:
     """Measure ``layouts`` one after the other (module docstring); write scaling.md and scaling.json to ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     rows = []
@@ -57,7 +88,7 @@ def scaling(spec: SweepSpec, out: Path, layouts: Sequence[int] = LAYOUTS,
         ratio = f"{r['run_time_s'] / base:.3f}" if base else "-"
         lines.append(f"| {name} | {r['runs']} | {r['failed']} | {r['wall_s']:.1f} | {r['rate_per_s']:.3f} | "
                      f"{r['steady_rate_per_s']:.3f} | {r['run_time_s']:.1f} | {ratio} |")
-    summary: dict[str, float] = {}
+    summary: dict[str, Any] = {}
     if 1 in by and 2 in by:
         summary["two_over_one_wall"] = by[2]["rate_per_s"] / by[1]["rate_per_s"]
         summary["two_over_one_steady"] = by[2]["steady_rate_per_s"] / by[1]["steady_rate_per_s"]
@@ -67,6 +98,13 @@ def scaling(spec: SweepSpec, out: Path, layouts: Sequence[int] = LAYOUTS,
         summary["one_worker_overhead"] = by[1]["run_time_s"] / by[0]["run_time_s"] - 1.0
         lines += [(f"One worker's run time against the same runs in this process: "
                    f"{100 * summary['one_worker_overhead']:+.1f} %.")]
+    if rounds > 0:
+        fair = interleaved_overhead(spec, out, rounds, progress)
+        summary["interleaved_overhead"] = fair["overhead"]
+        summary["interleaved"] = fair
+        lines += [(f"One warm worker against this process, interleaved ({rounds} rounds each after one left out; "
+                   f"run times [s] worker {', '.join(f'{t:.1f}' for t in fair['worker_run_time_s'])}, this process "
+                   f"{', '.join(f'{t:.1f}' for t in fair['process_run_time_s'])}): {100 * fair['overhead']:+.1f} %.")]
     text = "\n".join(lines) + "\n"
     md, js = out / "scaling.md", out / "scaling.json"
     md.write_text(text)
