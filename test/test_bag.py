@@ -166,9 +166,13 @@ def recordings(request: pytest.FixtureRequest,
             for name, fixture in (("sigint", "sigint_bag"), ("sigterm", "sigterm_bag")) if fixture in item.fixturenames}
     runs = {"sigint": (signal.SIGINT, N_MSGS), "sigterm": (signal.SIGTERM, SIGTERM_MSGS)}
 
+    # the directories made here, not in the jobs' threads: pytest's TempPathFactory is not thread-safe
+    # (two first mktemp calls at once raced for its base directory: "is not a normalized and relative path")
+    dirs = {name: tmp_path_factory.mktemp(name) for name in sorted(used)}
+
     def record(name: str, env: dict[str, str]) -> tuple[Path, int, str]:
         sig, n = runs[name]
-        return record_with_publisher(tmp_path_factory.mktemp(name), f"{name}_bag", sig, n, env)
+        return record_with_publisher(dirs[name], f"{name}_bag", sig, n, env)
 
     return side_by_side({name: lambda env, name=name: record(name, env) for name in sorted(used)})
 

@@ -143,9 +143,13 @@ def refusals(tmp_path_factory: pytest.TempPathFactory) -> list[tuple[int, str]]:
     """Each profile of :data:`MISMATCHES` against its own fake cell, side by side (each pair on a ROS
     domain of its own: the refusals wait out their startup_check together): the controller's exit
     code and log."""
+    # the directories made here, not in the jobs' threads: pytest's TempPathFactory is not thread-safe
+    # (two first mktemp calls at once raced for its base directory: "is not a normalized and relative path")
+    dirs = [tmp_path_factory.mktemp(f"mismatch{case}") for case in range(len(MISMATCHES))]
+
     def refusal(case: int, env: dict[str, str]) -> tuple[int, str]:
         change, rename, _ = MISMATCHES[case]
-        params = profile(tmp_path_factory.mktemp(f"mismatch{case}"), **change)  # type: ignore[arg-type]
+        params = profile(dirs[case], **change)  # type: ignore[arg-type]
         cell = fake(rename, env)
         controller = Node("controller_node", params, env)
         try:
