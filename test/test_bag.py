@@ -15,7 +15,8 @@ import signal
 import subprocess
 import sys
 import threading
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -417,3 +418,64 @@ def test_after_data_must_name_a_recorded_topic(tmp_path: Path) -> None:
                                  "--after-data", "/b"), cwd=REPO, capture_output=True, text=True, timeout=30,
                          check=False)
     assert out.returncode != 0 and "--after-data /b is not one of the topics to record ['/a']" in out.stderr
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (("/a", "--after-matched", "/b"), "--after-matched /b is not one of the topics to record ['/a']"),
+    (("/a", "/b", "--after-matched", "/b", "--after-data", "/b"), "/b is given to both --after-data and --after-matched"),
+])
+def test_after_matched_must_name_a_recorded_topic_once(tmp_path: Path, args: tuple[str, ...], message: str) -> None:
+    """--after-matched TOPIC must be one of the topics, and not also an --after-data one."""
+    out = subprocess.run(dualarm("bag", "record", "-o", str(tmp_path / "b"), "--duration", "0.2", *args), cwd=REPO,
+                         capture_output=True, text=True, timeout=30, check=False)
+    assert out.returncode != 0 and message in out.stderr, out.stderr
+
+
+def test_after_matched_topic_waits_for_every_publisher_of_the_others(tmp_path: Path) -> None:
+    """``after_matched`` /b: /b is subscribed only once the recorder's reader of /a has matched every
+    publisher the graph lists for /a. A second publisher of /a with another type never matches: /b
+    stays unsubscribed (polled many times, the first publisher matched) until it is gone."""
+    import rclpy
+    from rclpy.context import Context
+    from std_msgs.msg import Int32, String
+
+    from dualarm_control.ros.node import tool_node
+    from dualarm_control.ros.recorder import BagWriter, Recorder
+
+    def spin_until(condition: Callable[[], bool], what: str, timeout: float = 20.0) -> None:
+        deadline = time.monotonic() + timeout
+        while not condition():
+            assert time.monotonic() < deadline, f"not within {timeout} s: {what}"
+            recorder.poll()
+            executor.spin_once(timeout_sec=0.02)
+
+    bag = BagWriter(tmp_path / "bag")
+    contexts = [Context(), Context()]  # the publishers in participants of their own: one participant
+    for context in contexts:           # cannot have two types on a topic
+        rclpy.init(context=context)
+    try:
+        strings, ints = (rclpy.create_node(f"_test_after_matched_{i}", context=c) for i, c in enumerate(contexts))
+        publishers = {String: (strings, strings.create_publisher(String, "/a", 10)),
+                      Int32: (ints, ints.create_publisher(Int32, "/a", 10))}
+        strings.create_publisher(String, "/b", 10)
+        with tool_node("_test_after_matched", signals=False) as (node, executor, _):
+            recorder = Recorder(node, bag, ["/a", "/b"], False, compute_tf=False, after_matched=["/b"])
+            deadline = time.monotonic() + 20.0
+            while node.count_publishers("/a") < 2 or node.count_publishers("/b") < 1:  # all in the graph first
+                assert time.monotonic() < deadline, "the publishers of /a and /b not in the graph within 20 s"
+                executor.spin_once(timeout_sec=0.02)
+            spin_until(lambda: "/a" in recorder.subscriptions, "/a subscribed")
+            reader = recorder.subscriptions["/a"]
+            spin_until(lambda: reader.get_publisher_count() >= 1, "the reader of /a matched its own type's publisher")
+            for _ in range(50):
+                recorder.poll()
+                executor.spin_once(timeout_sec=0.01)
+            assert reader.get_publisher_count() == 1
+            assert "/b" not in recorder.subscriptions, "/b subscribed while a publisher of /a was not matched"
+            owner, late = next(v for t, v in publishers.items() if t is not reader.msg_type)
+            owner.destroy_publisher(late)
+            spin_until(lambda: "/b" in recorder.subscriptions, "/b subscribed once /a's publishers all matched")
+    finally:
+        for context in contexts:
+            context.try_shutdown()
+        bag.close()

@@ -304,7 +304,7 @@ def cmd_bag_record(args: argparse.Namespace) -> int:
 
     path = Path(args.output) if args.output else default_bag_path()
     return record(path, args.topics, record_all=args.all, duration=args.duration, use_sim_time=args.use_sim_time,
-                  after_data=args.after_data, compute_tf=not args.no_tf)
+                  after_data=args.after_data, compute_tf=not args.no_tf, after_matched=args.after_matched)
 
 
 def cmd_bag_info(args: argparse.Namespace) -> int:
@@ -396,6 +396,10 @@ def _add_bag_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     rec.add_argument("--after-data", action="append", default=[], metavar="TOPIC",
                      help="subscribe this named topic only once every other named topic has delivered a message "
                      "(repeatable): a node that waits for a reader on TOPIC then starts with the others recorded")
+    rec.add_argument("--after-matched", action="append", default=[], metavar="TOPIC",
+                     help="subscribe this named topic only once every other named topic's reader has matched all "
+                     "of its publishers (repeatable): a lockstep simulator that waits for a reader on TOPIC then "
+                     "starts with the others' readers matched (dualarm launch --lockstep gives /joint_states)")
     rec.add_argument("--no-tf", action="store_true",
                      help="do not write /tf and /tf_static computed from /joint_states (by default they are, "
                      "when no node publishes /tf: one transform per URDF joint, as robot_state_publisher)")

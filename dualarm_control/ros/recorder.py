@@ -195,7 +195,8 @@ class Recorder:
     """Subscribes topics as discovery finds them and writes every message to a :class:`BagWriter`."""
 
     def __init__(self, node: Any, bag: BagWriter, topics: Sequence[str], record_all: bool,
-                 after_data: Sequence[str] = (), compute_tf: bool = True, log: TextIO = sys.stderr) -> None:
+                 after_data: Sequence[str] = (), compute_tf: bool = True, log: TextIO = sys.stderr,
+                 after_matched: Sequence[str] = ()) -> None:
         self.node, self.bag = node, bag
         self.log = log
         self.tf = ComputedTf(self._write_computed, self._say) if compute_tf else None
@@ -203,9 +204,17 @@ class Recorder:
         self.named = [fq_topic(t) for t in topics]
         self.later = [fq_topic(t) for t in after_data]
         """Named topics subscribed only once every other named topic has delivered a message."""
-        unknown = [t for t in self.later if t not in self.named]
-        if unknown:
-            raise BagError(f"--after-data {unknown[0]} is not one of the topics to record {self.named}")
+        self.last = [fq_topic(t) for t in after_matched]
+        """Named topics subscribed only once every other named topic's subscription has matched every
+        publisher the graph lists for it (a lockstep simulator waits for a reader on such a topic: it
+        then starts with the recorder's other readers matched, not after a guessed delay)."""
+        for option, given in (("--after-data", self.later), ("--after-matched", self.last)):
+            unknown = [t for t in given if t not in self.named]
+            if unknown:
+                raise BagError(f"{option} {unknown[0]} is not one of the topics to record {self.named}")
+        both = [t for t in self.later if t in self.last]
+        if both:
+            raise BagError(f"{both[0]} is given to both --after-data and --after-matched: choose one")
         self.record_all = record_all
         self.subscriptions: dict[str, Any] = {}
 
@@ -252,13 +261,16 @@ class Recorder:
     def poll(self) -> None:
         """Subscribe the wanted topics that have a publisher now (named ones all at once; the
         ``after_data`` ones once each of the others has delivered a message: a node waiting for a
-        reader on such a topic then starts with the others already flowing into the bag)."""
+        reader on such a topic then starts with the others already flowing into the bag; the
+        ``after_matched`` ones once each of the others has matched its publishers)."""
         known = dict(self.node.get_topic_names_and_types())
         self._tf_poll(known)
-        first = [t for t in self.named if t not in self.later]
+        first = [t for t in self.named if t not in self.later and t not in self.last]
         self._subscribe_all(known, first)
         if all(self.bag.counts.get(t, 0) for t in first):
             self._subscribe_all(known, self.later)
+        if self.last and self._matched(first):
+            self._subscribe_all(known, self.last)
         if self.record_all:
             for topic, types in known.items():
                 if (topic not in self.subscriptions and topic not in EXCLUDED_BY_ALL
@@ -272,6 +284,12 @@ class Recorder:
         if wanted and all(t in known and self.node.count_publishers(t) for t in wanted):
             for topic in wanted:
                 self._subscribe(topic, known[topic][0])
+
+    def _matched(self, topics: Sequence[str]) -> bool:
+        """Whether each of ``topics`` is subscribed and its reader has matched every publisher the
+        graph lists for it (the reader's side of discovery, ``get_publisher_count``)."""
+        return all(t in self.subscriptions
+                   and self.subscriptions[t].get_publisher_count() >= self.node.count_publishers(t) for t in topics)
 
     def publishing(self) -> bool:
         """Whether any subscribed topic still has a publisher."""
@@ -319,12 +337,13 @@ def drain(executor: Any, bag: BagWriter, publishing: Callable[[], bool] = lambda
 
 def record(path: Path, topics: Sequence[str], *, record_all: bool = False, duration: float | None = None,
            use_sim_time: bool = False, after_data: Sequence[str] = (), compute_tf: bool = True,
-           log: TextIO = sys.stderr) -> int:
+           log: TextIO = sys.stderr, after_matched: Sequence[str] = ()) -> int:
     """Record into the bag directory ``path`` until SIGINT/SIGTERM or ``duration`` [s]; return 0.
 
     ``topics`` are recorded as soon as all of them have a publisher; ``record_all`` adds every
     topic discovery finds (but /rosout and /parameter_events); ``after_data`` topics (among
-    ``topics``) are subscribed once every other named topic has delivered a message. Prints :data:`READY_LINE` on
+    ``topics``) are subscribed once every other named topic has delivered a message, ``after_matched``
+    topics once every other named topic's reader has matched its publishers. Prints :data:`READY_LINE` on
     stdout once the named topics are subscribed, progress on stderr. ``compute_tf``: write /tf and
     /tf_static computed from /joint_states where no node publishes /tf (module docstring).
     """
@@ -339,7 +358,7 @@ def record(path: Path, topics: Sequence[str], *, record_all: bool = False, durat
         with tool_node("_dualarm_bag_recorder") as (node, executor, stop):
             if use_sim_time:
                 node.set_parameters([Parameter("use_sim_time", value=True)])
-            recorder = Recorder(node, bag, topics, record_all, after_data, compute_tf, log)
+            recorder = Recorder(node, bag, topics, record_all, after_data, compute_tf, log, after_matched)
             print(f"recording to {path} ({', '.join(recorder.named) or 'all topics'})", file=log, flush=True)
             start = time.monotonic()
             next_poll = next_progress = start

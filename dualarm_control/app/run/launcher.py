@@ -100,10 +100,11 @@ def container_command(node_args: Mapping[str, Sequence[str]]) -> list[str]:
 
 
 def recorder_command(path: Path, topics: Sequence[str], use_sim_time: bool = False,
-                     after_data: Sequence[str] = ()) -> list[str]:
+                     after_data: Sequence[str] = (), after_matched: Sequence[str] = ()) -> list[str]:
     """Command line of ``dualarm bag record -o PATH TOPICS`` with this interpreter."""
     return [sys.executable, "-u", "-m", "dualarm_control.app.cli", "bag", "record", "-o", str(path), *topics,
-            *(["--use-sim-time"] if use_sim_time else []), *(f"--after-data={t}" for t in after_data)]
+            *(["--use-sim-time"] if use_sim_time else []), *(f"--after-data={t}" for t in after_data),
+            *(f"--after-matched={t}" for t in after_matched)]
 
 
 @dataclass
@@ -271,7 +272,10 @@ def launch_scenario(
                 # Real-time task runs start once the recorder reads /diagnostics (task_start_readers); it
                 # subscribes that topic last, once the others deliver: the bag then holds the run from t = 0.
                 gate = ("/diagnostics",) if tasks and not lockstep else ()
-                launch.start("bag", recorder_command(record, record_topics, lockstep, gate), env)
+                # Lockstep: the simulator starts once the recorder reads /joint_states, which it subscribes
+                # last, once its other readers matched their publishers (none of their messages is lost).
+                last = ("/joint_states",) if lockstep and "/joint_states" in record_topics else ()
+                launch.start("bag", recorder_command(record, record_topics, lockstep, gate, last), env)
             readers = (1 if tasks else 2) + (record is not None)
             node_args = {"controller_node": [*common, *sim_time, *controller_args]}
             if not tasks:
