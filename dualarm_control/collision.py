@@ -71,7 +71,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import coal
 import numpy as np
@@ -213,34 +213,41 @@ class PairDistance:
     dd_dq: FloatArray
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class NearPairs:
     """The pairs of one :meth:`CollisionModel.near` call, as arrays (m pairs, in the order of
     :attr:`CollisionModel.pairs`): what the collision limit needs each cycle, without one object
-    per pair (:meth:`pair_distances` gives those).
+    per pair (:meth:`pair_distances` gives those). A per-cycle record: slotted, not frozen
+    (cheaper to build); not modified once returned (:meth:`CollisionModel.complete` makes a new one).
 
     Attributes:
         index: each pair's index in :attr:`CollisionModel.pairs`, (m,).
         links: each pair's links (link_a, link_b). geometries: its closest shapes.
-        distance: d [m], (m,). points: p_a, p_b [m], (2, m, 3). normals: n, (m, 3).
+        distance: d [m], (m,). points: p_a, p_b [m], (2, m, 3). normals: n, (m, 3). Both None
+            when the call deferred them (:meth:`CollisionModel.witness` reads them from ``results``).
         rows: dd_dq [m/rad], (m, n); None when the call deferred them (:meth:`CollisionModel.rows`
-            builds them from ``shape_pairs`` and ``jacobian``).
+            builds them from the witness points, ``shape_pairs`` and ``jacobian``).
         speed: how fast each pair's distance can change, C [m/rad] (m, n): |dd_dq qd| <= C |qd| for
             every qd (the reach of the pair's two links about each joint, :attr:`CollisionModel._pair_motion`).
         shape_pairs: each pair's closest shape pair (its index in the geometry's collision pairs), (m,).
         jacobian: pinocchio's joint Jacobians ``data.J`` at the call's q, (6, n) (for deferred rows).
+        raw_witness: coal's (p_a, p_b, n) of each pair as it gave them, (m, 3, 3), when the witness
+            points were deferred (else None). call: the model's placements count at this call (a deferred
+            witness point whose GJK failed is computed again only at that call's placements).
     """
 
     index: tuple[int, ...]
     links: tuple[tuple[str, str], ...]
     geometries: tuple[tuple[str, str], ...]
     distance: FloatArray
-    points: FloatArray
-    normals: FloatArray
+    points: FloatArray | None
+    normals: FloatArray | None
     rows: FloatArray | None
     speed: FloatArray
     shape_pairs: npt.NDArray[np.intp]
     jacobian: FloatArray
+    raw_witness: FloatArray | None = None
+    call: int = 0
 
     def __len__(self) -> int:
         return len(self.index)
@@ -252,12 +259,13 @@ class NearPairs:
                    np.zeros((0, n)), np.zeros(0, dtype=np.intp), np.zeros((6, n)))
 
     def pair_distances(self) -> list[PairDistance]:
-        """One :class:`PairDistance` per pair (ValueError when the rows were deferred)."""
-        if self.rows is None:
-            raise ValueError("pair_distances: the rows were deferred (CollisionModel.rows builds them)")
-        rows = self.rows
-        return [PairDistance(*self.links[r], *self.geometries[r], d, self.points[0, r], self.points[1, r],
-                             self.normals[r], rows[r]) for r, d in enumerate(self.distance.tolist())]
+        """One :class:`PairDistance` per pair (ValueError when the rows were deferred:
+        :meth:`CollisionModel.complete` gives them)."""
+        rows, points, normals = self.rows, self.points, self.normals
+        if rows is None or points is None or normals is None:
+            raise ValueError("pair_distances: the rows were deferred (CollisionModel.complete builds them)")
+        return [PairDistance(*self.links[r], *self.geometries[r], d, points[0, r], points[1, r],
+                             normals[r], rows[r]) for r, d in enumerate(self.distance.tolist())]
 
 
 @dataclass(frozen=True)
@@ -348,6 +356,13 @@ class CollisionModel:
         self._shape_pair_names = [(self._names[a], self._names[b]) for a, b in
                                   zip(self._shape_a.tolist(), self._shape_b.tolist(), strict=True)]
         self._none = NearPairs.empty(self.model.nv)
+        self._calls = 0  # placements computed so far (the call of a deferred witness point)
+        placed = self.geometry_data.oMg  # references into geometry_data: they follow updateGeometryPlacements
+        self._distance_calls = [(self._shapes[a], placed[a], self._shapes[b], placed[b], self._results[k], owner)
+                                for k, (a, b, owner) in enumerate(zip(self._shape_a_list, self._shape_b_list,
+                                                                      self._shape_pair_owner, strict=True))]
+        """Per shape pair, coal.distance's arguments but the request, and its link pair (the loop of :meth:`near`)."""
+        self._below = np.zeros(len(self._results), dtype=bool)  # the known bounds' test, preallocated
 
     # ---- links and pairs -------------------------------------------------------------------
 
@@ -611,8 +626,10 @@ class CollisionModel:
             polish: refine the witness points and normals of the pairs returned on the shapes' closest
                 features (:meth:`_polish`; rows to 1e-6 m/rad instead of 1e-5, at up to 100 us per pair): the
                 distances are coal's either way; False (the default) gives GJK's points and normals.
-            rows: compute the rows dd_dq now; False defers them (``NearPairs.rows`` None, :meth:`rows`
-                builds the same rows later, from what the call kept).
+            rows: compute the rows dd_dq now; False defers them and, without ``polish``, the witness
+                points and normals too (``NearPairs.rows``, ``points`` and ``normals`` None;
+                :meth:`rows`, :meth:`witness` and :meth:`complete` give the same later, from coal's
+                arrays, which the returned object keeps).
 
         Returns:
             the pairs (those within), in the order of :attr:`pairs`.
@@ -629,7 +646,7 @@ class CollisionModel:
             self._slack_q = q.copy()
         candidates = self._all_shape_pairs
         if within is not None:  # pairs whose distance may be < within, from what is known (no kinematics)
-            candidates = np.flatnonzero(self._slack < within)
+            candidates = np.less(self._slack, within, out=self._below).nonzero()[0]
             if not candidates.size:
                 return self._none
         pin.computeJointJacobians(self.model, self.data, q)  # the joints' placements data.oMi too
@@ -641,56 +658,97 @@ class CollisionModel:
             self._slack[candidates] = spheres
             active = candidates[spheres < within]
         pin.updateGeometryPlacements(self.model, self.data, self.geometry, self.geometry_data)  # oMg = oMi * placement
-        placed, shapes, request, results = self.geometry_data.oMg, self._shapes, self.request, self._results
-        shape_a, shape_b, owner = self._shape_a_list, self._shape_b_list, self._shape_pair_owner
+        self._calls += 1
+        request, calls, slack = self.request, self._distance_calls, self._slack
         best: dict[int, tuple[float, int]] = {}  # link pair -> (d, shape pair)
-        found = []
         for k in active.tolist():
-            res = results[k]
+            shape_a, placed_a, shape_b, placed_b, res, i = calls[k]
             res.clear()
-            ga, gb = shape_a[k], shape_b[k]
-            d = coal.distance(shapes[ga], placed[ga], shapes[gb], placed[gb], request, res)
+            d = coal.distance(shape_a, placed_a, shape_b, placed_b, request, res)
             if not -_FAILED < d < _FAILED:  # also NaN
                 d = self._retry(k)
-            found.append(d)
-            i = owner[k]
+            slack[k] = d - KNOWN_MARGIN
             if i not in best or d < best[i][0]:
                 best[i] = (d, k)
-        self._slack[active] = np.array(found) - KNOWN_MARGIN
-        chosen = sorted((i, k) for i, (d, k) in best.items() if within is None or d < within)
-        if not chosen:
+        # the link pairs within, in the order of self.pairs: active is ascending and each link pair's
+        # shape pairs are consecutive (_index_shape_pairs), so best's first insertions are in that order
+        pairs, shape_pairs, found = [], [], []
+        for i, (d, k) in best.items():
+            if within is None or d < within:
+                pairs.append(i)
+                shape_pairs.append(k)
+                found.append(d)
+        if not pairs:
             return self._none
-        pairs = [i for i, _ in chosen]
-        shape_pairs = [k for _, k in chosen]
-        chosen_results = [results[k] for k in shape_pairs]
-        dist = np.array([best[i][0] for i in pairs])  # coal.distance returns the result's min_distance
-        witness = np.array([(res.getNearestPoint1(), res.getNearestPoint2(), res.normal) for res in chosen_results])
+        dist = np.array(found)  # coal.distance returns the result's min_distance
+        index = np.array(shape_pairs, dtype=np.intp)
+        jacobian = self.data.J.copy()
+        links = tuple([self.pairs[i] for i in pairs])
+        names = tuple([self._shape_pair_names[k] for k in shape_pairs])
+        results = self._results
+        # coal's witness points and normals as it gives them, (m, 3, 3) (a copy: its arrays are views of
+        # the results, which the next call overwrites); checked and normalised now for rows or polish,
+        # else when first needed (witness())
+        raw = np.array([(res.getNearestPoint1(), res.getNearestPoint2(), res.normal) for res in map(results.__getitem__,
+                                                                                                       shape_pairs)])
+        if not rows and not polish:
+            return NearPairs(tuple(pairs), links, names, dist, None, None, None, self._pair_motion[index], index,
+                             jacobian, raw, self._calls)
+        points, normals = self._read_witness(raw, shape_pairs, dist, self._calls)
+        if polish:
+            for r, k in enumerate(shape_pairs):
+                points[0, r], points[1, r], normals[r] = self._polish(k, dist[r], points[0, r], points[1, r], normals[r])
+        return NearPairs(tuple(pairs), links, names, dist, points, normals,
+                         _witness_pair_rows(index, points, normals, jacobian, self._pair_support) if rows else None,
+                         self._pair_motion[index], index, jacobian, None, self._calls)
+
+    def _read_witness(self, raw: FloatArray, shape_pairs: Sequence[int], dist: FloatArray,
+                      call: int) -> tuple[FloatArray, FloatArray]:
+        """The witness points p_a, p_b (2, m, 3) and unit normals (m, 3) from coal's (p_a, p_b, n) of
+        ``shape_pairs`` (``raw``, (m, 3, 3), not modified). A finite distance with NaN points (GJK
+        failed) is computed again (:meth:`_retry`, into ``dist``) at the placements of the call that
+        gave them: CollisionError when ``call`` is not the last one (its placements are gone)."""
+        witness = raw.copy()
         points, normals = witness[:, :2].transpose(1, 0, 2), witness[:, 2]  # (2, m, 3) and (m, 3), views
         squares = (normals * normals).sum(axis=1)
         if not math.isfinite(float(points.sum() + squares.sum())):  # a finite distance with NaN points: GJK failed
             bad = ~(np.isfinite(points).all(axis=(0, 2)) & np.isfinite(normals).all(axis=1))
             for r in np.flatnonzero(bad).tolist():
-                res = results[shape_pairs[r]]
+                if call != self._calls:
+                    raise CollisionError(f"coal's witness points of {self._shape_pair_names[shape_pairs[r]]} "
+                                         "are not finite and the placements they were computed at are gone")
+                res = self._results[shape_pairs[r]]
                 dist[r] = self._retry(shape_pairs[r])
                 points[0, r], points[1, r], normals[r] = res.getNearestPoint1(), res.getNearestPoint2(), res.normal
             squares = (normals * normals).sum(axis=1)
         normals /= np.sqrt(squares)[:, None]  # np.linalg.norm(normals, axis=1), as it computes it
-        if polish:
-            for r, k in enumerate(shape_pairs):
-                points[0, r], points[1, r], normals[r] = self._polish(k, dist[r], points[0, r], points[1, r], normals[r])
-        index = np.array(shape_pairs, dtype=np.intp)
-        jacobian = self.data.J.copy()
-        return NearPairs(tuple(pairs), tuple(self.pairs[i] for i in pairs),
-                         tuple(self._shape_pair_names[k] for k in shape_pairs), dist, points, normals,
-                         _witness_pair_rows(index, points, normals, jacobian, self._pair_support) if rows else None,
-                         self._pair_motion[index], index, jacobian)
+        return points, normals
+
+    def witness(self, near: NearPairs) -> tuple[FloatArray, FloatArray]:
+        """The witness points (2, m, 3) [m] and unit normals (m, 3) of ``near``'s pairs: as the call
+        kept them or, when it deferred them, made now from coal's arrays it kept (a pair whose GJK
+        points are NaN is computed again, its distance in ``near`` kept: CollisionError if another
+        :meth:`near` call came between)."""
+        if near.points is not None and near.normals is not None:
+            return near.points, near.normals
+        assert near.raw_witness is not None, "a NearPairs without witness points keeps coal's"
+        return self._read_witness(near.raw_witness, near.shape_pairs.tolist(), near.distance.copy(), near.call)
+
+    def complete(self, near: NearPairs) -> NearPairs:
+        """``near`` with its witness points, normals and rows (those it deferred, built now)."""
+        if near.rows is not None and near.points is not None:
+            return near
+        points, normals = self.witness(near)
+        with_points = replace(near, points=points, normals=normals)
+        return replace(with_points, rows=self.rows(with_points))
 
     def rows(self, near: NearPairs) -> FloatArray:
         """The rows dd_dq [m/rad] (m, n) of ``near``'s pairs: ``near.rows``, or, when the call deferred
         them, the same rows built now from the witness points, normals and Jacobians it kept."""
         if near.rows is not None:
             return near.rows
-        return _witness_pair_rows(near.shape_pairs, near.points, near.normals, near.jacobian, self._pair_support)
+        points, normals = self.witness(near)
+        return _witness_pair_rows(near.shape_pairs, points, normals, near.jacobian, self._pair_support)
 
     def _retry(self, k: int) -> float:
         """Shape pair k again, at the shapes' placements of the call (``geometry_data.oMg``), with the

@@ -19,7 +19,7 @@ and how many of them are at their bound).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -98,9 +98,7 @@ class CollisionLimit:
     @property
     def near(self) -> list[PairDistance]:
         """The pairs of the last cycle closer than d_i (one object each: for a report, not the cycle)."""
-        last = self.last
-        if last.rows is None:
-            self.last = last = replace(last, rows=self.collision.rows(last))
+        self.last = last = self.collision.complete(self.last)
         return last.pair_distances()
 
     def apply(self, q: FloatArray, previous: FloatArray, bounds: Bounds) -> Bounds:
