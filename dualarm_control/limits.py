@@ -211,7 +211,7 @@ class DeferredRows:
         build: returns A (m, n), called at most once.
     """
 
-    __slots__ = ("_below", "_build", "_matrix", "bound", "speed")
+    __slots__ = ("_below", "_build", "_matrix", "_met", "bound", "speed")
 
     def __init__(self, speed: FloatArray, bound: FloatArray, build: Callable[[], FloatArray]) -> None:
         self.speed = speed
@@ -219,6 +219,7 @@ class DeferredRows:
         self._below = bound - ROW_SPEED_MARGIN
         self._build: Callable[[], FloatArray] | None = build
         self._matrix: FloatArray | None = None
+        self._met = b""  # the bytes of the last qd that met the bound (a cycle checks the same qd up to 3 times)
 
     @classmethod
     def of(cls, matrix: FloatArray, bound: FloatArray) -> DeferredRows:
@@ -243,7 +244,13 @@ class DeferredRows:
     def meets(self, qd: FloatArray) -> bool:
         """True when C |qd| <= b - :data:`ROW_SPEED_MARGIN` in every row, so that A qd <= b (qd (n,)
         [rad/s]); False says nothing (A qd may still meet b)."""
-        return bool((self.speed @ np.abs(qd) <= self._below).all())
+        key = qd.tobytes()
+        if key == self._met:
+            return True
+        met = bool((self.speed @ np.abs(qd) <= self._below).all())
+        if met:
+            self._met = key
+        return met
 
     def stacked(self, other: DeferredRows) -> DeferredRows:
         """These rows, then ``other``'s."""

@@ -23,6 +23,7 @@ from dualarm_control.collision import (
     WORLD,
     CollisionModel,
     CollisionParams,
+    NearPairs,
     PairDistance,
     velocity_damper_rows,
 )
@@ -621,3 +622,12 @@ def test_deferred_rows_are_the_rows_computed_at_once(robot: str) -> None:
         assert np.array_equal(later.speed, now.speed) and np.array_equal(later.distance, now.distance)
         with pytest.raises(ValueError, match="deferred"):
             later.pair_distances()
+        assert later.points is None and later.normals is None  # the witness points deferred too
+        assert now.points is not None and now.normals is not None
+        points, normals = c.witness(later)
+        assert np.array_equal(points, now.points) and np.array_equal(normals, now.normals)
+        def fields(near: NearPairs) -> list[tuple[object, ...]]:
+            return [(p.link_a, p.link_b, p.geometry_a, p.geometry_b, p.distance, p.point_a.tolist(),
+                     p.point_b.tolist(), p.normal.tolist(), p.dd_dq.tolist()) for p in near.pair_distances()]
+
+        assert fields(c.complete(later)) == fields(now)

@@ -186,3 +186,16 @@ def test_deferred_rows_build_once_and_stack() -> None:
     assert not both.meets(np.array([1.0, 0.0])) and not calls  # the bound says nothing: nothing built yet
     assert np.array_equal(both.matrix, np.vstack((a, b))) and np.array_equal(both.matrix, np.vstack((a, b)))
     assert calls == [1]
+
+
+def test_meets_remembers_only_the_velocity_it_vouched_for() -> None:
+    """``meets`` keeps the last qd that met the bound (a cycle checks the same command up to three
+    times): the same values give True again, any other qd is checked anew, so a velocity that
+    breaks the bound after one that met it is never vouched for."""
+    rows = DeferredRows(np.array([[1.0, 2.0]]), np.array([1.0]), lambda: np.zeros((1, 2)))
+    ok, bad, sign = np.array([0.1, 0.2]), np.array([0.5, 0.5]), np.array([-0.1, -0.2])
+    assert [rows.meets(v) for v in (ok, bad, ok.copy(), bad, sign, bad)] == [True, False, True, False, True, False]
+    worse = ok.copy()
+    assert rows.meets(worse)
+    worse[1] = 0.9  # the same array, changed in place: checked again
+    assert not rows.meets(worse)
