@@ -635,7 +635,7 @@ class CollisionModel:
             the pairs (those within), in the order of :attr:`pairs`.
         """
         q = self.kinematics.check_q(q)
-        if not math.isfinite(float(q.sum())):  # forget what is known (it would turn NaN); no pair is near
+        if not math.isfinite(sum(q.tolist())):  # forget what is known (it would turn NaN); no pair is near
             self._slack.fill(-np.inf)
             self._slack_q = None
             if within is not None:
@@ -692,8 +692,8 @@ class CollisionModel:
         raw = np.array([(res.getNearestPoint1(), res.getNearestPoint2(), res.normal) for res in map(results.__getitem__,
                                                                                                        shape_pairs)])
         if not rows and not polish:
-            return NearPairs(tuple(pairs), links, names, dist, None, None, None, self._pair_motion[index], index,
-                             jacobian, raw, self._calls)
+            return NearPairs(tuple(pairs), links, names, dist, None, None, None,
+                             self._pair_motion.take(shape_pairs, axis=0), index, jacobian, raw, self._calls)
         points, normals = self._read_witness(raw, shape_pairs, dist, self._calls)
         if polish:
             for r, k in enumerate(shape_pairs):
@@ -941,8 +941,8 @@ def velocity_damper_bound(distance: FloatArray, influence: float, safety: float,
     """b = xi (d - d_s) / (d_i - d_s) [m/s], (m,), of :func:`velocity_damper`'s rows, for m distances d [m]."""
     if not (0.0 <= safety < influence and gain > 0.0 and math.isfinite(influence + gain)):
         CollisionParams(influence_distance=influence, safety_distance=safety, gain=gain)  # raises, naming the key
-    result: FloatArray = gain * (distance - safety) / (influence - safety)
-    return result
+    span = influence - safety  # the pairs one by one: m is small, and each b is the same IEEE operations
+    return np.array([gain * (d - safety) / span for d in distance.tolist()], dtype=float)
 
 
 def velocity_damper_rows(distances: Sequence[PairDistance], influence: float, safety: float,

@@ -38,9 +38,10 @@ ACTIVE_TOLERANCE = 1e-6
 """A row is active (at its bound) when A qd >= b - 1e-6 m/s."""
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class CollisionReport:
-    """What the collision limit saw in one cycle.
+    """What the collision limit saw in one cycle (a per-cycle record: slotted, not frozen, cheaper
+    to build; not modified once made).
 
     Attributes:
         distance: the smallest distance d [m] of the pairs closer than d_i (inf: none that close).
@@ -94,6 +95,7 @@ class CollisionLimit:
         self._rows = DeferredRows.of(np.zeros((0, collision.model.nv)), np.zeros(0))
         self._labels = tuple(f"{a} – {b}" for a, b in collision.pairs)
         self._kept = params.kept_distances
+        self._clear = CollisionReport(math.inf, None, 0, 0, self._kept[0])  # no pair within d_i
 
     @property
     def near(self) -> list[PairDistance]:
@@ -115,13 +117,13 @@ class CollisionLimit:
 
     def report(self, velocities: FloatArray) -> CollisionReport:
         """The last cycle's :class:`CollisionReport` for its command ``velocities`` [rad/s] (n,)."""
-        d_i = self._kept[0]
         near = self.last
         if not near.index:
-            return CollisionReport(math.inf, None, 0, 0, d_i)
+            return self._clear
         rows = self._rows
         # a row vouched for by its speed bound (C |qd| <= b - 1e-6) is not active; else A qd decides
         active = 0 if rows.meets(velocities) else int(np.count_nonzero(rows.matrix @ velocities
                                                                         >= rows.bound - ACTIVE_TOLERANCE))
-        r = int(near.distance.argmin())
-        return CollisionReport(float(near.distance[r]), near.links[r], len(near), active, d_i)
+        distances = near.distance.tolist()
+        closest = min(distances)
+        return CollisionReport(closest, near.links[distances.index(closest)], len(distances), active, self._kept[0])
