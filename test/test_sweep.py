@@ -138,23 +138,28 @@ def test_cli_sweep_and_report(reference: Path, tmp_path: Path, capsys: pytest.Ca
 @pytest.mark.slow
 def test_cli_scaling_runs_the_same_rows_three_ways(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``dualarm sweep scaling``: the same runs in this process, on one worker and on two, and with
-    ``--interleave 1`` alternately on a kept worker and in this process; the table and the JSON hold
-    every layout (timings are not judged), and every layout's rows are the same.
+    ``--interleave 1`` task by task on a kept worker and in this process; the table and the JSON hold
+    every layout and every pair (timings are not judged), and every layout's rows are the same.
     ``slow`` (5-6 s, benchmark machinery): in the default run the rows on a two-worker local cluster
     equal one process's (``test_local_cluster_rows_equal_one_process``)."""
     import json
 
+    allowed = os.sched_getaffinity(0)
     assert main(["sweep", "scaling", str(SMOKE), "--tasks", "2", "--output", str(tmp_path), "--interleave", "1"]) == 0
+    assert os.sched_getaffinity(0) == allowed  # the pinning of the interleaved pairs is undone
     text = capsys.readouterr().out
     for layout in ("| this process | 6 | 0 |", "| 1 worker | 6 | 0 |", "| 2 workers | 6 | 0 |"):
         assert layout in text
-    assert "One warm worker against this process, interleaved (1 rounds each" in text
+    assert "One warm worker against this process, task by task (2 pairs, 1 pass, both on CPU " in text
     doc = json.loads((tmp_path / "scaling.json").read_text())
     assert [r["workers"] for r in doc["layouts"]] == [0, 1, 2]
     assert {"two_over_one_wall", "two_over_one_steady", "one_worker_overhead", "interleaved_overhead"} <= set(doc)
-    assert len(doc["interleaved"]["worker_run_time_s"]) == len(doc["interleaved"]["process_run_time_s"]) == 2
+    fair = doc["interleaved"]
+    assert len(fair["worker_run_time_s"]) == len(fair["process_run_time_s"]) == fair["tasks"] == 2
+    assert fair["overhead_ci"][0] <= fair["overhead"] <= fair["overhead_ci"][1] and fair["cpu"] in allowed
     rows = [sorted(deterministic(tmp_path / f"rows_{w}"), key=lambda r: r["key"]) for w in (0, 1, 2)]
-    rows += [sorted(deterministic(tmp_path / f"interleaved_{i}"), key=lambda r: r["key"]) for i in range(4)]
+    rows += [sorted(deterministic(tmp_path / f"interleaved_{side}"), key=lambda r: r["key"])
+             for side in ("process", "worker")]
     assert all(r == rows[0] for r in rows)
     assert main(["sweep", "scaling"]) == 2
     assert main(["sweep", "scaling", str(SMOKE), "--interleave", "-1"]) == 2
@@ -249,3 +254,22 @@ def read_table_of(part: Path) -> list[dict[str, Any]]:
     import pyarrow.parquet as pq
 
     return pq.read_table(part, columns=["key"]).to_pylist()
+
+
+def test_local_workers_run_without_dask_malloc_trim(tmp_path: Path) -> None:
+    """The sweep's own workers start with one BLAS thread each, as dask's do, but without dask's
+    MALLOC_TRIM_THRESHOLD_=65536 (glibc then trims the heap at every 64 KiB freed: the runs took 5-9 %
+    longer, docs/sweep.md): read from the worker processes' own environment."""
+    environments: list[dict[str, str]] = []
+    ours = os.environ.get("MALLOC_TRIM_THRESHOLD_")  # before the cluster: dask's nanny writes into os.environ
+
+    def read(_: dict[str, Any]) -> None:
+        if not environments:
+            children = psutil.Process().children(recursive=True)
+            environments.extend(p.environ() for p in children if "OPENBLAS_NUM_THREADS" in p.environ())
+
+    run_sweep(smoke(1), tmp_path, workers=1, show_progress=False, on_row=read)
+    assert environments, "no worker process with dask's environment found"
+    for env in environments:
+        assert env["OPENBLAS_NUM_THREADS"] == env["OMP_NUM_THREADS"] == "1"
+        assert env.get("MALLOC_TRIM_THRESHOLD_") == ours

@@ -35,8 +35,9 @@ def add_sweep_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[t
     swp.add_argument("--workers", type=int, default=2, metavar="N",
                      help="local cluster worker processes (default: %(default)s; 0: in this process, no Dask)")
     swp.add_argument("--interleave", type=int, default=0, metavar="ROUNDS",
-                     help="scaling: also measure one warm worker against this process, interleaved, ROUNDS "
-                     "rounds each after one left out (the fair overhead figure; default: %(default)s, off)")
+                     help="scaling: also measure one warm worker against this process task by task, each task "
+                     "on both sides one right after the other, ROUNDS passes over the tasks (the fair overhead "
+                     "figure, with a bootstrap interval; default: %(default)s, off)")
     swp.add_argument("--seed", type=int, default=0, help="report: bootstrap seed (default: %(default)s)")
     swp.add_argument("--no-progress", action="store_true", help="no progress bar")
     swp.set_defaults(func=cmd_sweep)

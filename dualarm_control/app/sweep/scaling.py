@@ -7,13 +7,14 @@ rate and each layout's run time over the runs in this process. Timings are of th
 this moment: ratios from one call, never a pass/fail verdict.
 
 With ``rounds`` > 0 (``--interleave ROUNDS``), also the one-worker overhead measured fairly
-(:func:`interleaved_overhead`): the layouts one after the other compare a fresh worker process
-with this warm one, and the machine's speed drifts over minutes.
+(:func:`interleaved_overhead`, task by task): the layouts one after the other compare a fresh
+worker process with this warm one, and the machine's speed drifts over minutes.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import time
 from collections.abc import Callable, Sequence
@@ -43,30 +44,83 @@ def measure_layout(spec: SweepSpec, out: Path, workers: int) -> dict[str, Any]:
 
 
 def interleaved_overhead(spec: SweepSpec, out: Path, rounds: int,
-                         progress: Callable[[str], None] | None = None) -> dict[str, Any]:
-    """One warm worker against this process: the whole of ``spec`` on a one-worker local cluster kept
-    for every round, and back to back in this process, alternately (worker, this process; then this
-    process, worker; ...: a drift of the machine's speed falls on both), ``rounds`` times each after
-    one round each that is left out (each process's start: imports, models, memory). Returns the run
-    times [s] of the measured rounds and ``overhead``, the worker's sum over this process's, minus 1."""
+                         progress: Callable[[str], None] | None = None, seed: int = 0,
+                         cpu: int | None = None) -> dict[str, Any]:
+    """One warm worker against this process, task by task: each task's runs (one Dask task) in this
+    process and on a one-worker local cluster kept for the whole measurement, one right after the
+    other, the order alternating from task to task (this process first, then the worker first: a
+    drift of the machine's speed over seconds falls on both sides of every pair), ``rounds`` passes
+    over the tasks after one pass on each side left out: a process runs the same runs faster once it
+    has run many (measured: a process that had run the 90 runs before ran them 12-19 % faster than a
+    fresh worker, and 3-5 % slower when it had not), and the two must be as warm.
+    Both sides run on one CPU (this process's affinity set to it before the cluster starts, which
+    its worker inherits; restored after): unpinned, each process keeps to the CPU it started on, and
+    this machine's two CPUs differ in speed by up to 10 % for minutes, which the pairs cannot cancel
+    (docs/sweep.md, "Workers"). ``cpu``: that CPU (default: the first this process may use).
+
+    Returns per task the runs' own times [s] on each side (``process_run_time_s``,
+    ``worker_run_time_s``), ``overhead`` (the worker's sum over this process's, minus 1), its 95 %
+    bootstrap interval over the tasks (``overhead_ci``, 2000 resamples of the pairs, ``seed``), the
+    median of the per-task ratios minus 1, and the worker's round trip per task beyond its runs'
+    times (``dispatch_s``: submitting, the result's transfer; a sweep overlaps it with the next
+    task). Every row is also written to ``out/interleaved_process`` and ``out/interleaved_worker``."""
     from contextlib import ExitStack
 
-    from dualarm_control.app.sweep.execute import local_cluster
+    import numpy as np
+    from distributed import Client
 
-    times: dict[int, list[float]] = {0: [], 1: []}
+    from dualarm_control.app.sweep.execute import local_cluster
+    from dualarm_control.app.sweep.run import grid, run_runs, task_groups
+    from dualarm_control.app.sweep.store import write_part
+
+    groups = task_groups(grid(spec))
+    here: list[float] = []
+    worker: list[float] = []
+    dispatch: list[float] = []
+    rows: dict[str, list[dict[str, Any]]] = {"process": [], "worker": []}
+    allowed = os.sched_getaffinity(0)
+    cpu = min(allowed) if cpu is None else cpu
     with ExitStack() as stack:
-        address = local_cluster(stack, 1).scheduler_address
-        order = [1, 0] + [w for r in range(rounds) for w in ((0, 1) if r % 2 == 0 else (1, 0))]
-        for i, workers in enumerate(order):
-            if progress is not None:
-                progress(f"scaling: interleaved {i + 1}/{len(order)}, {'one worker' if workers else 'this process'}")
-            segment = out / f"interleaved_{i}"
-            shutil.rmtree(segment, ignore_errors=True)
-            run_sweep(spec, segment, scheduler=address if workers else None, workers=0, show_progress=False)
-            times[workers].append(float(sum(r["wall_time_s"] for r in read_table(segment).to_pylist())))
-    worker, here = times[1][1:], times[0][1:]
-    return {"rounds": rounds, "worker_run_time_s": times[1], "process_run_time_s": times[0],
-            "overhead": sum(worker) / sum(here) - 1.0}
+        os.sched_setaffinity(0, {cpu})
+        stack.callback(os.sched_setaffinity, 0, allowed)
+        client = stack.enter_context(Client(local_cluster(stack, 1)))
+
+        def on_worker(group: list[Any]) -> tuple[list[dict[str, Any]], float]:
+            start = time.perf_counter()
+            result = client.submit(run_runs, spec, group, pure=False).result()
+            return result, time.perf_counter() - start
+
+        for n, group in enumerate(groups):  # one pass on each side, left out: both as warm
+            if progress is not None and (n % 10 == 0 or n == len(groups) - 1):
+                progress(f"scaling: interleaved, warming both sides, task {n + 1}/{len(groups)}")
+            run_runs(spec, group)
+            on_worker(group)
+        pairs = [(r, i, g) for r in range(rounds) for i, g in enumerate(groups)]
+        for n, (r, i, group) in enumerate(pairs):
+            if progress is not None and (n % 10 == 0 or n == len(pairs) - 1):
+                progress(f"scaling: interleaved, task {n + 1}/{len(pairs)}")
+            for side in (("process", "worker") if n % 2 == 0 else ("worker", "process")):
+                if side == "process":
+                    got = run_runs(spec, group)
+                    here.append(sum(row["wall_time_s"] for row in got))
+                else:
+                    got, trip = on_worker(group)
+                    worker.append(sum(row["wall_time_s"] for row in got))
+                    dispatch.append(trip - worker[-1])
+                if r == 0:
+                    rows[side] += got
+    for side, side_rows in rows.items():
+        shutil.rmtree(out / f"interleaved_{side}", ignore_errors=True)
+        write_part(out / f"interleaved_{side}", side_rows)
+    a, b = np.array(worker), np.array(here)
+    rng = np.random.default_rng(seed)
+    picks = rng.integers(0, len(a), size=(2000, len(a)))
+    boot = a[picks].sum(axis=1) / b[picks].sum(axis=1) - 1.0
+    return {"rounds": rounds, "tasks": len(a), "cpu": cpu, "worker_run_time_s": worker, "process_run_time_s": here,
+            "overhead": float(a.sum() / b.sum() - 1.0),
+            "overhead_ci": [float(np.percentile(boot, 2.5)), float(np.percentile(boot, 97.5))],
+            "median_task_overhead": float(np.median(a / b) - 1.0),
+            "dispatch_s": [float(np.percentile(dispatch, 50)), float(np.percentile(dispatch, 99))]}
 
 
 def scaling(spec: SweepSpec, out: Path, layouts: Sequence[int] = LAYOUTS,
@@ -102,9 +156,13 @@ def scaling(spec: SweepSpec, out: Path, layouts: Sequence[int] = LAYOUTS,
         fair = interleaved_overhead(spec, out, rounds, progress)
         summary["interleaved_overhead"] = fair["overhead"]
         summary["interleaved"] = fair
-        lines += [(f"One warm worker against this process, interleaved ({rounds} rounds each after one left out; "
-                   f"run times [s] worker {', '.join(f'{t:.1f}' for t in fair['worker_run_time_s'])}, this process "
-                   f"{', '.join(f'{t:.1f}' for t in fair['process_run_time_s'])}): {100 * fair['overhead']:+.1f} %.")]
+        low, high = fair["overhead_ci"]
+        lines += [(f"One warm worker against this process, task by task ({fair['tasks']} pairs, {rounds} "
+                   f"pass{'es' if rounds > 1 else ''}, both on CPU {fair['cpu']}; run time {sum(fair['worker_run_time_s']):.1f} s against "
+                   f"{sum(fair['process_run_time_s']):.1f} s): {100 * fair['overhead']:+.1f} % "
+                   f"[{100 * low:+.1f}, {100 * high:+.1f}] (95 % bootstrap over the tasks), median per task "
+                   f"{100 * fair['median_task_overhead']:+.1f} %; the worker's round trip beyond its runs "
+                   f"{1e3 * fair['dispatch_s'][0]:.1f} ms p50, {1e3 * fair['dispatch_s'][1]:.1f} ms p99 per task.")]
     text = "\n".join(lines) + "\n"
     md, js = out / "scaling.md", out / "scaling.json"
     md.write_text(text)
