@@ -224,7 +224,7 @@ class NearPairs:
         index: each pair's index in :attr:`CollisionModel.pairs`, (m,).
         links: each pair's links (link_a, link_b). geometries: its closest shapes.
         distance: d [m], (m,). points: p_a, p_b [m], (2, m, 3). normals: n, (m, 3). Both None
-            when the call deferred them (:meth:`CollisionModel.witness` reads them from ``results``).
+            when the call deferred them (:meth:`CollisionModel.witness` makes them from ``raw_witness``).
         rows: dd_dq [m/rad], (m, n); None when the call deferred them (:meth:`CollisionModel.rows`
             builds them from the witness points, ``shape_pairs`` and ``jacobian``).
         speed: how fast each pair's distance can change, C [m/rad] (m, n): |dd_dq qd| <= C |qd| for
