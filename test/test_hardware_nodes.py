@@ -153,19 +153,22 @@ def test_position_commands_stay_within_one_cycle_at_the_velocity_limit(runs: dic
         assert gap.max() <= 1.0 + 1e-9, f"command {gap.max():.3f} v_max T from the measured position"
 
 
-def dualarm_node(name: str, *args: str) -> Any:
+def dualarm_node(name: str, *args: str, log: Path | None = None) -> Any:
+    """``dualarm run NAME`` with the position profile; its output into ``log`` (else discarded)."""
     import subprocess
     import sys
 
+    out = subprocess.DEVNULL if log is None else log.open("w")
     return subprocess.Popen([sys.executable, "-m", "dualarm_control.app.cli", "run", name, "--ros-args",
                              "-p", f"scenario:={SHORT}", "--params-file",
                              str(ROOT / "config" / "hardware" / "lbr_dual_position.yaml"), *args],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=node_env())
+                            stdout=out, stderr=subprocess.STDOUT, env=node_env())
 
 
-def test_position_commands_hold_the_arms_after_the_controller_is_killed() -> None:
+def test_position_commands_hold_the_arms_after_the_controller_is_killed(tmp_path: Path) -> None:
     """Real time, lbr_dual_position: once the arms move, SIGKILL the controller; the last position
-    commands hold the arms (the simulator does not drift)."""
+    commands hold the arms (the simulator does not drift). A hang guard's failure shows each node's
+    exit code and the end of its output (once, in a full run, the arms did not move in 120 s)."""
     import time
 
     from sensor_msgs.msg import JointState
@@ -174,7 +177,14 @@ def test_position_commands_hold_the_arms_after_the_controller_is_killed() -> Non
 
     hang_guard_s = 120.0  # a hang guard, not a timing claim
     latest: dict[str, dict[str, float]] = {}
-    procs = [dualarm_node("sim_node"), dualarm_node("controller_node"), dualarm_node("trajectory_node")]
+    names = ("sim_node", "controller_node", "trajectory_node")
+    procs = [dualarm_node(name, log=tmp_path / f"{name}.log") for name in names]
+
+    def nodes_text() -> str:
+        return "\n".join(f"--- {name} (exit {p.poll()}):\n" + "\n".join(
+            (tmp_path / f"{name}.log").read_text(errors="replace").splitlines()[-15:])
+            for name, p in zip(names, procs, strict=True))
+
     try:
         with tool_node("hold_probe") as (node, executor, _):
             for topic in ("/left/joint_states", "/right/joint_states"):
@@ -188,7 +198,7 @@ def test_position_commands_hold_the_arms_after_the_controller_is_killed() -> Non
             def spin_until(cond: Any, what: str) -> None:
                 end = time.monotonic() + hang_guard_s
                 while not cond():
-                    assert time.monotonic() < end, f"hang guard: {what}; saw {latest.keys()}"
+                    assert time.monotonic() < end, f"hang guard: {what}; saw {latest.keys()}\n{nodes_text()}"
                     executor.spin_once(timeout_sec=0.05)
 
             spin_until(lambda: len(latest) == 2, "joint states on both topics")
