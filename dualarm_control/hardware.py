@@ -264,3 +264,51 @@ class StateAssembler:
             return (f"joint_states inconsistent: stamps of {', '.join(self.topics)} differ by "
                     f"{self.spread() / 1e6:.1f} ms > {self.tolerance_ns / 1e6:.1f} ms")
         return ""
+
+
+@dataclass(frozen=True)
+class TopicView:
+    """What a node knows of one joint-state topic while it waits for a consistent state (issue 38).
+
+    ``publishers``: one ``"node [type]"`` per publisher endpoint the ROS graph shows on the topic
+    (any type); ``delivered``: samples received (usable or not); ``rejection``: why the last
+    unusable sample was refused ('' if none was)."""
+
+    topic: str
+    publishers: tuple[str, ...]
+    delivered: int
+    rejection: str
+
+
+STATE_TYPE = "sensor_msgs/msg/JointState"
+
+
+def waiting_reason(views: Sequence[TopicView], assembler: StateAssembler, joint_names: Sequence[str]) -> str:
+    """Why there is no consistent joint state yet, every cause found, '; '-separated: a topic with no
+    publisher, a topic with more than one publisher or a publisher of another type (the node names
+    and types), a topic that has delivered nothing, a topic whose samples are refused (the last reason),
+    joints of the description that no topic carries, stamps beyond the tolerance (by how much).
+    '' when nothing explains the wait (a state is on its way)."""
+    causes: list[str] = []
+    for v in views:
+        if not v.publishers:
+            causes.append(f"no publisher on {v.topic}")
+            continue
+        foreign = [p for p in v.publishers if not p.endswith(f"[{STATE_TYPE}]")]
+        if len(v.publishers) > 1 or foreign:
+            causes.append(f"{len(v.publishers)} publishers on {v.topic}" + (" (of another type)" if foreign else "")
+                          + f": {', '.join(v.publishers)}")
+        if v.delivered == 0:
+            causes.append(f"{v.topic}: nothing delivered from {', '.join(v.publishers)}")
+        elif v.rejection:
+            causes.append(f"{v.topic}: samples refused: {v.rejection}")
+    carried = np.zeros(len(joint_names), dtype=bool)
+    for sample in assembler.latest.values():
+        carried[sample.indices] = True
+    if assembler.latest and not carried.all():
+        missing = [n for n, c in zip(joint_names, carried, strict=True) if not c]
+        causes.append(f"joints of the description missing from every topic: {', '.join(missing)}")
+    if len(assembler.latest) > 1 and assembler.spread() > assembler.tolerance_ns:
+        causes.append(f"stamps of {', '.join(assembler.latest)} differ by {assembler.spread() / 1e6:.1f} ms > "
+                      f"{assembler.tolerance_ns / 1e6:.1f} ms")
+    return "; ".join(causes)

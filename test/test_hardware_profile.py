@@ -13,8 +13,10 @@ from dualarm_control.hardware import (
     PositionIntegrator,
     StateAssembler,
     StateSample,
+    TopicView,
     load_profile,
     position_command,
+    waiting_reason,
 )
 from dualarm_control.params import read_params_file
 from dualarm_control.robot import load_robot
@@ -137,6 +139,32 @@ def test_stale_reason_names_the_silent_topic() -> None:
     a.put("/left/joint_states", StateSample(0, 10_000_000, np.array([0]), np.array([0.0])))
     a.put("/right/joint_states", StateSample(0, 40_000_000, np.array([1]), np.array([0.0])))
     assert a.stale_reason(50_000_000, 15e6) == "joint_states stale: /left/joint_states by 40.0 ms"
+
+
+JS = "[sensor_msgs/msg/JointState]"
+
+
+def test_waiting_reason_names_every_cause() -> None:
+    """issue 38: why a controller has no consistent state yet, one cause per case."""
+    names = ["l1", "l2", "r1", "r2"]
+    a = StateAssembler(["/left/joint_states", "/right/joint_states"], 4, 2_500_000)
+    views = [TopicView("/left/joint_states", (), 0, ""), TopicView("/right/joint_states", (f"/sim_node {JS}",), 0, "")]
+    assert waiting_reason(views, a, names) == ("no publisher on /left/joint_states; /right/joint_states: nothing "
+                                               f"delivered from /sim_node {JS}")
+    second = (f"/sim_node {JS}", "/probe [std_msgs/msg/Float64MultiArray]")
+    views = [TopicView("/left/joint_states", second, 3, ""),
+             TopicView("/right/joint_states", (f"/sim_node {JS}", f"/sim_node {JS}"), 5, "missing 1 of the 2 joints")]
+    assert waiting_reason(views, a, names) == (
+        f"2 publishers on /left/joint_states (of another type): /sim_node {JS}, /probe [std_msgs/msg/Float64MultiArray]; "
+        f"2 publishers on /right/joint_states: /sim_node {JS}, /sim_node {JS}; "
+        "/right/joint_states: samples refused: missing 1 of the 2 joints")
+    one = [TopicView(t, (f"/sim_node {JS}",), 1, "") for t in ("/left/joint_states", "/right/joint_states")]
+    a.put("/left/joint_states", sample(0, [0, 1], [0.0, 0.0]))
+    a.put("/right/joint_states", sample(7_000_000, [2], [0.0]))
+    assert waiting_reason(one, a, names) == ("joints of the description missing from every topic: r2; stamps of "
+                                             "/left/joint_states, /right/joint_states differ by 7.0 ms > 2.5 ms")
+    a.put("/right/joint_states", sample(1_000_000, [2, 3], [0.0, 0.0]))
+    assert waiting_reason(one, a, names) == ""
 
 
 def test_sim_state_layout_per_namespace_in_its_own_order() -> None:

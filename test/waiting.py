@@ -87,3 +87,43 @@ def wait_for_line(lines: Sequence[str], text: str, popen: subprocess.Popen[str] 
 
     return wait_until(found, lambda: tail(lines), what=f"'{text}' from {name}", timeout=timeout,
                       gone=exited(popen, name) if popen is not None else None) - 1
+
+
+class NodeProcess:
+    """``dualarm run NODE --ros-args ARGS`` in the background (real scheduling: thread_priority 0), its
+    output collected line by line in :attr:`lines`; ``env`` adds to :func:`node_env` (a ROS domain)."""
+
+    def __init__(self, node: str, *ros_args: str, env: dict[str, str] | None = None) -> None:
+        import sys
+        import threading
+        from pathlib import Path
+
+        self.name = node
+        self.popen = subprocess.Popen(
+            [sys.executable, "-u", "-m", "dualarm_control.app.cli", "run", node, "--ros-args",
+             "-p", "thread_priority:=0", *ros_args], cwd=Path(__file__).parents[1], stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT, text=True, env={**node_env(), **(env or {})})
+        self.lines: list[str] = []
+        threading.Thread(target=self._pump, daemon=True).start()
+
+    def _pump(self) -> None:
+        assert self.popen.stdout is not None
+        for line in self.popen.stdout:
+            self.lines.append(line.rstrip("\n"))
+
+    def wait_for(self, text: str, start: int = 0, timeout: float = DEADLINE_S) -> int:
+        """Index of the first line (from ``start``) containing ``text`` (:func:`wait_for_line`)."""
+        return wait_for_line(self.lines, text, self.popen, timeout=timeout, start=start, name=self.name)
+
+    def stop(self) -> int:
+        """SIGINT, then its exit code (SIGKILL and -9 after 30 s)."""
+        import signal
+
+        if self.popen.poll() is None:
+            self.popen.send_signal(signal.SIGINT)
+        try:
+            return self.popen.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            self.popen.kill()
+            self.popen.wait()
+            return -9

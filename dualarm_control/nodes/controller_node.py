@@ -75,6 +75,7 @@ DEFAULT_PRIORITY = 50
 WATCHDOG_MIN_PERIOD_S = 0.005  # the watchdog ticks at the control rate, at most 200 Hz
 STATS_EVERY = 200  # cycles between percentile updates
 MOVING = 1e-9  # a target twist / reference velocity norm above this is motion [m/s, rad/s]
+STARTUP_WAIT_S = 10.0  # real time: no consistent joint state this long after the start (no startup_check) is an ERROR
 CHECK_PERIOD_S = 0.1  # hardware.startup_check: the graph is checked this often until it matches
 END_DELAY_S = 0.5  # task mode: spin this long after the last cycle, so that a recorder gets the last messages
 NODE_PARAMETERS = (
@@ -164,6 +165,8 @@ class ControllerNode:
         self.ticks: list[shell.Tick] = ([] if self.lockstep else  # ros.node.Ticker, not an rclpy timer
                                         [(max(self.params.period, WATCHDOG_MIN_PERIOD_S), self.on_watchdog)])
         check_s = float(self.values["hardware.startup_check"])
+        self.started, self.wait_next, self.wait_text = time.monotonic(), 0.0, "waiting for joint_states"
+        self.wait_deadline = check_s or STARTUP_WAIT_S  # no consistent joint state by then: ERROR
         self.check_deadline = time.monotonic() + check_s if check_s > 0 else None  # None: checked (or no check)
         if self.check_deadline is not None:
             self.ticks.append((CHECK_PERIOD_S, self.on_startup_check))
@@ -351,7 +354,7 @@ class ControllerNode:
     def on_watchdog(self) -> None:
         """Real-time mode: zero command while there is no joint state yet, or a watchdog fault."""
         if self.state is None:
-            self.out.safe(self.node.get_clock().now().nanoseconds, "waiting for joint_states")
+            self.wait_for_state()
             return
         now = time.monotonic_ns()
         age = now - self.state[2]
@@ -360,6 +363,22 @@ class ControllerNode:
                   else self.target_fault(now))
         if reason:
             self.out.enter_safe_state(self.state[0], reason)
+
+    def wait_for_state(self) -> None:
+        """Real time, no consistent joint state yet: a zero command every tick with why it waits (the
+        joint-state topics' publishers, deliveries, refusals, missing joints, stamps; looked up once a
+        second), WARN on /diagnostics and in the log; ERROR (the safe state) past ``hardware.startup_check``
+        or :data:`STARTUP_WAIT_S`."""
+        now = time.monotonic()
+        if now >= self.wait_next:
+            self.wait_next = now + 1.0
+            cause = self.joint_states.waiting_reason()
+            self.wait_text = f"waiting for joint_states{f': {cause}' if cause else ''}"
+        stamp = self.node.get_clock().now().nanoseconds
+        if now - self.started > self.wait_deadline:
+            self.out.enter_safe_state(stamp, f"{self.wait_text} (none consistent after {self.wait_deadline:g} s)")
+        else:
+            self.out.safe(stamp, self.wait_text)
 
     def on_startup_check(self) -> None:
         """``hardware.startup_check``: commands start once the profile matches the graph; past the deadline

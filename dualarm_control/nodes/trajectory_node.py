@@ -5,8 +5,10 @@ What it publishes is the reference source's (:meth:`ReferenceSource.stream
 goals scenario on ``/relative_target``; with ``plan:=FILE`` a plan's joint reference on
 ``/joint_reference`` and its relative pose on ``/relative_target``. The stream starts from the
 first ``/joint_states`` (measured start configuration). Real-time mode: one target per control
-period on a tick of the spin loop (``ros.node.Ticker``), timed from the first joint state on the
-node's clock (simulation time with ``use_sim_time``). Lockstep mode: one target per joint state, stamped with the joint state's
+period on a tick of the spin loop (``ros.node.Ticker``), timed on the node's clock (simulation time
+with ``use_sim_time``) from the controller's first cycle (``wait_for_controller``: until
+controller_node reports one on /diagnostics the first target is held, and after 2 s the node says
+so), so that a scenario never runs to "complete" in front of a controller that never cycled. Lockstep mode: one target per joint state, stamped with the joint state's
 stamp, so the controller can pair them. When the stream's end (trajectory plus the scenario's
 settle time) has come the node logs completion, publishes a final ``/diagnostics`` status
 "complete" and exits 0; with ``repeat:=true`` (soak runs) it starts the scenario again from the
@@ -26,6 +28,7 @@ it keeps ``/joint_states`` to judge the arms' arrival and stalls.
 from __future__ import annotations
 
 import sys
+import time
 from typing import Any
 
 import numpy as np
@@ -63,6 +66,7 @@ from dualarm_control.trajectory import MotionLimits
 
 DEFAULT_PRIORITY = 40
 SCENARIO, INTERACTIVE = "scenario", "interactive"
+CONTROLLER_NOTE_S = 2.0  # real time: holding the first target longer than this is said (throttled)
 PARAMETERS = (
     ParamSpec("scenario", "assembly", "scenario name (config/scenarios/<name>.yaml) or YAML path", read_only=True),
     ParamSpec("mode", SCENARIO, "scenario: stream the scenario's reference; interactive: hold the measured pose "
@@ -76,6 +80,9 @@ PARAMETERS = (
     thread_priority_spec(DEFAULT_PRIORITY, "the target stream (below the simulator's and controller's 50)"),
     ParamSpec("repeat", False, "start the scenario again from the current pose when it completes (soak runs)",
               read_only=True),
+    ParamSpec("wait_for_controller", True, "real time: hold the first target until controller_node reports a "
+              "cycle on /diagnostics, so that the scenario's clock starts when the arms can follow (false: at the "
+              "first joint state, with no controller in sight)", read_only=True),
     ROBOT_PARAMETER,
     *HARDWARE_PARAMETERS,  # the joint-state topics (issue 29; the outputs are validated as the controller's)
 )
@@ -128,6 +135,12 @@ class TrajectoryNode:
         self.stage = ""
         self.finished = False
         self.ticks: list[Tick] = [] if self.lockstep else [(self.period, self.on_tick)]  # ros.node.Ticker
+        # real time: the scenario's clock starts at the controller's first cycle (None: not seen yet)
+        self.controller_seen: float | None = None if (p["wait_for_controller"] and not self.lockstep
+                                                      and self.drive is None) else 0.0
+        self.sub_diag = None if self.controller_seen is not None else n.create_subscription(
+            DiagnosticArray, "/diagnostics", self.on_diagnostics, 100)
+        self.held_since = time.monotonic()  # real time: since when the first target is held
         self.log.info(f"scenario '{self.scenario.name}': {self.source.describe()}, "
                       f"{'lockstep' if self.lockstep else 'real-time'}; waiting for /joint_states")
         if priority_note and priority_note != "disabled":
@@ -152,6 +165,7 @@ class TrajectoryNode:
             options = RunOptions(self.scenario.limits, self.scenario.settle_time)
             self.stream = self.source.stream(self.model, q, options, self.period)
             self.start_ns = stamp if self.lockstep else self.node.get_clock().now().nanoseconds
+            self.held_since = time.monotonic()
             if self.drive is not None and isinstance(self.stream, GoalsStream):
                 self.drive.start(self.stream.generator)
             if self.drive is None:
@@ -165,12 +179,33 @@ class TrajectoryNode:
         if line is not None:
             self.log.warning(line)
 
+    def on_diagnostics(self, msg: DiagnosticArray) -> None:
+        """Real time, before the controller's first cycle: a controller_node status counting cycles starts
+        the scenario's clock."""
+        if self.controller_seen is None and any(
+                s.name == "controller_node" and any(kv.key == "cycles" and kv.value not in ("", "0") for kv in s.values)
+                for s in msg.status):
+            self.controller_seen = time.monotonic()
+            self.start_ns = self.node.get_clock().now().nanoseconds
+            self.log.info(f"controller_node cycling ({self.controller_seen - self.held_since:.2f} s after the first "
+                          "target): the scenario's clock starts")
+
     def on_tick(self) -> None:
+        if self.sub_diag is not None and self.controller_seen is not None:
+            self.node.destroy_subscription(self.sub_diag)  # (not destroyed in its own callback)
+            self.sub_diag = None
         if self.stream is not None:
             if self.states is not None and self.drive is None:  # started: the timer drives the stream
                 self.states.close()  # (not destroyed in its own callback)
                 self.states = None
             now = self.node.get_clock().now().nanoseconds
+            if self.controller_seen is None:  # hold the first target until the controller cycles
+                self.publish(now, 0)
+                waited = time.monotonic() - self.held_since
+                if waited > CONTROLLER_NOTE_S:
+                    self.reject(f"holding the first target: no controller_node cycle on /diagnostics after "
+                                f"{waited:.0f} s (wait_for_controller:=false starts without one)")
+                return
             self.publish(now, now - self.start_ns)
 
     def publish(self, stamp: int, elapsed_ns: int) -> None:

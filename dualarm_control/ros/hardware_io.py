@@ -24,7 +24,9 @@ from dualarm_control.hardware import (
     PositionIntegrator,
     StateAssembler,
     StateSample,
+    TopicView,
     profile_parameters,
+    waiting_reason,
 )
 from dualarm_control.params import ParamSpec
 from dualarm_control.ros import cdr, convert
@@ -58,7 +60,10 @@ class JointStates:
         from sensor_msgs.msg import JointState
 
         self.node = node
+        self.joint_names = tuple(joint_names)
         topics = profile.joint_states
+        self.delivered = dict.fromkeys(topics, 0)
+        self.rejection = dict.fromkeys(topics, "")
         self.assembler = StateAssembler(topics, len(joint_names), round(profile.stamp_tolerance * 1e9))
         self.on_state, self.on_reject = on_state, on_reject
         order = {name: i for i, name in enumerate(joint_names)}
@@ -67,25 +72,47 @@ class JointStates:
         for topic in topics:
             self.decoders[topic] = decoder = convert.JointStateInput(order, partial=len(topics) > 1)
             self.subscriptions.append(subscribe_checked(
-                node, JointState, topic, self.receiver(topic, decoder), qos, on_malformed, decoder, bus))
+                node, JointState, topic, self.receiver(topic, decoder), qos, self.malformed(topic, on_malformed),
+                decoder, bus))
 
     def receiver(self, topic: str, decoder: convert.JointStateInput) -> Callable[[Any], None]:
         several = len(self.assembler.topics) > 1
 
         def receive(sample: tuple[int, tuple[np.ndarray, np.ndarray] | str]) -> None:
             stamp, decoded = sample
+            self.delivered[topic] += 1
             if isinstance(decoded, str):
+                self.rejection[topic] = decoded
                 self.on_reject(stamp, f"{topic}: {decoded}" if several else decoded)
                 return
             now = time.monotonic_ns()
+            self.rejection[topic] = ""
             state = self.assembler.put(topic, StateSample(stamp, now, decoder.present, decoded[0]))
             if state is not None:
                 self.on_state(state[0], state[1], now)
         return receive
 
+    def malformed(self, topic: str, on_malformed: Callable[[str], None]) -> Callable[[str], None]:
+        def note(reason: str) -> None:
+            self.delivered[topic] += 1
+            self.rejection[topic] = reason
+            on_malformed(reason)
+        return note
+
     def names_seen(self) -> dict[str, tuple[str, ...]]:
         """Per joint-state topic that delivered a message, the joint names of its last one."""
         return {t: d.names for t, d in self.decoders.items() if d.names is not None}
+
+    def views(self) -> list[TopicView]:
+        """Each joint-state topic as the graph and this node see it (its publishers: node and type)."""
+        return [TopicView(t, tuple(f"{i.node_namespace.rstrip('/')}/{i.node_name} "
+                                   f"[{i.topic_type}]" for i in self.node.get_publishers_info_by_topic(t)),
+                          self.delivered[t], self.rejection[t]) for t in self.assembler.topics]
+
+    def waiting_reason(self) -> str:
+        """Why no consistent state has come (:func:`~dualarm_control.hardware.waiting_reason`); '' if
+        nothing explains it."""
+        return waiting_reason(self.views(), self.assembler, self.joint_names)
 
     def close(self) -> None:
         for sub in self.subscriptions:
