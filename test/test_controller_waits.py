@@ -52,7 +52,7 @@ def test_the_controller_names_why_it_waits_for_joint_states(probe: tuple[Any, An
 
         def step() -> None:
             now = node.get_clock().now().nanoseconds
-            for topic, (pub, joints, offset) in state.items():
+            for pub, joints, offset in state.values():
                 msg = JointState(name=list(joints), position=[0.1] * len(joints))
                 msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(now + offset, 1_000_000_000)
                 pub.publish(msg)
