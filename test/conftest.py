@@ -4,10 +4,11 @@ a deliberately wrong solver for the tests that show a bound check can fail."""
 from __future__ import annotations
 
 import os
-import random
 from collections.abc import Iterator
 
 import bound_ignoring
+import domains
+import psutil
 import pytest
 from hypothesis import settings
 
@@ -15,8 +16,10 @@ from dualarm_control.ros.env import apply_localhost_default
 from dualarm_control.solvers import unregister
 
 apply_localhost_default()  # before rclpy.init; inherited by subprocesses
-# Always a private domain (not the user's interactive one), unless DUALARM_TEST_DOMAIN_ID says which.
-os.environ["ROS_DOMAIN_ID"] = os.environ.get("DUALARM_TEST_DOMAIN_ID") or str(random.SystemRandom().randint(1, 101))
+# Always a private domain (not the user's interactive one, not another test process's: a lease held for
+# the session, test/domains.py), DUALARM_TEST_DOMAIN_ID if set.
+SESSION_DOMAIN = domains.lease_session()
+os.environ["ROS_DOMAIN_ID"] = str(SESSION_DOMAIN.domain)
 os.environ.setdefault("MPLBACKEND", "Agg")
 # Property tests: the same examples on every CI run (a run's verdict must not depend on the draw; a new
 # counterexample found locally is kept as a regular test, e.g. test_online_trajectory's basis test).
@@ -25,6 +28,44 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 settings.register_profile("ci", derandomize=True, print_blob=True, deadline=None)
 settings.register_profile("local", deadline=None)
 settings.load_profile("ci" if os.environ.get("CI") else "local")
+
+
+LEFTOVER_GRACE_S = 10.0
+"""A process started in a module may take this long to exit after its module's last fixture stopped it [s]."""
+
+
+@pytest.fixture(scope="module", autouse=True)
+def no_process_outlives_its_module() -> Iterator[None]:
+    """No process a module started (nodes, launches, tools, servers) outlives it: those still alive when the
+    module's fixtures are torn down get :data:`LEFTOVER_GRACE_S` to exit, then SIGKILL, and the module
+    errors naming them (a leftover node on a domain answers the next test's nodes)."""
+    me = psutil.Process()
+    before = {p.pid for p in me.children(recursive=True)}
+    yield
+
+    def alive() -> list[psutil.Process]:
+        out = []
+        for p in me.children(recursive=True):
+            try:
+                if p.pid not in before and p.status() != psutil.STATUS_ZOMBIE:
+                    out.append(p)
+            except psutil.NoSuchProcess:
+                pass
+        return out
+
+    left = alive()
+    if not left:
+        return
+    _, still = psutil.wait_procs(left, timeout=LEFTOVER_GRACE_S)
+    names = []
+    for p in still:
+        try:
+            names.append(f"pid {p.pid}: {' '.join(p.cmdline())[:200]}")
+            p.kill()
+        except psutil.NoSuchProcess:
+            pass
+    if names:
+        pytest.fail("processes outlived their test module (killed now):\n" + "\n".join(names), pytrace=False)
 
 
 @pytest.fixture

@@ -7,49 +7,31 @@ Four launches of the short scenario side by side took 16-17 s on the 2-core mach
 the other 29 s. Lockstep runs do not depend on timing (the same commands and states however the
 processes are scheduled), so what the tests assert is the same either way.
 
-Each launch gets a ROS_DOMAIN_ID of its own (not the session's, not another launch's), so that
-the graphs do not see each other. When ``DUALARM_TEST_DOMAIN_ID`` fixes the test domain (a machine
-where only that domain is free), the launches run one after the other on it. The same goes for a
+Each launch runs on a ROS domain leased for it (:mod:`domains`: no other live test, in this
+process or another, holds it), so that the graphs do not see each other. The same goes for a
 launch in the background while in-process tests go on (:func:`in_background`), and for a
 computation in this process while launches run (:func:`meanwhile`).
 """
 
 from __future__ import annotations
 
-import os
-import random
 from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from typing import TypeVar
 
 import pytest
+from domains import leased
 
 T = TypeVar("T")
 R = TypeVar("R")
 
-DOMAINS = range(1, 102)
-"""ROS domain ids safe on Linux (higher ones reach into the ephemeral port range)."""
-
-
-def own_domains(count: int) -> list[dict[str, str]] | None:
-    """``count`` environments, each with a ROS_DOMAIN_ID of its own (not the session's, not another's);
-    None when ``DUALARM_TEST_DOMAIN_ID`` fixes the test domain (then launches run one after the other)."""
-    if os.environ.get("DUALARM_TEST_DOMAIN_ID"):
-        return None
-    taken = {int(os.environ["ROS_DOMAIN_ID"])} if os.environ.get("ROS_DOMAIN_ID", "").isdigit() else set()
-    return [{"ROS_DOMAIN_ID": str(d)}
-            for d in random.SystemRandom().sample([d for d in DOMAINS if d not in taken], count)]
-
 
 def side_by_side(jobs: Mapping[str, Callable[[dict[str, str]], T]]) -> dict[str, T]:
     """Each of ``jobs`` called with the environment its launch adds (``launch_scenario(env=...)``), all at
-    once, each on its own ROS domain; their results by name. The first exception is raised once every
-    job has ended (a launch stops by itself: its own timeout)."""
-    envs = own_domains(len(jobs)) if len(jobs) > 1 else None
-    if envs is None:
-        return {name: job({}) for name, job in jobs.items()}
-    with ThreadPoolExecutor(max_workers=len(jobs)) as pool:
+    once, each on a ROS domain leased for it (:mod:`domains`); their results by name. The first
+    exception is raised once every job has ended (a launch stops by itself: its own timeout)."""
+    with leased(len(jobs)) as envs, ThreadPoolExecutor(max_workers=len(jobs)) as pool:
         futures = {name: pool.submit(job, env) for (name, job), env in zip(jobs.items(), envs, strict=True)}
         return {name: future.result() for name, future in futures.items()}
 
@@ -63,13 +45,11 @@ def selected_tests(request: pytest.FixtureRequest) -> set[str]:
 
 @contextmanager
 def in_background(job: Callable[[dict[str, str]], T]) -> Iterator[Future[T]]:
-    """``job`` (a launch, say) started in a thread with the environment of a ROS domain of its own
-    (:func:`own_domains`; the session's when that is fixed: use it where the tests that go on meanwhile
-    use no ROS), while the tests go on: its future. The context waits for it on the way out, so that
-    nothing of it outlives the fixture."""
-    envs = own_domains(1)
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        yield pool.submit(job, envs[0] if envs else {})
+    """``job`` (a launch, say) started in a thread with the environment of a ROS domain leased for it
+    (:mod:`domains`), while the tests go on: its future. The context waits for it on the way out, so
+    that nothing of it outlives the fixture (nor its lease)."""
+    with leased(1) as envs, ThreadPoolExecutor(max_workers=1) as pool:
+        yield pool.submit(job, envs[0])
 
 
 def meanwhile(background: Callable[[], T], foreground: Callable[[], R]) -> tuple[T, R]:
