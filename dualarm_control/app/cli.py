@@ -623,7 +623,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     run = sub.add_parser("run", help="run one node (like ros2 run dualarm_control NODE)",
                          description="Run NODE (sim_node, controller_node, trajectory_node) in the foreground. "
-                         "Arguments after the node are ROS arguments: --ros-args --params-file F -p k:=v -r a:=b.")
+                         "Arguments after the node are ROS arguments: --ros-args --params-file F -p k:=v -r a:=b. "
+                         "'dualarm run NODE --help' (or --ros-args --help) prints the node's usage and parameters.")
     run.add_argument("node", help="sim_node, controller_node or trajectory_node")
     run.add_argument("ros_args", nargs=argparse.REMAINDER, help="--ros-args ...")
     run.set_defaults(func=cmd_run)
