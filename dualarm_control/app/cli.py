@@ -618,7 +618,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="the controller's parameter file with the profile (repeatable; default: the default profile)")
     chk.add_argument("--timeout", type=float, default=10.0, metavar="S",
                      help="how long to wait for the graph to match (discovery takes up to ~4 s)")
-    add_robot_argument(chk)
+    chk.add_argument("--robot", default=None, metavar="NAME|PATH",
+                     help="the robot description whose joints the profile is checked for: a name of config/robots/ "
+                     "(lwr4_cell, baxter, panda_pair, ur5_pair, ...) or a YAML path (docs/robots.md); default: the "
+                     "--params files' robot parameter (controller_node's), else the robot of their scenario "
+                     "parameter (default assembly: lwr4_cell)")
     chk.set_defaults(func=cmd_hardware)
 
     run = sub.add_parser("run", help="run one node (like ros2 run dualarm_control NODE)",
