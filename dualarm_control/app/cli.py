@@ -618,12 +618,17 @@ def build_parser() -> argparse.ArgumentParser:
                      help="the controller's parameter file with the profile (repeatable; default: the default profile)")
     chk.add_argument("--timeout", type=float, default=10.0, metavar="S",
                      help="how long to wait for the graph to match (discovery takes up to ~4 s)")
-    add_robot_argument(chk)
+    chk.add_argument("--robot", default=None, metavar="NAME|PATH",
+                     help="the robot description whose joints the profile is checked for: a name of config/robots/ "
+                     "(lwr4_cell, baxter, panda_pair, ur5_pair, ...) or a YAML path (docs/robots.md); default: the "
+                     "--params files' robot parameter (controller_node's), else the robot of their scenario "
+                     "parameter (default assembly: lwr4_cell)")
     chk.set_defaults(func=cmd_hardware)
 
     run = sub.add_parser("run", help="run one node (like ros2 run dualarm_control NODE)",
                          description="Run NODE (sim_node, controller_node, trajectory_node) in the foreground. "
-                         "Arguments after the node are ROS arguments: --ros-args --params-file F -p k:=v -r a:=b.")
+                         "Arguments after the node are ROS arguments: --ros-args --params-file F -p k:=v -r a:=b. "
+                         "'dualarm run NODE --help' (or --ros-args --help) prints the node's usage and parameters.")
     run.add_argument("node", help="sim_node, controller_node or trajectory_node")
     run.add_argument("ros_args", nargs=argparse.REMAINDER, help="--ros-args ...")
     run.set_defaults(func=cmd_run)

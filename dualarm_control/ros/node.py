@@ -255,11 +255,18 @@ def usage(name: str, doc: str, specs: Iterable[ParamSpec]) -> str:
     return "\n".join(lines)
 
 
+ROS_VALUE_FLAGS = frozenset({"-p", "--param", "-r", "--remap", "--params-file", "--log-level", "--log-config-file",
+                             "--log-file-name", "-e", "--enclave"})
+"""rcl's ROS arguments that take the next argument as their value (a ``--help`` there is that value)."""
+
+
 def wants_help(argv: Sequence[str]) -> bool:
-    """``-h``/``--help`` before any ``--ros-args``."""
-    head = list(argv[1:]) if argv else []
-    head = head[: head.index("--ros-args")] if "--ros-args" in head else head
-    return "-h" in head or "--help" in head
+    """``-h``/``--help`` anywhere in ``argv[1:]``: before ``--ros-args`` or among the ROS arguments, as
+    ``ros2 run PKG NODE --ros-args --help`` (``dualarm run NODE --help`` passes ``--ros-args --help``);
+    not the value of a ROS argument that takes one (``-p``, ``-r``, ``--params-file``, ...)."""
+    args = list(argv[1:]) if argv else []
+    return any(arg in ("-h", "--help") and (i == 0 or args[i - 1] not in ROS_VALUE_FLAGS)
+               for i, arg in enumerate(args))
 
 
 def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text: str = "",

@@ -18,7 +18,7 @@ def add_sweep_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[t
         "sweep", help="closed-loop runs over random relative tasks x robots x solvers on Dask (Parquet rows)",
         description="Run the grid of SPEC.yaml (robots x solvers x variants x tasks, config/sweeps/) as Dask tasks "
         "(a local cluster on 127.0.0.1 by default) into the Parquet dataset DIR; runs already in DIR are skipped. "
-        "'dualarm sweep report TABLE' writes the paired l0 ratios (medians, bootstrap 95 %% CIs), report.md and "
+        "'dualarm sweep report TABLE' writes the paired l0 ratios (medians, bootstrap 95 % CIs), report.md and "
         "box plots. 'dualarm sweep scaling SPEC.yaml' runs the same runs in this process, on one local worker and "
         "on two, one after the other, and writes the rates and their ratios (scaling.md, scaling.json).")
     swp.add_argument("spec", metavar="SPEC.yaml|report|scaling", help="the sweep spec, or 'report' or 'scaling'")
