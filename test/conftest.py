@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterator
+from pathlib import Path
 
 import bound_ignoring
 import domains
@@ -28,6 +29,35 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 settings.register_profile("ci", derandomize=True, print_blob=True, deadline=None)
 settings.register_profile("local", deadline=None)
 settings.load_profile("ci" if os.environ.get("CI") else "local")
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption("--durations-file", default="", help="write every test phase's duration to this file, "
+                     "slowest first (make test writes out/test-durations-*.txt and CI prints them)")
+
+
+class DurationsFile:
+    """Every test phase's duration [s], slowest first, written to ``path`` when the session ends (in the
+    process that reports: the xdist controller gets its workers' reports)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.rows: list[tuple[float, str, str]] = []
+
+    def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
+        self.rows.append((report.duration, report.when, report.nodeid))
+
+    def pytest_sessionfinish(self) -> None:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        total = sum(d for d, _, _ in self.rows)
+        self.path.write_text(f"# {len(self.rows)} test phases, {total:.1f} s in all (summed over workers)\n" + "".join(
+            f"{d:8.2f}s {when:<8} {nodeid}\n" for d, when, nodeid in sorted(self.rows, reverse=True)))
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    path = config.getoption("--durations-file")
+    if path and not hasattr(config, "workerinput"):
+        config.pluginmanager.register(DurationsFile(Path(path)), "durations-file")
 
 
 LEFTOVER_GRACE_S = 10.0
