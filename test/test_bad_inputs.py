@@ -1,0 +1,82 @@
+"""Bad files and places given to the `dualarm` verbs (issue 38): a truncated or corrupt bag, a bad plan file,
+a malformed URDF, a YAML alias bomb, an output directory that cannot be written. Each ends with exit 2 and one
+line naming the file and what is wrong (no traceback), and leaves nothing half-written behind."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+EXIT_USAGE = 2
+
+
+def dualarm(*args: str, timeout: float = 300.0) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "dualarm_control.app.cli", *args], cwd=REPO, check=False,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def assert_refused(done: subprocess.CompletedProcess[str], *words: str) -> str:
+    """Exit 2, no traceback, and the error line holds each of ``words``; the error line."""
+    seen = f"exit {done.returncode}\nstdout:\n{done.stdout[-2000:]}\nstderr:\n{done.stderr[-3000:]}"
+    assert done.returncode == EXIT_USAGE, seen
+    assert "Traceback" not in done.stderr, seen
+    line = done.stderr.strip().splitlines()[-1]
+    assert ": error: " in line and all(word in line for word in words), seen
+    return line
+
+
+# ---- bags ----------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def good_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A small rosbag2 (MCAP, as the recorder writes it): 2000 commands on /velocity_controller/commands."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    msgtype = "std_msgs/msg/Float64MultiArray"
+    cls = store.types[msgtype]
+    layout = store.types["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0)
+    path = tmp_path_factory.mktemp("bags") / "good"
+    with Writer(path, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection("/velocity_controller/commands", msgtype, typestore=store)
+        import numpy as np
+
+        for i in range(2000):
+            data = store.serialize_cdr(cls(layout=layout, data=np.full(14, 0.001 * i)), msgtype)
+            writer.write(conn, 5_000_000 * (i + 1), data)
+    return path
+
+
+def damaged(good: Path, tmp_path: Path, how: str) -> Path:
+    import shutil
+
+    bag = tmp_path / how
+    shutil.copytree(good, bag)
+    (storage,) = bag.glob("*.mcap")
+    data = bytearray(storage.read_bytes())
+    if how == "truncated":
+        data = data[: len(data) // 2]
+    else:  # 4 KiB of garbage a quarter into the file (in the chunks; the summary at the end is intact)
+        start = len(data) // 4
+        data[start:start + 4096] = b"\xa5" * 4096
+    storage.write_bytes(bytes(data))
+    return bag
+
+
+@pytest.mark.parametrize("how", ["truncated", "corrupt"])
+def test_report_on_a_damaged_bag_is_refused_naming_it(good_bag: Path, tmp_path: Path, how: str) -> None:
+    bag = damaged(good_bag, tmp_path, how)
+    out = tmp_path / "report"
+    assert_refused(dualarm("report", str(bag), "--output", str(out)), str(bag), "cannot read bag")
+    assert not out.exists()  # nothing half-written
+
+
+def test_bag_info_on_a_truncated_bag_is_refused_naming_it(good_bag: Path, tmp_path: Path) -> None:
+    bag = damaged(good_bag, tmp_path, "truncated")
+    assert_refused(dualarm("bag", "info", str(bag)), str(bag), "cannot read bag")
