@@ -80,3 +80,66 @@ def test_report_on_a_damaged_bag_is_refused_naming_it(good_bag: Path, tmp_path: 
 def test_bag_info_on_a_truncated_bag_is_refused_naming_it(good_bag: Path, tmp_path: Path) -> None:
     bag = damaged(good_bag, tmp_path, "truncated")
     assert_refused(dualarm("bag", "info", str(bag)), str(bag), "cannot read bag")
+
+
+# ---- plan files ----------------------------------------------------------------------------------
+
+
+def write_plan(tmp_path: Path, name: str, change: str) -> Path:
+    """A plan.json of corner_path (zero configurations, inside the limits) with one thing wrong at point 3."""
+    import json
+    import math
+
+    from dualarm_control.kinematics import DualArmModel
+    from dualarm_control.planning.plan_file import PLAN_FORMAT
+    from dualarm_control.scenario import load_scenario
+
+    joints = DualArmModel(load_scenario("corner_path").robot).joint_names
+    points = [{"configuration_rad": [0.0] * len(joints)} for _ in range(5)]
+    row = points[3]["configuration_rad"]
+    if change == "count":
+        del row[-1]
+    elif change == "nan":
+        row[2] = math.nan
+    elif change == "limits":
+        row[2] = 7.0  # rad: beyond every joint of the LWR4 (2.97 rad at most)
+    path = tmp_path / name
+    path.write_text(json.dumps({"format": PLAN_FORMAT, "scenario": "corner_path", "joint_names": joints,
+                                "points": points}))
+    return path
+
+
+@pytest.mark.parametrize(("change", "words"), [("count", "point 3 has 13 joint values, expected 14"),
+                                                ("nan", "point 3, joint left_joint_3: nan is not finite"),
+                                                ("limits", ("point 3, joint left_joint_3: 7 rad is beyond the joint "
+                                                            "limits [-2.96706, 2.96706]"))])
+def test_plan_loader_refuses_a_bad_plan_naming_the_file_point_and_joint(tmp_path: Path, change: str,
+                                                                        words: str) -> None:
+    from dualarm_control.errors import ScenarioError
+    from dualarm_control.kinematics import DualArmModel
+    from dualarm_control.planning.plan_file import read_plan
+    from dualarm_control.scenario import load_scenario
+
+    model = DualArmModel(load_scenario("corner_path").robot)
+    path = write_plan(tmp_path, f"{change}.json", change)
+    with pytest.raises(ScenarioError) as refused:
+        read_plan(path, model.joint_names, model.q_min, model.q_max)
+    assert str(path) in str(refused.value) and words in str(refused.value)
+    good = read_plan(write_plan(tmp_path, "good.json", ""), model.joint_names, model.q_min, model.q_max)
+    assert good.configurations.shape == (5, 14)
+
+
+@pytest.mark.parametrize(("change", "words"), [("count", "has 13 joint values"), ("nan", "is not finite")])
+def test_launch_refuses_a_bad_plan_with_exit_2(tmp_path: Path, change: str, words: str) -> None:
+    path = write_plan(tmp_path, f"{change}.json", change)
+    assert_refused(dualarm("launch", "corner_path", "--plan", str(path), "--lockstep"), str(path), words)
+
+
+def test_launch_of_a_plan_beyond_the_joint_limits_is_refused_by_the_nodes(tmp_path: Path) -> None:
+    """The nodes load the plan with the model's limits and exit with its error; the launch fails (exit 1:
+    the command's own check before it starts the nodes reads the plan without the limits, app/cli.py)."""
+    path = write_plan(tmp_path, "limits.json", "limits")
+    done = dualarm("launch", "corner_path", "--plan", str(path), "--lockstep")
+    seen = done.stdout[-3000:] + done.stderr[-3000:]
+    assert done.returncode != 0 and "Traceback" not in seen, seen
+    assert f"error: plan {path}: point 3, joint left_joint_3: 7 rad is beyond the joint limits" in seen, seen
