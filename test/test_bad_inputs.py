@@ -143,3 +143,35 @@ def test_launch_of_a_plan_beyond_the_joint_limits_is_refused_by_the_nodes(tmp_pa
     seen = done.stdout[-3000:] + done.stderr[-3000:]
     assert done.returncode != 0 and "Traceback" not in seen, seen
     assert f"error: plan {path}: point 3, joint left_joint_3: 7 rad is beyond the joint limits" in seen, seen
+
+
+# ---- robot descriptions --------------------------------------------------------------------------
+
+
+def test_a_robot_whose_urdf_is_malformed_xml_is_refused_naming_the_urdf(tmp_path: Path) -> None:
+    """A robot YAML (the xArm7 pair's) pointing to a URDF that is not well-formed XML."""
+    urdf = tmp_path / "broken.urdf"
+    urdf.write_text('<robot name="x">\n  <link name="a">\n  <joint name="j" type="revolute">\n</robot>\n')
+    robot = tmp_path / "robot.yaml"
+    robot.write_text((Path(__file__).parent / "data" / "xarm7_pair.yaml").read_text()
+                     .replace("urdf: example-robot-data:xarm_description/urdf/xarm7.urdf", "urdf: broken.urdf"))
+    out = tmp_path / "out"
+    assert_refused(dualarm("experiment", "assembly", "--robot", str(robot), "--solver", "sparse_qp", "--output",
+                           str(out)), f"{urdf}: not a valid URDF (mismatched tag: line 4")
+    assert not out.exists()
+
+
+# ---- output directories --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("where", "why"), [("file", "a file, not a directory"), ("under_file", "Not a directory")])
+def test_an_output_that_cannot_be_written_is_refused_before_the_run(tmp_path: Path, where: str, why: str) -> None:
+    """`dualarm experiment --output` on a regular file or under one: exit 2 naming it, before the runs."""
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a directory\n")
+    out = blocker if where == "file" else blocker / "sub"
+    done = dualarm("experiment", str(Path(__file__).parent / "data" / "short.yaml"), "--solver", "sparse_qp",
+                   "--output", str(out))
+    assert_refused(done, f"output directory {out}: cannot write there ({why})")
+    assert "done:" not in done.stderr  # refused before the first run
+    assert blocker.read_text() == "not a directory\n" and [p.name for p in tmp_path.iterdir()] == ["a_file"]

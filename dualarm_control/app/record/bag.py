@@ -549,6 +549,7 @@ def report(path: Path, output: Path) -> tuple[dict[str, dict[str, Any]], str, li
     figures' file names; BagError when the bag lacks what the report needs.
     """
     from dualarm_control.app.record.report import (
+        prepare_output,
         summarize_run,
         write_figures,
         write_json,
@@ -563,5 +564,6 @@ def report(path: Path, output: Path) -> tuple[dict[str, dict[str, Any]], str, li
     if scenario is None:
         scenario = goals_scenario(bag)
     results = {r.label: summarize_run(r, scenario, model) for r in runs}
+    prepare_output(Path(output))
     write_json(Path(output) / "metrics.json", results)
     return results, runs[0].kind, write_figures(runs[0].kind, Path(output), Path(path).name, runs, scenario)
