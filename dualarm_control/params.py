@@ -50,6 +50,36 @@ def _node_keys(node_name: str, namespace: str) -> list[str]:
     return ["/**", f"{ns}/**" if ns else "/**", node_name, f"/{node_name}", f"{ns}/{node_name}"]
 
 
+MAX_EXPANDED_VALUES = 1_000_000
+"""A parameter file may hold this many values (map keys, values and list items) once its aliases (``*name``)
+are expanded: far above any real file (a few thousand), far below an alias bomb (a few hundred bytes of nested
+aliases expanding to 9^9 values, minutes and gigabytes to flatten)."""
+
+
+def expanded_size(doc: Any) -> int | None:
+    """How many values ``doc`` (from ``yaml.safe_load``, aliases shared) holds with every alias expanded,
+    counted without expanding (each shared object once); None for a recursive alias."""
+    sizes: dict[int, int] = {}
+    busy: set[int] = set()
+
+    def size(node: Any) -> int:
+        if not isinstance(node, (Mapping, list)):
+            return 1
+        if id(node) in sizes:
+            return sizes[id(node)]
+        if id(node) in busy:
+            raise RecursionError
+        busy.add(id(node))
+        items = [*node.keys(), *node.values()] if isinstance(node, Mapping) else node
+        sizes[id(node)] = 1 + sum(size(item) for item in items)
+        return sizes[id(node)]
+
+    try:
+        return size(doc)
+    except RecursionError:
+        return None
+
+
 def read_params_file(path: str | Path, node_name: str, namespace: str = "/") -> dict[str, Any]:
     """Parameters that ``path`` gives to node ``node_name`` in ``namespace``, flattened.
 
@@ -72,6 +102,10 @@ def read_params_file(path: str | Path, node_name: str, namespace: str = "/") -> 
         raise ParameterFileError(p, f"malformed YAML{where}: {getattr(exc, 'problem', exc)}") from None
     if doc is None:
         return {}
+    size = expanded_size(doc)
+    if size is None or size > MAX_EXPANDED_VALUES:
+        raise ParameterFileError(p, "its aliases expand to " + ("a recursive structure" if size is None else
+                                 f"{size} values") + f", more than {MAX_EXPANDED_VALUES} (an alias bomb?)")
     if not isinstance(doc, Mapping):
         raise ParameterFileError(p, "expected a map of node names at the top level")
     out: dict[str, Any] = {}

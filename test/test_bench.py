@@ -430,15 +430,24 @@ def test_floor_probe_counts_a_loop_that_overruns_as_the_controller_does(monkeypa
 
 
 def test_floor_probe_runs_in_its_own_process_and_says_whether_rt_was_granted() -> None:
-    """One real probe (0.5 s): a row of non-negative figures; how many it misses is the machine's."""
-    from dualarm_control.app.bench.floor import run_floor
+    """One real probe (0.5 s): the row's figures, consistent with each other and as the bench's table shows
+    them; how many deadlines it misses is the machine's."""
+    from dualarm_control.app.bench.floor import format_floor, run_floor
 
     row = run_floor(200.0, 0.2, "none", "rt", seconds=0.5)
-    assert row["rate_hz"] == 200.0 and row["work_ms"] == 0.2 and row["scheduling"] == "rt"
+    assert set(row) == {"rate_hz", "load", "scheduling", "work_ms", "priority_granted", "cycles", "missed_deadlines",
+                        "missed_share", "late_p50_ms", "late_p99_ms", "late_max_ms"}, row
+    assert row["rate_hz"] == 200.0 and row["work_ms"] == 0.2 and row["scheduling"] == "rt" and row["load"] == "none"
     assert 1 <= row["cycles"] <= 101  # 0.5 s at 200 Hz, fewer when a wake-up was over a period late
-    assert isinstance(row["priority_granted"], bool)
-    figures = {k: v for k, v in row.items() if k not in ("load", "scheduling", "priority_granted")}
-    assert all(isinstance(v, (int, float)) and v >= 0.0 for v in figures.values()), row
+    assert isinstance(row["priority_granted"], bool) and isinstance(row["missed_deadlines"], int)
+    assert row["missed_deadlines"] >= 0, row  # a late cycle counts its lost periods too
+    assert row["missed_share"] == pytest.approx(row["missed_deadlines"] / row["cycles"]), row
+    assert 0.0 <= row["late_p50_ms"] <= row["late_p99_ms"] <= row["late_max_ms"] + 1e-9, row  # a distribution
+    (line,) = format_floor([row]).splitlines()[2:]
+    sched = "rt" if row["priority_granted"] else "rt (not permitted)"
+    assert line == (f"| 200 | none | {sched} | 0.200 | {row['cycles']} | {row['missed_deadlines']} "
+                    f"({row['missed_share']:.2%}) | {row['late_p50_ms']:.3f} / {row['late_p99_ms']:.3f} / "
+                    f"{row['late_max_ms']:.2f} |"), line
 
 
 def test_floor_rows_take_the_leanest_launch_of_each_group(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -162,25 +162,37 @@ def test_truncated_or_foreign_payloads_raise_cdr_error() -> None:
     a prefix that only lacks that padding reads)."""
     names = [f"joint_{i}" for i in range(14)]
     payloads = {
-        "joint_state": (rclpy_joint_state(5, "base", names, [0.1] * 14, [0.2] * 14, []), cdr.JointStateReader()),
-        "target": (convert.target_message(5, 0, _sample()), cdr.relative_target),
-        "command": (bytes(serialize_message(Float64MultiArray(data=[0.5] * 14))), cdr.float64_multi_array_data),
+        "joint_state": (rclpy_joint_state(5, "base", names, [0.1] * 14, [0.2] * 14, []), cdr.JointStateReader(),
+                        [5, names, [0.1] * 14, [0.2] * 14]),
+        "target": (convert.target_message(5, 0, _sample()), cdr.relative_target,
+                   [5, 1, [[0.1, 0.2, 0.3, 0.0, 0.0, 0.0, 1.0]], [[0.0] * 6]]),
+        "command": (bytes(serialize_message(Float64MultiArray(data=[0.5] * 14))), cdr.float64_multi_array_data,
+                    [0.5] * 14),
     }
-    for what, (payload, read) in payloads.items():
-        read(payload)  # the whole payload reads
+    for what, (payload, read, expected) in payloads.items():
+        assert _content(read(payload)) == expected, what  # the whole payload reads its content
         reads = []
         for cut in range(len(payload)):
             try:
-                read(payload[:cut])
+                value = read(payload[:cut])
             except cdr.CdrError:
                 continue
+            assert _content(value) == expected, (what, cut)  # a prefix lacking only padding reads the same
             reads.append(cut)
         assert reads == list(range(len(payload) - len(reads), len(payload))) and len(reads) < 8, (what, reads)
         with pytest.raises(cdr.CdrError, match="encapsulation"):
             read(b"\x00\x00\x00\x00" + payload[4:])  # CDR_BE: left to rclpy
         with pytest.raises(cdr.CdrError):
             read(payload[:4] + b"\xff" * (len(payload) - 4))
-        assert what
+
+
+def _content(value: object) -> object:
+    """A reader's result as plain lists (arrays, tuples) to compare with the values serialized."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, tuple):
+        return [_content(v) for v in value]
+    return value
 
 
 def _sample() -> object:

@@ -96,8 +96,10 @@ def test_closed_loop_reaches_the_target(solver: str, runs: dict[str, Run], model
     """Final relative pose from pinocchio FK of the measured q vs the trajectory's exact end pose."""
     run = runs[solver]
     p, r = model.relative_pose(run.final_q)
-    assert np.linalg.norm(p - run.end_position) < 1e-3
-    assert rotation_angle(r, run.end_rotation) < 1e-2
+    # measured 2026-12 (deterministic): 8.8e-8 m / 6.2e-7 rad (standard_qp, pseudo_inverse, constraint_based),
+    # 3.0e-7 m / 7.8e-7 rad (sparse_qp, hierarchical_sparse_qp); bounds 10 x the largest
+    position_error, rotation_error = float(np.linalg.norm(p - run.end_position)), rotation_angle(r, run.end_rotation)
+    assert position_error < 3e-6 and rotation_error < 8e-6, (position_error, rotation_error)
     p0, r0 = model.relative_pose(run.positions[0])  # and the motion really happened
     assert np.linalg.norm(p - p0) == pytest.approx(0.05, abs=2e-3)
     assert rotation_angle(r, r0) == pytest.approx(TURN, abs=1e-2)

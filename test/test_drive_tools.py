@@ -18,6 +18,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from reading import read_line
 
 from dualarm_control.online_trajectory import (
     KEY_ANGLE,
@@ -93,8 +94,7 @@ def _script() -> str:
 def start_subscriber(answer: str) -> subprocess.Popen[str]:
     proc = subprocess.Popen([sys.executable, "-c", _script(), answer], stdout=subprocess.PIPE, text=True,
                             env=os.environ.copy())
-    assert proc.stdout is not None
-    assert proc.stdout.readline().strip() == "ready"
+    assert read_line(proc, what="the subscriber's 'ready'").strip() == "ready"
     return proc
 
 

@@ -18,9 +18,11 @@ from dualarm_control.app.cli import main
 from dualarm_control.app.record.report import METRIC_KEYS, TRACKING_KEYS
 
 SOLVERS = ("standard_qp", "sparse_qp", "hierarchical_sparse_qp")
-FINAL_ERRORS = {"standard_qp": (1.6e-5, 5.3e-5), "sparse_qp": (2.1e-5, 6.6e-5), "hierarchical_sparse_qp": (2.2e-5, 6.9e-5)}
-"""docs/experiment.md: final position [m] / orientation [rad] error per solver before the cell held its integrated
-command (now 6e-12 to 1.6e-7 m); asserted within 2 x (the doc states this bound)."""
+FINAL_ERRORS = {"standard_qp": (6.4e-12, 3.7e-9), "sparse_qp": (1.6e-7, 1.3e-7), "hierarchical_sparse_qp": (1.6e-7, 1.3e-7)}
+"""docs/experiment.md: final position [m] / orientation [rad] error per solver since the cell holds its integrated
+command; measured 2026-12 (deterministic): 6.36e-12 / 3.72e-9, 1.65e-7 / 1.33e-7, 1.64e-7 / 1.32e-7. Asserted within
+FINAL_ERROR_FACTOR x these."""
+FINAL_ERROR_FACTOR = 10.0
 PAPER_RATIOS = (0.357, 0.471)
 """Paper 000, Table I: l0(sparse) / l0(standard), l0(hierarchical) / l0(standard)."""
 RATIOS = {"l0_sparse": 0.319, "l0_hierarchical": 0.431, "l1_sparse": 0.661, "l2_sparse": 1.22}
@@ -74,11 +76,12 @@ def test_metrics_file_has_every_key(metrics: dict[str, dict[str, float]]) -> Non
 
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_task_is_tracked_within_limits(metrics: dict[str, dict[str, float]], solver: str) -> None:
-    """Final relative error within 2 x the documented figures (FINAL_ERRORS, ~2e-5 m and ~6e-5 rad; the
-    core issue's done-when bound was 1 mm and 0.01 rad); no limit violation; no solver failure."""
+    """Final relative error within 10 x the documented figures (FINAL_ERRORS, 6e-12 to 1.6e-7 m, 4e-9 to 1.3e-7
+    rad; the core issue's done-when bound was 1 mm and 0.01 rad); no limit violation; no solver failure."""
     m = metrics[solver]
-    assert m["final_position_error_m"] < 2 * FINAL_ERRORS[solver][0]
-    assert m["final_orientation_error_rad"] < 2 * FINAL_ERRORS[solver][1]
+    position, orientation = FINAL_ERRORS[solver]
+    assert m["final_position_error_m"] < FINAL_ERROR_FACTOR * position, m["final_position_error_m"]
+    assert m["final_orientation_error_rad"] < FINAL_ERROR_FACTOR * orientation, m["final_orientation_error_rad"]
     assert m["joint_position_limit_violations"] == 0
     assert m["joint_velocity_limit_violations"] == 0
     assert m["solver_failures"] == 0

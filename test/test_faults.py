@@ -24,6 +24,7 @@ from pathlib import Path
 import pytest
 
 from dualarm_control.app.faults import matrix as faults
+from dualarm_control.app.faults.episodes import SafeEpisode
 
 FAULT_MOVE = str(Path(__file__).parent / "data" / "fault_move.yaml")
 Runs = dict[str, tuple[Path, dict[str, faults.Row], list[str]]]
@@ -162,3 +163,15 @@ def test_goal_into_collision_stalls_with_the_pair_and_no_contact(runs: Runs, tmp
     default run, in real time in test_interactive_node.py's slow test)."""
     row = passed(runs, tmp_path_factory, "goal_into_collision")
     assert row.figures["contacts"] == 0 and row.figures["distance_m"] >= 0.029, row.observed
+
+
+@pytest.mark.parametrize(("recovered_ms", "status"), [(15.0, "pass"), (1040.0, "pass"), (float("nan"), "FAIL")])
+def test_link_cut_verdict_is_that_it_recovers(monkeypatch: pytest.MonkeyPatch, recovered_ms: float,
+                                              status: str) -> None:
+    """The link_cut row's verdict is that the cell recovers once the link is up (OK again 1040 ms after it,
+    once, under load, failed a 1000 ms bound): the time is the row's figure; never recovering fails."""
+    seen = SafeEpisode("joint_states stale by 16.0 ms", 20.0, 16.0, 195, 0, recovered_ms, 1)  # as from a bag
+    monkeypatch.setattr(faults, "safe_episode", lambda *_args: seen)
+    row = faults.link_cut_row(None, faults._Episode(0, 10**9, (1, 1)))  # type: ignore[arg-type]
+    assert row.status == status, row.observed
+    assert row.figures["recovered_ms"] == pytest.approx(recovered_ms, nan_ok=True)

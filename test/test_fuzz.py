@@ -340,3 +340,35 @@ def test_garbled_cdr_and_bad_messages_on_running_nodes() -> None:
     assert any("time source restarted" in line for line in controller.lines)
     assert codes == (0, 0), (controller.lines[-20:], sim.lines[-20:])
     assert not any("Traceback" in line for line in controller.lines + sim.lines)
+
+
+def alias_bomb(levels: int = 9) -> str:
+    """A parameter file of 'billion laughs' shape: each level a map of 9 aliases of the level below; under
+    900 bytes, 9^9 (387 million) maps once expanded."""
+    lines = ["controller_node:", "  ros__parameters:", "    l0: &l0 {a: 1, b: 1, c: 1, d: 1, e: 1, f: 1, g: 1, h: 1, i: 1}"]
+    for k in range(1, levels):
+        lines.append(f"    l{k}: &l{k} {{" + ", ".join(f"k{j}: *l{k - 1}" for j in range(9)) + "}")
+    return "\n".join([*lines, f"    gain: *l{levels - 1}", ""])
+
+
+@pytest.mark.parametrize(("text", "words"), [(alias_bomb(), "its aliases expand to 1852354213 values"),
+                                              ("controller_node:\n  ros__parameters:\n    loop: &a [1, *a]\n",
+                                               "its aliases expand to a recursive structure")])
+def test_an_alias_bomb_is_refused_at_once(tmp_path: Path, text: str, words: str) -> None:
+    """The reader refuses a file whose aliases expand beyond MAX_EXPANDED_VALUES (or forever), naming the file,
+    within the hang guard (before the bound: no result after 20 s of flattening); files using a few aliases load."""
+    path = write(tmp_path, "bomb.yaml", text)
+    message = only_own_errors(lambda: read_params_file(path, "controller_node"))
+    assert str(path) in message and words in message, message
+    segments = read_params_file(Path(__file__).parent / "data" / "back_and_forth.yaml", "trajectory_node")
+    assert segments["scenario.there4.position"] == [0.05, 0.0, 0.12]  # its 40 segments are aliases
+
+
+def test_the_commands_refuse_an_alias_bomb_with_exit_2(tmp_path: Path) -> None:
+    path = write(tmp_path, "bomb.yaml", alias_bomb())
+    out = tmp_path / "out"
+    done = subprocess.run([sys.executable, "-m", "dualarm_control.app.cli", "experiment", "assembly", "--params",
+                           str(path), "--output", str(out)], cwd=REPO, capture_output=True, text=True, timeout=300,
+                          check=False)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr[-3000:]
+    assert f"parameter file {path}: its aliases expand to" in done.stderr and not out.exists(), done.stderr

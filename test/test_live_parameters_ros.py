@@ -20,6 +20,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from reading import read_line
 from test_ros_live import Launch
 
 from dualarm_control.app.record.bag import COMMANDS_TOPIC, read_bag
@@ -31,8 +32,12 @@ PERIOD = 0.005
 ROUNDING = 1e-6  # rad/s^2: the back-end's bound tolerance (1e-9 rad/s) over T; float64 in the bag is exact
 CHANGES = (("gain", "8.0"), ("gain", "12.0"), ("gain", "6.0"), ("gain", "10.0"), ("solver", "sparse_qp"))
 MOVING = 0.05  # rad/s: the largest joint command just before a change is above this (a_max T)
+HANG_GUARD_S = 300.0
+"""Each wait of the client (the service, a moment of motion, an answer, the next command) ends after this [s]:
+the client then exits 1 saying what it waited for and what it saw; a hang guard, not a timing claim."""
 CLIENT = """
 import sys
+import time
 import rclpy
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
@@ -48,8 +53,16 @@ def on_command(msg):
     seen["fast"] = max(abs(v) for v in msg.data) if msg.data else 0.0
 
 node.create_subscription(Float64MultiArray, "/velocity_controller/commands", on_command, 100)
-while not client.wait_for_service(timeout_sec=1.0):
-    pass
+
+def spin_until(condition, what):
+    end = time.monotonic() + HANG_GUARD_S
+    while not condition():
+        if time.monotonic() > end:
+            print(f"hang guard: {what} not within {HANG_GUARD_S:g} s; seen {seen}", file=sys.stderr, flush=True)
+            sys.exit(1)
+        rclpy.spin_once(node, timeout_sec=0.1)
+
+spin_until(lambda: client.service_is_ready(), "the service /controller_node/set_parameters")
 print("ready", flush=True)
 last = 0
 current = {"gain": "10.0", "solver": "standard_qp"}
@@ -57,28 +70,29 @@ current = {"gain": "10.0", "solver": "standard_qp"}
 def set_parameter(name, text):
     global last
     # mid-motion: a command faster than 0.1 rad/s, at least 300 cycles after the last change
-    while not (seen["fast"] > 0.1 and seen["count"] - last >= 300):
-        rclpy.spin_once(node, timeout_sec=0.1)
+    spin_until(lambda: seen["fast"] > 0.1 and seen["count"] - last >= 300, "a command faster than 0.1 rad/s")
     value = (ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=float(text)) if name == "gain"
              else ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=text))
     future = client.call_async(SetParameters.Request(parameters=[Parameter(name=name, value=value)]))
-    rclpy.spin_until_future_complete(node, future)
+    spin_until(future.done, f"the answer to {name}={text}")
     result = future.result().results[0]
     last = seen["count"]
     fast = []  # the next two commands: still fast, so the change landed while the arms moved
     while len(fast) < 2:
         before = seen["count"]
-        while seen["count"] == before:
-            rclpy.spin_once(node, timeout_sec=0.1)
+        spin_until(lambda before=before: seen["count"] > before, "the next command")
         fast.append(seen["fast"])
     return result, min(fast) > 0.15
 
 for line in sys.stdin:
     name, text = line.split()
-    while True:  # on a loaded machine a change may land at a reversal (at rest): undo it, try again
+    for attempt in range(ATTEMPTS):  # on a loaded machine a change may land at a reversal (at rest): undo it, again
         result, moving = set_parameter(name, text)
         if not result.successful or moving:
             break
+        if attempt == ATTEMPTS - 1:
+            print(f"{name}={text} landed at rest {ATTEMPTS} times", file=sys.stderr, flush=True)
+            sys.exit(1)
         print(f"landed at rest: {name}={text}; undone, again", file=sys.stderr, flush=True)
         set_parameter(name, current[name])
     if result.successful:
@@ -91,18 +105,19 @@ rclpy.shutdown()
 
 def test_live_changes_keep_the_acceleration_bound(tmp_path: Path) -> None:
     bag_path = Path(os.environ.get("KEEP_BAG", str(tmp_path))) / "bag"
-    client = subprocess.Popen([sys.executable, "-c", CLIENT], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+    client = subprocess.Popen([sys.executable, "-c", f"HANG_GUARD_S = {HANG_GUARD_S!r}\nATTEMPTS = 20\n{CLIENT}"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE, text=True)
     launch = Launch(str(SCENARIO), "--lockstep", "--params", str(REPO / "config/solvers/standard_qp.yaml"),
                     "--params", str(REPO / "config/acceleration_limit.yaml"), "--record", str(bag_path))
     try:
-        assert client.stdout is not None and client.stdin is not None
-        assert client.stdout.readline().strip() == "ready"  # the controller's parameter service is there
+        assert client.stdin is not None
+        # the controller's parameter service is there (the client's own hang guard is 300 s, then it exits)
+        assert read_line(client, what="the client's 'ready'", timeout=HANG_GUARD_S + 60).strip() == "ready"
         launch.wait_for("segment 2/40", timeout=300.0)  # moving, the recorder running
         for name, value in CHANGES:  # the client sends each while the arms move fast (see CLIENT)
             client.stdin.write(f"{name} {value}\n")
             client.stdin.flush()
-            answer = client.stdout.readline().strip()
+            answer = read_line(client, what=f"the client's answer to {name}={value}", timeout=HANG_GUARD_S + 60).strip()
             assert answer == "ok", f"{name}={value}: {answer!r}"
         launch.wait_for("solver='sparse_qp'", timeout=300.0)  # the last change has landed
     finally:

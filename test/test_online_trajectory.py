@@ -46,7 +46,14 @@ R0 = np.eye(3)
 REL = 1e-6  # relative rounding allowance on the limits
 SPEED_REL = 1e-9  # relative rounding allowance on the angular speed limit (a norm: exact up to rounding)
 
-SETTINGS = settings(max_examples=5, deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=False)
+SETTINGS = settings(max_examples=5, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+"""Five examples a test; derandomize comes from the profile (conftest.py): under CI the same examples every run."""
+
+
+def test_the_property_tests_draw_what_the_profile_says() -> None:
+    """SETTINGS overrides no profile setting: under CI (profile "ci", derandomize) every run draws the same examples."""
+    assert SETTINGS.derandomize == settings.default.derandomize
+    assert SETTINGS.print_blob == settings.default.print_blob
 
 
 def _vec(lo: float, hi: float) -> st.SearchStrategy[list[float]]:

@@ -359,12 +359,16 @@ def test_cli_plan_writes_plan_json_and_figures(tmp_path: Path) -> None:
 INDEX_RATIO_TARGET = 0.77
 """The documented margin (docs/planner.md): average index of the plan / baseline's <= 0.77, the
 paper's 1.17 / 1.52."""
+REDUCED_RATIO_BOUND = 0.54
+"""The reduced multi-start plan's ratio (deterministic, seed 0): measured 0.494 (index 0.2008 vs baseline 0.4061,
+2026-12, the same as docs/planner.md); bound about 10 % above it."""
 
 
 def test_reduced_multistart_plan_beats_the_baseline_by_the_documented_margin() -> None:
     """The default scenario settings with 10 key-point starts instead of 100 and 2 inner starts
     instead of 10 (the inner NLPs are unimodal: 10 inner starts give the same plan here), seed 0,
-    one worker: ratio <= 0.77 against the baseline from the plan's q_1, closure and joint limits as
+    one worker: ratio <= 0.54 (REDUCED_RATIO_BOUND, about 10 % above the measured 0.494; the documented margin of
+    the full plan is 0.77) against the baseline from the plan's q_1, closure and joint limits as
     for the full plan. Deterministic (bit-identical for a seed); measured ratio 0.494 (index 0.2008
     vs 0.4061), 14-17 s on the loaded 2-core machine."""
     config = dataclasses.replace(load_plan_config("corner_path"), starts=10, inner_starts=2, seed=0)
@@ -372,7 +376,7 @@ def test_reduced_multistart_plan_beats_the_baseline_by_the_documented_margin() -
     ratio = result.average_index / result.baseline_average_index
     print(f"index {result.average_index:.4f} vs baseline {result.baseline_average_index:.4f}: ratio {ratio:.3f}")
     assert config.candidates == 4 and config.lambda_key == 1.5 and config.lambda_inner == 3.0  # the defaults
-    assert ratio <= INDEX_RATIO_TARGET
+    assert ratio <= REDUCED_RATIO_BOUND, f"ratio {ratio:.3f} (index {result.average_index:.4f} vs {result.baseline_average_index:.4f})"
     assert np.max(result.closure_position_errors) <= 1e-5
     assert np.max(result.closure_rotation_errors) <= 1e-4
     assert result.joint_limit_violations == 0

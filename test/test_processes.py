@@ -153,4 +153,6 @@ def test_shared_process_runs_the_scenario_and_every_topic_reaches_a_recorder(tmp
     assert all(counts.get(t, 0) > 0 for t in per_cycle), counts  # each node's, off the local bus onto the wire
     assert len(run.time) > 0 and np.all(np.isfinite(run.commands))
     position_error, orientation_error = run.final_errors
-    assert position_error < 1e-3 and orientation_error < 1e-2  # the scenario ends at rest on its target
+    # the scenario ends at rest on its target: measured 2026-12 1.12e-6 m / 4.8e-6 rad (1 and 2 processes, real time,
+    # the machine shared); bounds about 10 x these
+    assert position_error < 1.2e-5 and orientation_error < 5e-5, (position_error, orientation_error)

@@ -9,7 +9,7 @@ node joining a cell that is already running (no later newcomer makes the peer an
 itself again): here the trajectory node starts several times against one running sim_node, in
 real time. The default test asserts what does not depend on the machine's load, on 3 starts: every
 start receives its first /joint_states (waited for with a deadline), and prints how long each
-took. How long is a wall-clock figure: the bound (1 s, 6x the normal 80 ms and far below the
+took; a join slower than 1.5 s (below the stall) fails it. How long is a wall-clock figure: the bound (1 s, 6x the normal 80 ms and far below the
 2.6-3.3 s stall it catches; before the profile, 21 of 30 such starts took over 0.5 s, up to
 3.3 s: docs/bench.md, "Start-up") is asserted by the ``slow`` test, on 10 starts.
 """
@@ -43,6 +43,12 @@ announcement: 2.6-3.3 s with Fast DDS's default 3 s. Measured with the package's
 0.41 s in 78 full launches and 60 joins on a loaded machine, but one of 10 joins took 0.515 s in a
 fresh clone under ``stress-ng --cpu 1`` (the node itself starved of CPU), so the bound is 1 s, not the
 0.5 s target that docs/bench.md reports against."""
+STALL_GUARD_S = 1.5
+"""The default test's bound: below the stall it exists for (a lost discovery reply, matched only at the peer's next
+periodic announcement: 2.6-3.3 s in docs/bench.md; without the package's profile here 1.78-2.73 s in 6 joins,
+2026-12), far above the normal join (80 ms quiet; 0.12-0.33 s on this shared machine; at most 0.41 s in 60 joins
+on a loaded machine, 0.515 s once with the node starved under ``stress-ng --cpu 1``): a guard that a busy machine
+does not trip (3 x the starved join), not a speed target (the slow test's 1 s)."""
 REAL_TIME = ["-p", "lockstep:=false", "-p", "scenario:=assembly"]
 LOG_FORMAT = {"RCUTILS_CONSOLE_OUTPUT_FORMAT": "[{severity}] [{time}] [{name}]: {message}"}
 LOG_LINE = re.compile(r"\[INFO\] \[(\d+\.\d+)\] \[trajectory_node\]: (.*)")
@@ -101,9 +107,11 @@ def joins() -> list[float]:
 
 
 def test_a_node_joining_a_running_cell_gets_its_first_joint_state(few_joins: list[float]) -> None:
-    """Each of 3 joins got its first joint state after it was up (the wait for it fails after
-    120 s: a deadline, not a speed; how soon is the slow test's, on 10 joins)."""
-    assert len(few_joins) == FEW_STARTS and all(delay >= 0.0 for delay in few_joins), few_joins
+    """Each of 3 joins got its first joint state after it was up, none after a discovery stall (the node's
+    own log stamps, from up to first state, under STALL_GUARD_S = 1.5 s: below the 1.8-3.3 s stall, 3 x the
+    slowest join seen on a starved machine); how soon (1 s) is the slow test's, on 10 joins."""
+    assert len(few_joins) == FEW_STARTS and all(0.0 <= delay < STALL_GUARD_S for delay in few_joins), \
+        [round(d, 3) for d in few_joins]
 
 
 @pytest.mark.slow

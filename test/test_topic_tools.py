@@ -15,6 +15,7 @@ import yaml
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, Transform, Twist, WrenchStamped
+from reading import read_line
 from rosbags.typesys import Stores, get_typestore
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -76,7 +77,7 @@ def publisher(tmp_path_factory: pytest.TempPathFactory) -> Iterator[subprocess.P
     proc = subprocess.Popen([sys.executable, str(script)], cwd=REPO, stdout=subprocess.PIPE,
                             stderr=subprocess.DEVNULL, text=True)
     try:
-        assert proc.stdout is not None and proc.stdout.readline().strip() == "publishing"
+        assert read_line(proc, what="the publisher's 'publishing'").strip() == "publishing"
         yield proc
     finally:
         proc.kill()

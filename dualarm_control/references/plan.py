@@ -77,7 +77,7 @@ class PlanSource(SourceDefaults):
     @classmethod
     def from_file(cls, model: DualArmModel, plan_path: str | Path) -> PlanSource:
         """The source of a plan.json of ``dualarm plan``."""
-        plan = read_plan(plan_path, model.joint_names)
+        plan = read_plan(plan_path, model.joint_names, model.q_min, model.q_max)
         return cls(model, load_plan_config(plan.scenario), plan.configurations, str(plan_path))
 
     def initial_positions(self, default: FloatArray) -> FloatArray:

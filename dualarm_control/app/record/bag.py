@@ -24,7 +24,7 @@ contacts; ``table_contacts`` is the simulator's running total from its last 1 Hz
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
@@ -311,11 +311,31 @@ def read_bag(path: Path) -> Bag:
     bag = Bag(missing=missing_topics(reader))
     try:
         connections = [c for c in reader.connections if c.topic in (*REPORT_TOPICS, CONTACT_TOPIC, DESCRIPTION_TOPIC)]
-        for conn, t, raw in reader.messages(connections=connections):
-            bag.add(conn.topic, t, reader.deserialize(raw, conn.msgtype))
+        for topic, t, msg in _decoded(reader, connections, path):
+            bag.add(topic, t, msg)
     finally:
         reader.close()
     return bag
+
+
+def _decoded(reader: AnyReader, connections: list[Any], path: Path) -> Iterator[tuple[str, int, Any]]:
+    """(topic, time, message) of ``connections``; BagError naming the bag, the topic and what failed when the
+    storage or a message cannot be decoded (a corrupt or truncated file: rosbags raises anything from
+    ``OverflowError`` to ``struct.error`` then)."""
+    messages = reader.messages(connections=connections)
+    count = 0
+    while True:
+        try:
+            item = next(messages, None)
+            if item is None:
+                return
+            conn, t, raw = item
+            msg = reader.deserialize(raw, conn.msgtype)
+        except Exception as exc:  # noqa: BLE001 - any failure to decode the file is a bad bag
+            raise BagError(f"cannot read bag {path}: corrupt data after {count} messages "
+                           f"({type(exc).__name__}: {exc})") from None
+        count += 1
+        yield conn.topic, t, msg
 
 
 def missing_topics(reader: AnyReader, needed: Iterable[str] = REPORT_TOPICS) -> list[str]:
@@ -529,6 +549,7 @@ def report(path: Path, output: Path) -> tuple[dict[str, dict[str, Any]], str, li
     figures' file names; BagError when the bag lacks what the report needs.
     """
     from dualarm_control.app.record.report import (
+        prepare_output,
         summarize_run,
         write_figures,
         write_json,
@@ -543,5 +564,6 @@ def report(path: Path, output: Path) -> tuple[dict[str, dict[str, Any]], str, li
     if scenario is None:
         scenario = goals_scenario(bag)
     results = {r.label: summarize_run(r, scenario, model) for r in runs}
+    prepare_output(Path(output))
     write_json(Path(output) / "metrics.json", results)
     return results, runs[0].kind, write_figures(runs[0].kind, Path(output), Path(path).name, runs, scenario)

@@ -18,6 +18,7 @@ order of ``joint_names``.
 from __future__ import annotations
 
 import json
+import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
@@ -28,6 +29,7 @@ import numpy as np
 from dualarm_control.app.record.run_record import RunRecord, TaskValues
 from dualarm_control.collision import CollisionModel
 from dualarm_control.drive_monitor import judge_goals
+from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel, FloatArray, rotation_angle
 from dualarm_control.metrics import (
     active_set_switches_per_s,
@@ -307,6 +309,22 @@ def plan_record(result: PlanResult, model: DualArmModel, execution: ExecutionRes
         doc["executed_max_error_rad"] = execution.max_error_rad
         doc["execution"] = asdict(execution)
     return doc
+
+
+def prepare_output(out: Path) -> Path:
+    """``out`` made (with its parents) and checked writable, before a command's work: DualArmError naming the
+    directory and why when it cannot be (a regular file on the way, no permission, a read-only file system),
+    with nothing written."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise DualArmError(f"output directory {out}: cannot write there (a file, not a directory)")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):  # writable: a probe file, removed at once
+            pass
+    except OSError as exc:
+        raise DualArmError(f"output directory {out}: cannot write there ({exc.strerror or exc})") from None
+    return out
 
 
 def write_json(path: Path, doc: Mapping[str, Any], indent: int = 2) -> Path:

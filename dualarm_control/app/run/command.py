@@ -15,6 +15,7 @@ from typing import Any
 from dualarm_control.app.record.report import (
     format_table,
     goal_lines,
+    prepare_output,
     summarize_run,
     write_figures,
     write_json,
@@ -69,6 +70,7 @@ def experiment_command(scenario_name: str, solver_names: str | None, params_file
         print(f"scenario {scenario.name!r} ({scenario.source}); solver {solver}; gains {gains}"
               f"{'; force feedback' if force else ''}; output: {out}", file=sys.stderr)
 
+    prepare_output(out)  # before the runs: an output that cannot be written fails now, not after minutes
     results: dict[str, dict[str, Any]] = {}
     logs: list[RunRecord] = []
     try:
