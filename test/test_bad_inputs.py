@@ -129,20 +129,12 @@ def test_plan_loader_refuses_a_bad_plan_naming_the_file_point_and_joint(tmp_path
     assert good.configurations.shape == (5, 14)
 
 
-@pytest.mark.parametrize(("change", "words"), [("count", "has 13 joint values"), ("nan", "is not finite")])
+@pytest.mark.parametrize(("change", "words"), [("count", "has 13 joint values"), ("nan", "is not finite"),
+                                              ("limits", "point 3, joint left_joint_3: 7 rad is beyond the joint limits")])
 def test_launch_refuses_a_bad_plan_with_exit_2(tmp_path: Path, change: str, words: str) -> None:
+    """Refused by `dualarm launch` itself before any node starts (the model's limits included)."""
     path = write_plan(tmp_path, f"{change}.json", change)
     assert_refused(dualarm("launch", "corner_path", "--plan", str(path), "--lockstep"), str(path), words)
-
-
-def test_launch_of_a_plan_beyond_the_joint_limits_is_refused_by_the_nodes(tmp_path: Path) -> None:
-    """The nodes load the plan with the model's limits and exit with its error; the launch fails (exit 1:
-    the command's own check before it starts the nodes reads the plan without the limits, app/cli.py)."""
-    path = write_plan(tmp_path, "limits.json", "limits")
-    done = dualarm("launch", "corner_path", "--plan", str(path), "--lockstep")
-    seen = done.stdout[-3000:] + done.stderr[-3000:]
-    assert done.returncode != 0 and "Traceback" not in seen, seen
-    assert f"error: plan {path}: point 3, joint left_joint_3: 7 rad is beyond the joint limits" in seen, seen
 
 
 # ---- robot descriptions --------------------------------------------------------------------------

@@ -88,8 +88,9 @@ def cmd_launch(args: argparse.Namespace) -> int:
         from dualarm_control.kinematics import DualArmModel
         from dualarm_control.planning.plan_file import read_plan
 
-        joints = DualArmModel(load_scenario(args.scenario, args.robot).robot).joint_names
-        planned = read_plan(plan, joints).scenario  # exit 2 on a bad plan file
+        model = DualArmModel(load_scenario(args.scenario, args.robot).robot)
+        # exit 2 on a bad plan file (joints, NaN, configurations beyond the limits), before any node starts
+        planned = read_plan(plan, model.joint_names, model.q_min, model.q_max).scenario
         if planned != args.scenario:
             raise DualArmError(f"--plan {plan} was planned on scenario {planned!r}, not {args.scenario!r}")
     return launch_scenario(args.scenario, args.params, extra, args.lockstep, record, args.timeout, args.rate,
