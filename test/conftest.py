@@ -60,6 +60,9 @@ def pytest_configure(config: pytest.Config) -> None:
         config.pluginmanager.register(DurationsFile(Path(path)), "durations-file")
 
 
+PROCESS_HELPERS = ("multiprocessing.resource_tracker", "multiprocessing.forkserver")
+"""Helpers of this pytest process itself (multiprocessing starts one on first use and keeps it for the
+process's life): not a test's leftovers."""
 LEFTOVER_GRACE_S = 10.0
 """A process started in a module may take this long to exit after its module's last fixture stopped it [s]."""
 
@@ -77,7 +80,8 @@ def no_process_outlives_its_module() -> Iterator[None]:
         out = []
         for p in me.children(recursive=True):
             try:
-                if p.pid not in before and p.status() != psutil.STATUS_ZOMBIE:
+                if (p.pid not in before and p.status() != psutil.STATUS_ZOMBIE
+                        and not any(part in " ".join(p.cmdline()) for part in PROCESS_HELPERS)):
                     out.append(p)
             except psutil.NoSuchProcess:
                 pass
