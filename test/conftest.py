@@ -3,6 +3,7 @@ a deliberately wrong solver for the tests that show a bound check can fail."""
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Iterator
 from pathlib import Path
@@ -52,6 +53,25 @@ class DurationsFile:
         total = sum(d for d, _, _ in self.rows)
         self.path.write_text(f"# {len(self.rows)} test phases, {total:.1f} s in all (summed over workers)\n" + "".join(
             f"{d:8.2f}s {when:<8} {nodeid}\n" for d, when, nodeid in sorted(self.rows, reverse=True)))
+        modules: dict[str, float] = {}
+        for d, _, nodeid in self.rows:
+            name = Path(nodeid.split("::")[0]).name
+            modules[name] = modules.get(name, 0.0) + d
+        self.path.with_suffix(".modules.json").write_text(json.dumps(
+            {k: round(v, 1) for k, v in sorted(modules.items(), key=lambda kv: -kv[1])}, indent=1) + "\n")
+
+
+MODULE_SECONDS = Path(__file__).with_name("module_seconds.json")
+"""Each test module's seconds in a recent default run (the ``.modules.json`` that ``--durations-file``
+writes beside its file; copy it here when modules change much)."""
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The longest modules first (order within a module kept): pytest-xdist hands whole modules to its
+    workers in this order (``--dist loadfile``), so the run ends on short modules, not on one worker
+    finishing a long one while the other idles. A module not in :data:`MODULE_SECONDS` counts 5 s."""
+    seconds = json.loads(MODULE_SECONDS.read_text()) if MODULE_SECONDS.exists() else {}
+    items.sort(key=lambda item: -seconds.get(item.path.name, 5.0))
 
 
 def pytest_configure(config: pytest.Config) -> None:
