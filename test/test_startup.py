@@ -106,6 +106,7 @@ def joins() -> list[float]:
     return join_delays(STARTS)
 
 
+@pytest.mark.realtime
 def test_a_node_joining_a_running_cell_gets_its_first_joint_state(few_joins: list[float]) -> None:
     """Each of 3 joins got its first joint state after it was up, none after a discovery stall (the node's
     own log stamps, from up to first state, under STALL_GUARD_S = 1.5 s: below the 1.8-3.3 s stall, 3 x the
