@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import signal
 import subprocess
 import sys
@@ -26,7 +25,7 @@ from launching import side_by_side
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
-from waiting import DEADLINE_S, exited, tail, wait_until
+from waiting import DEADLINE_S, exited, node_env, tail, wait_until
 
 from dualarm_control.app import cli
 from dualarm_control.app.record.bag import nearest_labels, pose_error, quaternion_angle
@@ -80,7 +79,7 @@ class Proc:
         """``env`` adds to the environment (a ROS domain of its own)."""
         self._stderr = stderr_path.open("w")
         self.popen = subprocess.Popen(args, cwd=REPO, stdout=subprocess.PIPE, stderr=self._stderr, text=True,
-                                      env={**os.environ, **env} if env else None)
+                                      env={**node_env(), **(env or {})})
         self.lines: list[str] = []
         self.stderr_path = stderr_path
         threading.Thread(target=self._pump, daemon=True).start()

@@ -7,7 +7,6 @@ private ROS_DOMAIN_ID.
 
 from __future__ import annotations
 
-import os
 import re
 import signal
 import subprocess
@@ -33,7 +32,7 @@ class Launch:
         """``env`` adds to the environment (a ROS domain of its own, say)."""
         self.popen = subprocess.Popen([sys.executable, "-u", "-m", "dualarm_control.app.cli", "launch", *args],
                                       cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                      env={**os.environ, **env} if env else None)
+                                      env={**node_env(), **(env or {})})
         self.lines: list[str] = []
         self._reader = threading.Thread(target=self._pump, daemon=True)
         self._reader.start()

@@ -54,6 +54,9 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
 def cmd_launch(args: argparse.Namespace) -> int:
     """Start the three nodes as processes on a scenario; optionally record a bag."""
+    from dualarm_control.ros.env import stop_with_launcher
+
+    stop_with_launcher()  # started by a launcher (or a test) that says so: stop with it, nodes and all
     from dualarm_control.app.run.launcher import (
         INTERACTIVE,
         INTERACTIVE_CELL,
