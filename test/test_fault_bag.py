@@ -47,6 +47,18 @@ def test_arm_stop_counts_steps_from_the_last_answered_state() -> None:
     assert stop.speed_at_last == 0.2 and stop.steps == 13 and stop.wall_ms == 65.0
 
 
+def test_arm_stop_counts_from_a_late_commands_arrival() -> None:
+    """A loaded controller answered state 9 with a command that arrived at state 14: the simulator's
+    timeout counts from there (the controller's lag is reported, not charged to the simulator)."""
+    stamps = [k * 5 * MS for k in range(30)]
+    speeds = [0.2] * 12 + [0.1] * 10 + [1e-4] * 8
+    rec = GraphStreams(state_stamp=stamps, state_speed=speeds, pose_stamp=stamps[:10],
+                       command_t=[s + MS for s in stamps[:9]] + [stamps[14] - MS // 2])
+    stop = arm_stop(rec, 0)
+    assert (stop.late_steps, stop.steps, stop.wall_ms) == (5, 8, 40.0)
+    assert "8 steps = 40 ms sim time" in stop.text(0.005) and "(5 steps after the last state" in stop.text(0.005)
+
+
 def test_arm_stop_never_at_rest() -> None:
     stamps = [k * 5 * MS for k in range(5)]
     rec = GraphStreams(state_stamp=stamps, state_speed=[0.2] * 5, pose_stamp=stamps[:2])

@@ -115,20 +115,25 @@ def safe_episode(rec: GraphStreams, start: int, resume: int, reason_text: str, e
 
 @dataclass(frozen=True)
 class ArmStop:
-    """The arms after the controller's last command (from /relative_pose and /joint_states stamps)."""
+    """The arms after the controller's last command (from /relative_pose, the commands' receipt and
+    /joint_states stamps)."""
 
     speed_at_last: float  # max joint speed at the last answered state [rad/s]
-    steps: int  # simulator steps from the last answered state to the first state at rest (-1: never)
+    steps: int  # simulator steps from the last command's arrival to the first state at rest (-1: never)
     wall_ms: float  # the same span in the states' wall-clock stamps
+    late_steps: int = 0  # steps from the last answered state to its command's arrival (the controller's lag)
 
     def text(self, period: float) -> str:
         return (f"moving at {self.speed_at_last:.3f} rad/s when the controller died; at rest (< {STOPPED_SPEED:g} "
                 f"rad/s) {self.steps} steps = {self.steps * period * 1e3:.0f} ms sim time "
-                f"({self.wall_ms:.0f} ms wall) after the last state it answered")
+                f"({self.wall_ms:.0f} ms wall) after its last command arrived ({self.late_steps} steps after the last "
+                "state it answered)")
 
 
 def arm_stop(rec: GraphStreams, after_stamp: int) -> ArmStop:
-    """Steps from the last state the controller answered (stamp >= ``after_stamp``) to rest."""
+    """Steps to rest from the arrival of the controller's last command (the first state stamped at or after
+    its receipt, or the last state it answered if later: the simulator's command timeout counts from the
+    command it received, and a loaded controller answers a state late), over states stamped >= ``after_stamp``."""
     answered = [s for s in rec.pose_stamp if s >= after_stamp]
     if not answered:
         return ArmStop(float("nan"), -1, float("nan"))
@@ -136,14 +141,16 @@ def arm_stop(rec: GraphStreams, after_stamp: int) -> ArmStop:
     order = np.argsort(rec.state_stamp)
     stamps = np.array(rec.state_stamp)[order]
     speeds = np.array(rec.state_speed)[order]
-    i0 = int(np.searchsorted(stamps, last))
-    if i0 >= len(stamps) or stamps[i0] != last:
+    i_answered = int(np.searchsorted(stamps, last))
+    if i_answered >= len(stamps) or stamps[i_answered] != last:
         return ArmStop(float("nan"), -1, float("nan"))
+    arrived = max(rec.command_t) if rec.command_t else last
+    i0 = max(i_answered, int(np.searchsorted(stamps, arrived)))
     rest = np.nonzero(speeds[i0:] < STOPPED_SPEED)[0]
     if not len(rest):
-        return ArmStop(float(speeds[i0]), -1, float("nan"))
+        return ArmStop(float(speeds[i_answered]), -1, float("nan"), i0 - i_answered)
     k = int(rest[0])
-    return ArmStop(float(speeds[i0]), k, (stamps[i0 + k] - last) / 1e6)
+    return ArmStop(float(speeds[i_answered]), k, (stamps[i0 + k] - stamps[i0]) / 1e6, i0 - i_answered)
 
 
 @dataclass(frozen=True)

@@ -80,7 +80,7 @@ EXPECTED = {
     "kill_sim": f"kill -9 sim_node mid-run, restart it {RESTART_AFTER_S:g} s later: zero commands + ERROR while it is "
                 f"gone, cycles resume (OK) once the new simulator publishes (< {RESTART_RECOVER_WITHIN_MS / 1e3:.0f} s)",
     "kill_controller": f"kill -9 controller_node mid-motion: the arms are at rest (all joints < 1e-3 rad/s) within "
-                       f"command_timeout ({COMMAND_TIMEOUT_STEPS} steps) + 3 steps of the last state it answered",
+                       f"command_timeout ({COMMAND_TIMEOUT_STEPS} steps) + 3 steps of its last command's arrival",
     "recorder_sigint": "SIGINT to a bag recorder mid-run: exit 0, bag readable (rosbags AnyReader), every message "
                        "decodes, every /joint_states stamped before the signal (- 1 ms) is in it",
     "recorder_sigterm": "SIGTERM to a bag recorder mid-run: as for SIGINT",
