@@ -14,6 +14,7 @@ from typing import Any
 
 import pytest
 from test_ros_live import Launch
+from waiting import DEADLINE_S
 
 REPO = Path(__file__).resolve().parents[1]
 DRIVER = Path(__file__).parent / "data" / "plain_driver.py"
@@ -58,18 +59,29 @@ LIVE_LIMITS = ("max_linear_velocity", "max_linear_acceleration")
 @pytest.fixture
 def live_limits(cell: Launch) -> Iterator[None]:
     """The trajectory node's motion limits that a test changes live, set back to their values after it
-    (the tests of the module share one running cell: no test sees another's limits)."""
-    before = {}
-    for name in LIVE_LIMITS:
-        got = dualarm("param", "get", "/trajectory_node", f"limits.{name}")
-        assert got.returncode == 0 and "value is: " in got.stdout, got.stdout + got.stderr
-        before[name] = got.stdout.strip().rsplit("value is: ", 1)[1]
-    try:
+    (the tests of the module share one running cell: no test sees another's limits); read and written
+    through one parameter client in this process (two `dualarm param` calls per limit cost seconds)."""
+    from rcl_interfaces.msg import Parameter as ParameterMsg
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+
+    from dualarm_control.ros.node import tool_node
+
+    names = [f"limits.{name}" for name in LIVE_LIMITS]
+    with tool_node("live_limits", signals=False) as (node, executor, _):
+        client = AsyncParameterClient(node, "/trajectory_node")
+        assert client.wait_for_services(timeout_sec=DEADLINE_S), "no parameter services of /trajectory_node"
+
+        def done(future: Any) -> Any:
+            executor.spin_until_future_complete(future, timeout_sec=DEADLINE_S)
+            assert future.done(), f"no answer from /trajectory_node within {DEADLINE_S:g} s"
+            return future.result()
+
+        values = done(client.get_parameters(names)).values
+        before = [Parameter.from_parameter_msg(ParameterMsg(name=n, value=v)) for n, v in zip(names, values, strict=True)]
         yield
-    finally:
-        for name, value in before.items():
-            done = dualarm("param", "set", "/trajectory_node", f"limits.{name}", value)
-            assert done.returncode == 0, done.stdout + done.stderr
+        results = done(client.set_parameters(before)).results
+        assert all(r.successful for r in results), [r.reason for r in results]
 
 
 def test_plain_rclpy_goals_are_reached_and_a_mid_motion_goal_preempts(cell: Launch) -> None:
