@@ -14,7 +14,6 @@ import math
 import signal
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -27,7 +26,7 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from waiting import exited, node_env, tail, wait_until
+from waiting import NodeProcess, exited, tail, wait_until
 
 from dualarm_control.controller import CONTROLLER_PARAMETERS, controller_params
 from dualarm_control.errors import DualArmError
@@ -180,32 +179,6 @@ REPO = Path(__file__).resolve().parents[1]
 PAYLOADS_PER_TOPIC = 200
 
 
-class NodeProcess:
-    """``dualarm run NODE`` in the background with its output collected."""
-
-    def __init__(self, node: str, *params: str) -> None:
-        args = [arg for p in ("thread_priority:=0", *params) for arg in ("-p", p)]
-        self.popen = subprocess.Popen([sys.executable, "-u", "-m", "dualarm_control.app.cli", "run", node,
-                                       "--ros-args", *args], cwd=REPO, stdout=subprocess.PIPE,
-                                      stderr=subprocess.STDOUT, text=True, env=node_env())
-        self.lines: list[str] = []
-        threading.Thread(target=self._pump, daemon=True).start()
-
-    def _pump(self) -> None:
-        assert self.popen.stdout is not None
-        for line in self.popen.stdout:
-            self.lines.append(line.rstrip("\n"))
-
-    def stop(self) -> int:
-        if self.popen.poll() is None:
-            self.popen.send_signal(signal.SIGINT)
-        try:
-            return self.popen.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            self.popen.kill()
-            return -9
-
-
 def garbled(rng: np.random.Generator, valid: bytes) -> bytes:
     """Random bytes, a truncated or bit-flipped valid sample, or a valid one with a huge sequence length."""
     kind = rng.integers(0, 4)
@@ -279,7 +252,7 @@ def test_garbled_cdr_and_bad_messages_on_running_nodes() -> None:
     from dualarm_control.ros.node import init_rclpy
 
     names = DualArmModel().joint_names
-    sim = NodeProcess("sim_node", "command_timeout:=0.2")
+    sim = NodeProcess("sim_node", "-p", "command_timeout:=0.2")
     controller = NodeProcess("controller_node")
     context = init_rclpy([])
     node = rclpy.create_node("fuzzer", context=context)
