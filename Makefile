@@ -37,8 +37,8 @@ lint: $(VENV)/.installed
 # phase's duration in $(OUT)/test-durations*.txt (CI prints them).
 TEST_WORKERS ?= 2
 test: lint
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile -m 'not slow and not realtime' --durations-file $(OUT)/test-durations.txt
-	$(PY) -m pytest -q -m 'realtime and not slow' --durations-file $(OUT)/test-durations-realtime.txt
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile -m 'not slow and not realtime' --durations-file=$(OUT)/test-durations.txt
+	$(PY) -m pytest -q -m 'realtime and not slow' --durations-file=$(OUT)/test-durations-realtime.txt
 
 test-slow: $(VENV)/.installed
 	$(PY) -m pytest -q -m slow
