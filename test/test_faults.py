@@ -26,6 +26,10 @@ import pytest
 from dualarm_control.app.faults import matrix as faults
 from dualarm_control.app.faults.episodes import SafeEpisode
 
+# real time against 15-100 ms watchdogs: run after the parallel tests, alone (a full parallel run made a
+# row miss its "complete" and another trip 2 s late)
+pytestmark = pytest.mark.realtime
+
 FAULT_MOVE = str(Path(__file__).parent / "data" / "fault_move.yaml")
 Runs = dict[str, tuple[Path, dict[str, faults.Row], list[str]]]
 

@@ -324,6 +324,9 @@ def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text
                 if getattr(shell, "lockstep", False):
                     watchdog.stage = "flush"
                     flush_publishers(shell_nodes(shell), ACK_TIMEOUT_S)
+                elif getattr(shell, "finished", False):  # ended by itself (a trajectory node's "complete")
+                    watchdog.stage = "flush"
+                    flush_publishers(shell_nodes(shell), FINISHED_ACK_TIMEOUT_S)
                 watchdog.stage = "teardown"
                 for node in shell_nodes(shell):
                     node.destroy_node()
@@ -339,6 +342,12 @@ ACK_TIMEOUT_S = 15.0
 a deadline for a recorder starved on a busy machine (a trajectory node's flush took 5.4 s under
 ``stress-ng --cpu 1``, its recorder 2800 samples behind), below the launcher's grace before SIGTERM
 (``app.run.launcher.STOP_GRACE_S``, 5 s more than this)."""
+
+FINISHED_ACK_TIMEOUT_S = 2.0
+"""How long, in all, a real-time node that ended by itself waits for its readers to acknowledge what it
+published last: the trajectory node's "complete" status reaches a loaded recorder instead of dying with
+the node's writer (a fault-matrix run under a parallel test load recorded no "complete" though the
+node logged it); short, because a reader that died with its process is never acknowledged."""
 
 
 EXIT_STUCK_S = ACK_TIMEOUT_S + 3.0
