@@ -94,20 +94,26 @@ def read_params_file(path: str | Path, node_name: str, namespace: str = "/") -> 
         text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise ParameterFileError(p, f"unreadable ({exc})") from None
+    return parse_params_text(text, node_name, namespace, p)
+
+
+def parse_params_text(text: str, node_name: str, namespace: str = "/", source: str | Path = "<text>") -> dict[str, Any]:
+    """:func:`read_params_file` on the text of a parameter file (``source`` names it in errors: a
+    path, or where the text came from, e.g. a bag's topic)."""
     try:
         doc = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        raise ParameterFileError(p, f"malformed YAML{where}: {getattr(exc, 'problem', exc)}") from None
+        raise ParameterFileError(source, f"malformed YAML{where}: {getattr(exc, 'problem', exc)}") from None
     if doc is None:
         return {}
     size = expanded_size(doc)
     if size is None or size > MAX_EXPANDED_VALUES:
-        raise ParameterFileError(p, "its aliases expand to " + ("a recursive structure" if size is None else
+        raise ParameterFileError(source, "its aliases expand to " + ("a recursive structure" if size is None else
                                  f"{size} values") + f", more than {MAX_EXPANDED_VALUES} (an alias bomb?)")
     if not isinstance(doc, Mapping):
-        raise ParameterFileError(p, "expected a map of node names at the top level")
+        raise ParameterFileError(source, "expected a map of node names at the top level")
     out: dict[str, Any] = {}
     seen: set[str] = set()
     for key in _node_keys(node_name, namespace):
@@ -116,12 +122,25 @@ def read_params_file(path: str | Path, node_name: str, namespace: str = "/") -> 
         seen.add(key)
         section = doc[key]
         if not isinstance(section, Mapping) or "ros__parameters" not in section:
-            raise ParameterFileError(p, f"section '{key}' must contain 'ros__parameters:'")
+            raise ParameterFileError(source, f"section '{key}' must contain 'ros__parameters:'")
         params = section["ros__parameters"] or {}
         if not isinstance(params, Mapping):
-            raise ParameterFileError(p, f"'{key}: ros__parameters' must be a map")
+            raise ParameterFileError(source, f"'{key}: ros__parameters' must be a map")
         out.update(flatten(params))
     return out
+
+
+def params_document(node_name: str, values: Mapping[str, Any]) -> str:
+    """A ROS 2 parameter file (YAML) giving node ``node_name`` the flat ``values`` (dotted names
+    nested again, keys sorted): :func:`parse_params_text` of it gives ``values`` back."""
+    tree: dict[str, Any] = {}
+    for name, value in values.items():
+        *parents, leaf = name.split(".")
+        branch = tree
+        for part in parents:
+            branch = branch.setdefault(part, {})
+        branch[leaf] = list(value) if isinstance(value, (list, tuple)) else value
+    return yaml.safe_dump({node_name: {"ros__parameters": tree}}, sort_keys=True, default_flow_style=None, width=100)
 
 
 def read_params_files(paths: Iterable[str | Path], node_name: str, namespace: str = "/") -> dict[str, Any]:

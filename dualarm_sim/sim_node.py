@@ -59,6 +59,7 @@ from trajectory_msgs.msg import JointTrajectory
 from dualarm_control.hardware import HARDWARE_PARAMETERS, profile_from_values
 from dualarm_control.params import ParamSpec, non_negative, positive
 from dualarm_control.ros import convert
+from dualarm_control.ros.cell_topic import CellPublisher
 from dualarm_control.ros.hardware_io import declare_with_profile
 from dualarm_control.ros.inputs import Throttle, subscribe_checked
 from dualarm_control.ros.local_bus import (
@@ -196,6 +197,7 @@ class SimNode:
                       f"(known scenarios: {', '.join(scenario_names())})")
         if priority_note and priority_note != "disabled":
             self.log.warning(priority_note)
+        self.cell_topic = CellPublisher(n)  # /dualarm/cell: what this run runs with, latched (for its bag)
 
     def close(self) -> None:
         self.log.info(f"stopping after {self.steps} steps ({self.steps * self.period_ns / 1e9:.3f} s sim time), "

@@ -7,6 +7,7 @@ final error is below 1 mm, and no position command is farther than v_max T from 
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -91,16 +92,19 @@ class Run:
         status = [s for d in topics["/diagnostics"] for s in d.status if s.name == "controller_node"]
         errors = [float(kv.value) for s in status for kv in s.values if kv.key == "position_error_m"]
         self.final_error = errors[-1]
+        self.bag = Path()
 
 
 def lockstep_run(name: str, scenario: str, bag: Path, timeout: float, env: dict[str, str] | None = None) -> Run:
     """The scenario over the nodes in lockstep on profile ``name``, recorded (its topics) and read back;
     ``env`` adds to the nodes' environment (a ROS domain of its own: launching.side_by_side)."""
     profile = profile_of(name)
-    topics = (*profile.joint_states, *profile.topics, "/diagnostics", "/relative_target")
+    topics = (*profile.joint_states, *profile.topics, "/diagnostics", "/relative_target", "/relative_pose")
     params = [str(profile_file(name))]
     assert launch_scenario(scenario, params, [], True, bag, timeout=timeout, record_topics=topics, env=env) == 0
-    return Run(profile, read_bag(bag))
+    run = Run(profile, read_bag(bag))
+    run.bag = bag
+    return run
 
 
 def assert_same_run(default: Run, got: Run) -> None:
@@ -130,6 +134,67 @@ def test_each_profile_completes_the_scenario(runs: dict[str, Run], name: str) ->
 @pytest.mark.parametrize("name", PROFILES[1:])
 def test_lockstep_table_one_metrics_equal_the_default_profiles(runs: dict[str, Run], name: str) -> None:
     assert_same_run(runs["sim"], runs[name])
+
+
+@pytest.mark.parametrize("name", PROFILES)
+def test_the_bag_carries_its_cell_and_the_product_reads_it_as_this_test_does(runs: dict[str, Run], name: str) -> None:
+    """Issue 40: the bag holds each node's parameters (/dualarm/cell); through the recorded profile the
+    product's reader gives the commands (velocities, description order) and the joint states this
+    test's own reading above gives."""
+    from dualarm_control.app.record.bag import read_bag as product_bag
+
+    run = runs[name]
+    bag = product_bag(run.bag)
+    assert {"sim_node", "controller_node", "trajectory_node"} <= set(bag.cell)
+    assert bag.streams.topics.outputs == profile_of(name).topics
+    commands = np.array([v for _, v in bag.commands])
+    assert commands.shape == run.velocities.shape
+    np.testing.assert_allclose(commands, run.velocities, rtol=0, atol=1e-9)
+    positions, _ = bag.joint_states(DualArmModel().joint_names)
+    states = {stamp: q for (_, stamp, _, _), q in zip(bag.states, positions.values, strict=True)}
+    np.testing.assert_allclose(np.array([states[s] for s in run.stamps]), run.positions, rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("name", PROFILES[1:])
+def test_dualarm_report_of_each_profiles_bag_equals_the_default_profiles(runs: dict[str, Run], name: str,
+                                                                          tmp_path: Path) -> None:
+    """Issue 40: ``dualarm report BAG`` of a run recorded on a hardware profile reads it through the recorded
+    profile: every metric of the default profile's report to 1e-6 (the cycle times, wall-clock
+    measurements, excepted)."""
+    from dualarm_control.app.cli import main
+
+    assert main(["report", str(runs["sim"].bag), "--output", str(tmp_path / "sim")]) == 0
+    assert main(["report", str(runs[name].bag), "--output", str(tmp_path / name)]) == 0
+    import json
+
+    want = json.loads((tmp_path / "sim" / "metrics.json").read_text())
+    got = json.loads((tmp_path / name / "metrics.json").read_text())
+    assert list(got) == list(want)
+    compared = 0
+    for label in want:
+        for key, value in want[label].items():
+            if "cycle_time" in key or "solve_time" in key or not isinstance(value, (int, float)):
+                continue
+            if isinstance(value, float) and math.isnan(value):
+                assert math.isnan(got[label][key]), key
+                continue
+            assert got[label][key] == pytest.approx(value, abs=1e-6), key
+            compared += 1
+    assert compared >= 10, want
+
+
+def test_the_video_of_a_two_topic_profiles_bag(runs: dict[str, Run], tmp_path: Path) -> None:
+    """Issue 40: ``dualarm view BAG --video`` draws a run recorded on lbr_dual_position (joint states on
+    /left and /right): as many frames as its duration gives, and the arms move in them."""
+    from dualarm_control.app.cli import main
+    from dualarm_control.app.view.recording import read_joint_recording
+
+    bag, video = runs["lbr_dual_position"].bag, tmp_path / "run.mp4"
+    assert main(["view", str(bag), "--video", str(video), "--fps", "10", "--size", "160x120"]) == 0
+    recording = read_joint_recording(bag)
+    assert recording.duration_s > 1.0
+    assert np.abs(recording.positions[-1] - recording.positions[0]).max() > 0.01
+    assert video.stat().st_size > 1000
 
 
 @pytest.mark.slow

@@ -61,6 +61,7 @@ from dualarm_control.references.base import (
 from dualarm_control.references.plan import PlanSource
 from dualarm_control.ros import convert, inputs, local_bus
 from dualarm_control.ros import node as shell
+from dualarm_control.ros.cell_topic import CellPublisher
 from dualarm_control.ros.hardware_check import check_graph
 from dualarm_control.ros.hardware_io import (
     CommandSink,
@@ -175,6 +176,7 @@ class ControllerNode:
                       f" ({self.model.nq} joints), solver '{self.params.solver}' (K={self.params.gain}, "
                       f"T={self.params.period} s, {'lockstep' if self.lockstep else 'real-time, event-driven'})")
         shell.log_priority(self.log, priority_note, self.values["thread_priority"])
+        self.cell_topic = CellPublisher(n)  # /dualarm/cell: what this run runs with, latched (for its bag)
 
     def run_options(self) -> RunOptions:
         """The run options of the scenario and the task parameters (0: the scenario's)."""

@@ -48,6 +48,7 @@ from dualarm_control.references.base import (
 from dualarm_control.references.goals import GoalsSource, GoalsStream
 from dualarm_control.references.plan import PlanSource
 from dualarm_control.ros import convert
+from dualarm_control.ros.cell_topic import CellPublisher
 from dualarm_control.ros.hardware_io import JointStates, declare_with_profile
 from dualarm_control.ros.inputs import StampGate, Throttle
 from dualarm_control.ros.local_bus import LocalBus, local_publisher
@@ -145,6 +146,7 @@ class TrajectoryNode:
                       f"{'lockstep' if self.lockstep else 'real-time'}; waiting for /joint_states")
         if priority_note and priority_note != "disabled":
             self.log.warning(priority_note)
+        self.cell_topic = CellPublisher(n)  # /dualarm/cell: what this run runs with, latched (for its bag)
 
     def subscribe_states(self) -> None:
         self.states = JointStates(self.node, self.profile, self.model.joint_names, self.qos, self.on_joint_state,

@@ -8,9 +8,9 @@ are stored as received (``raw=True``). Receive times come from the recorder node
 so with ``use_sim_time`` a bag of a lockstep run is on the simulation clock.
 Ctrl-C, SIGTERM or ``--duration`` close the bag with everything received so far.
 
-For the viewers (Foxglove, Lichtblick, Rerun) a bag also keeps ``/robot_description`` whenever
-a node publishes it (subscribed transient local, so a recorder started later still gets it)
-and, unless ``--no-tf`` or a node publishes ``/tf``, the link frames computed from each
+For the viewers (Foxglove, Lichtblick, Rerun) and the report a bag also keeps ``/robot_description``
+and ``/dualarm/cell`` (each node's parameters: robot, hardware profile, scenario) whenever a node
+publishes them (subscribed transient local, so a recorder started later still gets them) and, unless ``--no-tf`` or a node publishes ``/tf``, the link frames computed from each
 ``/joint_states`` (:mod:`dualarm_control.ros.computed_tf`); ``metadata.yaml`` says so in its
 ``custom_data``.
 """
@@ -38,6 +38,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from dualarm_control.errors import DualArmError
+from dualarm_control.ros.cell_topic import CELL_TOPIC
 from dualarm_control.ros.computed_tf import (
     DESCRIPTION_TOPIC,
     JOINT_STATES_TOPIC,
@@ -191,6 +192,11 @@ class BagWriter:
         meta_file.write_text(yaml.safe_dump(meta, sort_keys=False))
 
 
+ALWAYS_KEPT: Final = (DESCRIPTION_TOPIC, CELL_TOPIC)
+"""Latched topics every bag keeps whenever a node publishes them: the robot's URDF and what each node
+runs with (``ros/cell_topic.py``), so that a bag's reader knows the cell it was recorded on."""
+
+
 class Recorder:
     """Subscribes topics as discovery finds them and writes every message to a :class:`BagWriter`."""
 
@@ -251,10 +257,11 @@ class Recorder:
         return on_message
 
     def _tf_poll(self, known: dict[str, list[str]]) -> None:
-        """/robot_description kept whenever published; /tf computed only while no node publishes it."""
-        if DESCRIPTION_TOPIC not in self.subscriptions and DESCRIPTION_TOPIC in known \
-                and self.node.count_publishers(DESCRIPTION_TOPIC):
-            self._subscribe(DESCRIPTION_TOPIC, known[DESCRIPTION_TOPIC][0])
+        """/robot_description and /dualarm/cell (:data:`ALWAYS_KEPT`) kept whenever published; /tf
+        computed only while no node publishes it."""
+        for topic in ALWAYS_KEPT:
+            if topic not in self.subscriptions and topic in known and self.node.count_publishers(topic):
+                self._subscribe(topic, known[topic][0])
         if self.tf is not None and self.tf.enabled and self.node.count_publishers(TF_TOPIC):
             self.tf.disable("a node publishes it")
 

@@ -17,7 +17,6 @@ from typing import Any
 import numpy as np
 
 from dualarm_control.app.record.bag import (
-    COMMANDS_TOPIC,
     BagError,
     Status,
     open_reader,
@@ -57,7 +56,7 @@ def read_record(bag: Path) -> GraphStreams:
     for s in data.statuses:
         if s.name in statuses:
             statuses[s.name].append(s)
-    for t, command in data.rows[COMMANDS_TOPIC]:
+    for t, command in data.commands:
         rec.command_t.append(t)
         rec.command_max.append(float(np.max(np.abs(command))) if len(command) else 0.0)
     for _, stamp, _, msg in data.states:

@@ -27,6 +27,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
+from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -35,7 +36,13 @@ import numpy.typing as npt
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.typesys import Stores, get_typestore
 
+from dualarm_control.app.record.cell import (
+    ProfileStreams,
+    cell_parameters,
+    recorded_topics,
+)
 from dualarm_control.errors import DualArmError
+from dualarm_control.ros.cell_topic import CELL_TOPIC
 from dualarm_control.ros.convert import stamp_ns
 
 if TYPE_CHECKING:
@@ -52,7 +59,9 @@ DIAGNOSTICS_TOPIC = "/diagnostics"
 POSE_TOPIC = "/relative_pose"
 TARGET_TOPIC = "/relative_target"
 REPORT_TOPICS = (COMMANDS_TOPIC, JOINT_STATES_TOPIC, DIAGNOSTICS_TOPIC, POSE_TOPIC, TARGET_TOPIC)
-"""Topics :func:`read_run` needs (each with at least one message)."""
+"""Topics :func:`read_run` needs (each with at least one message) on the default hardware profile; a bag
+recorded on another profile needs that profile's joint-state and command topics instead (its
+``/dualarm/cell``: :mod:`dualarm_control.app.record.cell`)."""
 CONTROLLER_STATUS = "controller_node"
 """``DiagnosticStatus.name`` of the controller's per-cycle status."""
 DEFAULT_PERIOD_S = 0.005
@@ -224,9 +233,11 @@ class Bag:
     """The messages of one pass over a bag (:func:`read_bag`): what a run record of either kind,
     and the fault matrix's graph streams (:mod:`dualarm_control.app.faults.episodes`), are built from."""
 
-    rows: dict[str, list[tuple[int, Any]]] = field(  # (receive ns, values) of commands, poses, targets
-        default_factory=lambda: {t: [] for t in (COMMANDS_TOPIC, POSE_TOPIC, TARGET_TOPIC)})
-    states: list[tuple[int, int, list[str], Any]] = field(default_factory=list)  # (receive ns, stamp, names, msg)
+    streams: ProfileStreams = field(default_factory=lambda: ProfileStreams(recorded_topics({})))
+    """the hardware profile's joint states and commands (the recorded profile's; else the default)"""
+    cell: dict[str, dict[str, Any]] = field(default_factory=dict)  # node -> its parameters (/dualarm/cell)
+    rows: dict[str, list[tuple[int, Any]]] = field(  # (receive ns, values) of poses, targets
+        default_factory=lambda: {t: [] for t in (POSE_TOPIC, TARGET_TOPIC)})
     statuses: list[Status] = field(default_factory=list)  # every node's, in receive order
     pose_stamps: list[int] = field(default_factory=list)  # /relative_pose header stamps
     contact: dict[int, float] = field(default_factory=dict)  # /contact_force by header stamp
@@ -234,14 +245,12 @@ class Bag:
     description: str | None = None  # the first /robot_description (the cell's URDF)
 
     def add(self, topic: str, t: int, msg: Any) -> None:
-        if topic == JOINT_STATES_TOPIC:
-            self.states.append((t, stamp_ns(msg.header.stamp), list(msg.name), msg))
-        elif topic == DESCRIPTION_TOPIC:
+        if self.streams.add(topic, t, msg):
+            return
+        if topic == DESCRIPTION_TOPIC:
             self.description = self.description if self.description is not None else msg.data
         elif topic == CONTACT_TOPIC:
             self.contact.setdefault(stamp_ns(msg.header.stamp), float(msg.vector.z))
-        elif topic == COMMANDS_TOPIC:
-            self.rows[topic].append((t, np.asarray(msg.data, dtype=float)))
         elif topic == POSE_TOPIC:
             self.rows[topic].append((t, _pose_vector(msg.pose.position, msg.pose.orientation)))
             self.pose_stamps.append(stamp_ns(msg.header.stamp))
@@ -249,17 +258,38 @@ class Bag:
             if msg.points and msg.points[0].transforms:
                 tf = msg.points[0].transforms[0]
                 self.rows[topic].append((t, _pose_vector(tf.translation, tf.rotation)))
-        else:
+        elif topic == DIAGNOSTICS_TOPIC:
             for s in msg.status:
                 level = s.level[0] if isinstance(s.level, (bytes, bytearray)) else int(s.level)
                 self.statuses.append(Status(t, s.name, int(level), s.message, {kv.key: kv.value for kv in s.values}))
+
+    @property
+    def states(self) -> list[tuple[int, int, list[str], Any]]:
+        """(receive ns, stamp, names, message) of the joint states (several topics' assembled in the
+        robot's joint order)."""
+        return self.streams.states(self.robot.joint_names)
+
+    @property
+    def commands(self) -> list[tuple[int, FloatArray]]:
+        """(receive ns, joint velocities [rad/s] in the robot's joint order) of each cycle's command, from
+        the profile's outputs; BagError when they do not fit the robot."""
+        try:
+            return self.streams.commands(self.robot.joint_names)
+        except DualArmError as exc:
+            raise BagError(str(exc)) from None
+
+    @property
+    def needed(self) -> tuple[str, ...]:
+        """The topics a relative-motion report needs on this bag's profile."""
+        return (*self.streams.topics.outputs, *self.streams.topics.joint_states, DIAGNOSTICS_TOPIC, POSE_TOPIC,
+                TARGET_TOPIC)
 
     @property
     def cycles(self) -> list[tuple[int, dict[str, str]]]:
         """(receive ns, values) of the controller's statuses."""
         return [(s.t, s.values) for s in self.statuses if s.name == CONTROLLER_STATUS]
 
-    @property
+    @cached_property
     def robot(self) -> RobotDescription:
         """The robot of the run: the controller's ``robot`` on /diagnostics (a bag recorded before
         robots were data: the LWR4 cell)."""
@@ -281,7 +311,7 @@ class Bag:
     def require_report_topics(self, path: Path) -> None:
         """BagError naming the topics a relative-motion report needs and the bag lacks."""
         if self.missing:
-            raise BagError(f"bag {path} lacks {', '.join(self.missing)} (the report needs {', '.join(REPORT_TOPICS)})")
+            raise BagError(f"bag {path} lacks {', '.join(self.missing)} (the report needs {', '.join(self.needed)})")
 
     def joint_states(self, joint_names: Sequence[str]) -> tuple[TimedSeries, FloatArray]:
         """/joint_states in the order of ``joint_names``: positions by receive time, and the
@@ -299,18 +329,29 @@ class Bag:
                 np.array(qd_rows, dtype=float).reshape(len(qd_rows), n))
 
     def series(self, topic: str, width: int) -> TimedSeries:
-        rows = self.rows[topic]
+        """Receive times and values of ``topic``'s rows (:data:`COMMANDS_TOPIC`: :attr:`commands`)."""
+        rows = self.commands if topic == COMMANDS_TOPIC else self.rows[topic]
         t = np.array([r[0] for r in rows], dtype=np.int64)
         values = np.array([r[1] for r in rows], dtype=float).reshape(len(rows), width)
         return TimedSeries(t, values)
 
 
 def read_bag(path: Path) -> Bag:
-    """Every message a report, a viewer or a fault analysis reads, in one pass."""
+    """Every message a report, a viewer or a fault analysis reads: the nodes' parameters first
+    (``/dualarm/cell``: the hardware profile's topics), then the rest in one pass."""
     reader = open_reader(path)
-    bag = Bag(missing=missing_topics(reader))
     try:
-        connections = [c for c in reader.connections if c.topic in (*REPORT_TOPICS, CONTACT_TOPIC, DESCRIPTION_TOPIC)]
+        cells = [c for c in reader.connections if c.topic == CELL_TOPIC]
+        documents = (msg.data for _, _, msg in _decoded(reader, cells, path))
+        cell = cell_parameters(documents, f"{path}: {CELL_TOPIC}")
+        try:
+            topics = recorded_topics(cell.get(CONTROLLER_STATUS, {}))
+        except DualArmError as exc:
+            raise BagError(f"bag {path}: the controller's hardware profile on {CELL_TOPIC}: {exc}") from None
+        bag = Bag(streams=ProfileStreams(topics), cell=cell)
+        bag.missing = missing_topics(reader, bag.needed)
+        wanted = (*bag.needed, CONTACT_TOPIC, DESCRIPTION_TOPIC)
+        connections = [c for c in reader.connections if c.topic in wanted]
         for topic, t, msg in _decoded(reader, connections, path):
             bag.add(topic, t, msg)
     finally:
@@ -321,7 +362,9 @@ def read_bag(path: Path) -> Bag:
 def _decoded(reader: AnyReader, connections: list[Any], path: Path) -> Iterator[tuple[str, int, Any]]:
     """(topic, time, message) of ``connections``; BagError naming the bag, the topic and what failed when the
     storage or a message cannot be decoded (a corrupt or truncated file: rosbags raises anything from
-    ``OverflowError`` to ``struct.error`` then)."""
+    ``OverflowError`` to ``struct.error`` then). No connections: nothing (rosbags would read them all)."""
+    if not connections:
+        return
     messages = reader.messages(connections=connections)
     count = 0
     while True:
@@ -375,9 +418,6 @@ def _relative_records(bag: Bag) -> list[RunRecord]:
 
     joint_names = bag.robot.joint_names
     n = len(joint_names)
-    widths = {len(v) for _, v in bag.rows[COMMANDS_TOPIC]}
-    if widths != {n}:
-        raise BagError(f"{COMMANDS_TOPIC} data must have {n} values (one per joint), got lengths {sorted(widths)}")
     if not bag.cycles:
         raise BagError(f"{DIAGNOSTICS_TOPIC} has no status named '{CONTROLLER_STATUS}'")
     states, velocities = bag.joint_states(joint_names)
@@ -496,7 +536,7 @@ def _task_record(path: Path, bag: Bag) -> tuple[list[RunRecord], Scenario]:
         idx = order.setdefault(tuple(names), [names.index(j) for j in model.joint_names])
         positions[k] = np.asarray(q, dtype=np.float64)[idx]
     cycles = [by_stamp[s] for s in stamps]
-    sent = bag.rows[COMMANDS_TOPIC]
+    sent = bag.commands
     received = np.array([t for t, _ in sent], dtype=np.int64)
     nearest = np.clip(np.searchsorted(received, [t for t, _ in cycles]), 0, max(len(received) - 1, 0))
     commands = (np.array([sent[i][1] for i in nearest]) if len(received)
