@@ -379,6 +379,14 @@ def test_report_splits_solvers(tmp_path: Path) -> None:
         assert record["solver_failures"] == 1
 
 
+def test_bag_cell_of_a_bag_without_one_exits_1(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A bag without /dualarm/cell (recorded before issue 40): `dualarm bag cell` says so, exit 1."""
+    bag = tmp_path / "old"
+    write_synthetic_bag(bag)
+    assert cli.main(["bag", "cell", str(bag)]) == 1
+    assert "no /dualarm/cell message" in capsys.readouterr().err
+
+
 def test_report_names_missing_topics(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     bag = tmp_path / "no_commands"
     write_synthetic_bag(bag, with_commands=False)

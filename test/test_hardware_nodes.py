@@ -155,6 +155,20 @@ def test_the_bag_carries_its_cell_and_the_product_reads_it_as_this_test_does(run
     np.testing.assert_allclose(np.array([states[s] for s in run.stamps]), run.positions, rtol=0, atol=0)
 
 
+def test_dualarm_bag_cell_prints_a_parameter_file_that_gives_the_profile_back(
+        runs: dict[str, Run], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from dualarm_control.app.cli import main
+
+    assert main(["bag", "cell", str(runs["lbr_dual_position"].bag), "--node", "controller_node"]) == 0
+    printed = tmp_path / "cell.yaml"
+    printed.write_text(capsys.readouterr().out)
+    assert printed.read_text().startswith("controller_node:\n")
+    assert load_profile(read_params_file(printed, "controller_node"), DualArmModel().joint_names) == \
+        profile_of("lbr_dual_position")
+    assert main(["bag", "cell", str(runs["sim"].bag), "--node", "nobody"]) == 2
+    assert "no node 'nobody'" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("name", PROFILES[1:])
 def test_dualarm_report_of_each_profiles_bag_equals_the_default_profiles(runs: dict[str, Run], name: str,
                                                                           tmp_path: Path) -> None:

@@ -322,6 +322,24 @@ def cmd_bag_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bag_cell(args: argparse.Namespace) -> int:
+    """Print the bag's /dualarm/cell parameters as one parameter file."""
+    from dualarm_control.app.record.bag import read_cell
+    from dualarm_control.params import params_document
+
+    cell = read_cell(Path(args.bag))
+    unknown = [n for n in args.node if n not in cell]
+    if unknown:
+        print(f"error: no node {unknown[0]!r} on /dualarm/cell of {args.bag} (nodes: {', '.join(cell) or 'none'})",
+              file=sys.stderr)
+        return 2
+    if not cell:
+        print(f"{args.bag}: no /dualarm/cell message (recorded before issue 40, or without the topic)", file=sys.stderr)
+        return 1
+    print("".join(params_document(node, cell[node]) for node in (args.node or cell)), end="")
+    return 0
+
+
 def cmd_report(args: argparse.Namespace) -> int:
     """Metrics of a recorded run: DIR/metrics.json, the figures of its kind and the table."""
     from dualarm_control.app.record.bag import report
@@ -411,6 +429,15 @@ def _add_bag_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     info = verbs.add_parser("info", help="summary of a bag (like ros2 bag info)")
     info.add_argument("bag", help="rosbag2 directory")
     info.set_defaults(func=cmd_bag_info)
+    cell = verbs.add_parser("cell", help="the parameters each node ran with (/dualarm/cell), as a parameter file",
+                            description="Print what the bag's /dualarm/cell holds: each node's parameters at its "
+                            "start (robot, hardware profile, scenario, solver, limits) as one ROS 2 parameter file "
+                            "(YAML); give it back to the nodes with --params-file to run the same cell again. Exit 1 "
+                            "when the bag holds none (recorded before issue 40, or without the topic).")
+    cell.add_argument("bag", help="rosbag2 directory")
+    cell.add_argument("--node", action="append", default=[], metavar="NAME",
+                      help="only this node's section (repeatable; default: every node)")
+    cell.set_defaults(func=cmd_bag_cell)
 
 
 def _add_topic_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:

@@ -336,14 +336,26 @@ class Bag:
         return TimedSeries(t, values)
 
 
+def read_cell(path: Path) -> dict[str, dict[str, Any]]:
+    """Per node, the parameters it published on ``/dualarm/cell`` first ({} when the bag has none)."""
+    reader = open_reader(path)
+    try:
+        return _cell(reader, path)
+    finally:
+        reader.close()
+
+
+def _cell(reader: AnyReader, path: Path) -> dict[str, dict[str, Any]]:
+    cells = [c for c in reader.connections if c.topic == CELL_TOPIC]
+    return cell_parameters((msg.data for _, _, msg in _decoded(reader, cells, path)), f"{path}: {CELL_TOPIC}")
+
+
 def read_bag(path: Path) -> Bag:
     """Every message a report, a viewer or a fault analysis reads: the nodes' parameters first
     (``/dualarm/cell``: the hardware profile's topics), then the rest in one pass."""
     reader = open_reader(path)
     try:
-        cells = [c for c in reader.connections if c.topic == CELL_TOPIC]
-        documents = (msg.data for _, _, msg in _decoded(reader, cells, path))
-        cell = cell_parameters(documents, f"{path}: {CELL_TOPIC}")
+        cell = _cell(reader, path)
         try:
             topics = recorded_topics(cell.get(CONTROLLER_STATUS, {}))
         except DualArmError as exc:
