@@ -105,6 +105,20 @@ def test_with_the_limit_off_the_same_goals_go_through_the_other_arm() -> None:
     assert summary["pybullet_min_distance_m"] < 1e-3, summary["pybullet_min_pair"]
 
 
+def test_a_shipped_hardware_profile_bounds_the_collision_demos_acceleration() -> None:
+    """Issue 40: the shipped hardware profiles turn the joint acceleration bound on (10 rad/s^2); with it the
+    collision demo peaks at the bound (91.8 rad/s^2 without), and still stops at the safety distance."""
+    from dualarm_control.params import read_params_file
+
+    root = Path(__file__).parents[1] / "config" / "hardware"
+    bounds = {f.stem: read_params_file(f, "controller_node")["acceleration_limit"]
+              for f in (root / "ros2_control_velocity.yaml", root / "lbr_dual_position.yaml")}
+    assert set(map(tuple, bounds.values())) == {(10.0,)}, bounds
+    summary = in_process("lwr4_cell", acceleration_limit=[10.0])
+    assert summary["max_joint_acceleration"] <= 10.0 * (1 + 1e-6), summary["max_joint_acceleration"]
+    assert_stops_at_the_safety_distance(summary)
+
+
 def run_over_ros(tmp_path: Path, robot: str, *mode: str, env: dict[str, str] | None = None) -> dict[str, Any]:
     """The run's metrics from its bag, and ``pybullet_min_distance_m``; ``env`` adds to the launch's
     environment (a ROS domain of its own)."""

@@ -26,6 +26,8 @@ ROOT = Path(__file__).parents[1]
 SHORT = ROOT / "test" / "data" / "short.yaml"
 PROFILES = ("sim", "ros2_control_velocity", "lbr_dual_position", "servo_trajectories")
 PERIOD = 0.005
+ACCELERATION = ROOT / "config" / "acceleration_limit.yaml"
+"""10 rad/s^2, the bound the shipped hardware profiles turn on (issue 40): the default profile's run gets it too."""
 SERVO = ROOT / "test" / "data" / "servo_trajectories.yaml"
 """A profile of one-point JointTrajectory outputs (MoveIt Servo's form): the left arm by velocity, the right
 by position, in their own joint orders, /left and /right joint states."""
@@ -100,7 +102,7 @@ def lockstep_run(name: str, scenario: str, bag: Path, timeout: float, env: dict[
     ``env`` adds to the nodes' environment (a ROS domain of its own: launching.side_by_side)."""
     profile = profile_of(name)
     topics = (*profile.joint_states, *profile.topics, "/diagnostics", "/relative_target", "/relative_pose")
-    params = [str(profile_file(name))]
+    params = [str(profile_file(name)), str(ACCELERATION)]  # every run with the shipped profiles' bound
     assert launch_scenario(scenario, params, [], True, bag, timeout=timeout, record_topics=topics, env=env) == 0
     run = Run(profile, read_bag(bag))
     run.bag = bag
@@ -195,6 +197,8 @@ def test_dualarm_report_of_each_profiles_bag_equals_the_default_profiles(runs: d
             assert got[label][key] == pytest.approx(value, abs=1e-6), key
             compared += 1
     assert compared >= 10, want
+    for label in got:  # the profile's acceleration bound holds, by the report of its bag
+        assert got[label]["max_joint_acceleration"] <= 10.0 * (1 + 1e-6), got[label]
 
 
 def test_the_video_of_a_two_topic_profiles_bag(runs: dict[str, Run], tmp_path: Path) -> None:

@@ -43,6 +43,9 @@ def profile(tmp_path: Path, right_topic: str = "/right_velocity_controller/comma
         joints: {json.dumps(RIGHT)}
       joint_states: [/joint_states]
       startup_check: {startup_check}
+controller_node:
+  ros__parameters:
+    acceleration_limit: [10.0]
 """)
     return path
 

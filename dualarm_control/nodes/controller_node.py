@@ -174,7 +174,8 @@ class ControllerNode:
         self.log.info(f"{self.tracker.label} on scenario '{self.scenario.name}' ({source.describe()}"
                       f"{f', {self.tracker.steps} cycles' if self.timed else ''}), robot '{self.model.description.name}'"
                       f" ({self.model.nq} joints), solver '{self.params.solver}' (K={self.params.gain}, "
-                      f"T={self.params.period} s, {'lockstep' if self.lockstep else 'real-time, event-driven'})")
+                      f"T={self.params.period} s, {'lockstep' if self.lockstep else 'real-time, event-driven'}), "
+                      f"{acceleration_text(self.params.acceleration_limit)}")
         shell.log_priority(self.log, priority_note, self.values["thread_priority"])
         self.cell_topic = CellPublisher(n)  # /dualarm/cell: what this run runs with, latched (for its bag)
 
@@ -415,6 +416,14 @@ class ControllerNode:
         if speed <= MOVING or age <= self.values["target_timeout"] * 1e9:
             return ""
         return f"{self.streams[-1].lstrip('/')} stopped mid-motion: none for {age / 1e6:.1f} ms"
+
+
+def acceleration_text(limit: tuple[float, ...]) -> str:
+    """The start log's words for the joint acceleration bound (``acceleration_limit``) the run uses."""
+    if not limit:
+        return "no joint acceleration bound (acceleration_limit: [0.0])"
+    values = "/".join(f"{a:g}" for a in limit)
+    return f"joint acceleration bound {values} rad/s^2" + (" on every joint" if len(limit) == 1 else " per joint")
 
 
 def main(args: list[str] | None = None) -> int:
