@@ -125,9 +125,9 @@ class GoalMonitor:
 
 @dataclass(frozen=True)
 class GoalOutcome:
-    """How one scripted goal ended: ``index`` in the script, its time ``t`` [s], the ``state``
-    (``reached`` or ``stalled``), the measured ``distance`` [m] and ``angle`` [rad] to it where
-    it was judged, and the ``reason`` of a stall (:func:`stall_reason`)."""
+    """How one goal ended: ``index`` in its script (or segment list), its time ``t`` [s], the ``state``
+    (``reached`` or ``stalled``), the measured ``distance`` [m] and ``angle`` [rad] to it where it was
+    judged, the ``reason`` of a stall (:func:`stall_reason`) and its ``label`` ('' : "goal <index>")."""
 
     index: int
     t: float
@@ -135,10 +135,31 @@ class GoalOutcome:
     distance: float
     angle: float
     reason: str = ""
+    label: str = ""
 
     def text(self) -> str:
-        head = f"goal {self.index} (t = {self.t:g} s): {self.state}"
+        head = f"{self.label or f'goal {self.index}'} (t = {self.t:g} s): {self.state}"
         return head + (f": {self.reason}" if self.reason else f", error {self.distance * 1000:.3f} mm, {self.angle:.5f} rad")
+
+
+def pose_distance(model: DualArmModel, q: FloatArray, position: FloatArray, rotation: FloatArray) -> tuple[float, float]:
+    """Distance [m] and angle [rad] of the relative pose at q (n,) [rad] from ``(position (3,), rotation
+    (3, 3) or an (x, y, z, w) quaternion)``."""
+    p, r = model.relative_pose(q)
+    goal_r = np.asarray(rotation, dtype=float)
+    if goal_r.shape == (4,):
+        goal_r = pin.Quaternion(goal_r[3], *goal_r[:3]).normalized().toRotationMatrix()
+    return float(np.linalg.norm(p - np.asarray(position, dtype=float))), float(np.linalg.norm(pin.log3(goal_r @ r.T)))
+
+
+def _outcome(model: DualArmModel, q: FloatArray, distance: float, angle: float, index: int, t: float, when: str,
+             label: str, collision: CollisionModel | None, near: float, position_tolerance: float,
+             angle_tolerance: float) -> GoalOutcome:
+    """Reached within the tolerances, else stalled with :func:`stall_reason` at q."""
+    if distance <= position_tolerance and angle <= angle_tolerance:
+        return GoalOutcome(index, t, REACHED, distance, angle, label=label)
+    return GoalOutcome(index, t, STALLED, distance, angle, stall_reason(model, q, distance, angle, when, collision, near),
+                       label)
 
 
 def judge_goals(model: DualArmModel, commands: Sequence[TimedCommand], time: FloatArray, positions: FloatArray,
@@ -160,16 +181,43 @@ def judge_goals(model: DualArmModel, commands: Sequence[TimedCommand], time: Flo
             q = positions[max(k, 0)]
         else:
             q = final_positions if np.all(np.isfinite(final_positions)) else positions[-1]
-        p, r = model.relative_pose(q)
-        goal_r = np.asarray(command.orientation, dtype=float)
-        if goal_r.shape == (4,):
-            goal_r = pin.Quaternion(goal_r[3], *goal_r[:3]).normalized().toRotationMatrix()
-        distance = float(np.linalg.norm(p - command.position))
-        angle = float(np.linalg.norm(pin.log3(goal_r @ r.T)))
-        if distance <= position_tolerance and angle <= angle_tolerance:
-            out.append(GoalOutcome(i, command.t, REACHED, distance, angle))
+        distance, angle = pose_distance(model, q, command.position, command.orientation)
+        when = "when the next command came" if i + 1 < len(commands) else "at the end of the run"
+        out.append(_outcome(model, q, distance, angle, i, command.t, when, "", collision, near, position_tolerance,
+                            angle_tolerance))
+    return out
+
+
+SEGMENT_WINDOW = (0.05, 0.25)
+"""A segment is judged at its closest cycle to its end pose within this window [s] (before, after) its
+end: a target still moving when the segment ends (no hold) puts the arms a tracking lag behind it, and
+a lockstep bag's time axis may start a cycle or two off the trajectory node's clock."""
+
+
+def judge_segments(model: DualArmModel, names: Sequence[str], ends: Sequence[float],
+                   poses: Sequence[tuple[FloatArray, FloatArray]], time: FloatArray, positions: FloatArray,
+                   final_positions: FloatArray, collision: CollisionModel | None = None,
+                   position_tolerance: float = POSITION_TOLERANCE, angle_tolerance: float = ANGLE_TOLERANCE,
+                   near: float = COLLISION_NEAR) -> list[GoalOutcome]:
+    """The verdict of every segment of a relative trajectory after the run (issue 40): segment k (``names``,
+    ending at ``ends[k]`` [s] with its end pose ``poses[k]`` = (p (3,), R (3, 3))) is ``reached`` when a
+    cycle within :data:`SEGMENT_WINDOW` of its end is within the tolerances of that pose (the last segment:
+    the run's final positions), else ``stalled`` with :func:`stall_reason` at the closest such cycle: the
+    collision pair or joint limit that held the arms, and the error left."""
+    out = []
+    finite = np.all(np.isfinite(positions), axis=1)
+    for k, (name, end, (position, rotation)) in enumerate(zip(names, ends, poses, strict=True)):
+        last = k + 1 == len(names)
+        if last and np.all(np.isfinite(final_positions)):
+            candidates = [np.asarray(final_positions, dtype=float)]
         else:
-            when = "when the next command came" if i + 1 < len(commands) else "at the end of the run"
-            out.append(GoalOutcome(i, command.t, STALLED, distance, angle,
-                                   stall_reason(model, q, distance, angle, when, collision, near)))
+            window = finite & (time >= end - SEGMENT_WINDOW[0]) & (time <= end + SEGMENT_WINDOW[1])
+            candidates = list(positions[window]) or ([positions[finite][-1]] if finite.any() else [])
+        if not candidates:
+            continue
+        judged = [(pose_distance(model, q, position, rotation), q) for q in candidates]
+        (distance, angle), q = min(judged, key=lambda item: item[0][0] / position_tolerance + item[0][1] / angle_tolerance)
+        when = "at the end of the run" if last else "at the segment's end"
+        out.append(_outcome(model, q, distance, angle, k, end, when, f"segment {k + 1} '{name}'", collision, near,
+                            position_tolerance, angle_tolerance))
     return out

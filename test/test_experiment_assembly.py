@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from dualarm_control.app.cli import main
-from dualarm_control.app.record.report import METRIC_KEYS, TRACKING_KEYS
+from dualarm_control.app.record.report import METRIC_KEYS, SEGMENT_KEYS, TRACKING_KEYS
 
 SOLVERS = ("standard_qp", "sparse_qp", "hierarchical_sparse_qp")
 FINAL_ERRORS = {"standard_qp": (6.4e-12, 3.7e-9), "sparse_qp": (1.6e-7, 1.3e-7), "hierarchical_sparse_qp": (1.6e-7, 1.3e-7)}
@@ -71,7 +71,17 @@ def test_metrics_file_has_every_key(metrics: dict[str, dict[str, float]]) -> Non
     """metrics.json lists each solver with exactly the documented keys."""
     assert list(metrics) == list(SOLVERS)
     for record in metrics.values():
-        assert tuple(record) == METRIC_KEYS + TRACKING_KEYS
+        assert tuple(record) == METRIC_KEYS + TRACKING_KEYS + SEGMENT_KEYS
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
+def test_every_segment_is_reached(metrics: dict[str, dict[str, float]], solver: str) -> None:
+    """Issue 40: each segment's verdict; on the LWR4 cell every one is reached (within 0.5 mm / 5 mrad of its
+    end pose at its end)."""
+    m = metrics[solver]
+    assert (m["segments_reached"], m["segments_stalled"]) == (3, 0), m["segment_outcomes"]
+    assert [part.split(" (t = ")[0] for part in str(m["segment_outcomes"]).split(" | ")] == [
+        "segment 1 'approach'", "segment 2 'insert'", "segment 3 'screw'"]
 
 
 @pytest.mark.parametrize("solver", SOLVERS)

@@ -72,6 +72,8 @@ SCENARIO_KEY = "scenario"
 SIM_STATUS = "sim_node"
 CONTACT_TOPIC = "/contact_force"
 DESCRIPTION_TOPIC = "/robot_description"
+PLAN_TOPIC = "/joint_reference"
+"""A plan's joint trajectory (``dualarm launch --plan``): its bag is no run of the scenario's reference."""
 
 
 class BagError(DualArmError):
@@ -243,6 +245,7 @@ class Bag:
     contact: dict[int, float] = field(default_factory=dict)  # /contact_force by header stamp
     missing: list[str] = field(default_factory=list)  # the relative report's topics the bag lacks
     description: str | None = None  # the first /robot_description (the cell's URDF)
+    recorded: frozenset[str] = frozenset()  # every topic of the bag
 
     def add(self, topic: str, t: int, msg: Any) -> None:
         if self.streams.add(topic, t, msg):
@@ -360,7 +363,7 @@ def read_bag(path: Path) -> Bag:
             topics = recorded_topics(cell.get(CONTROLLER_STATUS, {}))
         except DualArmError as exc:
             raise BagError(f"bag {path}: the controller's hardware profile on {CELL_TOPIC}: {exc}") from None
-        bag = Bag(streams=ProfileStreams(topics), cell=cell)
+        bag = Bag(streams=ProfileStreams(topics), cell=cell, recorded=frozenset(reader.topics))
         bag.missing = missing_topics(reader, bag.needed)
         wanted = (*bag.needed, CONTACT_TOPIC, DESCRIPTION_TOPIC)
         connections = [c for c in reader.connections if c.topic in wanted]
@@ -578,21 +581,23 @@ def _task_record(path: Path, bag: Bag) -> tuple[list[RunRecord], Scenario]:
     return [with_task_values(record, scenario, model, gain, force)], scenario
 
 
-def goals_scenario(bag: Bag) -> Scenario | None:
-    """The scripted goals scenario a relative-motion bag ran (the controller's ``scenario`` on
-    /diagnostics, on the bag's robot), for the goals' verdicts; None for another kind, or when the
-    scenario cannot be loaded here (a file of another machine)."""
+def judged_scenario(bag: Bag) -> Scenario | None:
+    """The scenario a relative-motion bag ran, when its run has verdicts (scripted goals, or segments: issue
+    40): the controller's ``scenario`` on /diagnostics, on the bag's robot. None for another kind, or when
+    the scenario cannot be loaded here (a file of another machine)."""
     from dualarm_control.errors import DualArmError
+    from dualarm_control.references.segments import SegmentsSource
     from dualarm_control.scenario import load_scenario
 
     name = next((v[SCENARIO_KEY] for _, v in bag.cycles if v.get(SCENARIO_KEY)), "")
-    if not name:
-        return None
+    if not name or bag.cell.get(CONTROLLER_STATUS, {}).get("plan") or PLAN_TOPIC in bag.recorded:
+        return None  # a plan's run tracks its joint trajectory, not the scenario's reference
     try:
         scenario = load_scenario(name, bag.robot)
     except DualArmError:
         return None
-    return scenario if getattr(scenario.reference, "commands", None) else None
+    judged = getattr(scenario.reference, "commands", None) or isinstance(scenario.reference, SegmentsSource)
+    return scenario if judged else None
 
 
 def report(path: Path, output: Path) -> tuple[dict[str, dict[str, Any]], str, list[str]]:
@@ -614,7 +619,7 @@ def report(path: Path, output: Path) -> tuple[dict[str, dict[str, Any]], str, li
         raise BagError(f"bag {path}: no {COMMANDS_TOPIC} message could be attributed to a solver")
     model = DualArmModel(scenario.robot if scenario is not None else bag.robot)  # the run's limits
     if scenario is None:
-        scenario = goals_scenario(bag)
+        scenario = judged_scenario(bag)
     results = {r.label: summarize_run(r, scenario, model) for r in runs}
     prepare_output(Path(output))
     write_json(Path(output) / "metrics.json", results)

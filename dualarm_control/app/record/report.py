@@ -28,7 +28,7 @@ import numpy as np
 
 from dualarm_control.app.record.run_record import RunRecord, TaskValues
 from dualarm_control.collision import CollisionModel
-from dualarm_control.drive_monitor import judge_goals
+from dualarm_control.drive_monitor import judge_goals, judge_segments
 from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel, FloatArray, rotation_angle
 from dualarm_control.metrics import (
@@ -39,6 +39,7 @@ from dualarm_control.metrics import (
     velocity_norm_metrics,
 )
 from dualarm_control.planning.plan_file import PLAN_FORMAT
+from dualarm_control.references.segments import SegmentsSource
 from dualarm_control.scenario import Scenario
 from dualarm_control.solvers.base import ACTIVITY_THRESHOLD, FAILURE_STATUSES
 from dualarm_control.tasks import (
@@ -47,6 +48,7 @@ from dualarm_control.tasks import (
     ManipulabilityTask,
     TablePlaneTask,
 )
+from dualarm_control.trajectory import MotionLimits
 
 if TYPE_CHECKING:  # the planner and the simulator are only imported where a plan is made or executed
     from dualarm_control.app.plan.execute import ExecutionResult
@@ -105,8 +107,38 @@ def summarize_run(record: RunRecord, scenario: Scenario | None,
                    max_tracking_error_rad=float(rot.max()))
     commands_script = getattr(scenario.reference, "commands", None) if scenario is not None else None
     if commands_script:
-        out.update(goal_metrics(record, commands_script, model))
+        out.update(goal_metrics(record, commands_script, model, run_collision_model(model, scenario)))
+    if scenario is not None and isinstance(scenario.reference, SegmentsSource):
+        out.update(segment_metrics(record, scenario.reference, scenario.limits, model,
+                                   run_collision_model(model, scenario)))
     return out
+
+
+SEGMENT_KEYS = ("segments_reached", "segments_stalled", "segment_outcomes")
+"""The keys of a segments run (:func:`segment_metrics`)."""
+
+
+def run_collision_model(model: DualArmModel, scenario: Scenario | None) -> CollisionModel:
+    """The collision model the run's controller held the arms with: the robot's allowed pairs and the
+    scenario's (the assembly's tools), so that a stall names a pair the controller checked."""
+    extra = scenario.collision_allowed if scenario is not None else ()
+    return CollisionModel.shared(model, (*model.description.collision_allowed, *extra))
+
+
+def segment_metrics(record: RunRecord, source: SegmentsSource, limits: MotionLimits, model: DualArmModel,
+                    collision: CollisionModel) -> dict[str, float | int | str]:
+    """How each segment of a relative trajectory ended (issue 40, :func:`~dualarm_control.drive_monitor.judge_segments`;
+    a stall explained by the collision pair or the joint limit that held the arms), the trajectory planned
+    from the recorded start as the trajectory node plans it."""
+    trajectory = source.trajectory(*model.relative_pose(record.positions[0]), limits)
+    n = len(trajectory.segments)
+    ends = [*trajectory.segment_start_times[1:], trajectory.duration]
+    outcomes = judge_segments(model, [seg.name for seg in trajectory.segments], ends,
+                              [trajectory.segment_end_pose(k) for k in range(n)], record.time, record.positions,
+                              record.final_positions, collision)
+    return {"segments_reached": sum(o.state == "reached" for o in outcomes),
+            "segments_stalled": sum(o.state == "stalled" for o in outcomes),
+            "segment_outcomes": " | ".join(o.text() for o in outcomes)}
 
 
 GOAL_KEYS = ("goals_reached", "goals_stalled", "goal_outcomes", "collision_min_distance_m", "collision_min_pair")
@@ -117,6 +149,12 @@ def goal_lines(results: Mapping[str, Mapping[str, Any]]) -> str:
     """The goals' verdicts and the closest pair of every goals run, for the terminal ('' without goals)."""
     out = []
     for label, summary in results.items():
+        if "segment_outcomes" in summary:
+            stalled = [line for line in str(summary["segment_outcomes"]).split(" | ") if ": stalled" in line]
+            total = int(summary["segments_reached"]) + int(summary["segments_stalled"])
+            out.append(f"\n{label}: {summary['segments_reached']} of {total} segments reached"
+                       + ("" if stalled else " (each within 0.5 mm / 5 mrad of its end pose)"))
+            out += [f"  {line}" for line in stalled]
         if "goal_outcomes" in summary:
             out.append(f"\n{label}: closest pair {summary['collision_min_pair']} at "
                        f"{summary['collision_min_distance_m']:.4f} m")
@@ -124,11 +162,11 @@ def goal_lines(results: Mapping[str, Mapping[str, Any]]) -> str:
     return "\n".join(out) + "\n" if out else ""
 
 
-def goal_metrics(record: RunRecord, commands: Sequence[Any], model: DualArmModel) -> dict[str, float | int | str]:
+def goal_metrics(record: RunRecord, commands: Sequence[Any], model: DualArmModel,
+                 collision: CollisionModel) -> dict[str, float | int | str]:
     """How each goal of a script ended (:func:`~dualarm_control.drive_monitor.judge_goals`, stalls
     explained by the robot's collision model) and the smallest link-pair distance over the run [m]
-    (coal, on the recorded positions, the robot's ``collision_allowed`` pairs excluded)."""
-    collision = CollisionModel.shared(model, model.description.collision_allowed)
+    (coal, on the recorded positions, the pairs ``collision`` allows excluded)."""
     outcomes = judge_goals(model, commands, record.time, record.positions, record.final_positions, collision)
     closest = (np.inf, "")
     for q in record.positions[np.all(np.isfinite(record.positions), axis=1)]:
