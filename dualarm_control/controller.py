@@ -20,7 +20,7 @@ from dualarm_control.collision_limit import (
     allowed_pairs,
 )
 from dualarm_control.errors import ParameterError
-from dualarm_control.joint_tracking import joint_tracking_velocity
+from dualarm_control.joint_tracking import projected_tracking
 from dualarm_control.kinematics import (
     Configuration,
     DualArmModel,
@@ -45,7 +45,7 @@ from dualarm_control.params import (
     resolve,
     unit_interval,
 )
-from dualarm_control.qp import DEFAULT_BACKEND, QPSettings
+from dualarm_control.qp import DEFAULT_BACKEND, QPBackend, QPSettings, make_backend
 from dualarm_control.solvers import (
     ACTIVITY_THRESHOLD,
     SolverParams,
@@ -197,6 +197,7 @@ class RelativeController:
             self.collision_model = collision
             self.collision_limit = CollisionLimit(collision, self.params.collision)
         self.constraints: tuple[Limit, ...] = self._limits()
+        self._projection: QPBackend | None = None  # a plan's tracking QP (track_joints), made on first use
 
     def _limits(self) -> tuple[Limit, ...]:
         """The cycle's limits in their order (class docstring)."""
@@ -305,9 +306,12 @@ class RelativeController:
 
     def track_joints(self, q: FloatArray, q_ref: FloatArray, qd_ref: FloatArray, target: RelativeTarget,
                      gain: float) -> Cycle:
-        """Joint-space tracking of a planned trajectory (:func:`joint_tracking_velocity`) inside the
-        eq (23) bounds; the relative pose error is measured against ``target`` (the reference's
-        relative pose) for the report. Non-finite inputs give the zero command ("invalid_input")."""
+        """Joint-space tracking of a planned trajectory under every limit of the cycle, as the task
+        solvers are (issue 39: before, a plan ran inside the eq (23) box alone, with no acceleration bound
+        and no collision limit): the command nearest to qd_ref + K (q_ref - q) within the limits
+        (:func:`~dualarm_control.joint_tracking.projected_tracking`). The relative pose error is measured
+        against ``target`` (the reference's relative pose) for the report. Non-finite inputs give the
+        safe command ("invalid_input")."""
         start = time.perf_counter()
         q = self.model.check_q(q)
         q_ref, qd_ref = self.model.check_q(q_ref, "joint reference"), self.model.check_q(qd_ref, "joint reference")
@@ -315,17 +319,20 @@ class RelativeController:
             return self._invalid("non-finite joint positions", start, q)
         if not math.isfinite(q_ref.sum() + qd_ref.sum()):
             return self._invalid("non-finite joint reference", start, q)
-        lower, upper = velocity_bounds(q, self.limits, self.params.period)
-        velocities = joint_tracking_velocity(q, q_ref, qd_ref, gain, lower, upper)
+        bounds = apply_limits(self.constraints, q, self._previous)
+        if self._projection is None:
+            self._projection = make_backend(self.params.solver_params.qp_backend, self.params.solver_params.qp)
+        velocities, status = projected_tracking(qd_ref + gain * (q_ref - q), bounds, self._projection)
         self._previous = velocities
         p, r = self.model.relative_pose(q)
         p_des, r_des = np.asarray(target.position, dtype=float), np.asarray(target.rotation, dtype=float)
         active = int(np.count_nonzero(np.abs(velocities) > ACTIVITY_THRESHOLD))
         elapsed = time.perf_counter() - start
-        result = SolverResult(velocities, "solved", elapsed, 0, active, float("nan"), "joint tracking")
+        result = SolverResult(velocities, status, elapsed, 0, active, float("nan"), "joint tracking")
         return Cycle(velocities=velocities, result=result, position=p, rotation=r,
                      position_error=float(np.linalg.norm(p_des - p)),
-                     orientation_error=rotation_angle(r, r_des), cycle_time=elapsed)
+                     orientation_error=rotation_angle(r, r_des), cycle_time=elapsed,
+                     collision=self._collision_report(velocities))
 
     def _invalid(self, what: str, start: float, q: FloatArray) -> Cycle:
         """The safe command for an invalid input, with the reason in ``detail`` (status "invalid_input").

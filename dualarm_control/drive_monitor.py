@@ -221,3 +221,27 @@ def judge_segments(model: DualArmModel, names: Sequence[str], ends: Sequence[flo
         out.append(_outcome(model, q, distance, angle, k, end, when, f"segment {k + 1} '{name}'", collision, near,
                             position_tolerance, angle_tolerance))
     return out
+
+
+@dataclass(frozen=True)
+class ClosestPair:
+    """The closest link pair over a sequence of configurations: ``distance`` [m] (the collision model's
+    margin when none is closer), ``text`` ("link_a – link_b", or "none closer than M m") and ``index``,
+    the configuration it is at (-1 when none)."""
+
+    distance: float
+    text: str
+    index: int
+
+
+def closest_pair(collision: CollisionModel, configurations: FloatArray) -> ClosestPair:
+    """:class:`ClosestPair` of ``configurations`` (k, n) [rad] (rows with a non-finite value skipped) on
+    ``collision`` (coal; its allowed pairs excluded)."""
+    best = ClosestPair(float(collision.margin), f"none closer than {collision.margin:g} m", -1)
+    for i, q in enumerate(configurations):
+        if not np.all(np.isfinite(q)):
+            continue
+        for pair in collision.distances(q, within=best.distance):
+            if pair.distance < best.distance:
+                best = ClosestPair(float(pair.distance), f"{pair.link_a} – {pair.link_b}", i)
+    return best

@@ -306,14 +306,16 @@ class Limit(Protocol):
 class VelocityLimit:
     """The joint position and velocity limits as velocity bounds, eq (21)-(23) (:func:`velocity_bounds`).
 
-    Sets the box (it is the first limit); the period T [s] is the control period."""
+    Intersects the box with eq (23)'s (issue 39: it used to overwrite it, losing a limit applied before
+    it); the period T [s] is the control period."""
 
     limits: JointLimits
     period: float
     name: str = "joint_velocity"
 
     def apply(self, q: FloatArray, previous: FloatArray, bounds: Bounds) -> Bounds:
-        bounds.lower, bounds.upper = velocity_bounds(q, self.limits, self.period)
+        lower, upper = velocity_bounds(q, self.limits, self.period)
+        bounds.lower, bounds.upper = np.maximum(bounds.lower, lower), np.minimum(bounds.upper, upper)
         return bounds
 
 

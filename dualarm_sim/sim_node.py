@@ -96,8 +96,8 @@ PARAMETERS = (
     ParamSpec("command_timeout", 0.05, "command age that brings the arms to rest [s]", check=positive),
     ParamSpec("lockstep", False, "advance one period per received command", read_only=True),
     ParamSpec("plan", "", "plan.json of `dualarm plan`: start at its first configuration", read_only=True),
-    ParamSpec("collisions", True, "link contacts between the collision model's pairs (false: a plan run as planned, "
-              "docs/planner.md)", read_only=True),
+    ParamSpec("collisions", True, "link contacts between the collision model's pairs (false: links pass through "
+              "each other)", read_only=True),
     thread_priority_spec(50, "the physics loop"),
     ParamSpec("lockstep_subscribers", 2, "joint_states readers to wait for before the first lockstep state",
               check=non_negative),

@@ -11,8 +11,11 @@ from hypothesis import strategies as st
 
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.limits import (
+    Bounds,
     JointLimits,
+    VelocityLimit,
     acceleration_bounds,
+    apply_limits,
     repulsive_velocity,
     velocity_bounds,
 )
@@ -236,3 +239,32 @@ def test_position_limits_win_over_the_acceleration_bound() -> None:
     lower, upper = velocity_bounds(q, limits, 0.005)
     lo, up = acceleration_bounds(lower, upper, q, limits, np.array([1.5]), np.array([1.0]), 0.005)
     assert lo[0] == up[0] == pytest.approx(0.0)
+
+
+@dataclass(frozen=True)
+class HalfSpeed:
+    """A box limit of a test's own: every joint at most half its velocity limit (a user's new limit)."""
+
+    qd_max: np.ndarray
+    name: str = "half_speed"
+
+    def apply(self, q: np.ndarray, previous: np.ndarray, bounds: Bounds) -> Bounds:
+        bounds.lower = np.maximum(bounds.lower, -0.5 * self.qd_max)
+        bounds.upper = np.minimum(bounds.upper, 0.5 * self.qd_max)
+        return bounds
+
+
+@settings(max_examples=100, deadline=None, derandomize=True)
+@given(cases())
+def test_limits_intersect_whatever_their_order(case: Case) -> None:
+    """Issue 39: the box of every limit holds whichever comes first; VelocityLimit used to overwrite the box,
+    losing a limit applied before it. Brute force: the intersection computed elementwise here."""
+    mine = HalfSpeed(case.limits.qd_max)
+    eq23 = VelocityLimit(case.limits, case.period)
+    zero = np.zeros_like(case.q)
+    lower, upper = velocity_bounds(case.q, case.limits, case.period)
+    want = (np.maximum(lower, -0.5 * case.limits.qd_max), np.minimum(upper, 0.5 * case.limits.qd_max))
+    for order in ((mine, eq23), (eq23, mine)):
+        got = apply_limits(order, case.q, zero)
+        np.testing.assert_array_equal(got.lower, want[0])
+        np.testing.assert_array_equal(got.upper, want[1])

@@ -332,17 +332,66 @@ def test_plan_record_is_self_describing(small_plan: PlanResult, model: DualArmMo
         load_plan(bad)
 
 
-def test_executed_plan_stays_on_the_path(small_plan: PlanResult, model: DualArmModel) -> None:
+COLLISION_FREE_SEED = 5
+"""small_config's seed whose plan keeps every link pair 6.7 cm apart (seeds 0-4 pass a link through another:
+paper 003's planner does not avoid collisions; seed 0: right_flange 6.8 cm into left_link_2)."""
+
+
+def test_executed_plan_stays_on_the_path(model: DualArmModel) -> None:
+    """A collision-free plan, executed under every limit (the collision limit included, issue 39) with the
+    simulator's contacts on, follows the path within 1 mm / 5 mrad."""
     from dualarm_control.app.plan.execute import execute_plan
 
-    result = execute_plan(small_config(), small_plan.configurations, model)
+    config = small_config(seed=COLLISION_FREE_SEED)
+    free = plan(config, workers=1)
+    result = execute_plan(config, free.configurations, model)
+    assert result.closest_distance_m > 0.05, result.closest_pair
     assert result.duration > 1.0
     assert result.max_error_m < 1e-3  # m: 1 mm along a 30 cm corner
     assert result.max_error_rad < 5e-3
     assert result.reference_max_error_m < 5e-4  # the densified spline itself
 
 
-def test_cli_plan_writes_plan_json_and_figures(tmp_path: Path) -> None:
+def test_a_plan_through_the_other_arm_stops_at_the_safety_distance(small_plan: PlanResult, model: DualArmModel) -> None:
+    """Issue 39: small_config's seed-0 plan passes right_flange through left_link_2 (the plan record says so);
+    executed, the tracking runs under the collision limit in a simulator with contacts, so the links stay
+    at the safety distance (coal, and pybullet's closest points on the URDF's shapes, independently), and
+    the path is left rather than the arm pierced. Before, the plan ran inside the eq (23) box alone, with
+    the simulator's contacts off."""
+    from dualarm_control.app.plan.execute import execute_plan
+    from dualarm_control.app.record.report import plan_record
+    from dualarm_control.app.run.experiment import run_scenario
+    from dualarm_control.collision import CollisionModel
+    from dualarm_control.controller import ControllerParams
+    from dualarm_control.drive_monitor import closest_pair
+    from dualarm_control.references.plan import PlanSource
+    from dualarm_control.scenario import Scenario
+    from dualarm_control.trajectory import MotionLimits
+    from dualarm_sim.cell import robot_collision_pairs
+    from dualarm_sim.contacts import min_distances
+
+    doc = plan_record(small_plan, model, None)
+    assert doc["closest_pair_m"] < -0.05 and doc["closest_pair"] == "left_link_2 – right_flange", doc["closest_pair"]
+    result = execute_plan(small_config(), small_plan.configurations, model)
+    assert result.max_error_m > 0.01  # held off the path by the limit
+    config = small_config()
+    source = PlanSource(model, config, small_plan.configurations)
+    scenario = Scenario(name=config.name, description="plan", initial_positions=small_plan.configurations[0],
+                        reference=source, limits=MotionLimits(), settle_time=config.execution_settle,
+                        source=Path(config.name), robot=config.robot)
+    record = run_scenario(scenario, ControllerParams(period=0.005), model)
+    # the plan starts with right_flange 5.8 cm inside left_link_1: the limit separates them within 0.5 s
+    # (the damper's bound asks the pair to move apart), then holds the safety distance for the rest of the run
+    after = record.time >= 0.5
+    collision = CollisionModel.shared(model, model.description.collision_allowed)
+    closest = closest_pair(collision, record.positions[after])
+    assert closest.distance >= 0.03 - 1e-3, (closest.text, closest.distance)
+    found = min_distances(model.description, record.positions[after][::10], robot_collision_pairs(model.description))
+    assert found.minimum >= 0.03 - 2e-3, found.pair
+    assert closest_pair(collision, record.positions[:1]).distance < -0.05  # the plan's own start
+
+
+def test_cli_plan_writes_plan_json_and_figures(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from dualarm_control.app.cli import main
 
     out = tmp_path / "plan"
@@ -351,6 +400,11 @@ def test_cli_plan_writes_plan_json_and_figures(tmp_path: Path) -> None:
     assert code == 0
     doc = load_plan(out / "plan.json")
     assert doc["starts"] == 2 and doc["seed"] == 4
+    # seed 4's plan passes right_link_5 10.6 cm into left_link_1 (issue 39): said, and warned about
+    printed = capsys.readouterr()
+    assert doc["closest_pair"] == "left_link_1 – right_link_5" and doc["closest_pair_m"] < -0.1, doc["closest_pair"]
+    assert f"closest link pair        left_link_1 – right_link_5 at {doc['closest_pair_m'] * 1e3:.1f} mm" in printed.out
+    assert "warning: the plan brings left_link_1 – right_link_5 closer than the safety distance 30 mm" in printed.err
     assert (out / "index_along_path.png").stat().st_size > 0
     assert (out / "initial_configuration.png").stat().st_size > 0
     assert main(["plan", "assembly", "--output", str(out)]) == 2  # no corner path: usage error

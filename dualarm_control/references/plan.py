@@ -1,8 +1,10 @@
 """Reference source of paper 003: a plan's joint trajectory sample + its relative pose and twist.
 
-The trajectory node streams it; the controller tracks the joint reference
-(:func:`~dualarm_control.joint_tracking.joint_tracking_velocity`) and measures the relative
-pose error against the reference's relative pose (eq 1-2 and 4-6 of paper 000 at q_ref).
+The trajectory node streams it; the controller tracks the joint reference under every limit of the
+cycle, the collision limit included (:func:`~dualarm_control.joint_tracking.projected_tracking`;
+paper 003's planner does not avoid collisions: a plan through the other arm stalls at the safety
+distance, in a simulator with its contacts on, issue 39) and measures the relative pose error
+against the reference's relative pose (eq 1-2 and 4-6 of paper 000 at q_ref).
 """
 
 from __future__ import annotations
@@ -85,12 +87,6 @@ class PlanSource(SourceDefaults):
 
     def tracker(self, model: DualArmModel, params: ControllerParams, options: RunOptions) -> PlanTracker:
         return PlanTracker(self, RelativeController(model, params))
-
-    def cell(self, options: RunOptions) -> dict[str, Any]:
-        """The simulator without link contacts: paper 003's planner does not avoid collisions (the
-        corner_path plan passes right_flange 6.8 cm through left_link_2, which contacts would stop:
-        81.6 mm executed error), so a plan is executed as planned (docs/planner.md)."""
-        return {"collisions": False}
 
     def describe(self) -> str:
         return f"plan {self.path}"

@@ -44,6 +44,7 @@ def run_plan_command(args: argparse.Namespace, progress: ProgressFactory = progr
     """Body of ``dualarm plan`` (see :func:`add_plan_parser`)."""
     from dualarm_control.app.plan.optimise import default_workers, plan
     from dualarm_control.app.record.report import plan_record, write_figures, write_json
+    from dualarm_control.collision import CollisionParams
     from dualarm_control.kinematics import DualArmModel
     from dualarm_control.planning.config import load_plan_config
 
@@ -76,8 +77,16 @@ def run_plan_command(args: argparse.Namespace, progress: ProgressFactory = progr
     print(f"max closure error        {doc['max_closure_error_m']:.2e} m, {doc['max_closure_error_rad']:.2e} rad")
     print(f"joint-limit violations   {doc['joint_limit_violations']}")
     print(f"optimisation runtime     {doc['runtime_s']:.1f} s ({workers} workers)")
+    safety = CollisionParams().safety_distance
+    print(f"closest link pair        {doc['closest_pair']} at {doc['closest_pair_m'] * 1e3:.1f} mm"
+          + (f" (point {doc['closest_pair_point']})" if doc["closest_pair_point"] else ""))
+    if doc["closest_pair_m"] < safety:
+        print(f"warning: the plan brings {doc['closest_pair']} closer than the safety distance "
+              f"{safety * 1e3:g} mm (paper 003's planner does not avoid collisions): its execution stops at the "
+              "collision limit, off the path; try another --seed or more --starts", file=sys.stderr)
     if execution is not None:
         print(f"executed path error      max {execution.max_error_m * 1e3:.3f} mm, {execution.max_error_rad:.2e} rad; "
               f"rms {execution.rms_error_m * 1e3:.3f} mm, {execution.rms_error_rad:.2e} rad")
+        print(f"executed closest pair    {execution.closest_pair} at {execution.closest_distance_m * 1e3:.1f} mm")
     print(f"\nwrote {path}, {' and '.join(figures)}")
     return 0

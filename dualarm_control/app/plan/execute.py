@@ -1,9 +1,11 @@
 """In-process execution of a plan in the pybullet cell: joint-space tracking of the ruckig trajectory.
 
-The cell starts at the plan's first configuration; every 5 ms control period the command is
-``qd = qd_ref(t) + K (q_ref(t) - q)`` inside the eq (23) bounds (joint-space tracking,
-:func:`~dualarm_control.joint_tracking.joint_tracking_velocity`, K = ``execution.gain``; the
-controller node runs the same tracker with ``plan:=FILE``) with the
+The cell starts at the plan's first configuration; every 5 ms control period the command is the
+one nearest to ``qd = qd_ref(t) + K (q_ref(t) - q)`` within every limit of the cycle, the collision
+limit included (joint-space tracking, :func:`~dualarm_control.joint_tracking.projected_tracking`,
+K = ``execution.gain``; the controller node runs the same tracker with ``plan:=FILE``), in the
+simulator with its contacts on: a plan through the other arm (paper 003's planner does not avoid
+collisions) stalls at the safety distance, and the result names the closest pair. The
 reference from :class:`~dualarm_control.planning.joint_trajectory.JointPathTrajectory`
 through the planned configurations and ``execution.subdivisions - 1`` closure-projected
 knots between each pair (:func:`~dualarm_control.planning.joint_trajectory.densify`).
@@ -22,7 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from dualarm_control.app.run.experiment import run_scenario
+from dualarm_control.collision import CollisionModel
 from dualarm_control.controller import ControllerParams
+from dualarm_control.drive_monitor import closest_pair
 from dualarm_control.kinematics import DualArmModel, FloatArray, rotation_angle
 from dualarm_control.planning.config import PlanConfig
 from dualarm_control.references.plan import PlanSource
@@ -45,6 +49,8 @@ class ExecutionResult:
             times the reference passes them [m], [rad].
         max_joint_tracking_error: max |q_ref - q| [rad].
         steps: control periods simulated.
+        closest_distance_m, closest_pair: the closest link pair over the executed run [m] (coal, the
+            robot's allowed pairs excluded; at most the collision model's margin).
     """
 
     duration: float
@@ -58,6 +64,8 @@ class ExecutionResult:
     sample_max_error_rad: float
     max_joint_tracking_error: float
     steps: int
+    closest_distance_m: float = float("inf")
+    closest_pair: str = ""
 
 
 def execute_plan(
@@ -96,6 +104,8 @@ def execute_plan(
             sample_pos.append(float(np.linalg.norm(p - path.positions[i])))
             sample_rot.append(rotation_angle(r, r_d))
     pe, re_ = np.array(pos_err), np.array(rot_err)
+    closest = closest_pair(CollisionModel.shared(model, model.description.collision_allowed),
+                           np.vstack((record.positions, record.final_positions)))
     return ExecutionResult(
         duration=traj.duration,
         max_error_m=float(pe.max()),
@@ -108,4 +118,6 @@ def execute_plan(
         sample_max_error_rad=float(max(sample_rot)),
         max_joint_tracking_error=float(max(track)),
         steps=len(record.time),
+        closest_distance_m=closest.distance,
+        closest_pair=closest.text,
     )

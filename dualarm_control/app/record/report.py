@@ -28,7 +28,7 @@ import numpy as np
 
 from dualarm_control.app.record.run_record import RunRecord, TaskValues
 from dualarm_control.collision import CollisionModel
-from dualarm_control.drive_monitor import judge_goals, judge_segments
+from dualarm_control.drive_monitor import closest_pair, judge_goals, judge_segments
 from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel, FloatArray, rotation_angle
 from dualarm_control.metrics import (
@@ -168,16 +168,11 @@ def goal_metrics(record: RunRecord, commands: Sequence[Any], model: DualArmModel
     explained by the robot's collision model) and the smallest link-pair distance over the run [m]
     (coal, on the recorded positions, the pairs ``collision`` allows excluded)."""
     outcomes = judge_goals(model, commands, record.time, record.positions, record.final_positions, collision)
-    closest = (np.inf, "")
-    for q in record.positions[np.all(np.isfinite(record.positions), axis=1)]:
-        for pair in collision.distances(q, within=min(closest[0], collision.margin)):
-            if pair.distance < closest[0]:
-                closest = (pair.distance, f"{pair.link_a} – {pair.link_b}")
+    closest = closest_pair(collision, record.positions)
     return {"goals_reached": sum(o.state == "reached" for o in outcomes),
             "goals_stalled": sum(o.state == "stalled" for o in outcomes),
             "goal_outcomes": " | ".join(o.text() for o in outcomes),
-            "collision_min_distance_m": float(closest[0]) if np.isfinite(closest[0]) else float(collision.margin),
-            "collision_min_pair": closest[1] or f"none closer than {collision.margin:g} m"}
+            "collision_min_distance_m": closest.distance, "collision_min_pair": closest.text}
 
 
 def final_errors(record: RunRecord, scenario: Scenario, model: DualArmModel) -> tuple[float, float]:
@@ -342,6 +337,8 @@ def plan_record(result: PlanResult, model: DualArmModel, execution: ExecutionRes
             "random_first_configurations_rad": [b.configurations[0].tolist() for b in result.random_baselines],
         },
     }
+    closest = closest_pair(CollisionModel.shared(model, model.description.collision_allowed), result.configurations)
+    doc["closest_pair_m"], doc["closest_pair"], doc["closest_pair_point"] = closest.distance, closest.text, closest.index + 1
     if execution is not None:
         doc["executed_max_error_m"] = execution.max_error_m
         doc["executed_max_error_rad"] = execution.max_error_rad

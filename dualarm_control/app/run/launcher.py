@@ -281,8 +281,6 @@ def launch_scenario(
             if not tasks:
                 node_args["trajectory_node"] = [*common, *sim_time, *trajectory_args]
             node_args["sim_node"] = [*common, *with_scenario, "-p", f"lockstep_subscribers:={readers}"]
-            if plan is not None:  # a plan runs as planned: its planner does not avoid collisions (docs/planner.md)
-                node_args["sim_node"] += ["-p", "collisions:=false"]
             for group in LAYOUTS[processes]:
                 members = {node: node_args[node] for node in group if node in node_args}
                 if len(members) > 1:
