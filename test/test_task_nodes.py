@@ -108,6 +108,7 @@ def test_lockstep_bag_metrics_equal_in_process(lockstep: Lockstep, tmp_path: Pat
     assert len(log.time) == round(DURATION / PERIOD)
 
 
+@pytest.mark.realtime  # the circle is tracked in real time: a loaded machine's late states (84 ms) left 1.2 mm
 def test_realtime_200hz_reports_cycle_time_and_tracks_the_circle(tmp_path: Path) -> None:
     """Real time at 200 Hz: the cycles recorded from t = 0 to the end, cycle times reported,
     circle < 1 mm, no inequality violated, no solver failure."""
