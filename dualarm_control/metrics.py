@@ -99,6 +99,53 @@ def limit_violations(values: FloatArray, lower: FloatArray, upper: FloatArray, t
     return int(np.count_nonzero(outside.any(axis=1)))
 
 
+@dataclass(frozen=True)
+class JointLimitMetrics:
+    """How close a run came to the joint position limits (issue 43), from the normalised margin
+
+        m_ki = min(q_ki - q_min_i, q_max_i - q_ki) / (q_max_i - q_min_i)
+
+    of joint i at sample k (0.5 at mid-range, 0 at a limit, negative beyond it). Eq (24)'s repulsive zone
+    of share alpha is m < alpha / 2 (q below q*_min = q_min + alpha (q_max - q_min) / 2, or above q*_max):
+    where the repulsive velocity of eq (25) is non-zero.
+
+    Attributes:
+        min_margin: min over the samples and joints of m (the closest approach, as a share of the range).
+        final_margin: min over the joints of m at the final sample.
+        zone_joint_seconds: sum over the cycles and joints in the zone of the period [joint s].
+        zone_joints: how many joints are in the zone at some cycle.
+        alpha: the share the zone was measured with.
+    """
+
+    min_margin: float
+    final_margin: float
+    zone_joint_seconds: float
+    zone_joints: int
+    alpha: float
+
+
+def joint_limit_margins(q: FloatArray, q_min: FloatArray, q_max: FloatArray) -> FloatArray:
+    """m_ki of :class:`JointLimitMetrics` for joint positions q (N, n) [rad] and limits (n,) [rad]: (N, n)."""
+    q = np.asarray(q, dtype=float)
+    return np.minimum(q - q_min, q_max - q) / (q_max - q_min)
+
+
+def joint_limit_metrics(cycles: FloatArray, final: FloatArray, q_min: FloatArray, q_max: FloatArray, alpha: float,
+                        period: float) -> JointLimitMetrics:
+    """:class:`JointLimitMetrics` of a run: the joint positions of its cycles (N, n) [rad] (each held for
+    ``period`` [s]) and its final positions (n,) [rad]; ``alpha`` the share of eq (24)."""
+    margins = joint_limit_margins(cycles, q_min, q_max).reshape(-1, len(q_min))
+    final_margins = joint_limit_margins(np.asarray(final, dtype=float)[None, :], q_min, q_max)[0]
+    inside = margins < alpha / 2.0
+    return JointLimitMetrics(
+        min_margin=float(min(margins.min(initial=np.inf), final_margins.min(initial=np.inf))),
+        final_margin=float(final_margins.min(initial=np.inf)),
+        zone_joint_seconds=float(np.count_nonzero(inside) * period),
+        zone_joints=int(np.count_nonzero(inside.any(axis=0))),
+        alpha=float(alpha),
+    )
+
+
 def percentiles(samples: FloatArray, qs: tuple[float, ...] = (50.0, 99.0)) -> tuple[float, ...]:
     """Percentiles of ``samples`` (NaN-free), e.g. (p50, p99)."""
     arr = np.asarray(samples, dtype=float)

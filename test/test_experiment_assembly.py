@@ -15,7 +15,12 @@ from pathlib import Path
 import pytest
 
 from dualarm_control.app.cli import main
-from dualarm_control.app.record.report import METRIC_KEYS, SEGMENT_KEYS, TRACKING_KEYS
+from dualarm_control.app.record.report import (
+    JOINT_LIMIT_KEYS,
+    METRIC_KEYS,
+    SEGMENT_KEYS,
+    TRACKING_KEYS,
+)
 
 SOLVERS = ("standard_qp", "sparse_qp", "hierarchical_sparse_qp")
 FINAL_ERRORS = {"standard_qp": (6.4e-12, 3.7e-9), "sparse_qp": (1.6e-7, 1.3e-7), "hierarchical_sparse_qp": (1.6e-7, 1.3e-7)}
@@ -71,7 +76,7 @@ def test_metrics_file_has_every_key(metrics: dict[str, dict[str, float]]) -> Non
     """metrics.json lists each solver with exactly the documented keys."""
     assert list(metrics) == list(SOLVERS)
     for record in metrics.values():
-        assert tuple(record) == METRIC_KEYS + TRACKING_KEYS + SEGMENT_KEYS
+        assert tuple(record) == METRIC_KEYS + JOINT_LIMIT_KEYS + TRACKING_KEYS + SEGMENT_KEYS
 
 
 @pytest.mark.parametrize("solver", SOLVERS)

@@ -9,6 +9,7 @@ import pytest
 
 from dualarm_control.metrics import (
     active_set_switches_per_s,
+    joint_limit_metrics,
     l0_norms,
     limit_violations,
     max_joint_acceleration,
@@ -94,3 +95,20 @@ def test_active_set_switches_per_s_by_hand() -> None:
     # cycle 1: joint 0 enters (1); cycle 2: joint 0 leaves, 1 leaves, 2 enters (3); cycle 3: none
     assert active_set_switches_per_s(qd, 0.5) == pytest.approx(4 / (4 * 0.5))
     assert active_set_switches_per_s(np.full((5, 2), 1e-3), 0.5) == 0.0  # exactly 1e-3 is not active
+
+
+def test_joint_limit_metrics_on_a_hand_computed_trajectory() -> None:
+    """Issue 43: two joints, limits [-1, 1] and [0, 2], alpha 0.2 (zone: margin < 0.1 of the range), T = 0.01 s.
+    Joint 0 at 0, 0.7, 0.85, 0.95 has margins 0.5, 0.15, 0.075, 0.025 (two cycles in the zone); joint 1 stays
+    at mid-range; the final state (0.9, 1.0) has margin 0.05."""
+    cycles = np.array([[0.0, 1.0], [0.7, 1.0], [0.85, 1.0], [0.95, 1.0]])
+    m = joint_limit_metrics(cycles, np.array([0.9, 1.0]), np.array([-1.0, 0.0]), np.array([1.0, 2.0]), 0.2, 0.01)
+    assert m.min_margin == pytest.approx(0.025)
+    assert m.final_margin == pytest.approx(0.05)
+    assert m.zone_joint_seconds == pytest.approx(0.02)
+    assert m.zone_joints == 1 and m.alpha == 0.2
+    beyond = joint_limit_metrics(np.array([[1.1, 1.0]]), np.array([1.1, 1.0]), np.array([-1.0, 0.0]),
+                                 np.array([1.0, 2.0]), 0.2, 0.01)
+    assert beyond.min_margin == pytest.approx(-0.05) and beyond.zone_joint_seconds == pytest.approx(0.01)
+    none = joint_limit_metrics(cycles, cycles[0], np.array([-1.0, 0.0]), np.array([1.0, 2.0]), 0.0, 0.01)
+    assert none.zone_joint_seconds == 0.0 and none.zone_joints == 0  # alpha 0: no zone

@@ -606,6 +606,7 @@ def report(path: Path, output: Path) -> tuple[dict[str, dict[str, Any]], str, li
     figures' file names; BagError when the bag lacks what the report needs.
     """
     from dualarm_control.app.record.report import (
+        DEFAULT_ALPHA,
         prepare_output,
         summarize_run,
         write_figures,
@@ -620,7 +621,8 @@ def report(path: Path, output: Path) -> tuple[dict[str, dict[str, Any]], str, li
     model = DualArmModel(scenario.robot if scenario is not None else bag.robot)  # the run's limits
     if scenario is None:
         scenario = judged_scenario(bag)
-    results = {r.label: summarize_run(r, scenario, model) for r in runs}
+    alpha = bag.cell.get(CONTROLLER_STATUS, {}).get("alpha", DEFAULT_ALPHA)  # the run's eq (24) share, if recorded
+    results = {r.label: summarize_run(r, scenario, model, float(alpha)) for r in runs}
     prepare_output(Path(output))
     write_json(Path(output) / "metrics.json", results)
     return results, runs[0].kind, write_figures(runs[0].kind, Path(output), Path(path).name, runs, scenario)

@@ -33,6 +33,7 @@ from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel, FloatArray, rotation_angle
 from dualarm_control.metrics import (
     active_set_switches_per_s,
+    joint_limit_metrics,
     limit_violations,
     max_joint_acceleration,
     percentiles,
@@ -65,15 +66,21 @@ METRIC_KEYS = (
     "joint_velocity_limit_violations", "solver_failures", "cycle_time_p50_s", "cycle_time_p99_s",
     "max_joint_acceleration", "active_set_switches_per_s",
 )
+JOINT_LIMIT_KEYS = ("joint_limit_min_margin", "joint_limit_final_margin", "repulsive_zone_joint_s",
+                    "repulsive_zone_joints", "repulsive_zone_alpha")
+"""How close a relative-motion run came to the joint limits (issue 43, :class:`~dualarm_control.metrics.JointLimitMetrics`)."""
+DEFAULT_ALPHA = 0.1
+"""eq (24)'s share alpha the joint-limit metrics use when the run's is not known (the controller's default)."""
 TRACKING_KEYS = ("max_tracking_error_m", "rms_tracking_error_m", "max_tracking_error_rad")
 """Added when per-cycle tracking errors are known (in-process runs, bags with controller diagnostics)."""
 
 
-def summarize_run(record: RunRecord, scenario: Scenario | None,
-                  model: DualArmModel | None = None) -> dict[str, float | int | str]:
+def summarize_run(record: RunRecord, scenario: Scenario | None, model: DualArmModel | None = None,
+                  alpha: float = DEFAULT_ALPHA) -> dict[str, float | int | str]:
     """The metrics.json record of a run, in-process or from a bag: paper 001's keys for tasks
     (:func:`task_metrics`), else Table I's (``METRIC_KEYS``; ``TRACKING_KEYS`` too where the
-    record has per-cycle tracking errors). The velocity norms are those of the commanded
+    record has per-cycle tracking errors), then the joint-limit keys (``JOINT_LIMIT_KEYS``, with eq (24)'s
+    share ``alpha`` of the run). The velocity norms are those of the commanded
     velocities (Table I uses these); the velocity limits are checked on the commanded and the
     measured velocities, the position limits on the measured positions. The scenario may be
     None for a relative-motion record that holds its ``final_errors`` (a bag's)."""
@@ -101,6 +108,7 @@ def summarize_run(record: RunRecord, scenario: Scenario | None,
         max_joint_acceleration=max_joint_acceleration(commands, period),
         active_set_switches_per_s=active_set_switches_per_s(commands, period),
     )
+    out.update(joint_limit_keys(record, model, alpha))
     pos, rot = (e[np.isfinite(e)] for e in (record.position_error, record.orientation_error))
     if pos.size and rot.size:
         out.update(max_tracking_error_m=float(pos.max()), rms_tracking_error_m=float(np.sqrt(np.mean(pos**2))),
@@ -112,6 +120,17 @@ def summarize_run(record: RunRecord, scenario: Scenario | None,
         out.update(segment_metrics(record, scenario.reference, scenario.limits, model,
                                    run_collision_model(model, scenario)))
     return out
+
+
+def joint_limit_keys(record: RunRecord, model: DualArmModel, alpha: float) -> dict[str, float | int]:
+    """The ``JOINT_LIMIT_KEYS`` of a run (its finite cycles' positions; the final positions, else the last cycle's)."""
+    cycles = record.positions[np.all(np.isfinite(record.positions), axis=1)]
+    final = record.final_positions if np.all(np.isfinite(record.final_positions)) else \
+        (cycles[-1] if len(cycles) else np.full(model.nq, np.nan))
+    m = joint_limit_metrics(cycles, final, model.q_min, model.q_max, alpha, record.period)
+    return {"joint_limit_min_margin": m.min_margin, "joint_limit_final_margin": m.final_margin,
+            "repulsive_zone_joint_s": m.zone_joint_seconds, "repulsive_zone_joints": m.zone_joints,
+            "repulsive_zone_alpha": m.alpha}
 
 
 SEGMENT_KEYS = ("segments_reached", "segments_stalled", "segment_outcomes")
@@ -389,6 +408,10 @@ TABLE_I_ROWS = (
     ("cycle time p99 [ms]", "cycle_time_p99_s", 1e3, "{:.3f}"),
     ("max joint acceleration [rad/s^2]", "max_joint_acceleration", 1.0, "{:.2f}"),
     ("active-set switches per s", "active_set_switches_per_s", 1.0, "{:.2f}"),
+    ("closest joint-limit margin [% of range]", "joint_limit_min_margin", 100.0, "{:.2f}"),
+    ("final joint-limit margin [% of range]", "joint_limit_final_margin", 100.0, "{:.2f}"),
+    ("time in the repulsive zone [joint s]", "repulsive_zone_joint_s", 1.0, "{:.2f}"),
+    ("joints entering the repulsive zone", "repulsive_zone_joints", 1.0, "{:.0f}"),
 )
 """Table I of paper 000, plus errors, limits and timings: (label, key, scale, format)."""
 TASK_ROWS = (

@@ -77,7 +77,7 @@ def experiment_command(scenario_name: str, solver_names: str | None, params_file
         for label, params, gain in runs:
             start = time.perf_counter()
             log = run_scenario(scenario, params, model, progress_bar(label), gain=gain, force=force, duration=duration)
-            results[log.label] = summarize_run(log, scenario, model)
+            results[log.label] = summarize_run(log, scenario, model, params.alpha)
             logs.append(log)
             print(f"[{label}] done: {len(log.time)} cycles in {time.perf_counter() - start:.1f} s wall", file=sys.stderr)
     except KeyboardInterrupt:

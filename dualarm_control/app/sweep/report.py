@@ -4,8 +4,9 @@ Per task, the ratio l0(solver)/l0(standard_qp) of the time-averaged active-joint
 l0, metrics.json's ``l0_mean``), paired by task: only tasks whose runs of both solvers have no error.
 The median of each ratio with a percentile-bootstrap 95 % confidence interval (``resamples``
 resamples of the tasks, seeded: the same table gives the same interval), the final position error,
-the largest tracking error and the cycle times per solver (medians), as a Markdown table; box plots of the ratios, and of
-the final and tracking errors and cycle times per solver (PNG).
+the largest tracking error, the closest joint-limit margin and the time in eq (24)'s repulsive zone (issue 43) and
+the cycle times per solver (medians), as a Markdown table; box plots of the ratios, and of the final and tracking
+errors, limit margins, zone times and cycle times per solver (PNG).
 """
 
 from __future__ import annotations
@@ -73,8 +74,14 @@ def paired_ratios(rows: Sequence[dict[str, Any]], seed: int = 0) -> list[RatioSu
     return out
 
 
+def _column(rows: dict[int, dict[str, Any]], column: str, scale: float = 1.0) -> list[float]:
+    """The finite values of ``column`` (times ``scale``); none where a table predates the column."""
+    values = [r.get(column) for r in rows.values()]
+    return [scale * float(v) for v in values if v is not None and np.isfinite(v)]
+
+
 def _median(rows: dict[int, dict[str, Any]], column: str) -> float:
-    values = [r[column] for r in rows.values() if np.isfinite(r[column])]
+    values = _column(rows, column)
     return float(np.median(values)) if values else float("nan")
 
 
@@ -85,8 +92,9 @@ def markdown(rows: Sequence[dict[str, Any]], seed: int = 0) -> str:
         lines.append(f"| {s.robot} | {s.variant} | l0({s.solver}) / l0({REFERENCE}) | {s.tasks} | {s.median:.3f} | "
                      f"[{s.low:.3f}, {s.high:.3f}] |")
     header = ("| robot | variant | solver | runs | errors | median l0 | median final error [m] | median max tracking error [m] | "
+              "median closest limit margin [% of range] | median time in the repulsive zone [joint s] | "
               "median cycle p50 [ms] | median cycle p99 [ms] | solver failures |")
-    lines += ["", header, "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    lines += ["", header, "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     errors: dict[tuple[str, str, str], int] = defaultdict(int)
     for row in rows:
         errors[(row["robot"], row["variant"], row["solver"])] += row["error"] is not None
@@ -95,6 +103,7 @@ def markdown(rows: Sequence[dict[str, Any]], seed: int = 0) -> str:
             lines.append(f"| {robot} | {variant} | {solver} | {len(runs)} | {errors[(robot, variant, solver)]} | "
                          f"{_median(runs, 'l0_mean'):.3f} | {_median(runs, 'final_position_error_m'):.2e} | "
                          f"{_median(runs, 'max_tracking_error_m'):.2e} | "
+                         f"{100 * _median(runs, 'joint_limit_min_margin'):.2f} | {_median(runs, 'repulsive_zone_joint_s'):.3f} | "
                          f"{1e3 * _median(runs, 'cycle_time_p50_s'):.3f} | {1e3 * _median(runs, 'cycle_time_p99_s'):.3f} | "
                          f"{int(sum(r['solver_failures'] for r in runs.values()))} |")
     return "\n".join(lines) + "\n"
@@ -126,11 +135,17 @@ def plot(rows: Sequence[dict[str, Any]], out: Path, seed: int = 0) -> list[Path]
              for s, runs in sorted(solvers.items())]
     for column, scale, label, name in (("final_position_error_m", 1.0, "final position error [m]", "final_errors.png"),
                                        ("max_tracking_error_m", 1.0, "max tracking error [m]", "tracking_errors.png"),
-                                       ("cycle_time_p99_s", 1e3, "cycle time p99 [ms]", "cycle_times.png")):
+                                       ("cycle_time_p99_s", 1e3, "cycle time p99 [ms]", "cycle_times.png"),
+                                       ("joint_limit_min_margin", 100.0, "closest joint-limit margin [% of range]",
+                                        "joint_limit_margins.png"),
+                                       ("repulsive_zone_joint_s", 1.0, "time in the repulsive zone of eq (24) [joint s]",
+                                        "repulsive_zone_time.png")):
         if not cells:
             break
+        if not any(_column(runs, column) for _, runs in cells):
+            continue  # a table that predates the column
         fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(cells)), 4.0))
-        ax.boxplot([[scale * r[column] for r in runs.values() if np.isfinite(r[column])] for _, runs in cells])
+        ax.boxplot([_column(runs, column, scale) for _, runs in cells])
         ax.set_xticks(range(1, len(cells) + 1), [c for c, _ in cells], fontsize=8)
         if column.endswith("error_m"):
             ax.set_yscale("log")

@@ -16,7 +16,12 @@ from dataclasses import dataclass, replace
 from functools import lru_cache
 from typing import Any
 
-from dualarm_control.app.record.report import METRIC_KEYS, TRACKING_KEYS, summarize_run
+from dualarm_control.app.record.report import (
+    JOINT_LIMIT_KEYS,
+    METRIC_KEYS,
+    TRACKING_KEYS,
+    summarize_run,
+)
 from dualarm_control.app.run.experiment import run_scenario
 from dualarm_control.app.sweep.spec import SweepSpec
 from dualarm_control.app.sweep.tasks import RelativeTask, TaskSampler, TaskSampling
@@ -24,7 +29,7 @@ from dualarm_control.kinematics import DualArmModel
 from dualarm_control.scenario import Scenario, load_scenario
 
 KEY_COLUMNS = ("robot", "solver", "variant", "seed", "task")
-METRIC_COLUMNS = METRIC_KEYS + TRACKING_KEYS
+METRIC_COLUMNS = METRIC_KEYS + TRACKING_KEYS + JOINT_LIMIT_KEYS
 WALL_COLUMNS = ("cycle_time_p50_s", "cycle_time_p99_s", "wall_time_s")
 """Wall-clock columns: they differ between two runs of the same task; every other column is bitwise the same."""
 COLUMNS = ("key", *KEY_COLUMNS, *METRIC_COLUMNS, "steps", "task_duration_s", "wall_time_s", "error")
@@ -93,8 +98,9 @@ def run_one(spec: SweepSpec, key: RunKey) -> dict[str, Any]:
         base, model = _cell(spec.scenario, key.robot)
         task = sample_task(spec.scenario, key.robot, spec.sampling, spec.settle_time, key.seed, key.task)
         scenario = task_scenario(base, task, spec.settle_time)
-        record = run_scenario(scenario, spec.params(key.robot, key.solver, key.variant), model)
-        summary = summarize_run(record, scenario, model)
+        params = spec.params(key.robot, key.solver, key.variant)
+        record = run_scenario(scenario, params, model)
+        summary = summarize_run(record, scenario, model, params.alpha)
         row.update({c: float(summary[c]) for c in METRIC_COLUMNS if c in summary})
         row.update(steps=len(record.time), task_duration_s=task.duration)
     except Exception as exc:  # noqa: BLE001 -- a run's failure is its row, not the sweep's crash
