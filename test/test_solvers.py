@@ -183,8 +183,8 @@ def near_limit_problem(model: DualArmModel, limits: JointLimits, joint: int, see
 def test_registry_lists_the_four_methods_of_the_paper() -> None:
     """solver_names() holds eq (13), (14), (17)-(19) and (26)-(28) of paper 000 and paper 001's
     constraint_based (eq 12-14), sorted; make_solver sets .name."""
-    assert solver_names() == ["constraint_based", "hierarchical_sparse_qp", "pseudo_inverse", "sparse_qp",
-                              "standard_qp"]
+    assert solver_names() == ["constraint_based", "hierarchical_sparse_l1_qp", "hierarchical_sparse_qp",
+                              "pseudo_inverse", "sparse_qp", "standard_qp"]
     for name in solver_names():
         assert make_solver(name).name == name
 

@@ -396,6 +396,66 @@ class HierarchicalSparseQP(Solver):
         return qd1 + sol.x, status, iters + sol.iterations, detail
 
 
+SECONDARY_L1_WEIGHT = 1e-3
+"""lambda_2 [rad/s] of :class:`HierarchicalSparseL1QP`'s second level: the price of moving a joint outside the
+repulsive zone. Sparsity comes from the l1 term's geometry (a basic solution), not from its size: small
+against the zone term's (qd - qd_r)^2, of order (0.1 rad/s)^2 where the repulsion acts."""
+
+
+@register("hierarchical_sparse_l1_qp")
+class HierarchicalSparseL1QP(HierarchicalSparseQP):
+    """Hierarchical sparse QP whose second level stays sparse (issue 43): eq (26) as QP1, then, in place of
+    eq (27)'s least-squares projection (its ||qd - qd_r||^2 asks every joint outside the zone for qd = 0
+    in the l2 sense, which spreads one joint's repulsion over all of them),
+
+        qd = argmin 1/2 sum_{i in Z} (qd_i - qd_r,i)^2 + lambda_2 sum_{i not in Z} |qd_i|
+             s.t.  J qd = J qd1,  Qd_min <= qd <= Qd_max,  A qd <= b,
+
+    with Z the joints in the repulsive zone of eq (24) (qd_r,i != 0, eq (25)) and lambda_2 =
+    :data:`SECONDARY_L1_WEIGHT`. The first level's task velocity J qd1 is kept exactly (an equality, as eq
+    (27)'s J qd2 = 0), the zone joints are driven toward the repulsive velocity, and the joints outside the
+    zone pay the l1 norm of the whole command: a joint that QP1 moves costs what it did, a joint it left
+    at rest costs lambda_2 |qd_i| to start, so the compensation of the zone joints' motion in the task
+    is carried by few joints (a basic solution: at most m = 6 beyond QP1's). Solved as a QP in
+    z = [qd+; qd-] (2n), qd = qd+ - qd-, on the box of :func:`lasso_box`:
+
+        H = [[D, -D], [-D, D]],  D = diag(1_Z);   g = [-qd_r + lambda_2 1_{not Z}; qd_r + lambda_2 1_{not Z}];
+        [J, -J] z = J qd1;   [A, -A] z <= b.
+
+    H is semi-definite (back-ends that need a definite H are refused, as for QP1). Without a joint in
+    the zone the command is qd1 (QP2 skipped: bit for bit the sparse QP); if QP2 fails, qd1 alone is
+    commanded and ``detail`` says so.
+    """
+
+    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
+        qd1, status, iters, detail = self._primary._solve(problem)
+        if qd1 is None or not np.any(problem.repulsive) \
+                or not bound_excess(qd1, problem.lower, problem.upper) <= self.bound_tolerance:
+            return qd1, status, iters, detail  # no secondary motion, or a failure for solve() to handle
+        qd1 = np.minimum(np.maximum(qd1, problem.lower), problem.upper)  # absorbs QP1's tolerance
+        h, g = secondary_l1_terms(problem.repulsive, SECONDARY_L1_WEIGHT)
+        j = problem.jacobian
+        split = np.hstack((j, -j))
+        lb, ub = lasso_box(problem.lower, problem.upper)
+        sol = self._secondary.solve(QPProblem(H=h, g=g, A=split, b=j @ qd1, lb=lb, ub=ub,
+                                              **limit_rows_of(problem, 2)))
+        if sol.x is None:
+            return qd1, status, iters + sol.iterations, f"secondary l1 QP {sol.status}; primary task only"
+        n = qd1.shape[0]
+        return sol.x[:n] - sol.x[n:], status, iters + sol.iterations, detail
+
+
+def secondary_l1_terms(repulsive: FloatArray, l1_weight: float) -> tuple[FloatArray, FloatArray]:
+    """H (2n, 2n) and g (2n,) of :class:`HierarchicalSparseL1QP`'s second level on z = [qd+; qd-]:
+    1/2 sum_{i in Z} (qd_i - qd_r,i)^2 + l1_weight sum_{i not in Z} |qd_i| with Z = {i: qd_r,i != 0}."""
+    zone = repulsive != 0.0
+    d = np.diag(zone.astype(float))
+    h = np.block([[d, -d], [-d, d]])
+    price = np.where(zone, 0.0, l1_weight)
+    r = np.where(zone, repulsive, 0.0)
+    return h, np.concatenate((price - r, price + r))
+
+
 def null_space_projection(jacobian: FloatArray, velocity: FloatArray) -> FloatArray | None:
     """Projection of ``velocity`` onto the null space of J: v - J^T (J J^T)^-1 J v.
 

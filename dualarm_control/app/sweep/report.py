@@ -65,7 +65,8 @@ def paired_ratios(rows: Sequence[dict[str, Any]], seed: int = 0) -> list[RatioSu
     out = []
     for (robot, variant), solvers in sorted(grouped(rows).items()):
         reference = solvers.get(REFERENCE, {})
-        for solver in COMPARED:
+        others = sorted(s for s in solvers if s != REFERENCE and s not in COMPARED)  # e.g. hierarchical_sparse_l1_qp
+        for solver in (*COMPARED, *others):
             runs = solvers.get(solver, {})
             tasks = sorted(t for t in set(reference) & set(runs) if reference[t]["l0_mean"] > 0)
             ratios = np.array([runs[t]["l0_mean"] / reference[t]["l0_mean"] for t in tasks], dtype=float)
