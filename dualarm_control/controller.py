@@ -403,6 +403,8 @@ CONTROLLER_PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("regularization", 1e-6, "standard QP minimum-norm tie-break eps", check=non_negative),
     ParamSpec("proximal_weight", 1e-6, "sparse QPs' proximal term mu around the previous solution (0 = exact lasso)",
               check=non_negative),
+    ParamSpec("secondary_l1_weight", 0.1, "hierarchical_sparse_l1_qp: price lambda_2 [rad/s] of moving a joint "
+              "outside the repulsive zone (docs/hierarchy.md)", check=positive),
     ParamSpec("acceleration_limit", [0.0],
               "joint acceleration bound [rad/s^2]: [0.0] = none, one value for all joints or one per joint "
               f"(documented choice: [{DEFAULT_ACCELERATION_LIMIT}])", check=_acceleration_check),
@@ -436,6 +438,7 @@ def controller_params(values: Mapping[str, Any], node: str = "controller_node") 
             l1_weight=v["l1_weight"],
             regularization=v["regularization"],
             proximal_weight=v["proximal_weight"],
+            secondary_l1_weight=v["secondary_l1_weight"],
             qp_backend=v["qp_backend"],
             qp=QPSettings(eps_abs=v["qp_eps_abs"], max_iter=v["qp_max_iter"]),
         ),

@@ -114,6 +114,10 @@ class JointLimitMetrics:
         final_margin: min over the joints of m at the final sample.
         zone_joint_seconds: sum over the cycles and joints in the zone of the period [joint s].
         zone_joints: how many joints are in the zone at some cycle.
+        zone_depth_seconds: sum over the cycles and joints of the depth in the zone, (alpha/2 - m)+ / (alpha/2)
+            (0 at the zone's edge, 1 at the limit), times the period [joint s]. Eq (25)'s repulsion vanishes at
+            the edge, so a joint pushed out approaches it without crossing: the time in the zone cannot tell
+            it from a joint left deep inside; the depth can.
         alpha: the share the zone was measured with.
     """
 
@@ -121,6 +125,7 @@ class JointLimitMetrics:
     final_margin: float
     zone_joint_seconds: float
     zone_joints: int
+    zone_depth_seconds: float
     alpha: float
 
 
@@ -137,11 +142,13 @@ def joint_limit_metrics(cycles: FloatArray, final: FloatArray, q_min: FloatArray
     margins = joint_limit_margins(cycles, q_min, q_max).reshape(-1, len(q_min))
     final_margins = joint_limit_margins(np.asarray(final, dtype=float)[None, :], q_min, q_max)[0]
     inside = margins < alpha / 2.0
+    depth = np.maximum(alpha / 2.0 - margins, 0.0) / (alpha / 2.0) if alpha > 0 else np.zeros_like(margins)
     return JointLimitMetrics(
         min_margin=float(min(margins.min(initial=np.inf), final_margins.min(initial=np.inf))),
         final_margin=float(final_margins.min(initial=np.inf)),
         zone_joint_seconds=float(np.count_nonzero(inside) * period),
         zone_joints=int(np.count_nonzero(inside.any(axis=0))),
+        zone_depth_seconds=float(depth.sum() * period),
         alpha=float(alpha),
     )
 

@@ -107,6 +107,8 @@ def test_joint_limit_metrics_on_a_hand_computed_trajectory() -> None:
     assert m.final_margin == pytest.approx(0.05)
     assert m.zone_joint_seconds == pytest.approx(0.02)
     assert m.zone_joints == 1 and m.alpha == 0.2
+    # depth (0.1 - m) / 0.1 of the two zone cycles: 0.25 and 0.75, times 0.01 s
+    assert m.zone_depth_seconds == pytest.approx(0.01)
     beyond = joint_limit_metrics(np.array([[1.1, 1.0]]), np.array([1.1, 1.0]), np.array([-1.0, 0.0]),
                                  np.array([1.0, 2.0]), 0.2, 0.01)
     assert beyond.min_margin == pytest.approx(-0.05) and beyond.zone_joint_seconds == pytest.approx(0.01)

@@ -15,10 +15,15 @@ from scipy.optimize import minimize
 
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.limits import JointLimits, repulsive_velocity, velocity_bounds
-from dualarm_control.solvers import ACTIVITY_THRESHOLD, ControlProblem, make_solver
-from dualarm_control.solvers.methods import SECONDARY_L1_WEIGHT
+from dualarm_control.solvers import (
+    ACTIVITY_THRESHOLD,
+    ControlProblem,
+    SolverParams,
+    make_solver,
+)
 
 PERIOD = 0.005
+SECONDARY_L1_WEIGHT = SolverParams().secondary_l1_weight
 
 
 @pytest.fixture(scope="module")

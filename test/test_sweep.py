@@ -132,8 +132,10 @@ def test_cli_sweep_and_report(reference: Path, tmp_path: Path, capsys: pytest.Ca
     assert main(["sweep", "report", str(reference), "--output", str(tmp_path)]) == 0
     text = capsys.readouterr().out
     assert "l0(sparse_qp) / l0(standard_qp) | 4 |" in text
-    for name in ("report.md", "l0_ratios.png", "final_errors.png", "tracking_errors.png", "cycle_times.png"):
+    for name in ("report.md", "l0_ratios.png", "final_errors.png", "tracking_errors.png", "cycle_times.png",
+                 "joint_limit_margins.png", "repulsive_zone_time.png", "repulsive_zone_depth.png", "tradeoff.png"):
         assert (tmp_path / name).stat().st_size > 0
+    assert "median depth-weighted zone time [joint s]" in text  # issue 43's columns
     assert main(["sweep", "report"]) == 2
 
 

@@ -250,6 +250,8 @@ class SolverParams:
             previous lasso solution [(m/s)^2 per (rad/s)^2], >= 0; 0 = the exact lasso of eq (19)
             every cycle. Default 1e-6 (docs/bench.md: chatter vs mu).
             See :class:`dualarm_control.solvers.methods.SparseQP`.
+        secondary_l1_weight: lambda_2 [rad/s] of ``hierarchical_sparse_l1_qp``'s second level, > 0: the price
+            of moving a joint outside eq (24)'s repulsive zone (docs/hierarchy.md). Default 0.1.
         qp_backend: "daqp" (default), "proxsuite" or a qpsolvers solver name (see dualarm_control.qp).
         qp: numerical settings of the QP back-end.
     """
@@ -257,6 +259,7 @@ class SolverParams:
     l1_weight: float = 1e-6
     regularization: float = 1e-6
     proximal_weight: float = 1e-6
+    secondary_l1_weight: float = 0.1
     qp_backend: str = DEFAULT_BACKEND
     qp: QPSettings = field(default_factory=QPSettings)
 
@@ -267,6 +270,8 @@ class SolverParams:
             raise ValueError(f"regularization must be >= 0, got {self.regularization}")
         if not (np.isfinite(self.proximal_weight) and self.proximal_weight >= 0):
             raise ValueError(f"proximal_weight must be >= 0, got {self.proximal_weight}")
+        if not (np.isfinite(self.secondary_l1_weight) and self.secondary_l1_weight > 0):
+            raise ValueError(f"secondary_l1_weight must be > 0, got {self.secondary_l1_weight}")
 
 
 class Solver:

@@ -396,12 +396,6 @@ class HierarchicalSparseQP(Solver):
         return qd1 + sol.x, status, iters + sol.iterations, detail
 
 
-SECONDARY_L1_WEIGHT = 1e-3
-"""lambda_2 [rad/s] of :class:`HierarchicalSparseL1QP`'s second level: the price of moving a joint outside the
-repulsive zone. Sparsity comes from the l1 term's geometry (a basic solution), not from its size: small
-against the zone term's (qd - qd_r)^2, of order (0.1 rad/s)^2 where the repulsion acts."""
-
-
 @register("hierarchical_sparse_l1_qp")
 class HierarchicalSparseL1QP(HierarchicalSparseQP):
     """Hierarchical sparse QP whose second level stays sparse (issue 43): eq (26) as QP1, then, in place of
@@ -412,7 +406,8 @@ class HierarchicalSparseL1QP(HierarchicalSparseQP):
              s.t.  J qd = J qd1,  Qd_min <= qd <= Qd_max,  A qd <= b,
 
     with Z the joints in the repulsive zone of eq (24) (qd_r,i != 0, eq (25)) and lambda_2 =
-    :data:`SECONDARY_L1_WEIGHT`. The first level's task velocity J qd1 is kept exactly (an equality, as eq
+    ``secondary_l1_weight`` (:class:`~dualarm_control.solvers.base.SolverParams`, default 0.1 rad/s: the
+    trade-off between the joints kept out of the zone and the joints moving, docs/hierarchy.md). The first level's task velocity J qd1 is kept exactly (an equality, as eq
     (27)'s J qd2 = 0), the zone joints are driven toward the repulsive velocity, and the joints outside the
     zone pay the l1 norm of the whole command: a joint that QP1 moves costs what it did, a joint it left
     at rest costs lambda_2 |qd_i| to start, so the compensation of the zone joints' motion in the task
@@ -433,7 +428,7 @@ class HierarchicalSparseL1QP(HierarchicalSparseQP):
                 or not bound_excess(qd1, problem.lower, problem.upper) <= self.bound_tolerance:
             return qd1, status, iters, detail  # no secondary motion, or a failure for solve() to handle
         qd1 = np.minimum(np.maximum(qd1, problem.lower), problem.upper)  # absorbs QP1's tolerance
-        h, g = secondary_l1_terms(problem.repulsive, SECONDARY_L1_WEIGHT)
+        h, g = secondary_l1_terms(problem.repulsive, self.params.secondary_l1_weight)
         j = problem.jacobian
         split = np.hstack((j, -j))
         lb, ub = lasso_box(problem.lower, problem.upper)

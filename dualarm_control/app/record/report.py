@@ -67,7 +67,7 @@ METRIC_KEYS = (
     "max_joint_acceleration", "active_set_switches_per_s",
 )
 JOINT_LIMIT_KEYS = ("joint_limit_min_margin", "joint_limit_final_margin", "repulsive_zone_joint_s",
-                    "repulsive_zone_joints", "repulsive_zone_alpha")
+                    "repulsive_zone_joints", "repulsive_zone_depth_s", "repulsive_zone_alpha")
 """How close a relative-motion run came to the joint limits (issue 43, :class:`~dualarm_control.metrics.JointLimitMetrics`)."""
 DEFAULT_ALPHA = 0.1
 """eq (24)'s share alpha the joint-limit metrics use when the run's is not known (the controller's default)."""
@@ -130,7 +130,7 @@ def joint_limit_keys(record: RunRecord, model: DualArmModel, alpha: float) -> di
     m = joint_limit_metrics(cycles, final, model.q_min, model.q_max, alpha, record.period)
     return {"joint_limit_min_margin": m.min_margin, "joint_limit_final_margin": m.final_margin,
             "repulsive_zone_joint_s": m.zone_joint_seconds, "repulsive_zone_joints": m.zone_joints,
-            "repulsive_zone_alpha": m.alpha}
+            "repulsive_zone_depth_s": m.zone_depth_seconds, "repulsive_zone_alpha": m.alpha}
 
 
 SEGMENT_KEYS = ("segments_reached", "segments_stalled", "segment_outcomes")
@@ -412,6 +412,7 @@ TABLE_I_ROWS = (
     ("final joint-limit margin [% of range]", "joint_limit_final_margin", 100.0, "{:.2f}"),
     ("time in the repulsive zone [joint s]", "repulsive_zone_joint_s", 1.0, "{:.2f}"),
     ("joints entering the repulsive zone", "repulsive_zone_joints", 1.0, "{:.0f}"),
+    ("depth-weighted time in the zone [joint s]", "repulsive_zone_depth_s", 1.0, "{:.3f}"),
 )
 """Table I of paper 000, plus errors, limits and timings: (label, key, scale, format)."""
 TASK_ROWS = (

@@ -6,7 +6,8 @@ The median of each ratio with a percentile-bootstrap 95 % confidence interval (`
 resamples of the tasks, seeded: the same table gives the same interval), the final position error,
 the largest tracking error, the closest joint-limit margin and the time in eq (24)'s repulsive zone (issue 43) and
 the cycle times per solver (medians), as a Markdown table; box plots of the ratios, and of the final and tracking
-errors, limit margins, zone times and cycle times per solver (PNG).
+errors, limit margins, zone times and cycle times per solver, and the trade-off of l0 against the depth-weighted
+zone time per robot (PNG).
 """
 
 from __future__ import annotations
@@ -94,8 +95,9 @@ def markdown(rows: Sequence[dict[str, Any]], seed: int = 0) -> str:
                      f"[{s.low:.3f}, {s.high:.3f}] |")
     header = ("| robot | variant | solver | runs | errors | median l0 | median final error [m] | median max tracking error [m] | "
               "median closest limit margin [% of range] | median time in the repulsive zone [joint s] | "
+              "median depth-weighted zone time [joint s] | "
               "median cycle p50 [ms] | median cycle p99 [ms] | solver failures |")
-    lines += ["", header, "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    lines += ["", header, "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     errors: dict[tuple[str, str, str], int] = defaultdict(int)
     for row in rows:
         errors[(row["robot"], row["variant"], row["solver"])] += row["error"] is not None
@@ -105,6 +107,7 @@ def markdown(rows: Sequence[dict[str, Any]], seed: int = 0) -> str:
                          f"{_median(runs, 'l0_mean'):.3f} | {_median(runs, 'final_position_error_m'):.2e} | "
                          f"{_median(runs, 'max_tracking_error_m'):.2e} | "
                          f"{100 * _median(runs, 'joint_limit_min_margin'):.2f} | {_median(runs, 'repulsive_zone_joint_s'):.3f} | "
+                         f"{_median(runs, 'repulsive_zone_depth_s'):.3f} | "
                          f"{1e3 * _median(runs, 'cycle_time_p50_s'):.3f} | {1e3 * _median(runs, 'cycle_time_p99_s'):.3f} | "
                          f"{int(sum(r['solver_failures'] for r in runs.values()))} |")
     return "\n".join(lines) + "\n"
@@ -132,6 +135,7 @@ def plot(rows: Sequence[dict[str, Any]], out: Path, seed: int = 0) -> list[Path]
         fig.savefig(out / "l0_ratios.png", dpi=120)
         plt.close(fig)
         written.append(out / "l0_ratios.png")
+    written += tradeoff_plot(rows, out, plt)
     cells = [(f"{r}\n{s.replace('_qp', '')}\n{v}", runs) for (r, v), solvers in sorted(grouped(rows).items())
              for s, runs in sorted(solvers.items())]
     for column, scale, label, name in (("final_position_error_m", 1.0, "final position error [m]", "final_errors.png"),
@@ -140,7 +144,9 @@ def plot(rows: Sequence[dict[str, Any]], out: Path, seed: int = 0) -> list[Path]
                                        ("joint_limit_min_margin", 100.0, "closest joint-limit margin [% of range]",
                                         "joint_limit_margins.png"),
                                        ("repulsive_zone_joint_s", 1.0, "time in the repulsive zone of eq (24) [joint s]",
-                                        "repulsive_zone_time.png")):
+                                        "repulsive_zone_time.png"),
+                                       ("repulsive_zone_depth_s", 1.0, "depth-weighted time in the zone [joint s]",
+                                        "repulsive_zone_depth.png")):
         if not cells:
             break
         if not any(_column(runs, column) for _, runs in cells):
@@ -156,6 +162,36 @@ def plot(rows: Sequence[dict[str, Any]], out: Path, seed: int = 0) -> list[Path]
         plt.close(fig)
         written.append(out / name)
     return written
+
+
+def tradeoff_plot(rows: Sequence[dict[str, Any]], out: Path, plt: Any) -> list[Path]:
+    """tradeoff.png (issue 43): per robot, each (solver, variant) as a point, median l0 against the median
+    depth-weighted time in eq (24)'s repulsive zone (down and left is better on both); none for a table that
+    predates the column."""
+    points: dict[str, list[tuple[str, float, float]]] = defaultdict(list)
+    seen: dict[tuple[str, str, float, float], str] = {}  # a solver the variant does not change: drawn once
+    for (robot, variant), solvers in sorted(grouped(rows).items(), key=lambda item: item[0][1] != "default"):
+        for solver, runs in sorted(solvers.items()):
+            depth = _median(runs, "repulsive_zone_depth_s")
+            l0 = _median(runs, "l0_mean")
+            if np.isfinite(depth) and (robot, solver, l0, depth) not in seen:
+                label = solver.replace("_qp", "") + ("" if variant == "default" else f" {variant}")
+                seen[(robot, solver, l0, depth)] = label
+                points[robot].append((label, l0, depth))
+    if not points:
+        return []
+    fig, axes = plt.subplots(1, len(points), figsize=(5.0 * len(points), 4.2), squeeze=False)
+    for ax, (robot, cells) in zip(axes[0], sorted(points.items()), strict=True):
+        for label, l0, depth in cells:
+            ax.scatter([l0], [depth], s=25)
+            ax.annotate(label, (l0, depth), fontsize=6, xytext=(3, 3), textcoords="offset points")
+        ax.set_xlabel("median mean ||qd||_0 (active joints)")
+        ax.set_ylabel("median depth-weighted zone time [joint s]")
+        ax.set_title(robot)
+    fig.tight_layout()
+    fig.savefig(out / "tradeoff.png", dpi=120)
+    plt.close(fig)
+    return [out / "tradeoff.png"]
 
 
 def report(table: Path, out: Path, seed: int = 0) -> tuple[str, list[Path]]:
