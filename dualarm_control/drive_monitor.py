@@ -194,33 +194,90 @@ end: a target still moving when the segment ends (no hold) puts the arms a track
 a lockstep bag's time axis may start a cycle or two off the trajectory node's clock."""
 
 
+class SegmentJudge:
+    """Every segment's verdict as the run goes (issue 40): segment k (``names[k]``, ending at ``ends[k]`` [s]
+    with its end pose ``poses[k]`` = (p (3,), R (3, 3))) is judged at its closest sample to that pose within
+    :data:`SEGMENT_WINDOW` of its end (:meth:`feed`, once the window has passed), the last one at the run's
+    final positions (:meth:`finish`): ``reached`` within the tolerances, else ``stalled`` with
+    :func:`stall_reason` (the collision pair or joint limit that held the arms, and the error left). A segment
+    with no sample in its window is judged at the latest sample before the window closed. The batch form is
+    :func:`judge_segments`; the trajectory node feeds it live."""
+
+    def __init__(self, model: DualArmModel, names: Sequence[str], ends: Sequence[float],
+                 poses: Sequence[tuple[FloatArray, FloatArray]], collision: CollisionModel | None = None,
+                 position_tolerance: float = POSITION_TOLERANCE, angle_tolerance: float = ANGLE_TOLERANCE,
+                 near: float = COLLISION_NEAR) -> None:
+        self.model, self.collision, self.near = model, collision, near
+        self.names, self.ends, self.poses = list(names), list(ends), list(poses)
+        self.position_tolerance, self.angle_tolerance = position_tolerance, angle_tolerance
+        self.k = 0  # the segment being judged
+        self.best: tuple[float, float, float, FloatArray] | None = None  # (score, distance, angle, q) in its window
+        self.latest: FloatArray | None = None
+
+    def _score(self, distance: float, angle: float) -> float:
+        return distance / self.position_tolerance + angle / self.angle_tolerance
+
+    def _judge(self, k: int, q: FloatArray, distance: float, angle: float, when: str) -> GoalOutcome:
+        return _outcome(self.model, q, distance, angle, k, self.ends[k], when, f"segment {k + 1} '{self.names[k]}'",
+                        self.collision, self.near, self.position_tolerance, self.angle_tolerance)
+
+    def feed(self, t: float, q: FloatArray) -> list[GoalOutcome]:
+        """A sample: joint positions q (n,) [rad] at time t [s] of the run; the verdicts it completes."""
+        out: list[GoalOutcome] = []
+        if not np.all(np.isfinite(q)):
+            return out
+        while self.k + 1 < len(self.names) and t > self.ends[self.k] + SEGMENT_WINDOW[1]:
+            out.append(self._close(self.k))
+        self.latest = q
+        if self.k + 1 < len(self.names) and t >= self.ends[self.k] - SEGMENT_WINDOW[0]:
+            distance, angle = pose_distance(self.model, q, *self.poses[self.k])
+            score = self._score(distance, angle)
+            if self.best is None or score < self.best[0]:
+                self.best = (score, distance, angle, q)
+        return out
+
+    def _close(self, k: int) -> GoalOutcome:
+        """Segment k's verdict at its best sample (or the latest), then on to the next."""
+        if self.best is None:
+            q = self.latest if self.latest is not None else np.full(self.model.nq, np.nan)
+            distance, angle = pose_distance(self.model, q, *self.poses[k])
+        else:
+            _, distance, angle, q = self.best
+        self.k, self.best = k + 1, None
+        return self._judge(k, q, distance, angle, "at the segment's end")
+
+    def run(self, time: FloatArray, positions: FloatArray, final: FloatArray) -> list[GoalOutcome]:
+        """Every verdict of a recorded run: its cycles ``time`` (N,) [s], ``positions`` (N, n) [rad], then
+        its ``final`` positions (n,)."""
+        out: list[GoalOutcome] = []
+        for t, q in zip(np.asarray(time, dtype=float).tolist(), positions, strict=True):
+            out += self.feed(t, q)
+        return out + self.finish(final)
+
+    def finish(self, final: FloatArray | None = None) -> list[GoalOutcome]:
+        """The verdicts still open at the run's end: the last segment at ``final`` (n,) [rad] (else the
+        latest sample), any earlier one at its window's best."""
+        out: list[GoalOutcome] = []
+        while self.k + 1 < len(self.names):
+            out.append(self._close(self.k))
+        if self.k < len(self.names):
+            q = final if final is not None and np.all(np.isfinite(final)) else self.latest
+            if q is not None:
+                distance, angle = pose_distance(self.model, q, *self.poses[self.k])
+                out.append(self._judge(self.k, q, distance, angle, "at the end of the run"))
+            self.k += 1
+        return out
+
+
 def judge_segments(model: DualArmModel, names: Sequence[str], ends: Sequence[float],
                    poses: Sequence[tuple[FloatArray, FloatArray]], time: FloatArray, positions: FloatArray,
                    final_positions: FloatArray, collision: CollisionModel | None = None,
                    position_tolerance: float = POSITION_TOLERANCE, angle_tolerance: float = ANGLE_TOLERANCE,
                    near: float = COLLISION_NEAR) -> list[GoalOutcome]:
-    """The verdict of every segment of a relative trajectory after the run (issue 40): segment k (``names``,
-    ending at ``ends[k]`` [s] with its end pose ``poses[k]`` = (p (3,), R (3, 3))) is ``reached`` when a
-    cycle within :data:`SEGMENT_WINDOW` of its end is within the tolerances of that pose (the last segment:
-    the run's final positions), else ``stalled`` with :func:`stall_reason` at the closest such cycle: the
-    collision pair or joint limit that held the arms, and the error left."""
-    out = []
-    finite = np.all(np.isfinite(positions), axis=1)
-    for k, (name, end, (position, rotation)) in enumerate(zip(names, ends, poses, strict=True)):
-        last = k + 1 == len(names)
-        if last and np.all(np.isfinite(final_positions)):
-            candidates = [np.asarray(final_positions, dtype=float)]
-        else:
-            window = finite & (time >= end - SEGMENT_WINDOW[0]) & (time <= end + SEGMENT_WINDOW[1])
-            candidates = list(positions[window]) or ([positions[finite][-1]] if finite.any() else [])
-        if not candidates:
-            continue
-        judged = [(pose_distance(model, q, position, rotation), q) for q in candidates]
-        (distance, angle), q = min(judged, key=lambda item: item[0][0] / position_tolerance + item[0][1] / angle_tolerance)
-        when = "at the end of the run" if last else "at the segment's end"
-        out.append(_outcome(model, q, distance, angle, k, end, when, f"segment {k + 1} '{name}'", collision, near,
-                            position_tolerance, angle_tolerance))
-    return out
+    """The verdict of every segment of a relative trajectory after the run (:class:`SegmentJudge` on the
+    recorded cycles: ``time`` (N,) [s], ``positions`` (N, n) [rad], then ``final_positions`` (n,))."""
+    return SegmentJudge(model, names, ends, poses, collision, position_tolerance, angle_tolerance,
+                        near).run(time, positions, final_positions)
 
 
 @dataclass(frozen=True)

@@ -3,15 +3,20 @@
 ``judge_segments`` on hand-made records of the LWR4 cell: arms that stay put (the first segment's end is
 their pose, the second is 1 cm off), arms that arrive within the window after a moving segment's end,
 and a stall at a joint limit; the report's segment keys on the shipped ur5_pair assembly, which the
-collision limit holds 2.67 cm short (docs/robots.md).
+collision limit holds 2.67 cm short (docs/robots.md); and a target behind the other arm, in one process
+and over ROS (the trajectory node's verdict in the launch's output and on /diagnostics, the bag's report).
 """
 
 from __future__ import annotations
+
+import json
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
 
+from dualarm_control.app.cli import main as main_cli
 from dualarm_control.drive_monitor import (
     POSITION_TOLERANCE,
     SEGMENT_WINDOW,
@@ -96,3 +101,39 @@ def test_the_ur5_pairs_assembly_says_which_pair_held_it() -> None:
     assert 0.029 <= pair_distance < 0.1, last  # held at the safety distance d_s = 0.03 m, not a touch
     left_mm = float(last.split("remaining error ")[1].split(" mm")[0])
     assert left_mm == pytest.approx(summary["final_position_error_m"] * 1e3, abs=0.006), last  # printed to 0.01 mm
+
+
+BEHIND = str(Path(__file__).parent / "data" / "behind_the_arm.yaml")
+
+
+def test_a_target_behind_the_other_arm_is_named_in_process_over_ros_and_in_the_bag(tmp_path: Path) -> None:
+    """Issue 40: one segment that drives the peg through the hole arm (test/data/behind_the_arm.yaml). In one
+    process, metrics.json names the stall; in lockstep over ROS the trajectory node says it in the launch's
+    output and as a WARN on /diagnostics, and the bag's report names it as the in-process run does (the same
+    error to the printed 0.01 mm)."""
+    from test_ros_live import Launch, dualarm
+
+    from dualarm_control.app.record.bag import read_bag
+
+    inproc = tmp_path / "inproc"
+    assert main_cli(["experiment", BEHIND, "--solver", "sparse_qp", "--output", str(inproc)]) == 0
+    record = json.loads((inproc / "metrics.json").read_text())["sparse_qp"]
+    assert (record["segments_reached"], record["segments_stalled"]) == (0, 1)
+    stall = str(record["segment_outcomes"])
+    assert ": stalled: collision constraint: " in stall and "remaining error " in stall, stall
+    bag = tmp_path / "bag"
+    launch = Launch(BEHIND, "--lockstep", "--solver", "sparse_qp", "--record", str(bag))
+    try:
+        assert launch.finish(timeout=300) == 0, "\n".join(launch.lines[-30:])
+    finally:
+        launch.kill()
+    said = [line for line in launch.lines if "[trajectory_node] [WARN]" in line and "segment 1 'through'" in line]
+    assert said and ": stalled: collision constraint: " in said[0], "\n".join(launch.lines[-30:])
+    statuses = [s for s in read_bag(bag).statuses if s.name == "trajectory_node" and "(t = " in s.message]
+    assert [s.level for s in statuses] == [1] and ": stalled: collision constraint: " in statuses[0].message
+    report = dualarm("report", str(bag), "--output", str(tmp_path / "report"), timeout=300)
+    assert report.returncode == 0, report.stderr[-2000:]
+    from_bag = json.loads((tmp_path / "report" / "metrics.json").read_text())["sparse_qp"]
+    assert from_bag["segments_stalled"] == 1
+    left = [str(r["segment_outcomes"]).split("remaining error ")[1].split(" mm")[0] for r in (record, from_bag)]
+    assert left[0] == left[1], left

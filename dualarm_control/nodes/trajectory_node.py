@@ -36,8 +36,11 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
+from dualarm_control.collision import CollisionModel
+from dualarm_control.drive_monitor import GoalOutcome, SegmentJudge
 from dualarm_control.hardware import HARDWARE_PARAMETERS, profile_from_values
 from dualarm_control.kinematics import DualArmModel
+from dualarm_control.online_trajectory import STALLED
 from dualarm_control.params import ParamSpec, positive
 from dualarm_control.references.base import (
     JOINT_REFERENCE,
@@ -47,6 +50,7 @@ from dualarm_control.references.base import (
 )
 from dualarm_control.references.goals import GoalsSource, GoalsStream
 from dualarm_control.references.plan import PlanSource
+from dualarm_control.references.segments import SegmentsStream, segment_judge
 from dualarm_control.ros import convert
 from dualarm_control.ros.cell_topic import CellPublisher
 from dualarm_control.ros.hardware_io import JointStates, declare_with_profile
@@ -132,6 +136,7 @@ class TrajectoryNode:
         self.throttle = Throttle(1.0)
         self.gate = StampGate("joint_states")
         self.stream: TargetStream | None = None
+        self.judge: SegmentJudge | None = None  # a segments scenario: each segment's verdict, live (issue 40)
         self.start_ns = 0
         self.stage = ""
         self.finished = False
@@ -172,8 +177,13 @@ class TrajectoryNode:
                 self.drive.start(self.stream.generator)
             if self.drive is None:
                 self.log.info(f"targets: {self.stream.end:.2f} s (with settle {self.scenario.settle_time:.2f} s)")
+            if isinstance(self.stream, SegmentsStream):
+                allowed = (*self.model.description.collision_allowed, *self.scenario.collision_allowed)
+                self.judge = segment_judge(self.stream.trajectory, self.model, CollisionModel.shared(self.model, allowed))
         if self.lockstep:
-            self.publish(stamp, stamp - self.start_ns)
+            self.publish(stamp, stamp - self.start_ns, q)
+        elif self.judge is not None and self.controller_seen is not None:  # real time: the state at its receipt
+            self.outcomes(stamp, self.judge.feed((self.node.get_clock().now().nanoseconds - self.start_ns) / 1e9, q))
 
     def reject(self, reason: str) -> None:
         """Throttled warning for an unusable input (the sample is not used)."""
@@ -197,7 +207,7 @@ class TrajectoryNode:
             self.node.destroy_subscription(self.sub_diag)  # (not destroyed in its own callback)
             self.sub_diag = None
         if self.stream is not None:
-            if self.states is not None and self.drive is None:  # started: the timer drives the stream
+            if self.states is not None and self.drive is None and self.judge is None:  # started: the timer drives it
                 self.states.close()  # (not destroyed in its own callback)
                 self.states = None
             now = self.node.get_clock().now().nanoseconds
@@ -210,10 +220,21 @@ class TrajectoryNode:
                 return
             self.publish(now, now - self.start_ns)
 
-    def publish(self, stamp: int, elapsed_ns: int) -> None:
+    def outcomes(self, stamp: int, verdicts: list[GoalOutcome]) -> None:
+        """Each segment's verdict in the log and on /diagnostics (a stall as WARN, naming what held the arms)."""
+        for verdict in verdicts:
+            stalled = verdict.state == STALLED
+            (self.log.warning if stalled else self.log.info)(verdict.text())
+            self._status(stamp, 1 if stalled else 0, verdict.text(), verdict.t)
+
+    def publish(self, stamp: int, elapsed_ns: int, q: np.ndarray | None = None) -> None:
         assert self.stream is not None
         t = elapsed_ns / 1e9
+        if self.judge is not None and q is not None:  # lockstep: the state this target answers
+            self.outcomes(stamp, self.judge.feed(t, q))
         if t >= self.stream.end:  # no target at or after the end: as many cycles as the in-process run
+            if self.judge is not None:
+                self.outcomes(stamp, self.judge.finish())
             self.log.info(f"scenario '{self.scenario.name}' complete at t={t:.2f} s")
             self._status(stamp, 0, "complete", t)
             self.repetitions += 1

@@ -15,7 +15,9 @@ from typing import Any, ClassVar
 import numpy as np
 import pinocchio as pin
 
+from dualarm_control.collision import CollisionModel
 from dualarm_control.controller import ControllerParams, RelativeController
+from dualarm_control.drive_monitor import SegmentJudge
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.references.base import (
@@ -90,6 +92,16 @@ class SegmentsSource(SourceDefaults):
             p = np.asarray(seg.position)
             r = pin.exp3(seg.axis * seg.angle) @ r
         return RelativeTrajectory(start_position, start_rotation, segments, limits)
+
+
+def segment_judge(trajectory: RelativeTrajectory, model: DualArmModel,
+                  collision: CollisionModel | None = None) -> SegmentJudge:
+    """The :class:`~dualarm_control.drive_monitor.SegmentJudge` of ``trajectory``'s segments (names, end
+    times [s] and end poses): the report's after the run, the trajectory node's live."""
+    n = len(trajectory.segments)
+    return SegmentJudge(model, [seg.name for seg in trajectory.segments],
+                        [*trajectory.segment_start_times[1:], trajectory.duration],
+                        [trajectory.segment_end_pose(k) for k in range(n)], collision)
 
 
 class SegmentsStream:

@@ -28,7 +28,7 @@ import numpy as np
 
 from dualarm_control.app.record.run_record import RunRecord, TaskValues
 from dualarm_control.collision import CollisionModel
-from dualarm_control.drive_monitor import closest_pair, judge_goals, judge_segments
+from dualarm_control.drive_monitor import closest_pair, judge_goals
 from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel, FloatArray, rotation_angle
 from dualarm_control.metrics import (
@@ -40,7 +40,7 @@ from dualarm_control.metrics import (
     velocity_norm_metrics,
 )
 from dualarm_control.planning.plan_file import PLAN_FORMAT
-from dualarm_control.references.segments import SegmentsSource
+from dualarm_control.references.segments import SegmentsSource, segment_judge
 from dualarm_control.scenario import Scenario
 from dualarm_control.solvers.base import ACTIVITY_THRESHOLD, FAILURE_STATUSES
 from dualarm_control.tasks import (
@@ -149,12 +149,8 @@ def segment_metrics(record: RunRecord, source: SegmentsSource, limits: MotionLim
     """How each segment of a relative trajectory ended (issue 40, :func:`~dualarm_control.drive_monitor.judge_segments`;
     a stall explained by the collision pair or the joint limit that held the arms), the trajectory planned
     from the recorded start as the trajectory node plans it."""
-    trajectory = source.trajectory(*model.relative_pose(record.positions[0]), limits)
-    n = len(trajectory.segments)
-    ends = [*trajectory.segment_start_times[1:], trajectory.duration]
-    outcomes = judge_segments(model, [seg.name for seg in trajectory.segments], ends,
-                              [trajectory.segment_end_pose(k) for k in range(n)], record.time, record.positions,
-                              record.final_positions, collision)
+    judge = segment_judge(source.trajectory(*model.relative_pose(record.positions[0]), limits), model, collision)
+    outcomes = judge.run(record.time, record.positions, record.final_positions)
     return {"segments_reached": sum(o.state == "reached" for o in outcomes),
             "segments_stalled": sum(o.state == "stalled" for o in outcomes),
             "segment_outcomes": " | ".join(o.text() for o in outcomes)}
