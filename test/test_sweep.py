@@ -136,6 +136,7 @@ def test_cli_sweep_and_report(reference: Path, tmp_path: Path, capsys: pytest.Ca
                  "joint_limit_margins.png", "repulsive_zone_time.png", "repulsive_zone_depth.png", "tradeoff.png"):
         assert (tmp_path / name).stat().st_size > 0
     assert "median depth-weighted zone time [joint s]" in text  # issue 43's columns
+    assert "| lwr4_cell | default | sparse_qp | 4 |" in text.split("minus the hierarchical QP's")[1]  # paired, per task
     assert main(["sweep", "report"]) == 2
 
 

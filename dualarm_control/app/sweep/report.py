@@ -76,10 +76,39 @@ def paired_ratios(rows: Sequence[dict[str, Any]], seed: int = 0) -> list[RatioSu
     return out
 
 
+ZONE_REFERENCE = "hierarchical_sparse_qp"
+"""The solver whose depth-weighted zone time the others are paired with (eq (27), issue 43)."""
+
+
+def paired_zone_differences(rows: Sequence[dict[str, Any]], seed: int = 0) -> list[RatioSummary]:
+    """Per robot and variant, each solver's depth-weighted time in the repulsive zone minus
+    :data:`ZONE_REFERENCE`'s, paired by task [joint s] (median and bootstrap 95 % CI); none for a table that
+    predates the column or has no such reference."""
+    out = []
+    for (robot, variant), solvers in sorted(grouped(rows).items()):
+        reference = solvers.get(ZONE_REFERENCE, {})
+        for solver in sorted(s for s in solvers if s != ZONE_REFERENCE):
+            runs = solvers[solver]
+            tasks = sorted(t for t in set(reference) & set(runs)
+                           if _finite(reference[t].get("repulsive_zone_depth_s"))
+                           and _finite(runs[t].get("repulsive_zone_depth_s")))
+            if not tasks:
+                continue
+            diffs = np.array([runs[t]["repulsive_zone_depth_s"] - reference[t]["repulsive_zone_depth_s"]
+                              for t in tasks], dtype=float)
+            out.append(RatioSummary(robot, variant, solver, len(tasks), *bootstrap_median(diffs, seed=seed), diffs))
+    return out
+
+
+def _finite(value: Any) -> bool:
+    """A number that is not NaN (None: a column the table predates)."""
+    return value is not None and bool(np.isfinite(value))
+
+
 def _column(rows: dict[int, dict[str, Any]], column: str, scale: float = 1.0) -> list[float]:
     """The finite values of ``column`` (times ``scale``); none where a table predates the column."""
     values = [r.get(column) for r in rows.values()]
-    return [scale * float(v) for v in values if v is not None and np.isfinite(v)]
+    return [scale * float(v) for v in values if v is not None and _finite(v)]
 
 
 def _median(rows: dict[int, dict[str, Any]], column: str) -> float:
@@ -93,6 +122,12 @@ def markdown(rows: Sequence[dict[str, Any]], seed: int = 0) -> str:
     for s in paired_ratios(rows, seed):
         lines.append(f"| {s.robot} | {s.variant} | l0({s.solver}) / l0({REFERENCE}) | {s.tasks} | {s.median:.3f} | "
                      f"[{s.low:.3f}, {s.high:.3f}] |")
+    zone = paired_zone_differences(rows, seed)
+    if zone:
+        lines += ["", ("| robot | variant | depth-weighted zone time minus the hierarchical QP's (eq 27) [joint s] | tasks | "
+                  "median | 95 % CI |"), "|---|---|---|---:|---:|---:|"]
+        lines += [f"| {z.robot} | {z.variant} | {z.solver} | {z.tasks} | {z.median:.3f} | [{z.low:.3f}, {z.high:.3f}] |"
+                  for z in zone]
     header = ("| robot | variant | solver | runs | errors | median l0 | median final error [m] | median max tracking error [m] | "
               "median closest limit margin [% of range] | median time in the repulsive zone [joint s] | "
               "median depth-weighted zone time [joint s] | "
