@@ -432,11 +432,14 @@ class HierarchicalSparseL1QP(HierarchicalSparseQP):
         j = problem.jacobian
         split = np.hstack((j, -j))
         lb, ub = lasso_box(problem.lower, problem.upper)
-        sol = self._secondary.solve(QPProblem(H=h, g=g, A=split, b=j @ qd1, lb=lb, ub=ub,
-                                              **limit_rows_of(problem, 2)))
+        n = qd1.shape[0]
+        sol = self._secondary.solve(QPProblem(H=h, g=g, A=split, b=j @ qd1, lb=lb, ub=ub))
+        # the relaxation first: rows its optimum meets are not active (and are never built, DeferredRows)
+        if problem.has_limit_rows and (sol.x is None or problem.limit_excess(sol.x[:n] - sol.x[n:]) > 0.0):
+            sol = self._secondary.solve(QPProblem(H=h, g=g, A=split, b=j @ qd1, lb=lb, ub=ub,
+                                                  **limit_rows_of(problem, 2)))
         if sol.x is None:
             return qd1, status, iters + sol.iterations, f"secondary l1 QP {sol.status}; primary task only"
-        n = qd1.shape[0]
         return sol.x[:n] - sol.x[n:], status, iters + sol.iterations, detail
 
 
