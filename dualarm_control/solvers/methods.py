@@ -377,6 +377,11 @@ class HierarchicalSparseQP(Solver):
                 or not bound_excess(qd1, problem.lower, problem.upper) <= self.bound_tolerance:
             return qd1, status, iters, detail  # no secondary motion, or a failure for solve() to handle
         qd1 = np.minimum(np.maximum(qd1, problem.lower), problem.upper)  # absorbs QP1's tolerance
+        return self._second_level(problem, qd1, status, iters, detail)
+
+    def _second_level(self, problem: ControlProblem, qd1: FloatArray, status: str, iters: int,
+                      detail: str) -> tuple[FloatArray | None, str, int, str]:
+        """Eq (27)-(28) from QP1's result ``qd1`` (inside the bounds) and its status, iterations and detail."""
         lower2, upper2 = problem.lower - qd1, problem.upper - qd1
         qd2 = null_space_projection(problem.jacobian, problem.repulsive)
         if qd2 is not None and inside(qd2, lower2, upper2) and problem.limit_excess(qd1 + qd2) <= 0.0:
@@ -422,12 +427,9 @@ class HierarchicalSparseL1QP(HierarchicalSparseQP):
     commanded and ``detail`` says so.
     """
 
-    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
-        qd1, status, iters, detail = self._primary._solve(problem)
-        if qd1 is None or not np.any(problem.repulsive) \
-                or not bound_excess(qd1, problem.lower, problem.upper) <= self.bound_tolerance:
-            return qd1, status, iters, detail  # no secondary motion, or a failure for solve() to handle
-        qd1 = np.minimum(np.maximum(qd1, problem.lower), problem.upper)  # absorbs QP1's tolerance
+    def _second_level(self, problem: ControlProblem, qd1: FloatArray, status: str, iters: int,
+                      detail: str) -> tuple[FloatArray | None, str, int, str]:
+        """The l1 second level (class docstring) from QP1's result ``qd1`` (inside the bounds)."""
         h, g = secondary_l1_terms(problem.repulsive, self.params.secondary_l1_weight)
         j = problem.jacobian
         split = np.hstack((j, -j))
