@@ -20,7 +20,7 @@ from dualarm_control.collision_limit import (
     allowed_pairs,
 )
 from dualarm_control.errors import ParameterError
-from dualarm_control.joint_tracking import projected_tracking
+from dualarm_control.joint_tracking import TrackingProjection
 from dualarm_control.kinematics import (
     Configuration,
     DualArmModel,
@@ -45,7 +45,7 @@ from dualarm_control.params import (
     resolve,
     unit_interval,
 )
-from dualarm_control.qp import DEFAULT_BACKEND, QPBackend, QPSettings, make_backend
+from dualarm_control.qp import DEFAULT_BACKEND, QPSettings, make_backend
 from dualarm_control.solvers import (
     ACTIVITY_THRESHOLD,
     SolverParams,
@@ -197,7 +197,7 @@ class RelativeController:
             self.collision_model = collision
             self.collision_limit = CollisionLimit(collision, self.params.collision)
         self.constraints: tuple[Limit, ...] = self._limits()
-        self._projection: QPBackend | None = None  # a plan's tracking QP (track_joints), made on first use
+        self._projection: TrackingProjection | None = None  # a plan's tracking QP (track_joints), made on first use
 
     def _limits(self) -> tuple[Limit, ...]:
         """The cycle's limits in their order (class docstring)."""
@@ -309,7 +309,7 @@ class RelativeController:
         """Joint-space tracking of a planned trajectory under every limit of the cycle, as the task
         solvers are (issue 39: before, a plan ran inside the eq (23) box alone, with no acceleration bound
         and no collision limit): the command nearest to qd_ref + K (q_ref - q) within the limits
-        (:func:`~dualarm_control.joint_tracking.projected_tracking`). The relative pose error is measured
+        (:class:`~dualarm_control.joint_tracking.TrackingProjection`). The relative pose error is measured
         against ``target`` (the reference's relative pose) for the report. Non-finite inputs give the
         safe command ("invalid_input")."""
         start = time.perf_counter()
@@ -321,8 +321,9 @@ class RelativeController:
             return self._invalid("non-finite joint reference", start, q)
         bounds = apply_limits(self.constraints, q, self._previous)
         if self._projection is None:
-            self._projection = make_backend(self.params.solver_params.qp_backend, self.params.solver_params.qp)
-        velocities, status = projected_tracking(qd_ref + gain * (q_ref - q), bounds, self._projection)
+            self._projection = TrackingProjection(make_backend(self.params.solver_params.qp_backend,
+                                                               self.params.solver_params.qp))
+        velocities, status = self._projection(qd_ref + gain * (q_ref - q), bounds)
         self._previous = velocities
         p, r = self.model.relative_pose(q)
         p_des, r_des = np.asarray(target.position, dtype=float), np.asarray(target.rotation, dtype=float)

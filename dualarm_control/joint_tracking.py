@@ -12,23 +12,22 @@ ROW_TOLERANCE = 1e-9
 """[m/s] a clipped command that meets every row within this needs no QP (the back-ends' own tolerance)."""
 
 
-def joint_tracking_velocity(q: FloatArray, q_ref: FloatArray, qd_ref: FloatArray, gain: float,
-                            lower: FloatArray, upper: FloatArray) -> FloatArray:
-    """qd = qd_ref + K (q_ref - q), clipped into the velocity bounds of paper 000 eq (23).
+class TrackingProjection:
+    """:func:`projected_tracking` on one QP back-end, with the QP's Hessian I (n, n) built once per n."""
 
-    Args:
-        q: measured joint positions [rad], (n,).
-        q_ref, qd_ref: reference positions [rad] and velocities [rad/s], (n,).
-        gain: K [1/s], >= 0.
-        lower, upper: Qd_min, Qd_max of eq (23) [rad/s], (n,).
+    def __init__(self, backend: QPBackend) -> None:
+        self.backend = backend
+        self.identity = np.eye(0)
 
-    Returns:
-        The command [rad/s], (n,), inside [lower, upper].
-    """
-    return np.clip(qd_ref + gain * (q_ref - q), lower, upper)
+    def __call__(self, desired: FloatArray, bounds: Bounds) -> tuple[FloatArray, str]:
+        n = desired.shape[0]
+        if self.identity.shape != (n, n):
+            self.identity = np.eye(n)
+        return projected_tracking(desired, bounds, self.backend, self.identity)
 
 
-def projected_tracking(desired: FloatArray, bounds: Bounds, backend: QPBackend) -> tuple[FloatArray, str]:
+def projected_tracking(desired: FloatArray, bounds: Bounds, backend: QPBackend,
+                       identity: FloatArray | None = None) -> tuple[FloatArray, str]:
     """The command nearest to ``desired`` that meets every limit of the cycle (issue 39):
 
         qd = argmin 1/2 ||qd - qd_des||^2  s.t.  lower <= qd <= upper,  A qd <= b
@@ -42,6 +41,7 @@ def projected_tracking(desired: FloatArray, bounds: Bounds, backend: QPBackend) 
         desired: qd_des [rad/s], (n,): qd_ref + K (q_ref - q) of the plan.
         bounds: the cycle's limits (:func:`~dualarm_control.limits.apply_limits`).
         backend: the QP back-end.
+        identity: I (n, n), the QP's Hessian (built here when not given).
 
     Returns:
         (qd [rad/s] (n,), "solved" or "infeasible").
@@ -53,8 +53,8 @@ def projected_tracking(desired: FloatArray, bounds: Bounds, backend: QPBackend) 
     matrix = rows.matrix
     if bool((matrix @ clipped <= bounds.bound + ROW_TOLERANCE).all()):
         return clipped, "solved"
-    n = desired.shape[0]
-    solution = backend.solve(QPProblem(H=np.eye(n), g=-desired, C=matrix, l=np.full(matrix.shape[0], -np.inf),
+    hessian = identity if identity is not None else np.eye(desired.shape[0])
+    solution = backend.solve(QPProblem(H=hessian, g=-desired, C=matrix, l=np.full(matrix.shape[0], -np.inf),
                                        u=bounds.bound, lb=bounds.lower, ub=bounds.upper))
     if solution.ok and solution.x is not None and bool(np.isfinite(solution.x).all()):
         return np.minimum(np.maximum(solution.x, bounds.lower), bounds.upper), "solved"

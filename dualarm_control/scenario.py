@@ -28,9 +28,10 @@ from typing import Any
 
 import numpy as np
 
+from dualarm_control.collision import CollisionModel
 from dualarm_control.controller import ControllerParams
 from dualarm_control.errors import ScenarioError
-from dualarm_control.kinematics import FloatArray
+from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.params import (
     ParameterError,
     ParamSpec,
@@ -82,6 +83,11 @@ class Scenario:
             return params
         collision = replace(params.collision, allowed=tuple(params.collision.allowed) + self.collision_allowed)
         return replace(params, collision=collision)
+
+    def collision_model(self, model: DualArmModel) -> CollisionModel:
+        """The collision model a controller runs this scenario with (the robot's allowed pairs and the
+        scenario's, default settings; shared on ``model``): what a stall's reason names."""
+        return CollisionModel.shared(model, (*model.description.collision_allowed, *self.collision_allowed))
 
     @property
     def tasks(self) -> TasksSource | None:

@@ -36,7 +36,6 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
-from dualarm_control.collision import CollisionModel
 from dualarm_control.drive_monitor import GoalOutcome, SegmentJudge
 from dualarm_control.hardware import HARDWARE_PARAMETERS, profile_from_values
 from dualarm_control.kinematics import DualArmModel
@@ -178,8 +177,7 @@ class TrajectoryNode:
             if self.drive is None:
                 self.log.info(f"targets: {self.stream.end:.2f} s (with settle {self.scenario.settle_time:.2f} s)")
             if isinstance(self.stream, SegmentsStream):
-                allowed = (*self.model.description.collision_allowed, *self.scenario.collision_allowed)
-                self.judge = segment_judge(self.stream.trajectory, self.model, CollisionModel.shared(self.model, allowed))
+                self.judge = segment_judge(self.stream.trajectory, self.model, self.scenario.collision_model(self.model))
         if self.lockstep:
             self.publish(stamp, stamp - self.start_ns, q)
         elif self.judge is not None and self.controller_seen is not None:  # real time: the state at its receipt

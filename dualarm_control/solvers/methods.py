@@ -7,6 +7,7 @@ velocity bounds of eq (23), qd_r repulsive velocity of eq (25). Units rad/s, m/s
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 from scipy.linalg import lapack
 
 from dualarm_control.qp import QPBackend, QPProblem, check_backend
@@ -427,10 +428,19 @@ class HierarchicalSparseL1QP(HierarchicalSparseQP):
     commanded and ``detail`` says so.
     """
 
+    def __init__(self, params: SolverParams | None = None) -> None:
+        super().__init__(params)
+        self._zone = b""  # the zone mask H was built for
+        self._hessian = np.zeros((0, 0))
+
     def _second_level(self, problem: ControlProblem, qd1: FloatArray, status: str, iters: int,
                       detail: str) -> tuple[FloatArray | None, str, int, str]:
         """The l1 second level (class docstring) from QP1's result ``qd1`` (inside the bounds)."""
-        h, g = secondary_l1_terms(problem.repulsive, self.params.secondary_l1_weight)
+        zone = problem.repulsive != 0.0
+        key = zone.tobytes()
+        if key != self._zone:  # H depends on the zone's joints only: rebuilt when they change
+            self._zone, self._hessian = key, secondary_l1_hessian(zone)
+        h, g = self._hessian, secondary_l1_gradient(problem.repulsive, self.params.secondary_l1_weight)
         j = problem.jacobian
         split = np.hstack((j, -j))
         lb, ub = lasso_box(problem.lower, problem.upper)
@@ -445,15 +455,18 @@ class HierarchicalSparseL1QP(HierarchicalSparseQP):
         return sol.x[:n] - sol.x[n:], status, iters + sol.iterations, detail
 
 
-def secondary_l1_terms(repulsive: FloatArray, l1_weight: float) -> tuple[FloatArray, FloatArray]:
-    """H (2n, 2n) and g (2n,) of :class:`HierarchicalSparseL1QP`'s second level on z = [qd+; qd-]:
-    1/2 sum_{i in Z} (qd_i - qd_r,i)^2 + l1_weight sum_{i not in Z} |qd_i| with Z = {i: qd_r,i != 0}."""
-    zone = repulsive != 0.0
+def secondary_l1_hessian(zone: npt.NDArray[np.bool_]) -> FloatArray:
+    """H (2n, 2n) of :class:`HierarchicalSparseL1QP`'s second level on z = [qd+; qd-] for the joints ``zone``
+    (n,) in the repulsive zone: [[D, -D], [-D, D]], D = diag(zone) (the Hessian of 1/2 sum_Z (qd+ - qd-)^2)."""
     d = np.diag(zone.astype(float))
-    h = np.block([[d, -d], [-d, d]])
-    price = np.where(zone, 0.0, l1_weight)
-    r = np.where(zone, repulsive, 0.0)
-    return h, np.concatenate((price - r, price + r))
+    return np.block([[d, -d], [-d, d]])
+
+
+def secondary_l1_gradient(repulsive: FloatArray, l1_weight: float) -> FloatArray:
+    """g (2n,) of the same second level: 1/2 sum_{i in Z} (qd_i - qd_r,i)^2 + l1_weight sum_{i not in Z} |qd_i|
+    with Z = {i: qd_r,i != 0}, on z = [qd+; qd-]: [-qd_r + price; qd_r + price], price = l1_weight outside Z."""
+    price = np.where(repulsive != 0.0, 0.0, l1_weight)
+    return np.concatenate((price - repulsive, price + repulsive))
 
 
 def null_space_projection(jacobian: FloatArray, velocity: FloatArray) -> FloatArray | None:

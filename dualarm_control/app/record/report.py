@@ -113,12 +113,13 @@ def summarize_run(record: RunRecord, scenario: Scenario | None, model: DualArmMo
     if pos.size and rot.size:
         out.update(max_tracking_error_m=float(pos.max()), rms_tracking_error_m=float(np.sqrt(np.mean(pos**2))),
                    max_tracking_error_rad=float(rot.max()))
-    commands_script = getattr(scenario.reference, "commands", None) if scenario is not None else None
-    if commands_script:
-        out.update(goal_metrics(record, commands_script, model, run_collision_model(model, scenario)))
-    if scenario is not None and isinstance(scenario.reference, SegmentsSource):
-        out.update(segment_metrics(record, scenario.reference, scenario.limits, model,
-                                   run_collision_model(model, scenario)))
+    if scenario is not None:  # the verdicts of a run of goals or segments, on the controller's collision model
+        commands_script = getattr(scenario.reference, "commands", None)
+        if commands_script:
+            out.update(goal_metrics(record, commands_script, model, scenario.collision_model(model)))
+        if isinstance(scenario.reference, SegmentsSource):
+            out.update(segment_metrics(record, scenario.reference, scenario.limits, model,
+                                       scenario.collision_model(model)))
     return out
 
 
@@ -135,13 +136,6 @@ def joint_limit_keys(record: RunRecord, model: DualArmModel, alpha: float) -> di
 
 SEGMENT_KEYS = ("segments_reached", "segments_stalled", "segment_outcomes")
 """The keys of a segments run (:func:`segment_metrics`)."""
-
-
-def run_collision_model(model: DualArmModel, scenario: Scenario | None) -> CollisionModel:
-    """The collision model the run's controller held the arms with: the robot's allowed pairs and the
-    scenario's (the assembly's tools), so that a stall names a pair the controller checked."""
-    extra = scenario.collision_allowed if scenario is not None else ()
-    return CollisionModel.shared(model, (*model.description.collision_allowed, *extra))
 
 
 def segment_metrics(record: RunRecord, source: SegmentsSource, limits: MotionLimits, model: DualArmModel,

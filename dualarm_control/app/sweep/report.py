@@ -13,7 +13,7 @@ zone time per robot (PNG).
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -61,19 +61,31 @@ def grouped(rows: Sequence[dict[str, Any]]) -> dict[tuple[str, str], dict[str, d
     return out
 
 
-def paired_ratios(rows: Sequence[dict[str, Any]], seed: int = 0) -> list[RatioSummary]:
-    """The ratios of :data:`COMPARED` to :data:`REFERENCE`, paired by task, per robot and variant."""
+def _paired(rows: Sequence[dict[str, Any]], reference: str, order: Callable[[Sequence[str]], Sequence[str]],
+            value: Callable[[dict[str, Any], dict[str, Any]], float | None], seed: int) -> list[RatioSummary]:
+    """Per robot and variant, ``value(run, reference run)`` of each solver ``order`` lists, paired by task
+    (tasks whose value is None or NaN left out), its median and bootstrap 95 % CI."""
     out = []
     for (robot, variant), solvers in sorted(grouped(rows).items()):
-        reference = solvers.get(REFERENCE, {})
-        others = sorted(s for s in solvers if s != REFERENCE and s not in COMPARED)  # e.g. hierarchical_sparse_l1_qp
-        for solver in (*COMPARED, *others):
+        base = solvers.get(reference, {})
+        for solver in order(list(solvers)):
             runs = solvers.get(solver, {})
-            tasks = sorted(t for t in set(reference) & set(runs) if reference[t]["l0_mean"] > 0)
-            ratios = np.array([runs[t]["l0_mean"] / reference[t]["l0_mean"] for t in tasks], dtype=float)
-            out.append(RatioSummary(robot, variant, solver, len(tasks), *bootstrap_median(ratios, seed=seed),
-                                    ratios))
+            values = [value(runs[t], base[t]) for t in sorted(set(base) & set(runs))]
+            kept = np.array([v for v in values if _finite(v)], dtype=float)
+            out.append(RatioSummary(robot, variant, solver, len(kept), *bootstrap_median(kept, seed=seed), kept))
     return out
+
+
+def paired_ratios(rows: Sequence[dict[str, Any]], seed: int = 0) -> list[RatioSummary]:
+    """The l0 ratios of :data:`COMPARED` (then any other solver present) to :data:`REFERENCE`, paired by task,
+    per robot and variant."""
+    def order(present: Sequence[str]) -> list[str]:
+        return [*COMPARED, *sorted(s for s in present if s != REFERENCE and s not in COMPARED)]
+
+    def ratio(run: dict[str, Any], base: dict[str, Any]) -> float | None:
+        return run["l0_mean"] / base["l0_mean"] if base["l0_mean"] > 0 else None
+
+    return _paired(rows, REFERENCE, order, ratio, seed)
 
 
 ZONE_REFERENCE = "hierarchical_sparse_qp"
@@ -82,22 +94,16 @@ ZONE_REFERENCE = "hierarchical_sparse_qp"
 
 def paired_zone_differences(rows: Sequence[dict[str, Any]], seed: int = 0) -> list[RatioSummary]:
     """Per robot and variant, each solver's depth-weighted time in the repulsive zone minus
-    :data:`ZONE_REFERENCE`'s, paired by task [joint s] (median and bootstrap 95 % CI); none for a table that
-    predates the column or has no such reference."""
-    out = []
-    for (robot, variant), solvers in sorted(grouped(rows).items()):
-        reference = solvers.get(ZONE_REFERENCE, {})
-        for solver in sorted(s for s in solvers if s != ZONE_REFERENCE):
-            runs = solvers[solver]
-            tasks = sorted(t for t in set(reference) & set(runs)
-                           if _finite(reference[t].get("repulsive_zone_depth_s"))
-                           and _finite(runs[t].get("repulsive_zone_depth_s")))
-            if not tasks:
-                continue
-            diffs = np.array([runs[t]["repulsive_zone_depth_s"] - reference[t]["repulsive_zone_depth_s"]
-                              for t in tasks], dtype=float)
-            out.append(RatioSummary(robot, variant, solver, len(tasks), *bootstrap_median(diffs, seed=seed), diffs))
-    return out
+    :data:`ZONE_REFERENCE`'s, paired by task [joint s]; none where the table predates the column or has no
+    such reference."""
+    def order(present: Sequence[str]) -> list[str]:
+        return sorted(s for s in present if s != ZONE_REFERENCE)
+
+    def difference(run: dict[str, Any], base: dict[str, Any]) -> float | None:
+        a, b = run.get("repulsive_zone_depth_s"), base.get("repulsive_zone_depth_s")
+        return a - b if a is not None and b is not None else None
+
+    return [z for z in _paired(rows, ZONE_REFERENCE, order, difference, seed) if z.tasks]
 
 
 def _finite(value: Any) -> bool:
