@@ -59,6 +59,8 @@ def soak(tmp_path_factory: pytest.TempPathFactory) -> Soak:
     return soak_for(SECONDS, tmp_path_factory)
 
 
+@pytest.mark.realtime  # 200 Hz over ROS in real time: under stress-ng --cpu 1 beside the parallel tests it missed
+# 63 deadlines in bursts and lost 35 commands to watchdog trips; alone it is the soak's verdict
 def test_quick_soak_keeps_memory_and_every_command(quick_soak: Soak) -> None:
     """15 s: the criteria of the 40 s soak below (RSS growth within 5 %, no command lost after the
     start-up, the counters add up, no solver failure); the deadline figures are printed, not judged."""

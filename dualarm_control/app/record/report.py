@@ -138,13 +138,21 @@ SEGMENT_KEYS = ("segments_reached", "segments_stalled", "segment_outcomes")
 """The keys of a segments run (:func:`segment_metrics`)."""
 
 
+def timed_positions(record: RunRecord) -> tuple[FloatArray, FloatArray]:
+    """The cycles' times (N,) [s] and joint positions (N, n) [rad] of a run, paired: a bag's record may hold a
+    state fewer or more than its commands (a state re-sent, or lost, on a loaded machine; seen on Baxter under
+    ``stress-ng --cpu 1``, where the verdicts then failed on the lengths), so the longer is cut to the shorter."""
+    n = min(len(record.time), len(record.positions))
+    return record.time[:n], record.positions[:n]
+
+
 def segment_metrics(record: RunRecord, source: SegmentsSource, limits: MotionLimits, model: DualArmModel,
                     collision: CollisionModel) -> dict[str, float | int | str]:
     """How each segment of a relative trajectory ended (issue 40, :func:`~dualarm_control.drive_monitor.judge_segments`;
     a stall explained by the collision pair or the joint limit that held the arms), the trajectory planned
     from the recorded start as the trajectory node plans it."""
     judge = segment_judge(source.trajectory(*model.relative_pose(record.positions[0]), limits), model, collision)
-    outcomes = judge.run(record.time, record.positions, record.final_positions)
+    outcomes = judge.run(*timed_positions(record), record.final_positions)
     return {"segments_reached": sum(o.state == "reached" for o in outcomes),
             "segments_stalled": sum(o.state == "stalled" for o in outcomes),
             "segment_outcomes": " | ".join(o.text() for o in outcomes)}
@@ -176,7 +184,7 @@ def goal_metrics(record: RunRecord, commands: Sequence[Any], model: DualArmModel
     """How each goal of a script ended (:func:`~dualarm_control.drive_monitor.judge_goals`, stalls
     explained by the robot's collision model) and the smallest link-pair distance over the run [m]
     (coal, on the recorded positions, the pairs ``collision`` allows excluded)."""
-    outcomes = judge_goals(model, commands, record.time, record.positions, record.final_positions, collision)
+    outcomes = judge_goals(model, commands, *timed_positions(record), record.final_positions, collision)
     closest = closest_pair(collision, record.positions)
     return {"goals_reached": sum(o.state == "reached" for o in outcomes),
             "goals_stalled": sum(o.state == "stalled" for o in outcomes),

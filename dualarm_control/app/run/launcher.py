@@ -16,9 +16,13 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from dualarm_control.ros.env import LAUNCHER_PID_VARIABLE, localhost_environment
 from dualarm_control.ros.node import ACK_TIMEOUT_S, StopOnSignal
+
+if TYPE_CHECKING:
+    from dualarm_control.hardware import HardwareProfile
 
 NODES = {
     "sim_node": "dualarm_sim.sim_node",
@@ -56,13 +60,20 @@ TASK_TOPICS = ("/joint_states", "/velocity_controller/commands", "/diagnostics",
 the simulator's ``/contact_force``)."""
 
 
+def params_profile(params: Sequence[str], joint_names: Sequence[str]) -> HardwareProfile:
+    """The controller's hardware profile in the ``params`` files (the default profile without one)."""
+    from dualarm_control.hardware import load_profile
+    from dualarm_control.params import read_params_files
+
+    return load_profile(read_params_files(params, "controller_node"), joint_names, "controller_node")
+
+
 def with_profile_topics(topics: Sequence[str], params: Sequence[str], joint_names: Sequence[str]) -> tuple[str, ...]:
     """``topics`` with the joint-state and command topics of the hardware profile of the ``params`` files
     (docs/hardware.md) in place of the default profile's (the same topics without a profile)."""
     from dualarm_control.hardware import load_profile
-    from dualarm_control.params import read_params_files
 
-    profile = load_profile(read_params_files(params, "controller_node"), joint_names, "controller_node")
+    profile = params_profile(params, joint_names)
     default = load_profile({}, joint_names)
     out: list[str] = []
     for topic in topics:
@@ -269,12 +280,15 @@ def launch_scenario(
                 record_topics = PLAN_TOPICS
             if record is not None:  # subscribes the graph's topics once they all have a publisher
                 record_topics = with_profile_topics(record_topics, params, loaded.robot.joint_names)
+                state_topics = params_profile(params, loaded.robot.joint_names).joint_states
                 # Real-time task runs start once the recorder reads /diagnostics (task_start_readers); it
                 # subscribes that topic last, once the others deliver: the bag then holds the run from t = 0.
                 gate = ("/diagnostics",) if tasks and not lockstep else ()
-                # Lockstep: the simulator starts once the recorder reads /joint_states, which it subscribes
-                # last, once its other readers matched their publishers (none of their messages is lost).
-                last = ("/joint_states",) if lockstep and "/joint_states" in record_topics else ()
+                # Lockstep: the simulator starts once the recorder reads every joint-state topic of the profile,
+                # which it subscribes last, once its other readers matched their publishers (none of their
+                # messages is lost; a profile's /left and /right topics too: with /joint_states alone gated, a
+                # recorder under load missed a whole run's /relative_pose and /relative_target).
+                last = tuple(t for t in state_topics if t in record_topics) if lockstep else ()
                 launch.start("bag", recorder_command(record, record_topics, lockstep, gate, last), env)
             readers = (1 if tasks else 2) + (record is not None)
             node_args = {"controller_node": [*common, *sim_time, *controller_args]}
