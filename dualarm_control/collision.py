@@ -1,7 +1,7 @@
 """Collision distances between the robot's links and the velocity damper that keeps them apart.
 
 The ROS-free core of collision avoidance (issue 27; docs/collision.md): :func:`velocity_damper` gives
-the rows ``A qd <= b`` that :class:`~dualarm_control.collision_limit.CollisionLimit` adds to every solver's QP.
+the rows ``A qd <= b`` that :class:`~dualarm_control.limits.collision.CollisionLimit` adds to every solver's QP.
 
 Geometry: the robot's COLLISION shapes from its resolved URDF (``pin.buildGeomFromUrdf``), reduced
 like :class:`~dualarm_control.kinematics.DualArmModel`'s model (``pin.buildReducedModel``, the same

@@ -14,11 +14,6 @@ from typing import Any
 import numpy as np
 
 from dualarm_control.collision import CollisionModel, CollisionParams
-from dualarm_control.collision_limit import (
-    CollisionLimit,
-    CollisionReport,
-    allowed_pairs,
-)
 from dualarm_control.errors import ParameterError
 from dualarm_control.joint_tracking import TrackingProjection
 from dualarm_control.kinematics import (
@@ -28,12 +23,17 @@ from dualarm_control.kinematics import (
     rotation_angle,
 )
 from dualarm_control.limits import (
-    AccelerationLimit,
+    DEFAULT_LIMITS,
+    CollisionReport,
     JointLimits,
     Limit,
+    LimitContext,
+    LimitReport,
     RepulsiveField,
-    VelocityLimit,
+    allowed_pairs,
     apply_limits,
+    make_limits,
+    ordered,
     velocity_bounds,
 )
 from dualarm_control.params import (
@@ -45,6 +45,7 @@ from dualarm_control.params import (
     resolve,
     unit_interval,
 )
+from dualarm_control.plugins import load_plugins
 from dualarm_control.qp import DEFAULT_BACKEND, QPSettings, make_backend
 from dualarm_control.solvers import (
     ACTIVITY_THRESHOLD,
@@ -81,8 +82,11 @@ class ControllerParams:
             acceleration limits for the LWR4; ``DEFAULT_ACCELERATION_LIMIT`` is this
             project's documented choice (docs/bench.md).
         solver_params: parameters of the QP solvers.
-        collision: the collision limit (:mod:`dualarm_control.collision_limit`): on by default,
+        collision: the collision limit (:mod:`dualarm_control.limits.collision`): on by default,
             d_i 0.10 m, d_s 0.03 m, xi 0.5 m/s (docs/collision.md gives the reasons).
+        limits: registered limits added to the default ones (:data:`~dualarm_control.limits.DEFAULT_LIMITS`),
+            by name (docs/limits.md).
+        plugins: Python files or modules imported first: a user's own limits and tasks register there.
     """
 
     solver: str = "hierarchical_sparse_qp"
@@ -93,6 +97,8 @@ class ControllerParams:
     acceleration_limit: tuple[float, ...] = ()
     solver_params: SolverParams = field(default_factory=SolverParams)
     collision: CollisionParams = field(default_factory=CollisionParams)
+    limits: tuple[str, ...] = ()
+    plugins: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         for key in ("gain", "period"):
@@ -142,7 +148,7 @@ class Cycle:
         measured_force: filtered normal force f_c [N] of paper 001's force loop (NaN without).
         normal_offset: f_F of eq (9) of paper 001 [m] (0 without force feedback).
         stage: what is being followed (segment name, "circle", "execute"), for progress output.
-        collision: what the collision limit saw (closest pair, rows), None when it is off.
+        reports: what each limit saw, by limit name (the limits that had something to say).
     """
 
     velocities: FloatArray
@@ -156,7 +162,13 @@ class Cycle:
     measured_force: float = math.nan
     normal_offset: float = 0.0
     stage: str = ""
-    collision: CollisionReport | None = None
+    reports: dict[str, LimitReport] = field(default_factory=dict)
+
+    @property
+    def collision(self) -> CollisionReport | None:
+        """What the collision limit saw (closest pair, rows), None when it is off."""
+        report = self.reports.get("collision")
+        return report if isinstance(report, CollisionReport) else None
 
 
 class RelativeController:
@@ -166,9 +178,12 @@ class RelativeController:
     It remembers its last command for the optional acceleration bound; ``reset`` forgets it
     (the next cycle then starts from rest, zero velocity).
 
-    The constraints of a cycle are its limits (:class:`~dualarm_control.limits.Limit`), in order:
-    the joint position and velocity limits (eq 21-23), the acceleration bound when set, the
-    collision limit when ``params.collision.enabled``. ``collision`` is the robot's collision
+    The constraints of a cycle are its limits (:class:`~dualarm_control.limits.Limit`), intersected by
+    priority whatever their order (:func:`~dualarm_control.limits.apply_limits`): the joint position and
+    velocity limits (eq 21-23), the acceleration bound when set, the collision limit when
+    ``params.collision.enabled``, and the limits ``params.limits`` names (registered by the package or by a
+    file ``params.plugins`` names; docs/limits.md). Every tracker (:meth:`step`, :meth:`solve_tasks`,
+    :meth:`track_joints`) solves under all of them. ``collision`` is the robot's collision
     model, when None the model's shared one (:meth:`CollisionModel.shared`: the robot's and the
     parameters' allowed pairs removed); a controller taking over from another
     (:meth:`continue_from`) keeps the old one's when the allowed pairs are the same.
@@ -178,6 +193,7 @@ class RelativeController:
                  collision: CollisionModel | None = None) -> None:
         self.model = model
         self.params = params or ControllerParams()
+        load_plugins(self.params.plugins)
         self.limits = JointLimits(model.q_min, model.q_max, model.qd_max).scaled_velocity(self.params.velocity_scale)
         self.solver = make_solver(self.params.solver, self.params.solver_params)
         n = model.nq
@@ -189,24 +205,23 @@ class RelativeController:
         self._zeros = np.zeros(n)
         self._repulsive = RepulsiveField(self.limits, self.params.alpha)
         self.collision_model: CollisionModel | None = None
-        self.collision_limit: CollisionLimit | None = None
         if self.params.collision.enabled:
             allowed = allowed_pairs(model, self.params.collision)
             if collision is None or collision.allowed_given != frozenset(frozenset(p) for p in allowed):
                 collision = CollisionModel.shared(model, allowed)
             self.collision_model = collision
-            self.collision_limit = CollisionLimit(collision, self.params.collision)
         self.constraints: tuple[Limit, ...] = self._limits()
         self._projection: TrackingProjection | None = None  # a plan's tracking QP (track_joints), made on first use
 
     def _limits(self) -> tuple[Limit, ...]:
-        """The cycle's limits in their order (class docstring)."""
-        out: list[Limit] = [VelocityLimit(self.limits, self.params.period)]
-        if self._acceleration is not None:
-            out.append(AccelerationLimit(self.limits, self._acceleration, self.params.period))
-        if self.collision_limit is not None:
-            out.append(self.collision_limit)
-        return tuple(out)
+        """The cycle's limits by priority (class docstring); ParameterError naming an unknown limit."""
+        context = LimitContext(self.model, self.limits, self.params.period, self._acceleration,
+                               self.collision_model, self.params)
+        return ordered(make_limits(DEFAULT_LIMITS + self.params.limits, context))
+
+    def limit(self, name: str) -> Limit | None:
+        """The controller's limit called ``name`` (e.g. "collision"), None when it has none."""
+        return next((limit for limit in self.constraints if limit.name == name), None)
 
     def reset(self) -> None:
         self.solver.reset()
@@ -235,10 +250,9 @@ class RelativeController:
         if old.model.nq != self.model.nq:
             raise ValueError(f"continue_from: {old.model.nq} joints, expected {self.model.nq}")
         self._previous = old._previous.copy()
-        if self.collision_limit is not None and old.collision_model is not None \
-                and old.collision_model.allowed == self.collision_limit.collision.allowed:
+        if self.collision_model is not None and old.collision_model is not None \
+                and old.collision_model.allowed == self.collision_model.allowed:
             self.collision_model = old.collision_model
-            self.collision_limit = CollisionLimit(old.collision_model, self.params.collision)
             self.constraints = self._limits()
         if (old.params.solver, old.params.solver_params) == (self.params.solver, self.params.solver_params):
             self.solver = old.solver
@@ -257,7 +271,7 @@ class RelativeController:
         q = self.model.check_q(q)
         conf = Configuration(self.model, q)
         rows = RelativePoseTask(target, self.params.gain).evaluate(conf, 0.0)
-        result = self._solve_rows(q, (rows,))
+        result = self._solve_rows(conf, (rows,))
         if result.status == "invalid_input":
             return self._invalid(_culprit(q, target) or result.detail, start, q)
         state = conf.relative()
@@ -270,11 +284,17 @@ class RelativeController:
             position_error=math.sqrt(ex * ex + ey * ey + ez * ez),
             orientation_error=rotation_angle(state.rotation, np.asarray(target.rotation, dtype=float)),
             cycle_time=time.perf_counter() - start,
-            collision=self._collision_report(result.velocities),
+            reports=self._reports(result.velocities),
         )
 
-    def _collision_report(self, velocities: FloatArray) -> CollisionReport | None:
-        return None if self.collision_limit is None else self.collision_limit.report(velocities)
+    def _reports(self, velocities: FloatArray) -> dict[str, LimitReport]:
+        """What each limit saw in the cycle whose command is ``velocities`` [rad/s] (n,), by limit name."""
+        out = {}
+        for limit in self.constraints:
+            report = limit.report(velocities)
+            if report is not None:
+                out[limit.name] = report
+        return out
 
     def solve_tasks(self, q: FloatArray, tasks: Sequence[Task], t: float) -> Cycle:
         """One cycle on any set of tasks at time t [s] (paper 001, eq (12)-(14)).
@@ -288,14 +308,16 @@ class RelativeController:
             raise ParameterError("solver", self.solver.name, "a solver that handles inequality tasks: constraint_based")
         if not math.isfinite(q.sum()):
             return self._invalid("non-finite joint positions", start, q)
-        rows = evaluate_tasks(tasks, Configuration(self.model, q), t)
-        result = self._solve_rows(q, rows)
+        conf = Configuration(self.model, q)
+        rows = evaluate_tasks(tasks, conf, t)
+        result = self._solve_rows(conf, rows)
         return Cycle(result.velocities, result, time.perf_counter() - start, rows=rows,
-                     collision=self._collision_report(result.velocities))
+                     reports=self._reports(result.velocities))
 
-    def _solve_rows(self, q: FloatArray, rows: Sequence[TaskRows]) -> SolverResult:
+    def _solve_rows(self, conf: Configuration, rows: Sequence[TaskRows]) -> SolverResult:
         """The limits' bounds and rows (class docstring), the problem of the task rows, the solve."""
-        bounds = apply_limits(self.constraints, q, self._previous)
+        q = conf.q
+        bounds = apply_limits(self.constraints, conf, self._previous)
         repulsive = self._repulsive(q) if self.solver.uses_repulsive else self._zeros
         problem = assemble_problem(rows, bounds.lower, bounds.upper, repulsive)
         if bounds.rows is not None:
@@ -319,13 +341,15 @@ class RelativeController:
             return self._invalid("non-finite joint positions", start, q)
         if not math.isfinite(q_ref.sum() + qd_ref.sum()):
             return self._invalid("non-finite joint reference", start, q)
-        bounds = apply_limits(self.constraints, q, self._previous)
+        conf = Configuration(self.model, q)
+        bounds = apply_limits(self.constraints, conf, self._previous)
         if self._projection is None:
             self._projection = TrackingProjection(make_backend(self.params.solver_params.qp_backend,
                                                                self.params.solver_params.qp))
         velocities, status = self._projection(qd_ref + gain * (q_ref - q), bounds)
         self._previous = velocities
-        p, r = self.model.relative_pose(q)
+        state = conf.relative()
+        p, r = state.position, state.rotation
         p_des, r_des = np.asarray(target.position, dtype=float), np.asarray(target.rotation, dtype=float)
         active = int(np.count_nonzero(np.abs(velocities) > ACTIVITY_THRESHOLD))
         elapsed = time.perf_counter() - start
@@ -333,7 +357,7 @@ class RelativeController:
         return Cycle(velocities=velocities, result=result, position=p, rotation=r,
                      position_error=float(np.linalg.norm(p_des - p)),
                      orientation_error=rotation_angle(r, r_des), cycle_time=elapsed,
-                     collision=self._collision_report(velocities))
+                     reports=self._reports(velocities))
 
     def _invalid(self, what: str, start: float, q: FloatArray) -> Cycle:
         """The safe command for an invalid input, with the reason in ``detail`` (status "invalid_input").
@@ -393,6 +417,16 @@ def _pairs_check(value: Any) -> str:
     return pairs if isinstance(pairs, str) else ""
 
 
+def _names_check(value: Any) -> str:
+    """a list of strings ([''] = none)"""
+    return "" if isinstance(value, list) and all(isinstance(v, str) for v in value) else "a list of strings"
+
+
+def _names(value: list[str]) -> tuple[str, ...]:
+    """A string-array parameter's entries, ROS's [''] for none skipped."""
+    return tuple(v for v in value if v)
+
+
 CONTROLLER_PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("solver", "hierarchical_sparse_qp", "kinematic solver (registry name)", choices=_solver_choices),
     ParamSpec("gain", 10.0, "closed-loop gain K of eq (13) [1/s]", check=positive),
@@ -420,6 +454,10 @@ CONTROLLER_PARAMETERS: tuple[ParamSpec, ...] = (
               "collision margin): d_s is kept between them", check=non_negative),
     ParamSpec("collision.allowed", [""], "link pairs never checked besides the robot's collision_allowed: "
               "'link_a link_b' strings ([''] = none)", check=_pairs_check, read_only=True),
+    ParamSpec("limits", [""], "registered limits added to the default ones, by name ([''] = none; docs/limits.md)",
+              check=_names_check, read_only=True),
+    ParamSpec("plugins", [""], "Python files or module names imported first: a user's own limits and tasks "
+              "register there ([''] = none; docs/limits.md)", check=_names_check, read_only=True),
     ParamSpec("qp_eps_abs", 1e-9, "QP absolute tolerance", check=positive),
     ParamSpec("qp_max_iter", 10000, "QP iteration cap", check=positive),
 )
@@ -448,4 +486,6 @@ def controller_params(values: Mapping[str, Any], node: str = "controller_node") 
             safety_distance=v["collision.safety_distance"], gain=v["collision.gain"],
             shape_margin=v["collision.shape_margin"],
             allowed=_allowed(v["collision.allowed"])),
+        limits=_names(v["limits"]),
+        plugins=_names(v["plugins"]),
     )

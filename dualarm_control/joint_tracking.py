@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from dualarm_control.kinematics import FloatArray
-from dualarm_control.limits import Bounds
+from dualarm_control.limits.base import Bounds
 from dualarm_control.qp import QPBackend, QPProblem
 
 ROW_TOLERANCE = 1e-9

@@ -16,7 +16,7 @@ from test_properties import Target
 
 from dualarm_control.controller import ControllerParams, RelativeController
 from dualarm_control.kinematics import DualArmModel
-from dualarm_control.limits import DeferredRows
+from dualarm_control.limits import CollisionLimit, DeferredRows
 
 PERIOD = 0.005
 
@@ -41,8 +41,8 @@ def test_deferred_rows_change_no_command(solver: str, monkeypatch: pytest.Monkey
     for k in range(800):
         target = goals[k // 400]
         mine = deferring.step(q, target)
-        limit = deferring.collision_limit
-        assert limit is not None and mine.collision is not None
+        limit = deferring.limit("collision")
+        assert isinstance(limit, CollisionLimit) and mine.collision is not None
         if mine.collision.rows:
             built += limit._rows.built
             deferred += not limit._rows.built

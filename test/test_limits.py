@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pytest
@@ -11,8 +12,9 @@ from hypothesis import strategies as st
 
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.limits import (
-    Bounds,
+    Constraint,
     JointLimits,
+    Limit,
     VelocityLimit,
     acceleration_bounds,
     apply_limits,
@@ -242,16 +244,22 @@ def test_position_limits_win_over_the_acceleration_bound() -> None:
 
 
 @dataclass(frozen=True)
-class HalfSpeed:
-    """A box limit of a test's own: every joint at most half its velocity limit (a user's new limit)."""
+class HalfSpeed(Limit):
+    """A box limit of a test's own: every joint at most half its velocity limit (a user's new limit),
+    listed with the package's priority of a user limit (after eq (23)'s)."""
 
     qd_max: np.ndarray
     name: str = "half_speed"
 
-    def apply(self, q: np.ndarray, previous: np.ndarray, bounds: Bounds) -> Bounds:
-        bounds.lower = np.maximum(bounds.lower, -0.5 * self.qd_max)
-        bounds.upper = np.minimum(bounds.upper, 0.5 * self.qd_max)
-        return bounds
+    def constraints(self, configuration: Any, previous: np.ndarray) -> Constraint:
+        return Constraint(-0.5 * self.qd_max, 0.5 * self.qd_max)
+
+
+@dataclass(frozen=True)
+class Joints:
+    """The one attribute of a Configuration the joint limits read: q [rad] (n,)."""
+
+    q: np.ndarray
 
 
 @settings(max_examples=100, deadline=None, derandomize=True)
@@ -265,6 +273,6 @@ def test_limits_intersect_whatever_their_order(case: Case) -> None:
     lower, upper = velocity_bounds(case.q, case.limits, case.period)
     want = (np.maximum(lower, -0.5 * case.limits.qd_max), np.minimum(upper, 0.5 * case.limits.qd_max))
     for order in ((mine, eq23), (eq23, mine)):
-        got = apply_limits(order, case.q, zero)
+        got = apply_limits(order, Joints(case.q), zero)  # type: ignore[arg-type]
         np.testing.assert_array_equal(got.lower, want[0])
         np.testing.assert_array_equal(got.upper, want[1])

@@ -45,10 +45,10 @@ from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
 from dualarm_control import controller as core
-from dualarm_control.collision_limit import CollisionReport
 from dualarm_control.errors import DualArmError
 from dualarm_control.hardware import HARDWARE_PARAMETERS, profile_from_values
 from dualarm_control.kinematics import DualArmModel
+from dualarm_control.limits.collision import CollisionReport
 from dualarm_control.params import ParamSpec, non_negative, positive
 from dualarm_control.references.base import (
     JOINT_REFERENCE,

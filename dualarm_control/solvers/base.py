@@ -27,7 +27,7 @@ import numpy.typing as npt
 # scipy.optimize imported here, not in the fallback: a first import inside the loop takes ~0.3 s
 from scipy.optimize import lsq_linear
 
-from dualarm_control.limits import DeferredRows
+from dualarm_control.limits.base import DeferredRows
 from dualarm_control.qp import DEFAULT_BACKEND, QPSettings, QPSolution, make_backend
 from dualarm_control.solvers.slack_qp import slack_qp
 
@@ -70,7 +70,7 @@ class ControlProblem:
         equality_weights: slack weight of each row of ``jacobian`` (>= 0), (m,), or None (1).
         inequality_weights: slack weight of each inequality row (> 0), (m_ie,), or None.
         limit_rows: hard rows ``limit_rows @ qd <= limit_bound`` of the limits beyond the box, (m_l, n), or
-            None: the collision limit's velocity damper (:mod:`dualarm_control.collision_limit`). Every
+            None: the collision limit's velocity damper (:mod:`dualarm_control.limits.collision`). Every
             solver takes them as hard constraints (docs/collision.md, "Limits").
         limit_bound: their right-hand side [m/s], (m_l,).
         limit_labels: what each row keeps apart (the link pair), m_l strings, for reports.

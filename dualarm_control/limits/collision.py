@@ -1,4 +1,4 @@
-"""The collision limit: the velocity damper's rows as a :class:`~dualarm_control.limits.Limit`.
+"""The collision limit: the velocity damper's rows as a :class:`~dualarm_control.limits.base.Limit`.
 
 Each cycle, the pairs of the robot's :class:`~dualarm_control.collision.CollisionModel` closer
 than the influence distance d_i give one hard row each (:func:`~dualarm_control.collision.velocity_damper`):
@@ -9,7 +9,7 @@ with d_s' = d_s + 2 m and d_i' = d_i + 2 m, m the shape margin (``collision.shap
 pybullet's collision margin; the limit keeps d_s between the shapes as the simulator grows them).
 
 which every solver takes in its own variables (docs/collision.md, "Limits"). The rows' matrix is
-deferred (:class:`~dualarm_control.limits.DeferredRows`): it is built only when a solver's result
+deferred (:class:`~dualarm_control.limits.base.DeferredRows`): it is built only when a solver's result
 is not vouched for by how fast the pairs' distances can change at most (the reach of their links
 about each joint), which in most cycles with pairs in range it is. What the limit saw
 is kept for the cycle's report (:class:`CollisionReport`: the closest pair, its distance, the rows
@@ -31,8 +31,15 @@ from dualarm_control.collision import (
     velocity_damper,
     velocity_damper_bound,
 )
-from dualarm_control.kinematics import DualArmModel, FloatArray
-from dualarm_control.limits import Bounds, DeferredRows
+from dualarm_control.kinematics import Configuration, DualArmModel, FloatArray
+from dualarm_control.limits.base import (
+    NONE,
+    ROW_PRIORITY,
+    Constraint,
+    DeferredRows,
+    Limit,
+)
+from dualarm_control.limits.registry import LimitContext, register_limit
 
 ACTIVE_TOLERANCE = 1e-6
 """A row is active (at its bound) when A qd >= b - 1e-6 m/s."""
@@ -78,7 +85,7 @@ def allowed_pairs(model: DualArmModel, params: CollisionParams) -> tuple[tuple[s
     return tuple(model.description.collision_allowed) + tuple(params.allowed)
 
 
-class CollisionLimit:
+class CollisionLimit(Limit):
     """The velocity damper of every pair closer than d_i, as hard rows (module docstring).
 
     Args:
@@ -87,6 +94,7 @@ class CollisionLimit:
     """
 
     name = "collision"
+    priority = ROW_PRIORITY
 
     def __init__(self, collision: CollisionModel, params: CollisionParams) -> None:
         self.collision = collision
@@ -103,17 +111,16 @@ class CollisionLimit:
         self.last = last = self.collision.complete(self.last)
         return last.pair_distances()
 
-    def apply(self, q: FloatArray, previous: FloatArray, bounds: Bounds) -> Bounds:
+    def constraints(self, configuration: Configuration, previous: FloatArray) -> Constraint:
         influence, safety = self._kept
-        self.last = near = self.collision.near(q, within=influence, rows=False)
+        self.last = near = self.collision.near(configuration.q, within=influence, rows=False)
         if not near.index:
-            return bounds
+            return NONE
         gain, collision = self.params.gain, self.collision
         self._rows = rows = DeferredRows(near.speed, velocity_damper_bound(near.distance, influence, safety, gain),
                                          lambda: velocity_damper(collision.rows(near), near.distance, influence,
                                                                  safety, gain)[0])
-        bounds.add_rows(rows, tuple([self._labels[i] for i in near.index]))
-        return bounds
+        return Constraint(rows=rows, labels=tuple([self._labels[i] for i in near.index]))
 
     def report(self, velocities: FloatArray) -> CollisionReport:
         """The last cycle's :class:`CollisionReport` for its command ``velocities`` [rad/s] (n,)."""
@@ -127,3 +134,11 @@ class CollisionLimit:
         distances = near.distance.tolist()
         closest = min(distances)
         return CollisionReport(closest, near.links[distances.index(closest)], len(distances), active, self._kept[0])
+
+
+@register_limit("collision")
+def collision_limit(context: LimitContext) -> CollisionLimit | None:
+    """On when the controller's ``collision.enabled`` is (the controller then has a collision model)."""
+    if context.collision is None:
+        return None
+    return CollisionLimit(context.collision, context.params.collision)

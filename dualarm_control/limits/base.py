@@ -1,0 +1,223 @@
+"""What a limit is and how one cycle's limits are put together (issue 39; docs/limits.md).
+
+A limit (:class:`Limit`) looks at one cycle's :class:`~dualarm_control.kinematics.Configuration` and the
+previous command and returns a :class:`Constraint` on the joint velocities qd [rad/s], (n,): a box
+``lower <= qd <= upper`` and/or hard rows ``A qd <= b``. :func:`apply_limits` intersects what the limits
+give, whatever order they are listed in: the boxes are narrowed in the order of the limits' ``priority``
+(where two boxes do not meet, the higher-priority one wins: the result is its point nearest to the other),
+the rows are stacked. Every solver and every tracker takes the result as hard constraints.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from dualarm_control.kinematics import Configuration
+
+FloatArray = npt.NDArray[np.float64]
+
+ROW_SPEED_MARGIN = 1e-6
+"""m/s: how far below its bound b a row's speed bound C |qd| must lie for :meth:`DeferredRows.meets`
+to vouch for qd (witness points within 1e-9 m of their shapes, rounding; the collision report's
+"active" tolerance is the same)."""
+
+POSITION_PRIORITY = 0
+"""Priority of the joint position and velocity limits of eq (21)-(23): narrowed first, never given up."""
+
+ACCELERATION_PRIORITY = 10
+"""Priority of the acceleration bound: given up (clipped into eq (23)'s box) where it meets no position bound."""
+
+ROW_PRIORITY = 20
+"""Priority of the collision limit (rows only: the priority orders its rows among the other limits' rows)."""
+
+USER_PRIORITY = 100
+"""Default priority of a limit that does not say: after every built-in one."""
+
+
+class DeferredRows:
+    """The matrix A (m, n) of hard rows ``A qd <= b``, built on first use, and a bound that often
+    makes building it unnecessary.
+
+    ``speed`` C (m, n) >= 0 bounds every row: |A_i qd| <= C_i |qd| for every qd (the collision
+    limit's rows are distance velocities, C the reach of the pair's links about each joint [m/rad]:
+    no point of a link moves faster than sum_j reach_j |qd_j|). Where C |qd| <= b - margin, qd meets
+    every row whatever A is (:meth:`meets`): a solver's relaxation (its QP without the rows) that
+    meets the bound is the solution with them, and A is never built. A is built when a solver needs
+    it (a row may be active) and then kept: the same rows, the same decisions as with A built at once.
+
+    Args:
+        speed: C [m/rad], (m, n), >= 0.
+        bound: b [m/s], (m,).
+        build: returns A (m, n), called at most once.
+    """
+
+    __slots__ = ("_below", "_build", "_matrix", "_met", "bound", "speed")
+
+    def __init__(self, speed: FloatArray, bound: FloatArray, build: Callable[[], FloatArray]) -> None:
+        self.speed = speed
+        self.bound = bound
+        self._below = bound - ROW_SPEED_MARGIN
+        self._build: Callable[[], FloatArray] | None = build
+        self._matrix: FloatArray | None = None
+        self._met = b""  # the bytes of the last qd that met the bound (a cycle checks the same qd up to 3 times)
+
+    @classmethod
+    def of(cls, matrix: FloatArray, bound: FloatArray) -> DeferredRows:
+        """Rows already built (C = |A|)."""
+        rows = cls(np.abs(matrix), bound, lambda: matrix)
+        rows._matrix, rows._build = matrix, None
+        return rows
+
+    @property
+    def built(self) -> bool:
+        """Whether A has been built."""
+        return self._matrix is not None
+
+    @property
+    def matrix(self) -> FloatArray:
+        """A (m, n), built on the first call."""
+        if self._matrix is None:
+            assert self._build is not None
+            self._matrix, self._build = self._build(), None
+        return self._matrix
+
+    def meets(self, qd: FloatArray) -> bool:
+        """True when C |qd| <= b - :data:`ROW_SPEED_MARGIN` in every row, so that A qd <= b (qd (n,)
+        [rad/s]); False says nothing (A qd may still meet b)."""
+        key = qd.tobytes()
+        if key == self._met:
+            return True
+        met = bool((self.speed @ np.abs(qd) <= self._below).all())
+        if met:
+            self._met = key
+        return met
+
+    def stacked(self, other: DeferredRows) -> DeferredRows:
+        """These rows, then ``other``'s."""
+        return DeferredRows(np.vstack((self.speed, other.speed)), np.concatenate((self.bound, other.bound)),
+                            lambda: np.vstack((self.matrix, other.matrix)))
+
+
+@dataclass(slots=True)
+class Constraint:
+    """What one limit gives one cycle: a box on qd [rad/s] (``lower``, ``upper``, (n,) each, None for no
+    bound on that side) and/or rows ``A qd <= b`` (``rows``, m of them, one label each naming what the row
+    keeps apart: ``labels``, m strings). :data:`NONE` gives nothing (e.g. no collision pair in range)."""
+
+    lower: FloatArray | None = None
+    upper: FloatArray | None = None
+    rows: DeferredRows | None = None
+    labels: tuple[str, ...] = ()
+
+
+NONE = Constraint()
+"""The constraint that constrains nothing (shared: never modified)."""
+
+
+@dataclass(slots=True)
+class Bounds:
+    """What the limits give one cycle's QP over the joint velocities qd [rad/s], (n,).
+
+    The box ``lower <= qd <= upper`` (n,) and the general rows ``A qd <= bound`` (A (m, n) in
+    ``rows``, built when first needed: :class:`DeferredRows`; bound (m,), m >= 0), each row labelled
+    (``labels``, m strings: the collision pair it keeps apart). Every solver takes both as hard
+    constraints in its own variables (docs/collision.md, "Limits").
+
+    A per-cycle record: slotted, not frozen (cheaper to build, docs/bench.md).
+    """
+
+    lower: FloatArray
+    upper: FloatArray
+    rows: DeferredRows | None
+    bound: FloatArray
+    labels: tuple[str, ...] = ()
+
+    @classmethod
+    def free(cls, n: int) -> Bounds:
+        """No constraint yet: the box (-inf, inf) and no row."""
+        return cls(np.full(n, -np.inf), np.full(n, np.inf), None, np.zeros(0))
+
+    def narrow(self, lower: FloatArray | None, upper: FloatArray | None) -> None:
+        """Intersect the box with [lower, upper] (None: no bound on that side), keeping the box's own
+        range where the two do not meet: per joint the result is the point of the box nearest to
+        the new range (lower' = min(max(l, lower), u), upper' = max(min(u, upper), lower'))."""
+        if lower is not None:
+            self.lower = np.minimum(np.maximum(self.lower, lower), self.upper)
+        if upper is not None:
+            self.upper = np.maximum(np.minimum(self.upper, upper), self.lower)
+
+    def add_rows(self, rows: DeferredRows, labels: tuple[str, ...]) -> None:
+        """Append m rows ``A qd <= b`` (``rows``, m labels) after those already given."""
+        self.rows = rows if self.rows is None else self.rows.stacked(rows)
+        self.bound, self.labels = self.rows.bound, self.labels + labels
+
+    def add(self, constraint: Constraint) -> None:
+        """Intersect with one limit's constraint (:meth:`narrow`, :meth:`add_rows`)."""
+        if constraint.lower is not None or constraint.upper is not None:
+            self.narrow(constraint.lower, constraint.upper)
+        if constraint.rows is not None:
+            self.add_rows(constraint.rows, constraint.labels)
+
+
+class LimitReport(Protocol):
+    """What a limit saw in one cycle, for the cycle's record and /diagnostics."""
+
+    def values(self) -> dict[str, str]:
+        """/diagnostics key-value pairs (strings, as diagnostic_msgs/KeyValue holds them)."""
+        ...
+
+    def text(self) -> str:
+        """One line for a log or a stall verdict."""
+        ...
+
+
+class Limit:
+    """One limit of every cycle's QP (as pink's and mink's limits): subclass it and write
+    :meth:`constraints` (docs/limits.md has a worked example).
+
+    Attributes:
+        name: what the limit is called (reports, labels, ``limits`` parameter); unique per controller.
+        priority: the order in which boxes are narrowed (lower first; :func:`apply_limits`). A limit
+            that only adds rows keeps the default; its priority orders its rows among the others'.
+    """
+
+    name: str = "limit"
+    priority: int = USER_PRIORITY
+
+    def constraints(self, configuration: Configuration, previous: FloatArray) -> Constraint:
+        """This cycle's constraint at ``configuration`` (its joint positions ``configuration.q`` [rad],
+        (n,), frames and Jacobians) given the previous command ``previous`` [rad/s], (n,)."""
+        raise NotImplementedError
+
+    def report(self, velocities: FloatArray) -> LimitReport | None:
+        """What the limit saw in the cycle whose command is ``velocities`` [rad/s], (n,); None: nothing to say."""
+        return None
+
+
+def _priority(limit: Limit) -> int:
+    return limit.priority
+
+
+def ordered(limits: Iterable[Limit]) -> tuple[Limit, ...]:
+    """``limits`` by priority, equal priorities in the order given; ValueError on a name given twice."""
+    out = tuple(sorted(limits, key=_priority))
+    names = [limit.name for limit in out]
+    twice = sorted({name for name in names if names.count(name) > 1})
+    if twice:
+        raise ValueError(f"limit names must be unique, got {', '.join(twice)} more than once")
+    return out
+
+
+def apply_limits(limits: Iterable[Limit], configuration: Configuration, previous: FloatArray) -> Bounds:
+    """One cycle's constraints: every limit's :class:`Constraint` intersected (:meth:`Bounds.add`) in
+    the order of :func:`ordered` (n = configuration.q.shape[0]); ``previous`` [rad/s], (n,)."""
+    bounds = Bounds.free(configuration.q.shape[0])
+    for limit in sorted(limits, key=_priority):
+        bounds.add(limit.constraints(configuration, previous))
+    return bounds
