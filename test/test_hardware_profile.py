@@ -226,10 +226,9 @@ def test_one_point_trajectory_command_is_exact_cdr(interface: str) -> None:
     from rosbags.typesys import Stores, get_typestore
 
     from dualarm_control.hardware import OutputSpec
-    from dualarm_control.ros.hardware_io import trajectory_bytes
 
     spec = OutputSpec("servo", "/servo", "joint_trajectory", interface, ("b", "a"))
-    msg = get_typestore(Stores.ROS2_JAZZY).deserialize_cdr(trajectory_bytes(spec, np.array([0.5, -1.0]), 0.005),
+    msg = get_typestore(Stores.ROS2_JAZZY).deserialize_cdr(spec.kind.encode(spec, np.array([0.5, -1.0]), 0.005),
                                                            "trajectory_msgs/msg/JointTrajectory")
     (point,) = msg.points
     assert list(msg.joint_names) == ["b", "a"]
