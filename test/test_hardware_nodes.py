@@ -17,7 +17,7 @@ from launching import side_by_side
 from waiting import node_env
 
 from dualarm_control.app.run.launcher import launch_scenario
-from dualarm_control.hardware import HardwareProfile, OutputSpec, load_profile
+from dualarm_control.hardware import HardwareProfile, load_profile
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.metrics import velocity_norm_metrics
 from dualarm_control.params import read_params_file
@@ -41,11 +41,13 @@ def profile_of(name: str) -> HardwareProfile:
     return load_profile(read_params_file(profile_file(name), "controller_node"), DualArmModel().joint_names)
 
 
-def command_values(o: OutputSpec, msg: Any) -> list[float]:
-    """A command message's values in the output's joint order (its registered message type's decoding)."""
-    values = o.kind.decode(o, msg)
-    assert not isinstance(values, str), values
-    return list(values)
+def command_values(o: Any, msg: Any) -> list[float]:
+    """A command message's values in the output's joint order."""
+    if o.message == "float64_multi_array":
+        return list(msg.data)
+    point = msg.points[0]
+    values = dict(zip(msg.joint_names, point.positions if o.position else point.velocities))
+    return [values[j] for j in o.joints]
 
 
 def read_bag(bag: Path) -> dict[str, list[Any]]:
