@@ -39,5 +39,17 @@ class UnknownSolverError(DualArmError, KeyError):
         return str(self.args[0])
 
 
+class UnknownOutputError(DualArmError, KeyError):
+    """A command output's message type is not in the registry (:mod:`dualarm_control.outputs`)."""
+
+    def __init__(self, name: str, known: list[str]) -> None:
+        self.name = name
+        self.known = known
+        super().__init__(f"unknown output message type {name!r}; known: {', '.join(known)}")
+
+    def __str__(self) -> str:  # KeyError quotes its message otherwise
+        return str(self.args[0])
+
+
 class DimensionError(DualArmError, ValueError):
     """An array has the wrong shape (e.g. a joint vector with the wrong joint count)."""

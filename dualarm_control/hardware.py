@@ -7,14 +7,15 @@ nodes and ``dualarm hardware check``)::
       outputs: [left_arm, right_arm]          # names of the command outputs
       left_arm:
         topic: /left/forward_position_controller/commands
-        message: float64_multi_array          # or joint_trajectory (one point)
+        message: float64_multi_array          # or joint_trajectory (one point), any registered type
         interface: position                   # or velocity
         joints: [lbr_A1, ...]                 # any subset and order of the description's joints
       right_arm: {...}
       joint_states: [/left/joint_states, /right/joint_states]
       stamp_tolerance: 0.0025                 # [s] stamps of one consistent state differ by at most this
 
-An output's ``topic`` defaults to ``/<name>/commands``, ``message`` to ``float64_multi_array``,
+An output's ``message`` is a key of the output registry (:mod:`dualarm_control.outputs`,
+docs/outputs.md); an unknown one is refused naming the known ones. An output's ``topic`` defaults to ``/<name>/commands``, ``message`` to ``float64_multi_array``,
 ``interface`` to ``velocity``, ``joints`` to every joint of the description in its order. Every
 joint of the description is commanded by exactly one output. The default profile (no
 ``hardware.`` keys) is one velocity output on ``/velocity_controller/commands`` with the
@@ -34,10 +35,11 @@ from typing import Any
 import numpy as np
 
 from dualarm_control.errors import ParameterError
+from dualarm_control.outputs import OutputSpec, output_names
 from dualarm_control.params import ParamSpec, non_negative, positive, resolve
 
 FloatArray = np.ndarray
-MESSAGES = ("float64_multi_array", "joint_trajectory")
+DEFAULT_MESSAGE = "float64_multi_array"
 INTERFACES = ("velocity", "position")
 DEFAULT_OUTPUT = "velocity_controller"
 
@@ -82,28 +84,14 @@ def output_parameters(name: str) -> tuple[ParamSpec, ...]:
     key = f"hardware.{name}"
     return (
         ParamSpec(f"{key}.topic", f"/{name}/commands", "command topic of this output", read_only=True),
-        ParamSpec(f"{key}.message", MESSAGES[0], "message type: std_msgs/Float64MultiArray or a one-point "
-                  "trajectory_msgs/JointTrajectory", choices=lambda: list(MESSAGES), read_only=True),
+        ParamSpec(f"{key}.message", DEFAULT_MESSAGE, "command message type (a registered output type, "
+                  "docs/outputs.md): float64_multi_array (std_msgs/Float64MultiArray), joint_trajectory (a one-point "
+                  "trajectory_msgs/JointTrajectory), ...", choices=output_names, read_only=True),
         ParamSpec(f"{key}.interface", INTERFACES[0], "command interface of the controller it feeds",
                   choices=lambda: list(INTERFACES), read_only=True),
         ParamSpec(f"{key}.joints", [""], "joints of this output, in the controller's order (['']: every joint "
                   "of the robot description, in its order)", read_only=True),
     )
-
-
-@dataclass(frozen=True)
-class OutputSpec:
-    """One command output: ``joints`` (names) published on ``topic`` as ``message`` for ``interface``."""
-
-    name: str
-    topic: str
-    message: str
-    interface: str
-    joints: tuple[str, ...]
-
-    @property
-    def position(self) -> bool:
-        return self.interface == "position"
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,8 @@
 * :func:`state_layout`: the joint-state topics as joint_state_broadcaster publishes them: per topic
   its joints in the simulator's own order, the held (locked) joints and optional extra joints.
 * :class:`CommandMerger`: the profile's command outputs (each its joints, velocity or position
-  interface) merged into the cell's joint velocity command.
+  interface) merged into the cell's joint velocity command; per output, the decoder of its registered
+  message type (:mod:`dualarm_control.outputs`), which the simulator's command subscriptions use.
 
 ROS-free.
 """
@@ -16,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualarm_control.hardware import HardwareProfile
+from dualarm_control.outputs import CommandDecoder
 
 STATE_ORDERS = ("description", "reversed", "sorted")
 
@@ -66,9 +68,12 @@ class CommandMerger:
     joints' position reference (the cell's joint position controller, :attr:`DualArmCell.reference`)
     to the commanded positions in one ``period``. After the step the simulator stops the position
     joints (:attr:`position_mask`, :meth:`DualArmCell.hold`): the positions last commanded hold.
+    :attr:`decoders`: per output name, how its messages are read (an unregistered message type is
+    refused here, UnknownOutputError naming the known ones).
     """
 
     def __init__(self, profile: HardwareProfile, joint_names: Sequence[str], period: float) -> None:
+        self.decoders = {o.name: CommandDecoder(o) for o in profile.outputs}
         self.outputs = {o.name: (o, idx) for o, idx in zip(profile.outputs, profile.indices(joint_names))}
         self.period = period
         self.velocity = np.zeros(len(joint_names))

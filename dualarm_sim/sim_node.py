@@ -5,7 +5,7 @@ time, steps x period) every period while a subscription reads them (lazy, as ima
 publish); applies
 ``/velocity_controller/commands`` (Float64MultiArray, 14 values, controller joint order). Those are the
 default hardware profile's topics: with ``hardware.*`` (docs/hardware.md) it takes the profile's command
-outputs (topics, message types, velocity or position interfaces) and publishes its joint-state topics
+outputs (topics, message types of the output registry (docs/outputs.md), velocity or position interfaces) and publishes its joint-state topics
 as joint_state_broadcaster does (``state_order``, ``extra_joints``, a topic per namespace).
 A command older than ``command_timeout`` (simulation time, counted in steps, as a robot's
 own cycle counts it) brings the arms to rest, in both modes. A malformed command (bad CDR,
@@ -53,8 +53,7 @@ from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray, String
-from trajectory_msgs.msg import JointTrajectory
+from std_msgs.msg import String
 
 from dualarm_control.hardware import HARDWARE_PARAMETERS, profile_from_values
 from dualarm_control.params import ParamSpec, non_negative, positive
@@ -171,12 +170,10 @@ class SimNode:
         self.pub_description.publish(String(data=robot.urdf_xml))
         self.pub_contact = (n.create_publisher(Vector3Stamped, "/contact_force", depth) if self.contact is not None
                             else None)
-        for o in profile.outputs:
-            array = o.message == "float64_multi_array"
-            subscribe_checked(n, Float64MultiArray if array else JointTrajectory, o.topic,
-                              functools.partial(self.on_command, o.name), qos, self.reject,
-                              convert.CommandInput(len(o.joints)) if array else
-                              convert.TrajectoryCommandInput(o.joints, o.interface), bus)
+        for o in profile.outputs:  # each output's registered message type (dualarm_control.outputs)
+            decoder = self.merger.decoders[o.name]
+            subscribe_checked(n, decoder.kind.message_class(), o.topic, functools.partial(self.on_command, o.name),
+                              qos, self.reject, decoder, bus)
         self.log = n.get_logger()
         self.throttle = Throttle(1.0)
         self.steps = 0

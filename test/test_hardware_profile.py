@@ -63,7 +63,8 @@ def test_per_arm_outputs_in_their_own_order() -> None:
     ({"hardware.right.topic": "/left/commands"}, ["hardware.right.topic", "/left/commands", "hardware.left.topic"]),
     ({"hardware.right.topic": "right/commands"}, ["hardware.right.topic", "absolute"]),
     ({"hardware.left.interface": "effort"}, ["hardware.left.interface", "effort", "velocity, position"]),
-    ({"hardware.left.message": "twist"}, ["hardware.left.message", "joint_trajectory"]),
+    ({"hardware.left.message": "twist"}, ["hardware.left.message", "'twist'",
+                                          "one of: float64_multi_array, joint_trajectory"]),
     ({"hardware.joint_states": ["joint_states"]}, ["hardware.joint_states", "absolute"]),
     ({"hardware.outputs": ["left", "left"]}, ["hardware.outputs", "no duplicates"]),
     ({"hardware.outputs": ["left", "joint_states"]}, ["hardware.outputs", "not outputs, joint_states"]),
@@ -226,16 +227,47 @@ def test_one_point_trajectory_command_is_exact_cdr(interface: str) -> None:
     from rosbags.typesys import Stores, get_typestore
 
     from dualarm_control.hardware import OutputSpec
-    from dualarm_control.ros.hardware_io import trajectory_bytes
 
     spec = OutputSpec("servo", "/servo", "joint_trajectory", interface, ("b", "a"))
-    msg = get_typestore(Stores.ROS2_JAZZY).deserialize_cdr(trajectory_bytes(spec, np.array([0.5, -1.0]), 0.005),
+    msg = get_typestore(Stores.ROS2_JAZZY).deserialize_cdr(spec.kind.encode(spec, np.array([0.5, -1.0]), 0.005),
                                                            "trajectory_msgs/msg/JointTrajectory")
     (point,) = msg.points
     assert list(msg.joint_names) == ["b", "a"]
     assert list(point.positions if interface == "position" else point.velocities) == [0.5, -1.0]
     assert len(point.velocities if interface == "position" else point.positions) == 0
     assert (point.time_from_start.sec, point.time_from_start.nanosec) == (0, 5_000_000)
+
+
+WIRE = {
+    "float64_multi_array": "0001000000000000000000000200000000000000000000000000e03f000000000000f0bf",
+    "joint_trajectory.velocity": "000100000000000000000000010000000000000002000000020000006200000002000000610000000100"
+                                 "00000000000002000000000000000000e03f000000000000f0bf000000000000000000000000404b4c00",
+    "joint_trajectory.position": "000100000000000000000000010000000000000002000000020000006200000002000000610000000100"
+                                 "00000200000000000000000000000000e03f000000000000f0bf00000000000000000000000000000000"
+                                 "404b4c00",
+}
+"""The commands of [0.5, -1.0] for joints (b, a) at 5 ms as the controller sent them before the output registry
+(issue 39): ``convert.float_array`` and ``hardware_io.trajectory_bytes``."""
+
+
+@pytest.mark.parametrize("case", sorted(WIRE))
+def test_the_registry_sends_the_bytes_sent_before_it(case: str) -> None:
+    from dualarm_control.hardware import OutputSpec
+    from dualarm_control.outputs import output_type
+
+    message, _, interface = case.partition(".")
+    spec = OutputSpec("servo", "/servo", message, interface or "velocity", ("b", "a"))
+    assert output_type(message).encode(spec, np.array([0.5, -1.0]), 0.005).hex() == WIRE[case]
+
+
+def test_an_unknown_message_type_is_refused_where_the_simulator_sets_up_its_ports() -> None:
+    from dualarm_control.errors import UnknownOutputError
+    from dualarm_control.hardware import HardwareProfile, OutputSpec
+
+    spec = OutputSpec("left", "/left/commands", "twist", "velocity", tuple(NAMES))
+    with pytest.raises(UnknownOutputError, match="unknown output message type 'twist'; known: float64_multi_array, "
+                                                 "joint_trajectory"):
+        CommandMerger(HardwareProfile((spec,), ("/joint_states",), 0.0025), NAMES, 0.005)
 
 
 def test_a_recording_takes_the_profiles_topics() -> None:

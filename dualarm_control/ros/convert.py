@@ -20,7 +20,9 @@ from builtin_interfaces.msg import Duration, Time
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from dualarm_control.outputs import CommandDecoder, OutputSpec
 from dualarm_control.ros import cdr
+from dualarm_control.ros.checks import finite, joint_indices
 
 LEFT_FRAME = "left_tool"
 RIGHT_FRAME = "right_tool"
@@ -44,22 +46,6 @@ def header(ns: int, frame_id: str = "") -> Any:
 def joint_state(names: Sequence[str], ns: int, q: np.ndarray, qd: np.ndarray) -> bytes:
     """sensor_msgs/JointState (CDR) with positions [rad] and velocities [rad/s]; effort left empty."""
     return cdr.joint_state(ns, names, q, qd)
-
-
-def joint_indices(names: Sequence[str], order: Mapping[str, int], what: str) -> list[int] | str:
-    """Index in ``names`` of each of the model's joints (``order``: name -> model index), or why not.
-
-    Order is mapped by name; extra names (joints the controller does not drive) are ignored;
-    a missing or duplicated name makes the message unusable.
-    """
-    position = {name: i for i, name in enumerate(names)}
-    if len(position) != len(names):
-        duplicates = sorted({n for n in names if names.count(n) > 1})
-        return f"{what} has duplicate joint names {duplicates[:3]}"
-    missing = [n for n in order if n not in position]
-    if missing:
-        return f"{what} is missing {len(missing)} of the {len(order)} joints, e.g. {missing[:3]} (got {list(names)[:3]}...)"
-    return [position[n] for n in order]
 
 
 class JointStateInput:
@@ -127,58 +113,17 @@ class JointStateInput:
         return q, qd
 
 
-def finite(values: np.ndarray) -> bool:
-    """Every entry finite (the sum first: one pass in the common case; overflow is checked entrywise)."""
-    return math.isfinite(float(values.sum())) or bool(np.isfinite(values).all())
-
-
-class CommandInput:
-    """/velocity_controller/commands -> the joint velocity command [rad/s], (size,), or why it is unusable."""
+class CommandInput(CommandDecoder):
+    """/velocity_controller/commands (Float64MultiArray) -> the joint velocity command [rad/s], (size,), or why
+    it is unusable: the default profile's output (:class:`~dualarm_control.outputs.CommandDecoder`)."""
 
     def __init__(self, size: int) -> None:
-        self.size = size
-
-    def from_bytes(self, data: bytes) -> np.ndarray | str:
-        return self.check(cdr.float64_multi_array_data(data))
-
-    def from_message(self, msg: Any) -> np.ndarray | str:
-        return self.check(np.asarray(msg.data, dtype=float))
-
-    def check(self, data: np.ndarray) -> np.ndarray | str:
-        if data.shape != (self.size,):
-            return f"command with {data.size} values rejected: expected {self.size}"
-        if not finite(data):
-            return f"command with NaN or inf at indices {np.flatnonzero(~np.isfinite(data))[:5].tolist()} rejected"
-        return data.copy()
-
-
-class TrajectoryCommandInput:
-    """A one-point trajectory_msgs/JointTrajectory command (MoveIt Servo's form) -> the values of
-    ``joints`` in that order (positions or velocities per ``interface``), or why it is unusable."""
-
-    def __init__(self, joints: Sequence[str], interface: str) -> None:
-        self.order = {name: i for i, name in enumerate(joints)}
-        self.interface = interface
-        self.check = CommandInput(len(joints)).check
-
-    def from_bytes(self, data: bytes) -> np.ndarray | str:
-        raise cdr.CdrError("decoded by rclpy")
-
-    def from_message(self, msg: Any) -> np.ndarray | str:
-        if len(msg.points) != 1:
-            return f"trajectory command with {len(msg.points)} points rejected: expected 1"
-        idx = joint_indices(list(msg.joint_names), self.order, "trajectory command")
-        if isinstance(idx, str):
-            return idx
-        field = msg.points[0].positions if self.interface == "position" else msg.points[0].velocities
-        values = np.asarray(field, dtype=float)
-        if values.shape != (len(msg.joint_names),):
-            return f"trajectory command with {values.size} {self.interface}s for {len(msg.joint_names)} joints rejected"
-        return self.check(values[idx])
+        super().__init__(OutputSpec("velocity_controller", "/velocity_controller/commands", "float64_multi_array",
+                                    "velocity", tuple(str(i) for i in range(size))))
 
 
 def float_array(values: np.ndarray) -> bytes:
-    """std_msgs/Float64MultiArray (CDR; JointGroupVelocityController convention: layout empty)."""
+    """std_msgs/Float64MultiArray (CDR; JointGroupVelocityController convention: layout empty), (n,) values."""
     return cdr.float64_multi_array(values)
 
 

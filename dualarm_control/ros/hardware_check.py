@@ -17,8 +17,6 @@ from typing import Any
 from dualarm_control.hardware import HardwareProfile
 
 JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
-COMMAND_TYPES = {"float64_multi_array": "std_msgs/msg/Float64MultiArray",
-                 "joint_trajectory": "trajectory_msgs/msg/JointTrajectory"}
 
 
 @dataclass(frozen=True)
@@ -89,7 +87,7 @@ def check_graph(node: Any, profile: HardwareProfile, joint_names: Sequence[str],
         problems += [f"joint {n} is on no joint-state topic" for n in missing]
         problems += [f"joint {n} is on several joint-state topics" for n in twice]
     for out in profile.outputs:
-        expected = COMMAND_TYPES[out.message]
+        expected = out.kind.type_name
         subs = others(node.get_subscriptions_info_by_topic(out.topic))
         endpoints += subs
         pubs = others(node.get_publishers_info_by_topic(out.topic))

@@ -4,9 +4,9 @@ the command outputs out.
 * :class:`JointStates` subscribes every joint-state topic of the profile (matched by name) and hands
   over each consistent state of both arms (:class:`~dualarm_control.hardware.StateAssembler`).
 * :class:`CommandSink` sends a cycle's joint velocities (the description's order) to every output of
-  the profile in one call: each output its joints, in its order, as Float64MultiArray or a one-point
-  JointTrajectory, as velocities or as integrated positions
-  (:class:`~dualarm_control.hardware.PositionIntegrator`).
+  the profile in one call: each output its joints, in its order, encoded by its registered message
+  type (:mod:`dualarm_control.outputs`: Float64MultiArray, a one-point JointTrajectory, ...), as
+  velocities or as integrated positions (:class:`~dualarm_control.hardware.PositionIntegrator`).
 """
 
 from __future__ import annotations
@@ -28,8 +28,9 @@ from dualarm_control.hardware import (
     profile_parameters,
     waiting_reason,
 )
+from dualarm_control.outputs import OutputType
 from dualarm_control.params import ParamSpec
-from dualarm_control.ros import cdr, convert
+from dualarm_control.ros import convert
 from dualarm_control.ros.inputs import subscribe_checked, unsubscribe
 from dualarm_control.ros.local_bus import LocalBus, local_publisher
 
@@ -120,30 +121,19 @@ class JointStates:
         self.subscriptions = []
 
 
-def trajectory_bytes(spec: OutputSpec, values: np.ndarray, period: float) -> bytes:
-    """A one-point trajectory_msgs/JointTrajectory (CDR) of ``spec``'s joints reached one ``period`` from
-    now (MoveIt Servo's form): ``values`` as positions or velocities per ``spec.interface``."""
-    empty = np.zeros(0)
-    return cdr.joint_trajectory_point(spec.joints, values if spec.position else empty,
-                                      empty if spec.position else values, round(period * 1e9))
-
-
 class CommandSink:
     """Every command output of ``profile``; :meth:`send` publishes one cycle's command on all of them."""
 
     def __init__(self, node: Any, profile: HardwareProfile, joint_names: Sequence[str], limits: tuple[
                  np.ndarray, np.ndarray, np.ndarray], period: float, qos: Any, bus: LocalBus | None = None) -> None:
-        from std_msgs.msg import Float64MultiArray
-        from trajectory_msgs.msg import JointTrajectory
-
         self.period = period
-        self.outputs: list[tuple[OutputSpec, np.ndarray, Any]] = []
+        self.outputs: list[tuple[OutputSpec, np.ndarray, Any, OutputType]] = []
         for spec, idx in zip(profile.outputs, profile.indices(joint_names)):
-            msg_type = Float64MultiArray if spec.message == "float64_multi_array" else JointTrajectory
-            self.outputs.append((spec, idx, local_publisher(bus, node.create_publisher(msg_type, spec.topic, qos),
-                                                            spec.topic)))
+            kind = spec.kind
+            pub = node.create_publisher(kind.message_class(), spec.topic, qos)
+            self.outputs.append((spec, idx, local_publisher(bus, pub, spec.topic), kind))
         self.integrator = PositionIntegrator(*limits, period)
-        self.positions = any(spec.position for spec, _, _ in self.outputs)
+        self.positions = any(spec.position for spec, _, _, _ in self.outputs)
         self.measured: np.ndarray | None = None
 
     def measure(self, q: np.ndarray) -> None:
@@ -158,14 +148,12 @@ class CommandSink:
         if self.positions and self.measured is not None:
             positions = (self.integrator.hold(self.measured) if safe
                          else self.integrator.command(velocities, self.measured))
-        for spec, idx, pub in self.outputs:
+        for spec, idx, pub, kind in self.outputs:
             values = positions if spec.position else velocities
             if values is None:
                 continue
-            part = values[idx]
-            pub.publish(convert.float_array(part) if spec.message == "float64_multi_array"
-                        else trajectory_bytes(spec, part, self.period))
+            pub.publish(kind.encode(spec, values[idx], self.period))
 
     def get_subscription_count(self) -> int:
         """The fewest subscriptions matched on one output (0: some output has no reader)."""
-        return min(pub.get_subscription_count() for _, _, pub in self.outputs)
+        return min(pub.get_subscription_count() for _, _, pub, _ in self.outputs)

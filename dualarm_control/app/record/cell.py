@@ -33,6 +33,7 @@ import yaml
 from dualarm_control.errors import DualArmError
 from dualarm_control.hardware import (
     HardwareProfile,
+    OutputSpec,
     StateAssembler,
     StateSample,
     profile_from_values,
@@ -197,14 +198,15 @@ class ProfileStreams:
         return out
 
 
-def command_values(output: Any, msg: Any) -> FloatArray:
-    """A command message's values in the output's joint order: a Float64MultiArray's data, or a one-point
-    JointTrajectory's positions or velocities (per the output's interface) by joint name."""
-    if output.message == "float64_multi_array":
-        return np.asarray(msg.data, dtype=float)
-    point = msg.points[0]
-    values = dict(zip(msg.joint_names, point.positions if output.position else point.velocities, strict=False))
-    return np.array([values.get(j, np.nan) for j in output.joints], dtype=float)
+def command_values(output: OutputSpec, msg: Any) -> FloatArray:
+    """A command message's values in the output's joint order (its registered message type's
+    :meth:`~dualarm_control.outputs.OutputType.decode`: a Float64MultiArray's data, a one-point
+    JointTrajectory's positions or velocities by joint name, ...); DualArmError naming the topic if the
+    message is unusable."""
+    values = output.kind.decode(output, msg)
+    if isinstance(values, str):
+        raise DualArmError(f"{output.topic}: {values}")
+    return values
 
 
 def _ordered(state: State, joint_names: Sequence[str]) -> FloatArray:
