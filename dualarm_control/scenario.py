@@ -39,7 +39,7 @@ from dualarm_control.params import (
     read_params_file,
 )
 from dualarm_control.paths import registry_file, registry_names
-from dualarm_control.references.base import PREFIX, ReferenceSource, get, number, vector
+from dualarm_control.references.base import ReferenceSource
 from dualarm_control.references.goals import GoalsSource, parse_goals_source
 from dualarm_control.references.segments import SegmentsSource, parse_segments
 from dualarm_control.references.tasks import TasksSource, parse_tasks
@@ -49,6 +49,7 @@ from dualarm_control.robot import (
     RobotError,
     load_robot,
 )
+from dualarm_control.scenario_keys import PREFIX, get, number, vector
 from dualarm_control.trajectory import MotionLimits, RelativeTrajectory
 
 

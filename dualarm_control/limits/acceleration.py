@@ -15,9 +15,9 @@ from dualarm_control.limits.base import (
     Bounds,
     Constraint,
     FloatArray,
+    JointLimits,
     Limit,
 )
-from dualarm_control.limits.joint import JointLimits
 from dualarm_control.limits.registry import LimitContext, register_limit
 
 if TYPE_CHECKING:

@@ -10,6 +10,7 @@ the rows are stacked. Every solver and every tracker takes the result as hard co
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
@@ -38,6 +39,50 @@ ROW_PRIORITY = 20
 
 USER_PRIORITY = 100
 """Default priority of a limit that does not say: after every built-in one."""
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Position and velocity limits of eq (20); velocities are symmetric as on the LWR4.
+
+    Attributes:
+        q_min, q_max: position limits [rad], (n,).
+        qd_max: velocity limit magnitude [rad/s], (n,); the lower limit is -qd_max.
+    """
+
+    q_min: FloatArray
+    q_max: FloatArray
+    qd_max: FloatArray
+
+    def __post_init__(self) -> None:
+        n = self.q_min.shape
+        if self.q_max.shape != n or self.qd_max.shape != n:
+            raise ValueError(f"limit shapes differ: {n}, {self.q_max.shape}, {self.qd_max.shape}")
+        if np.any(self.q_min >= self.q_max):
+            raise ValueError(f"q_min must be < q_max, got {self.q_min} and {self.q_max}")
+        if np.any(self.qd_max <= 0):
+            raise ValueError(f"qd_max must be > 0, got {self.qd_max}")
+
+    @functools.cached_property
+    def half_range(self) -> FloatArray:
+        """(q_max - q_min) / 2 [rad], (n,); computed once (the limits are constant)."""
+        return (self.q_max - self.q_min) / 2.0
+
+    @functools.cached_property
+    def position_rows(self) -> FloatArray:
+        """[q_min; q_max] [rad], (2, n): both bounds of eq (21)-(22) in one array operation."""
+        return np.stack((self.q_min, self.q_max))
+
+    @functools.cached_property
+    def negative_qd_max(self) -> FloatArray:
+        """-qd_max [rad/s], (n,)."""
+        return -self.qd_max
+
+    def scaled_velocity(self, factor: float) -> JointLimits:
+        """Same limits with the velocity limits multiplied by ``factor`` in (0, 1]."""
+        if not 0.0 < factor <= 1.0:
+            raise ValueError(f"velocity scale factor must be in (0, 1], got {factor}")
+        return JointLimits(self.q_min, self.q_max, self.qd_max * factor)
 
 
 class DeferredRows:

@@ -15,12 +15,11 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from dualarm_control.errors import ParameterError
-from dualarm_control.limits.base import FloatArray, Limit
+from dualarm_control.limits.base import FloatArray, JointLimits, Limit
 
 if TYPE_CHECKING:
     from dualarm_control.collision import CollisionModel
     from dualarm_control.kinematics import DualArmModel
-    from dualarm_control.limits.joint import JointLimits
 
 
 @dataclass(frozen=True)

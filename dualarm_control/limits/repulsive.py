@@ -8,8 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dualarm_control.limits.base import FloatArray
-from dualarm_control.limits.joint import JointLimits
+from dualarm_control.limits.base import FloatArray, JointLimits
 
 
 def repulsive_velocity(q: FloatArray, limits: JointLimits, alpha: float) -> FloatArray:

@@ -25,9 +25,9 @@ from dualarm_control.errors import ScenarioError
 from dualarm_control.params import ParameterError, read_params_file
 from dualarm_control.planning.baseline import BaselineParams
 from dualarm_control.planning.path import CornerPath
-from dualarm_control.references.base import number
 from dualarm_control.robot import RobotDescription, load_robot
 from dualarm_control.scenario import scenario_file, scenario_robot
+from dualarm_control.scenario_keys import number
 
 
 @dataclass(frozen=True)

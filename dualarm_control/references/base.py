@@ -33,20 +33,14 @@ report) read only these members.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
-import numpy as np
-
-from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.trajectory import MotionLimits
 
 if TYPE_CHECKING:
     from dualarm_control.controller import ControllerParams, Cycle, RelativeController
-
-PREFIX = "scenario."
 
 RELATIVE_TARGET = "/relative_target"
 JOINT_REFERENCE = "/joint_reference"
@@ -215,34 +209,6 @@ class ReferenceSource(Protocol):
                  options: RunOptions) -> StreamFollower: ...
 
     def stream(self, model: DualArmModel, q0: FloatArray, options: RunOptions, period: float) -> TargetStream: ...
-
-
-def get(flat: Mapping[str, Any], key: str, default: Any = None) -> Any:
-    """``scenario.<key>`` of flattened parameters; ScenarioError naming the full key when missing without default."""
-    full = PREFIX + key
-    if full in flat:
-        return flat[full]
-    if default is None:
-        raise ScenarioError(f"scenario parameter '{full}' is missing")
-    return default
-
-
-def vector(flat: Mapping[str, Any], key: str, size: int) -> FloatArray:
-    """``scenario.<key>`` as ``size`` finite numbers; ScenarioError naming the key and value otherwise."""
-    value = get(flat, key)
-    if not isinstance(value, list) or len(value) != size or not all(
-        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in value
-    ):
-        raise ScenarioError(f"scenario parameter '{PREFIX}{key}': got {value!r}, expected a list of {size} numbers")
-    return np.array(value, dtype=float)
-
-
-def number(flat: Mapping[str, Any], key: str, default: float | None = None) -> float:
-    """``scenario.<key>`` as a finite number; ScenarioError naming the key and value otherwise."""
-    value = get(flat, key, default)
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise ScenarioError(f"scenario parameter '{PREFIX}{key}': got {value!r}, expected a number")
-    return float(value)
 
 
 class SourceDefaults:

@@ -21,16 +21,13 @@ from dualarm_control.drive_monitor import SegmentJudge
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.references.base import (
-    PREFIX,
     RELATIVE_TARGET,
     RelativeTracker,
     RunOptions,
     SourceDefaults,
     StreamSample,
-    get,
-    number,
-    vector,
 )
+from dualarm_control.scenario_keys import PREFIX, get, number, vector
 from dualarm_control.trajectory import MotionLimits, RelativeTrajectory, Segment
 
 

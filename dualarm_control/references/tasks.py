@@ -35,36 +35,22 @@ from dualarm_control.force import (
     contact_normal_force,
 )
 from dualarm_control.kinematics import Configuration, DualArmModel, FloatArray
+from dualarm_control.plugins import load_plugins
 from dualarm_control.references.base import (
-    PREFIX,
     RunOptions,
     SourceDefaults,
     StreamSample,
     cycle_count,
-    get,
-    number,
 )
+from dualarm_control.scenario_keys import PREFIX, get, number
 from dualarm_control.tasks import (
-    DEFAULT_EQUALITY_WEIGHT,
-    DEFAULT_INEQUALITY_WEIGHT,
     CircleTask,
-    ConeTask,
-    ManipulabilityTask,
-    TablePlaneTask,
     Task,
+    TaskContext,
+    TaskSpec,
+    build_task,
+    check_task_type,
 )
-
-TASK_TYPES = ("circle", "cone", "singularity", "table")
-
-
-@dataclass(frozen=True)
-class TaskSpec:
-    """One task as written in the file: its flattened parameters (``scenario.<name>.<key>``),
-    validated when the task is built."""
-
-    name: str
-    type: str
-    values: Mapping[str, Any]
 
 
 @dataclass(frozen=True)
@@ -114,50 +100,13 @@ class TasksSource(SourceDefaults):
         """Task objects with gain k for every task; ``height_offset`` [m] is added to the circle
         height (a modelling error of the pan along its normal: the model's pan surface is
         that far above the real one)."""
-        return [_build(spec, gain, self.table_height, height_offset) for spec in self.tasks]
+        context = TaskContext(gain, self.table_height, height_offset)
+        return [build_task(spec, context) for spec in self.tasks]
 
     def build_variant(self, gain: float, force: bool) -> list[Task]:
         """The tasks a run uses: with ``force`` the circle includes the pan modelling error
         (``force.model_error``) that the force loop has to absorb."""
         return self.build(gain, height_offset=self.force.model_error if force else 0.0)
-
-
-def _value(spec: TaskSpec, key: str, kind: type, default: Any = None) -> Any:
-    """``scenario.<task>.<key>`` as a number, a string or a list; ScenarioError naming the key."""
-    full = f"{spec.name}.{key}"
-    if kind is float:
-        return number(spec.values, full, default)
-    value = get(spec.values, full, default)
-    if not isinstance(value, kind):
-        raise ScenarioError(f"scenario parameter '{PREFIX}{full}': got {value!r}, expected a {kind.__name__}")
-    return value
-
-
-def _build(spec: TaskSpec, gain: float, table_height: float, height_offset: float) -> Task:
-    weight_default = DEFAULT_EQUALITY_WEIGHT if spec.type == "circle" else DEFAULT_INEQUALITY_WEIGHT
-    common = {"gain": gain, "weight": _value(spec, "weight", float, weight_default), "name": spec.name}
-    try:
-        if spec.type == "circle":
-            period = _value(spec, "period", float)
-            return CircleTask(_value(spec, "pan_frame", str), _value(spec, "tool_frame", str),
-                              radius=_value(spec, "radius", float), rate=2 * math.pi / period,
-                              height=_value(spec, "height", float, 0.0) + height_offset, **common)
-        if spec.type == "cone":
-            return ConeTask(_value(spec, "pan_frame", str), _value(spec, "tool_frame", str),
-                            max_angle=math.radians(_value(spec, "max_angle_deg", float)), **common)
-        if spec.type == "singularity":
-            return ManipulabilityTask(_value(spec, "frame", str), _value(spec, "side", str),
-                                      bound=_value(spec, "bound", float), **common)
-        frames, radii = _value(spec, "frames", list), _value(spec, "radii", list)
-        if len(frames) != len(radii):
-            raise ScenarioError(f"scenario parameter 'scenario.{spec.name}': {len(frames)} frames but "
-                                f"{len(radii)} radii")
-        return TablePlaneTask(tuple(zip(frames, (float(r) for r in radii), strict=True)), table_height,
-                              bound=_value(spec, "bound", float), **common)
-    except ValueError as exc:
-        if isinstance(exc, ScenarioError):
-            raise
-        raise ScenarioError(f"scenario task {spec.name!r}: {exc}") from None
 
 
 def _check_frames(model: DualArmModel, tasks: list[Task]) -> None:
@@ -260,15 +209,21 @@ def parse_tasks(flat: Mapping[str, Any]) -> TasksSource:
     names = get(flat, "tasks")
     if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
         raise ScenarioError(f"scenario parameter '{PREFIX}tasks': got {names!r}, expected a list of task names")
+    plugins = get(flat, "plugins", [""])
+    if not isinstance(plugins, list) or not all(isinstance(p, str) for p in plugins):
+        raise ScenarioError(f"scenario parameter '{PREFIX}plugins': got {plugins!r}, expected a list of Python "
+                            "files or module names")
+    try:
+        load_plugins(plugins, PREFIX + "plugins")
+    except ValueError as exc:
+        raise ScenarioError(str(exc)) from None
     specs = []
     for name in names:
         sub = PREFIX + name + "."
         values = {k: v for k, v in flat.items() if k.startswith(sub)}
-        kind = values.get(sub + "type")
-        if kind not in TASK_TYPES:
-            raise ScenarioError(f"scenario parameter '{sub}type': got {kind!r}, expected one of: "
-                                f"{', '.join(TASK_TYPES)}")
-        specs.append(TaskSpec(name, str(kind), values))
+        spec = TaskSpec(name, str(values.get(sub + "type")), values)
+        check_task_type(spec)
+        specs.append(spec)
     gains = get(flat, "gains", [1.0])
     if not isinstance(gains, list) or not gains or not all(
             isinstance(g, int | float) and not isinstance(g, bool) and g > 0 for g in gains):

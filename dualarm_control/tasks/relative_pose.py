@@ -1,0 +1,65 @@
+"""Paper 000's closed-loop relative pose task, eq (8)-(13): J qd = xd* + K e."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from dualarm_control.kinematics import Configuration, FloatArray, luh_components
+from dualarm_control.tasks.base import (
+    DEFAULT_EQUALITY_WEIGHT,
+    EQUALITY,
+    Kind,
+    TaskRows,
+    check_gain_weight,
+)
+
+
+class RelativeTarget(Protocol):
+    """A desired relative pose and twist (x*, xd*) of F2 in F1 (paper 000)."""
+
+    @property
+    def position(self) -> FloatArray: ...  # (3,) m
+
+    @property
+    def rotation(self) -> FloatArray: ...  # (3, 3)
+
+    @property
+    def linear_velocity(self) -> FloatArray: ...  # (3,) m/s
+
+    @property
+    def angular_velocity(self) -> FloatArray: ...  # (3,) rad/s
+
+
+@dataclass(frozen=True)
+class RelativePoseTask:
+    """Relative pose of F2 in F1 equal to a target, paper 000 eq (8)-(13), 6 equality rows.
+
+    f = -e = [p - p*; -e_o(R, R*)] (Luh error, eq 10), b = 0, df/dq = J (relative Jacobian,
+    eq 5), df/dt = -[v*; w*]; the rows are J qd = xd* + K e, eq (13). J is the exact Jacobian
+    of the position rows; for the orientation rows it is exact at zero orientation error
+    (where Luh's L matrix is the identity), the approximation of paper 000.
+    """
+
+    target: RelativeTarget
+    gain: float
+    weight: float = DEFAULT_EQUALITY_WEIGHT
+    name: str = "relative_pose"
+    kind: Kind = EQUALITY
+
+    def __post_init__(self) -> None:
+        check_gain_weight(self.name, self.gain, self.weight)
+
+    def evaluate(self, conf: Configuration, t: float) -> TaskRows:
+        state = conf.relative()
+        target = self.target
+        px, py, pz = state.position.tolist()
+        tx, ty, tz = np.asarray(target.position, float).tolist()
+        ox, oy, oz = luh_components(state.rotation, np.asarray(target.rotation, float))
+        value = np.array((px - tx, py - ty, pz - tz, -ox, -oy, -oz))  # f = -e = [p - p*; -e_o]
+        time_derivative = np.concatenate((target.linear_velocity, target.angular_velocity))
+        np.negative(time_derivative, out=time_derivative)
+        return TaskRows(self.name, self.kind, value, np.zeros(6), state.jacobian, time_derivative, self.gain,
+                        self.weight)
