@@ -1,4 +1,4 @@
-"""Collision distances and the velocity damper (issue 27, part 1; dualarm_control/collision.py).
+"""Collision distances and the velocity damper (issue 27, part 1; the package dualarm_control/collision/).
 
 * The rows dd_dq against finite differences of coal's distances, near contact, on the LWR4 cell
   and on Baxter (separated pairs, and penetrating ones with EPA's coarser accuracy).
@@ -184,7 +184,7 @@ def test_polished_rows_are_the_derivative_of_coals_distance(name: str) -> None:
     print(summary)
     assert len(e) >= 80 and fraction <= 0.02, summary
     # Baxter keeps one pair at 1.4e-6 (seed 3): a hull's facet or edge against a rim, a feature
-    # _polish does not refine (GJK's points kept); all others within 1e-6
+    # polish_witness does not refine (GJK's points kept); all others within 1e-6
     assert np.mean(e <= 1e-6) >= 0.995 and e.max() <= 2e-6, summary
     assert wrong_sign > 0.9 and no_angular > 0.9, summary
 
