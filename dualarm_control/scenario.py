@@ -200,7 +200,7 @@ def scenario_from_parameters(flat: Mapping[str, Any], source: Path,
     on its own robot or on ``robot`` (its ready positions are then the start)."""
     reference: ReferenceSource
     if PREFIX + "tasks" in flat:
-        reference = parse_tasks(flat)
+        reference = parse_tasks(flat, Path(source).parent)
     elif PREFIX + "goals" in flat:
         reference = parse_goals_source(flat[PREFIX + "goals"])
     else:

@@ -160,6 +160,13 @@ class Constraint:
     rows: DeferredRows | None = None
     labels: tuple[str, ...] = ()
 
+    @classmethod
+    def of_rows(cls, matrix: FloatArray, bound: FloatArray, labels: tuple[str, ...]) -> Constraint:
+        """Rows ``matrix @ qd <= bound`` (A (m, n) [units of b per rad/s], b (m,)), one label each."""
+        if matrix.shape[0] != bound.shape[0] or len(labels) != bound.shape[0]:
+            raise ValueError(f"rows: {matrix.shape[0]} rows, {bound.shape[0]} bounds, {len(labels)} labels")
+        return cls(rows=DeferredRows.of(matrix, bound), labels=labels)
+
 
 NONE = Constraint()
 """The constraint that constrains nothing (shared: never modified)."""

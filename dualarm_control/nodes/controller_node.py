@@ -270,8 +270,9 @@ class ControllerNode:
         if math.isfinite(cycle.position_error):
             local_bus.publish_if_subscribed(self.pub_pose, lambda: convert.pose_stamped(stamp, cycle.position, cycle.rotation))
         extra = {"scenario": self.values["scenario"], **self.tracker.report(cycle, t)}
+        for report in cycle.reports.values():  # every limit's, by name (docs/limits.md)
+            extra.update(report.values())
         if cycle.collision is not None:
-            extra.update(cycle.collision.values())
             self.log_collision(cycle.collision)
         if not self.timed:
             extra.update(self.timing.values(latency, refresh=self.out.count["cycles"] % STATS_EVERY == 1))

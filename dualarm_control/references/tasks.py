@@ -11,7 +11,8 @@ Keys under ``scenario.`` (flattened, see :mod:`dualarm_control.scenario`):
   * ``singularity`` (eq 10): ``frame``, ``side`` (left|right), ``bound`` (b_5 < 0);
   * ``table`` (eq 11): ``frames`` and ``radii`` [m] (spheres), ``bound`` (b_6 < 0, m);
 
-  optional ``<task>.weight`` (slack weight). ``force.*`` configures the force variant
+  any type a plugin registers (``plugins``: Python files, relative to the scenario file, or module
+  names; docs/limits.md); optional ``<task>.weight`` (slack weight). ``force.*`` configures the force variant
   (eq 9), see :class:`~dualarm_control.force.ForceParams`; ``contact_links`` (two link
   names) are the links that touch in the force variant (pan and brush).
 """
@@ -22,6 +23,7 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
+from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -199,12 +201,16 @@ class TasksController:
             tasks = list(self.tasks)
             tasks[self._circle_index] = dataclasses.replace(circle, normal_offset=self._offset)
         out = self.controller.solve_tasks(q, tasks, t)
-        out.measured_force, out.normal_offset, out.stage = measured, self._offset, "circle"
+        out.measured_force, out.normal_offset, out.stage = measured, self._offset, "circle" if self.circle else "tasks"
         return out
 
 
-def parse_tasks(flat: Mapping[str, Any]) -> TasksSource:
-    """Read the task keys (module docstring) from flattened parameters; ScenarioError on a bad value."""
+def parse_tasks(flat: Mapping[str, Any], base: Path | None = None) -> TasksSource:
+    """Read the task keys (module docstring) from flattened parameters; ScenarioError on a bad value.
+
+    ``scenario.plugins`` (Python files or module names, :func:`~dualarm_control.plugins.load_plugins`) are
+    imported first, so that the task types they register are known; a relative file path is taken from
+    ``base`` (the scenario file's directory) when given."""
 
     names = get(flat, "tasks")
     if not isinstance(names, list) or not names or not all(isinstance(n, str) for n in names):
@@ -213,6 +219,8 @@ def parse_tasks(flat: Mapping[str, Any]) -> TasksSource:
     if not isinstance(plugins, list) or not all(isinstance(p, str) for p in plugins):
         raise ScenarioError(f"scenario parameter '{PREFIX}plugins': got {plugins!r}, expected a list of Python "
                             "files or module names")
+    if base is not None:
+        plugins = [str(base / p) if p.endswith(".py") and not Path(p).is_absolute() else p for p in plugins]
     try:
         load_plugins(plugins, PREFIX + "plugins")
     except ValueError as exc:

@@ -213,8 +213,11 @@ def task_metrics(log: RunRecord, part: TaskValues, scenario: Scenario) -> dict[s
     spec = scenario.tasks
     assert spec is not None, f"scenario {scenario.name!r} has no tasks"
     after = log.time >= spec.convergence_time
-    circle_name = next(s.name for s in spec.tasks if s.type == "circle")
-    circle_error = np.linalg.norm(part.values[circle_name], axis=1)
+    circle_name = next((s.name for s in spec.tasks if s.type == "circle"), None)
+    circle_error = (np.linalg.norm(part.values[circle_name], axis=1) if circle_name is not None
+                    else np.full(log.time.shape, np.nan))  # a task set without a circle (a user's own types)
+    equality = [part.values[name] - part.bounds[name] for name, kind in part.kinds.items() if kind != INEQUALITY]
+    equality_error = np.linalg.norm(np.hstack(equality), axis=1) if equality else np.full(log.time.shape, np.nan)
     violations = [part.values[name] - part.bounds[name] for name, kind in part.kinds.items() if kind == INEQUALITY]
     worst = max(float(v.max()) for v in violations) if violations else float("nan")
     tasks = spec.build(part.gain)
@@ -232,7 +235,9 @@ def task_metrics(log: RunRecord, part: TaskValues, scenario: Scenario) -> dict[s
         "duration_s": float(log.time[-1] + log.period),
         "circle_rms_error_m": float(np.sqrt(np.mean(circle_error[after] ** 2))),
         "circle_max_error_after_convergence_m": float(circle_error[after].max()),
-        "convergence_time_1mm_s": convergence_time(log.time, circle_error, 1e-3),
+        "convergence_time_1mm_s": convergence_time(log.time, circle_error, 1e-3) if circle_name else float("nan"),
+        "equality_rms_error_after_convergence": float(np.sqrt(np.mean(equality_error[after] ** 2))),
+        "equality_final_error": float(equality_error[-1]),
         "max_inequality_violation": worst,
         "min_table_distance_m": min_table,
         "table_contacts": int(log.table_contacts.sum()),
@@ -417,6 +422,7 @@ TASK_ROWS = (
     ("circle RMS error after convergence [mm]", "circle_rms_error_m", 1e3, "{:.4f}"),
     ("circle max error after convergence [mm]", "circle_max_error_after_convergence_m", 1e3, "{:.4f}"),
     ("time to circle error < 1 mm [s]", "convergence_time_1mm_s", 1.0, "{:.2f}"),
+    ("equality tasks' error at the end, norm of f-b", "equality_final_error", 1.0, "{:.4g}"),
     ("max inequality violation f-b", "max_inequality_violation", 1.0, "{:.4g}"),
     ("min table distance [m]", "min_table_distance_m", 1.0, "{:.3f}"),
     ("table contact points", "table_contacts", 1.0, "{:.0f}"),
@@ -451,7 +457,7 @@ def write_figures(kind: str, out: Path, title: str, runs: Sequence[RunRecord] = 
     """The figures of a run's kind, in ``out`` (the one place that picks them); their file names.
 
     ``segments``, ``goals`` (paper 000): velocity_norms.png (Fig. 5) of every run. ``tasks``
-    (paper 001, needs the ``scenario``): tool_path.png and task_values.png of every run,
+    (paper 001, needs the ``scenario``): tool_path.png (with a circle task) and task_values.png of every run,
     joint_velocities.png of the first and, in the force variant, contact_force.png of the first
     (where its contact force is known). ``plan`` (paper 003): index_along_path.png (Fig. 4) and
     initial_configuration.png (Fig. 5) of the ``plan`` result.
@@ -465,11 +471,14 @@ def write_figures(kind: str, out: Path, title: str, runs: Sequence[RunRecord] = 
         plot_velocity_norms(runs, out / "velocity_norms.png", title=f"{title}: |qd_i| and active joints")
         return ["velocity_norms.png"]
     assert scenario is not None and scenario.tasks is not None, "the task figures need the task scenario"
-    circle = next(t for t in scenario.tasks.build(1.0) if isinstance(t, CircleTask))
-    plot_tool_paths(runs, circle.radius, out / "tool_path.png")
+    circle = next((t for t in scenario.tasks.build(1.0) if isinstance(t, CircleTask)), None)
+    files = []
+    if circle is not None:  # the tool path in the pan frame: a circle task's
+        plot_tool_paths(runs, circle.radius, out / "tool_path.png")
+        files.append("tool_path.png")
     plot_task_values(runs, out / "task_values.png")
     plot_joint_velocities(runs[0], out / "joint_velocities.png")
-    files = ["tool_path.png", "task_values.png", "joint_velocities.png"]
+    files += ["task_values.png", "joint_velocities.png"]
     if _tasks(runs[0]).force and np.isfinite(runs[0].contact_force).any():
         plot_contact_force(runs[0], out / "contact_force.png")
         files.append("contact_force.png")

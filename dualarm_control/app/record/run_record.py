@@ -97,7 +97,8 @@ def with_task_values(record: RunRecord, scenario: Scenario, model: DualArmModel,
                      force: bool) -> RunRecord:
     """``record`` with its task values (a scenario with tasks; otherwise unchanged).
 
-    The task values f_i and bounds b_i and the tool path in the pan frame are evaluated here,
+    The task values f_i and bounds b_i and the tool path in the pan frame (NaN without a circle task) are
+    evaluated here,
     from the measured joint positions and the cycle times (the circle at the cycle's normal
     offset f_F in the force variant): the same values the controller solved with, computed by
     the one piece of code that serves the in-process runner and a recorded bag
@@ -109,20 +110,21 @@ def with_task_values(record: RunRecord, scenario: Scenario, model: DualArmModel,
     k_gain = spec.gain(RunOptions(scenario.limits, scenario.settle_time, gain, force))
     tasks = spec.build_variant(k_gain, force)
     circles = [(i, t) for i, t in enumerate(tasks) if isinstance(t, CircleTask)]
-    if not circles:
-        raise ValueError(f"scenario {scenario.name!r} has no circle task")
-    circle_index, circle = circles[0]
+    circle_index, circle = circles[0] if circles else (-1, None)  # no circle: no tool path (NaN)
     values: dict[str, list[FloatArray]] = {t.name: [] for t in tasks}
     bounds: dict[str, FloatArray] = {}
     tip = np.zeros((len(record.time), 3))
     for k, (q, t) in enumerate(zip(record.positions, record.time, strict=True)):
         cycle_tasks = tasks
-        if force:
+        if force and circle is not None:
             cycle_tasks = list(tasks)
             cycle_tasks[circle_index] = dataclasses.replace(circle, normal_offset=float(record.normal_offset[k]))
         for rows in evaluate_tasks(cycle_tasks, Configuration(model, model.check_q(q)), float(t)):
             values[rows.name].append(rows.value)
             bounds.setdefault(rows.name, rows.bound)
+        if circle is None:
+            tip[k] = np.nan
+            continue
         o1, o2 = model.frame_poses(q, (circle.pan_frame, circle.tool_frame))
         tip[k] = o1.rotation.T @ (o2.translation - o1.translation)
     part = TaskValues(gain=k_gain, force=force, values={name: np.array(v) for name, v in values.items()},
