@@ -54,6 +54,7 @@ from dualarm_control.solvers import (
     make_solver,
 )
 from dualarm_control.solvers.base import rest_command
+from dualarm_control.status import Status
 from dualarm_control.tasks import (
     INEQUALITY,
     RelativePoseTask,
@@ -272,7 +273,7 @@ class RelativeController:
         conf = Configuration(self.model, q)
         rows = RelativePoseTask(target, self.params.gain).evaluate(conf, 0.0)
         result = self._solve_rows(conf, (rows,))
-        if result.status == "invalid_input":
+        if result.status == Status.INVALID_INPUT:
             return self._invalid(_culprit(q, target) or result.detail, start, q)
         state = conf.relative()
         ex, ey, ez = rows.value[:3].tolist()  # -e: the position rows are p - p*
@@ -369,7 +370,7 @@ class RelativeController:
         velocities = (rest_command(*velocity_bounds(q, self.limits, self.params.period)) if math.isfinite(q.sum())
                       else np.zeros(n))
         self.solver.reset()
-        result = SolverResult(velocities, "invalid_input", time.perf_counter() - start, 0,
+        result = SolverResult(velocities, Status.INVALID_INPUT, time.perf_counter() - start, 0,
                               int(np.count_nonzero(np.abs(velocities) > ACTIVITY_THRESHOLD)), float("nan"),
                               what)
         self._previous = velocities

@@ -7,6 +7,7 @@ import numpy as np
 from dualarm_control.kinematics import FloatArray
 from dualarm_control.limits.base import Bounds
 from dualarm_control.qp import QPBackend, QPProblem
+from dualarm_control.status import Status
 
 ROW_TOLERANCE = 1e-9
 """[m/s] a clipped command that meets every row within this needs no QP (the back-ends' own tolerance)."""
@@ -19,7 +20,7 @@ class TrackingProjection:
         self.backend = backend
         self.identity = np.eye(0)
 
-    def __call__(self, desired: FloatArray, bounds: Bounds) -> tuple[FloatArray, str]:
+    def __call__(self, desired: FloatArray, bounds: Bounds) -> tuple[FloatArray, Status]:
         n = desired.shape[0]
         if self.identity.shape != (n, n):
             self.identity = np.eye(n)
@@ -27,7 +28,7 @@ class TrackingProjection:
 
 
 def projected_tracking(desired: FloatArray, bounds: Bounds, backend: QPBackend,
-                       identity: FloatArray | None = None) -> tuple[FloatArray, str]:
+                       identity: FloatArray | None = None) -> tuple[FloatArray, Status]:
     """The command nearest to ``desired`` that meets every limit of the cycle (issue 39):
 
         qd = argmin 1/2 ||qd - qd_des||^2  s.t.  lower <= qd <= upper,  A qd <= b
@@ -49,13 +50,13 @@ def projected_tracking(desired: FloatArray, bounds: Bounds, backend: QPBackend,
     clipped = np.minimum(np.maximum(desired, bounds.lower), bounds.upper)
     rows = bounds.rows
     if rows is None or rows.meets(clipped):
-        return clipped, "solved"
+        return clipped, Status.SOLVED
     matrix = rows.matrix
     if bool((matrix @ clipped <= bounds.bound + ROW_TOLERANCE).all()):
-        return clipped, "solved"
+        return clipped, Status.SOLVED
     hessian = identity if identity is not None else np.eye(desired.shape[0])
     solution = backend.solve(QPProblem(H=hessian, g=-desired, C=matrix, l=np.full(matrix.shape[0], -np.inf),
                                        u=bounds.bound, lb=bounds.lower, ub=bounds.upper))
     if solution.ok and solution.x is not None and bool(np.isfinite(solution.x).all()):
-        return np.minimum(np.maximum(solution.x, bounds.lower), bounds.upper), "solved"
-    return np.minimum(np.maximum(0.0, bounds.lower), bounds.upper), "infeasible"
+        return np.minimum(np.maximum(solution.x, bounds.lower), bounds.upper), Status.SOLVED
+    return np.minimum(np.maximum(0.0, bounds.lower), bounds.upper), Status.INFEASIBLE

@@ -25,6 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dualarm_control.errors import ParameterError, UnknownSolverError
+from dualarm_control.status import Status
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -87,14 +88,14 @@ class QPSolution:
     """
 
     x: FloatArray | None
-    status: str
+    status: Status
     iterations: int
     solve_time: float
     multipliers: FloatArray | None = None
 
     @property
     def ok(self) -> bool:
-        return self.status == "solved" and self.x is not None
+        return self.status == Status.SOLVED and self.x is not None
 
 
 class QPBackend:
@@ -174,14 +175,14 @@ class ProxsuiteBackend(QPBackend):
         info = qp.results.info  # type: ignore[attr-defined]
         out = proxsuite.proxqp.QPSolverOutput
         status = {
-            out.PROXQP_SOLVED: "solved",
-            out.PROXQP_MAX_ITER_REACHED: "max_iter",
-            out.PROXQP_PRIMAL_INFEASIBLE: "infeasible",
-            out.PROXQP_DUAL_INFEASIBLE: "infeasible",
-        }.get(info.status, "failed")
-        x = np.array(qp.results.x, dtype=float) if status in ("solved", "max_iter") else None  # type: ignore[attr-defined]
-        z = np.array(qp.results.z[:n_in], dtype=float) if status == "solved" and n_in else None  # type: ignore[attr-defined]
-        if status != "solved":
+            out.PROXQP_SOLVED: Status.SOLVED,
+            out.PROXQP_MAX_ITER_REACHED: Status.MAX_ITER,
+            out.PROXQP_PRIMAL_INFEASIBLE: Status.INFEASIBLE,
+            out.PROXQP_DUAL_INFEASIBLE: Status.INFEASIBLE,
+        }.get(info.status, Status.FAILED)
+        x = np.array(qp.results.x, dtype=float) if status in (Status.SOLVED, Status.MAX_ITER) else None  # type: ignore[attr-defined]
+        z = np.array(qp.results.z[:n_in], dtype=float) if status == Status.SOLVED and n_in else None  # type: ignore[attr-defined]
+        if status != Status.SOLVED:
             self.reset()  # never warm-start from a failed solve
         return QPSolution(x=x, status=status, iterations=int(info.iter), solve_time=elapsed, multipliers=z)
 
@@ -204,8 +205,8 @@ class DaqpBackend(QPBackend):
     """Proximal-point stopping tolerance (change of the iterate between outer iterations)."""
     EQUALITY, INEQUALITY = 5, 0
     """daqp constraint kinds (``sense``)."""
-    STATUS: ClassVar[Mapping[int, str]] = MappingProxyType(
-        {1: "solved", 2: "solved", -1: "infeasible", -3: "infeasible", -4: "max_iter"})
+    STATUS: ClassVar[Mapping[int, Status]] = MappingProxyType(
+        {1: Status.SOLVED, 2: Status.SOLVED, -1: Status.INFEASIBLE, -3: Status.INFEASIBLE, -4: Status.MAX_ITER})
     """daqp exit flags: 1 optimal, 2 soft optimal, -1 infeasible, -2 cycling, -3 unbounded,
     -4 iteration limit, -5 non-convex, -6 initial point infeasible (the others: "failed")."""
 
@@ -275,12 +276,12 @@ class DaqpBackend(QPBackend):
             primal_start=warm,
         )
         elapsed = time.perf_counter() - start
-        status = self.STATUS.get(int(flag), "failed")
+        status = self.STATUS.get(int(flag), Status.FAILED)
         x = np.asarray(x)  # a new array per call: shared by the result and the warm start (neither is modified)
-        usable = status in ("solved", "max_iter") and math.isfinite(x.sum())
-        self._previous = x if status == "solved" else None
+        usable = status in (Status.SOLVED, Status.MAX_ITER) and math.isfinite(x.sum())
+        self._previous = x if status == Status.SOLVED else None
         n_c = 0 if problem.C is None else problem.C.shape[0]  # daqp's lam: box, equalities, then the C rows
-        z = np.asarray(info["lam"][-n_c:]) if n_c and status == "solved" else None
+        z = np.asarray(info["lam"][-n_c:]) if n_c and status == Status.SOLVED else None
         return QPSolution(x=x if usable else None, status=status, iterations=int(info["iterations"]),
                           solve_time=elapsed, multipliers=z)
 
@@ -313,8 +314,8 @@ class QpsolversBackend(QPBackend):
         except Exception:  # noqa: BLE001 - a back-end error is reported as a failed solve
             x = None
         elapsed = time.perf_counter() - start
-        status = "solved" if x is not None and np.all(np.isfinite(x)) else "failed"
-        return QPSolution(x=None if status != "solved" else np.asarray(x, float), status=status,
+        status = Status.SOLVED if x is not None and np.all(np.isfinite(x)) else Status.FAILED
+        return QPSolution(x=None if status != Status.SOLVED else np.asarray(x, float), status=status,
                           iterations=0, solve_time=elapsed)
 
 

@@ -71,6 +71,7 @@ from dualarm_control.ros.hardware_io import (
 from dualarm_control.ros.output import CommandOutput
 from dualarm_control.ros.qos import QOS_PARAMETER, publisher_depth, stream_qos
 from dualarm_control.scenario import ROBOT_PARAMETER, load_scenario
+from dualarm_control.status import Status
 
 DEFAULT_PRIORITY = 50
 WATCHDOG_MIN_PERIOD_S = 0.005  # the watchdog ticks at the control rate, at most 200 Hz
@@ -349,7 +350,7 @@ class ControllerNode:
     def publish_cycle(self, stamp: int, cycle: core.Cycle, solver: str, extra: dict[str, Any]) -> None:
         """The cycle's /diagnostics: status, solver figures, counters and the mode's ``extra`` values."""
         r = cycle.result
-        self.out.status(stamp, 2 if r.failed else int(r.status != "solved"), r.detail or r.status, {
+        self.out.status(stamp, 2 if r.failed else int(r.status != Status.SOLVED), r.detail or r.status, {
             "solver": solver, "status": r.status, "solve_time_s": f"{r.solve_time:.6e}",
             "iterations": r.iterations, "active_joints": r.active_joints, "control_period_s": self.params.period,
             "stamp_ns": stamp, **extra, **self.out.counters(), "watchdog": self.out.watchdog_text(),

@@ -87,6 +87,8 @@ PARAMETERS = (
     ParamSpec("wait_for_controller", True, "real time: hold the first target until controller_node reports a "
               "cycle on /diagnostics, so that the scenario's clock starts when the arms can follow (false: at the "
               "first joint state, with no controller in sight)", read_only=True),
+    ParamSpec("start_after_reader", "", "real time: hold the first target until a node of this name reads "
+              "/relative_target (a recorder: the bag then holds the run from t = 0; '' = no wait)", read_only=True),
     ROBOT_PARAMETER,
     *HARDWARE_PARAMETERS,  # the joint-state topics (issue 29; the outputs are validated as the controller's)
 )
@@ -146,6 +148,7 @@ class TrajectoryNode:
         self.sub_diag = None if self.controller_seen is not None else n.create_subscription(
             DiagnosticArray, "/diagnostics", self.on_diagnostics, 100)
         self.held_since = time.monotonic()  # real time: since when the first target is held
+        self.awaited_reader = "" if self.lockstep else str(p["start_after_reader"])
         self.log.info(f"scenario '{self.scenario.name}': {self.source.describe()}, "
                       f"{'lockstep' if self.lockstep else 'real-time'}; waiting for /joint_states")
         if priority_note and priority_note != "disabled":
@@ -197,8 +200,9 @@ class TrajectoryNode:
                 for s in msg.status):
             self.controller_seen = time.monotonic()
             self.start_ns = self.node.get_clock().now().nanoseconds
+            then = f"once {self.awaited_reader} reads {RELATIVE_TARGET}" if self.awaited_reader else "now"
             self.log.info(f"controller_node cycling ({self.controller_seen - self.held_since:.2f} s after the first "
-                          "target): the scenario's clock starts")
+                          f"target): the scenario's clock starts {then}")
 
     def on_tick(self) -> None:
         if self.sub_diag is not None and self.controller_seen is not None:
@@ -209,6 +213,14 @@ class TrajectoryNode:
                 self.states.close()  # (not destroyed in its own callback)
                 self.states = None
             now = self.node.get_clock().now().nanoseconds
+            if self.awaited_reader and not self.reader_arrived():  # hold: the clock starts when it reads
+                self.publish(now, 0)
+                self.start_ns = now
+                waited = time.monotonic() - self.held_since
+                if waited > CONTROLLER_NOTE_S:
+                    self.reject(f"holding the first target: {self.awaited_reader} does not read {RELATIVE_TARGET} "
+                                f"after {waited:.0f} s")
+                return
             if self.controller_seen is None:  # hold the first target until the controller cycles
                 self.publish(now, 0)
                 waited = time.monotonic() - self.held_since
@@ -217,6 +229,15 @@ class TrajectoryNode:
                                 f"{waited:.0f} s (wait_for_controller:=false starts without one)")
                 return
             self.publish(now, now - self.start_ns)
+
+    def reader_arrived(self) -> bool:
+        """Whether the node ``start_after_reader`` names subscribes /relative_target (said once when it does)."""
+        if any(info.node_name == self.awaited_reader for info in self.node.get_subscriptions_info_by_topic(
+                RELATIVE_TARGET)):
+            self.log.info(f"{self.awaited_reader} reads {RELATIVE_TARGET}: the scenario's clock can start")
+            self.awaited_reader = ""
+            return True
+        return False
 
     def outcomes(self, stamp: int, verdicts: list[GoalOutcome]) -> None:
         """Each segment's verdict in the log and on /diagnostics (a stall as WARN, naming what held the arms)."""

@@ -101,3 +101,6 @@ def stop_with_launcher(environ: Mapping[str, str] | None = None) -> None:
         return
     if os.getppid() != int(pid):  # the launcher died before the request
         os.kill(os.getpid(), signal.SIGTERM)
+
+RECORDER_NODE = "_dualarm_bag_recorder"
+"""The recorder's node name (``dualarm bag record``): what a launch's trajectory node waits for (``start_after_reader``)."""

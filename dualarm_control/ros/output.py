@@ -16,7 +16,7 @@ import numpy as np
 
 from dualarm_control.ros import convert
 from dualarm_control.ros.inputs import WINDOW, CycleTiming, Throttle
-from dualarm_control.solvers.base import BOUNDS_VIOLATED
+from dualarm_control.status import Status
 
 COUNTERS = ("cycles", "safe_commands", "unmatched_commands", "watchdog_trips", "solver_failures",
             "solver_fallbacks", "rejected_inputs", "bounds_violations", "parameter_switches")
@@ -100,7 +100,7 @@ class CommandOutput:
         self.count["cycles"] += 1
         if result.failed:
             self.count["solver_failures"] += 1
-            self.count["bounds_violations"] += result.status == BOUNDS_VIOLATED
+            self.count["bounds_violations"] += result.status == Status.BOUNDS_VIOLATED
             self.warn(f"solver {result.status}: {result.detail}; safe command sent")
         elif result.fell_back:
             self.count["solver_fallbacks"] += 1

@@ -48,6 +48,7 @@ from dualarm_control.ros.computed_tf import (
     TF_TOPIC,
     ComputedTf,
 )
+from dualarm_control.ros.env import RECORDER_NODE
 from dualarm_control.ros.graph import adapted_qos, fq_topic, message_class
 from dualarm_control.ros.node import tool_node
 
@@ -362,7 +363,7 @@ def record(path: Path, topics: Sequence[str], *, record_all: bool = False, durat
     recorder: Recorder | None = None
     stopped_by = ""
     try:
-        with tool_node("_dualarm_bag_recorder") as (node, executor, stop):
+        with tool_node(RECORDER_NODE) as (node, executor, stop):
             if use_sim_time:
                 node.set_parameters([Parameter("use_sim_time", value=True)])
             recorder = Recorder(node, bag, topics, record_all, after_data, compute_tf, log, after_matched)

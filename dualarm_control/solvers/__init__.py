@@ -6,7 +6,6 @@ from dualarm_control.solvers import constraint_based as _constraint_based  # noq
 from dualarm_control.solvers import methods as _methods  # noqa: F401 - fills the registry
 from dualarm_control.solvers.base import (
     ACTIVITY_THRESHOLD,
-    BOUNDS_VIOLATED,
     ControlProblem,
     Solver,
     SolverParams,
@@ -28,7 +27,6 @@ def make_solver(name: str, params: SolverParams | None = None) -> Solver:
 
 __all__ = [
     "ACTIVITY_THRESHOLD",
-    "BOUNDS_VIOLATED",
     "ControlProblem",
     "Solver",
     "SolverParams",

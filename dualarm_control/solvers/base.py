@@ -30,6 +30,7 @@ from scipy.optimize import lsq_linear
 from dualarm_control.limits.base import DeferredRows
 from dualarm_control.qp import DEFAULT_BACKEND, QPSettings, QPSolution, make_backend
 from dualarm_control.solvers.slack_qp import slack_qp
+from dualarm_control.status import FAILURE_STATUSES, FALLBACK_TRIGGERS, Status
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -40,12 +41,6 @@ ROUND_OFF = 1e-12
 """Bound tolerance of a closed form [rad/s]: floating-point round-off only (a pseudo-inverse
 shrunk onto a bound, a sum of two bounded parts); bounds are at most a few rad/s, so this is
 some 1e3 ulp of them."""
-BOUNDS_VIOLATED = "bounds_violated"
-"""Status of a solver result beyond a velocity bound by more than the solver's ``bound_tolerance``."""
-FAILURE_STATUSES = frozenset({"infeasible", "failed", "invalid_input", BOUNDS_VIOLATED})
-FALLBACK_TRIGGERS = frozenset({"infeasible", "failed", "max_iter"})
-"""Solver statuses whose result is replaced by the bounded least-squares step."""
-FALLBACK_STATUS = "fallback"
 FALLBACK_DAMPING = 1e-6
 """Damping of :func:`bounded_least_squares` [(m/s)^2 per (rad/s)^2]: selects a small step
 among the least-squares ones and keeps the problem well posed at singular configurations."""
@@ -219,7 +214,7 @@ class SolverResult:
     """
 
     velocities: FloatArray
-    status: str
+    status: Status
     solve_time: float
     iterations: int
     active_joints: int
@@ -235,7 +230,7 @@ class SolverResult:
     @property
     def fell_back(self) -> bool:
         """The solver failed and the bounded least-squares step was commanded."""
-        return self.status == FALLBACK_STATUS
+        return self.status == Status.FALLBACK
 
 
 @dataclass(frozen=True)
@@ -317,7 +312,7 @@ class Solver:
     def _backend(self):
         return make_backend(self.params.qp_backend, self.params.qp)
 
-    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
+    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, Status, int, str]:
         """Return (velocities or None, status, iterations, detail)."""
         raise NotImplementedError
 
@@ -330,7 +325,7 @@ class Solver:
         excess = math.nan
         if invalid:
             qd: FloatArray = np.zeros(max(n, 0))
-            status, iters, detail, residual = "invalid_input", 0, invalid, float("nan")
+            status, iters, detail, residual = Status.INVALID_INPUT, 0, invalid, float("nan")
         else:
             qd, raw, excess, status, iters, detail = self._solve_or_fall_back(problem)
             d = problem.jacobian @ qd - problem.reference
@@ -348,7 +343,7 @@ class Solver:
         )
 
     def _solve_or_fall_back(self, problem: ControlProblem
-                            ) -> tuple[FloatArray, FloatArray | None, float, str, int, str]:
+                            ) -> tuple[FloatArray, FloatArray | None, float, Status, int, str]:
         """``_solve`` on a valid problem, then the clip or the failure policy.
 
         Returns (command, the solver's own result or None, its bound excess [rad/s], status,
@@ -357,7 +352,7 @@ class Solver:
         try:
             qd, status, iters, detail = self._solve(problem)
         except (ValueError, np.linalg.LinAlgError, RuntimeError) as exc:
-            qd, status, iters, detail = None, "failed", 0, f"{type(exc).__name__}: {exc}"
+            qd, status, iters, detail = None, Status.FAILED, 0, f"{type(exc).__name__}: {exc}"
         excess = math.nan if qd is None else bound_excess(qd, problem.lower, problem.upper)
         rows_excess = 0.0 if qd is None or not problem.has_limit_rows else problem.limit_excess(qd)
         if qd is None or status in FALLBACK_TRIGGERS or not math.isfinite(excess):
@@ -365,12 +360,12 @@ class Solver:
             velocities, status, detail = fallback(problem, qd, status, detail)
         elif excess > self.box_tolerance(problem):
             self.reset()
-            velocities, status, detail = fallback(problem, qd, BOUNDS_VIOLATED,
+            velocities, status, detail = fallback(problem, qd, Status.BOUNDS_VIOLATED,
                                                   violation_text(qd, problem.lower, problem.upper,
                                                                  self.box_tolerance(problem)))
         elif rows_excess > 0.0 and rows_excess > self.row_tolerance(problem):
             self.reset()
-            velocities, status, detail = fallback(problem, qd, BOUNDS_VIOLATED,
+            velocities, status, detail = fallback(problem, qd, Status.BOUNDS_VIOLATED,
                                                   row_violation_text(problem, qd, self.row_tolerance(problem)))
         else:
             velocities = np.minimum(np.maximum(qd, problem.lower), problem.upper)  # absorbs <= bound_tolerance
@@ -393,7 +388,7 @@ class Solver:
         return self.box_tolerance(problem) * (1.0 + float(np.abs(rows).sum(axis=1).max(initial=0.0)))
 
 
-def fallback(problem: ControlProblem, qd: FloatArray | None, status: str, detail: str) -> tuple[FloatArray, str, str]:
+def fallback(problem: ControlProblem, qd: FloatArray | None, status: Status, detail: str) -> tuple[FloatArray, Status, str]:
     """The failure policy for a valid problem whose solver gave no usable result.
 
     Returns (velocities, status, detail): the bounded least-squares step with status
@@ -406,10 +401,10 @@ def fallback(problem: ControlProblem, qd: FloatArray | None, status: str, detail
     the pairs apart as fast as the bounds let it, or stops), and ``detail`` says by how much the
     rows were relaxed; when that fails too, the command nearest to rest.
     """
-    if qd is not None and status not in FALLBACK_TRIGGERS and status != BOUNDS_VIOLATED:
-        status, detail = "failed", detail or f"solver returned non-finite velocities or shape {qd.shape}"
+    if qd is not None and status not in FALLBACK_TRIGGERS and status != Status.BOUNDS_VIOLATED:
+        status, detail = Status.FAILED, detail or f"solver returned non-finite velocities or shape {qd.shape}"
     reason = f"{status}: {detail or 'no solution'}"
-    final_status = status if status == BOUNDS_VIOLATED else FALLBACK_STATUS
+    final_status = status if status == Status.BOUNDS_VIOLATED else Status.FALLBACK
     step = bounded_least_squares(problem.jacobian, problem.reference, problem.lower, problem.upper)
     if step is not None and problem.limit_excess(step) <= ROUND_OFF:
         return step, final_status, f"{reason}; bounded least-squares step used"
@@ -419,7 +414,7 @@ def fallback(problem: ControlProblem, qd: FloatArray | None, status: str, detail
             velocities, slack = separated
             relaxed = f", limit rows relaxed by up to {slack:.3g} m/s" if slack > ROUND_OFF else ""
             return velocities, final_status, f"{reason}; separating step used (limit rows hard{relaxed})"
-    final = "failed" if status == "max_iter" else status
+    final = Status.FAILED if status == Status.MAX_ITER else status
     return rest_command(problem.lower, problem.upper), final, f"{reason}; bounded least squares failed, nearest-to-rest command"
 
 
@@ -543,10 +538,10 @@ def bounded_least_squares(jacobian: FloatArray, reference: FloatArray, lower: Fl
     return np.minimum(np.maximum(qd, lower), upper)
 
 
-def from_qp(solution: QPSolution, transform=None) -> tuple[FloatArray | None, str, int, str]:
+def from_qp(solution: QPSolution, transform=None) -> tuple[FloatArray | None, Status, int, str]:
     """Map a QP solution to the ``_solve`` tuple, applying ``transform`` to x when usable."""
     if solution.x is None:
         return None, solution.status, solution.iterations, f"QP {solution.status}"
     x = solution.x if transform is None else transform(solution.x)
-    detail = "" if solution.status == "solved" else f"QP {solution.status}"
+    detail = "" if solution.status == Status.SOLVED else f"QP {solution.status}"
     return x, solution.status, solution.iterations, detail

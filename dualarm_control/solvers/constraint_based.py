@@ -49,6 +49,7 @@ from dualarm_control.solvers.base import (
 from dualarm_control.solvers.methods import damped_least_squares
 from dualarm_control.solvers.registry import register
 from dualarm_control.solvers.slack_qp import slack_qp
+from dualarm_control.status import Status
 
 SLACK_REPORT_THRESHOLD = 1e-9
 """An inequality slack above this is reported in ``detail`` [units of the row]."""
@@ -93,7 +94,7 @@ class ConstraintBased(Solver):
     def reset(self) -> None:
         self._qp.reset()
 
-    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
+    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, Status, int, str]:
         n = problem.jacobian.shape[1]
         a_ie = problem.inequality_jacobian
         if a_ie is None or a_ie.shape[0] == 0:
@@ -101,10 +102,10 @@ class ConstraintBased(Solver):
             qd = damped_least_squares(problem.jacobian * np.reshape(scale, (-1, 1)), problem.reference * scale,
                                       2.0 * self.params.regularization)
             if qd is not None and inside(qd, problem.lower, problem.upper) and problem.limit_excess(qd) <= 0.0:
-                return qd, "solved", 0, ""
+                return qd, Status.SOLVED, 0, ""
         if problem.has_limit_rows:  # the relaxation first: rows its optimum meets are not active
             relaxed = self._solve(problem.without_limit_rows())
-            if relaxed[0] is not None and relaxed[1] == "solved" and problem.limit_excess(relaxed[0]) <= 0.0:
+            if relaxed[0] is not None and relaxed[1] == Status.SOLVED and problem.limit_excess(relaxed[0]) <= 0.0:
                 return relaxed
         solution = self._qp.solve(constraint_qp(problem, self.params.regularization))
         qd, status, iters, detail = from_qp(solution, lambda x: x[:n])

@@ -23,6 +23,7 @@ from dualarm_control.solvers.base import (
 )
 from dualarm_control.solvers.registry import register
 from dualarm_control.solvers.slack_qp import INFINITY
+from dualarm_control.status import Status
 
 
 @register("pseudo_inverse")
@@ -42,7 +43,7 @@ class PseudoInverse(Solver):
     step (:func:`~dualarm_control.solvers.base.separating_step`) is commanded.
     """
 
-    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
+    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, Status, int, str]:
         qd = np.linalg.pinv(problem.jacobian, rcond=1e-6) @ problem.reference
         scale = 1.0
         for value, lo, hi in zip(qd, problem.lower, problem.upper, strict=True):
@@ -77,11 +78,11 @@ class PseudoInverse(Solver):
             assert matrix is not None and problem.limit_bound is not None
             i = int(np.argmax(matrix @ qd - problem.limit_bound))
             label = problem.limit_labels[i] if i < len(problem.limit_labels) else f"row {i}"
-            return None, "infeasible", 0, (f"limit row {label} not met by eq (13) shrunk into the bounds "
+            return None, Status.INFEASIBLE, 0, (f"limit row {label} not met by eq (13) shrunk into the bounds "
                                            f"(b = {problem.limit_bound[i]:.3g} m/s)")
         if notes:
-            return qd, "scaled", 0, "; ".join(notes)
-        return qd, "solved", 0, ""
+            return qd, Status.SCALED, 0, "; ".join(notes)
+        return qd, Status.SOLVED, 0, ""
 
 
 def _least_squares_terms(problem: ControlProblem) -> tuple[FloatArray, FloatArray]:
@@ -131,10 +132,10 @@ class StandardQP(_QPSolver):
         self.positive_definite = (params or SolverParams()).regularization > 0
         super().__init__(params)
 
-    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
+    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, Status, int, str]:
         qd = damped_least_squares(problem.jacobian, problem.reference, self.params.regularization)
         if qd is not None and inside(qd, problem.lower, problem.upper) and problem.limit_excess(qd) <= 0.0:
-            return qd, "solved", 0, ""  # eq (14)'s optimum: no bound and no row is active
+            return qd, Status.SOLVED, 0, ""  # eq (14)'s optimum: no bound and no row is active
         jtj, jtr = _least_squares_terms(problem)
         n = jtj.shape[0]
         h = jtj  # a fresh array: add eps to its diagonal in place
@@ -142,7 +143,7 @@ class StandardQP(_QPSolver):
         box = QPProblem(H=h, g=-jtr, lb=problem.lower, ub=problem.upper)
         if problem.has_limit_rows:  # the relaxation first: rows that its optimum meets are not active
             relaxed = from_qp(self._qp.solve(box))
-            if relaxed[0] is not None and relaxed[1] == "solved" and problem.limit_excess(relaxed[0]) <= 0.0:
+            if relaxed[0] is not None and relaxed[1] == Status.SOLVED and problem.limit_excess(relaxed[0]) <= 0.0:
                 return relaxed
         return from_qp(self._qp.solve(QPProblem(H=h, g=-jtr, lb=problem.lower, ub=problem.upper,
                                                 **limit_rows_of(problem))))
@@ -249,11 +250,11 @@ class SparseQP(_QPSolver):
         """The proximal term's z_prev from the previous command (no effect with mu = 0)."""
         self._previous = np.array(velocities, dtype=float)
 
-    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
+    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, Status, int, str]:
         if problem.has_limit_rows:  # the relaxation first (the box QP): rows its optimum meets are not active
             previous = self._previous
             relaxed = self._solve(problem.without_limit_rows())
-            if relaxed[0] is not None and relaxed[1] == "solved" and problem.limit_excess(relaxed[0]) <= 0.0:
+            if relaxed[0] is not None and relaxed[1] == Status.SOLVED and problem.limit_excess(relaxed[0]) <= 0.0:
                 return relaxed
             self._previous = previous  # the proximal centre stays the previous cycle's solution
         j = problem.jacobian
@@ -264,7 +265,7 @@ class SparseQP(_QPSolver):
             qd, iterations = self._dual.solve(j, problem.reference, self.params.l1_weight)
             if qd is not None and inside(qd, problem.lower, problem.upper) and problem.limit_excess(qd) <= 0.0:
                 self._previous = qd
-                return qd, "solved", iterations, ""  # eq (17)'s optimum lies inside the bounds
+                return qd, Status.SOLVED, iterations, ""  # eq (17)'s optimum lies inside the bounds
         b = np.hstack((j, -j))  # J [I, -I], (6, 2n)
         h = b.T @ b
         g = self.params.l1_weight - b.T @ problem.reference
@@ -372,7 +373,7 @@ class HierarchicalSparseQP(Solver):
             self._identity = np.eye(n)
         return self._identity
 
-    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, str, int, str]:
+    def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, Status, int, str]:
         qd1, status, iters, detail = self._primary._solve(problem)
         if qd1 is None or not np.any(problem.repulsive) \
                 or not bound_excess(qd1, problem.lower, problem.upper) <= self.bound_tolerance:
@@ -380,8 +381,8 @@ class HierarchicalSparseQP(Solver):
         qd1 = np.minimum(np.maximum(qd1, problem.lower), problem.upper)  # absorbs QP1's tolerance
         return self._second_level(problem, qd1, status, iters, detail)
 
-    def _second_level(self, problem: ControlProblem, qd1: FloatArray, status: str, iters: int,
-                      detail: str) -> tuple[FloatArray | None, str, int, str]:
+    def _second_level(self, problem: ControlProblem, qd1: FloatArray, status: Status, iters: int,
+                      detail: str) -> tuple[FloatArray | None, Status, int, str]:
         """Eq (27)-(28) from QP1's result ``qd1`` (inside the bounds) and its status, iterations and detail."""
         lower2, upper2 = problem.lower - qd1, problem.upper - qd1
         qd2 = null_space_projection(problem.jacobian, problem.repulsive)
@@ -433,8 +434,8 @@ class HierarchicalSparseL1QP(HierarchicalSparseQP):
         self._zone = b""  # the zone mask H was built for
         self._hessian = np.zeros((0, 0))
 
-    def _second_level(self, problem: ControlProblem, qd1: FloatArray, status: str, iters: int,
-                      detail: str) -> tuple[FloatArray | None, str, int, str]:
+    def _second_level(self, problem: ControlProblem, qd1: FloatArray, status: Status, iters: int,
+                      detail: str) -> tuple[FloatArray | None, Status, int, str]:
         """The l1 second level (class docstring) from QP1's result ``qd1`` (inside the bounds)."""
         zone = problem.repulsive != 0.0
         key = zone.tobytes()

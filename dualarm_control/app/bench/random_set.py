@@ -23,6 +23,7 @@ from dualarm_control.limits import JointLimits, repulsive_velocity, velocity_bou
 from dualarm_control.metrics import percentiles
 from dualarm_control.qp import QPSettings
 from dualarm_control.solvers import ControlProblem, make_solver
+from dualarm_control.status import Status
 
 MARGIN = 0.02
 """Share of each joint range left out at both ends when drawing configurations."""
@@ -124,7 +125,7 @@ def time_random_set(
                     solve[name].append(out.result.solve_time)
                     active[name].append(out.result.active_joints)
                     failures[name] += int(out.result.failed)
-                    if out.result.status in ("solved", "scaled"):
+                    if out.result.status in (Status.SOLVED, Status.SCALED):
                         excess[name] = max(excess[name], out.result.bound_excess)
                 else:
                     start = time.perf_counter()

@@ -42,7 +42,8 @@ from dualarm_control.metrics import (
 from dualarm_control.planning.plan_file import PLAN_FORMAT
 from dualarm_control.references.segments import SegmentsSource, segment_judge
 from dualarm_control.scenario import Scenario
-from dualarm_control.solvers.base import ACTIVITY_THRESHOLD, FAILURE_STATUSES
+from dualarm_control.solvers.base import ACTIVITY_THRESHOLD
+from dualarm_control.status import FAILURE_STATUSES
 from dualarm_control.tasks import (
     INEQUALITY,
     CircleTask,

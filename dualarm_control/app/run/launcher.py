@@ -18,7 +18,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from dualarm_control.ros.env import LAUNCHER_PID_VARIABLE, localhost_environment
+from dualarm_control.references.base import RELATIVE_TARGET
+from dualarm_control.ros.env import (
+    LAUNCHER_PID_VARIABLE,
+    RECORDER_NODE,
+    localhost_environment,
+)
 from dualarm_control.ros.node import ACK_TIMEOUT_S, StopOnSignal
 
 if TYPE_CHECKING:
@@ -289,6 +294,12 @@ def launch_scenario(
                 # messages is lost; a profile's /left and /right topics too: with /joint_states alone gated, a
                 # recorder under load missed a whole run's /relative_pose and /relative_target).
                 last = tuple(t for t in state_topics if t in record_topics) if lockstep else ()
+                # Real-time relative runs hold the first target until the recorder reads /relative_target
+                # (start_after_reader), which it subscribes last, once its other readers matched their publishers
+                # (a recorder slower to start than a 1.5 s scenario recorded none of its per-cycle topics).
+                if not tasks and not lockstep and RELATIVE_TARGET in record_topics:
+                    last = (RELATIVE_TARGET,)
+                    trajectory_args = [*trajectory_args, "-p", f"start_after_reader:={RECORDER_NODE}"]
                 launch.start("bag", recorder_command(record, record_topics, lockstep, gate, last), env)
             readers = (1 if tasks else 2) + (record is not None)
             node_args = {"controller_node": [*common, *sim_time, *controller_args]}

@@ -26,7 +26,8 @@ import numpy as np
 import numpy.typing as npt
 
 from dualarm_control.metrics import l0_norms
-from dualarm_control.solvers.base import ACTIVITY_THRESHOLD, FAILURE_STATUSES
+from dualarm_control.solvers.base import ACTIVITY_THRESHOLD
+from dualarm_control.status import FAILURE_STATUSES
 
 FloatArray = npt.NDArray[np.float64]
 
