@@ -200,14 +200,15 @@ class SegmentJudge:
     :data:`SEGMENT_WINDOW` of its end (:meth:`feed`, once the window has passed), the last one at the run's
     final positions (:meth:`finish`): ``reached`` within the tolerances, else ``stalled`` with
     :func:`stall_reason` (the collision pair or joint limit that held the arms, and the error left). A segment
-    with no sample in its window is judged at the latest sample before the window closed. The batch form is
+    with no sample in its window is judged at the latest sample before the window closed. ``kind`` names a
+    part in the verdicts ("segment 1 'approach'"; a plan's one part: "plan 1 'corner_path'"). The batch form is
     :func:`judge_segments`; the trajectory node feeds it live."""
 
     def __init__(self, model: DualArmModel, names: Sequence[str], ends: Sequence[float],
                  poses: Sequence[tuple[FloatArray, FloatArray]], collision: CollisionModel | None = None,
                  position_tolerance: float = POSITION_TOLERANCE, angle_tolerance: float = ANGLE_TOLERANCE,
-                 near: float = COLLISION_NEAR) -> None:
-        self.model, self.collision, self.near = model, collision, near
+                 near: float = COLLISION_NEAR, kind: str = "segment") -> None:
+        self.model, self.collision, self.near, self.kind = model, collision, near, kind
         self.names, self.ends, self.poses = list(names), list(ends), list(poses)
         self.position_tolerance, self.angle_tolerance = position_tolerance, angle_tolerance
         self.k = 0  # the segment being judged
@@ -218,7 +219,7 @@ class SegmentJudge:
         return distance / self.position_tolerance + angle / self.angle_tolerance
 
     def _judge(self, k: int, q: FloatArray, distance: float, angle: float, when: str) -> GoalOutcome:
-        return _outcome(self.model, q, distance, angle, k, self.ends[k], when, f"segment {k + 1} '{self.names[k]}'",
+        return _outcome(self.model, q, distance, angle, k, self.ends[k], when, f"{self.kind} {k + 1} '{self.names[k]}'",
                         self.collision, self.near, self.position_tolerance, self.angle_tolerance)
 
     def feed(self, t: float, q: FloatArray) -> list[GoalOutcome]:

@@ -49,7 +49,6 @@ from dualarm_control.references.base import (
 )
 from dualarm_control.references.goals import GoalsSource, GoalsStream
 from dualarm_control.references.plan import PlanSource
-from dualarm_control.references.segments import SegmentsStream, segment_judge
 from dualarm_control.ros import convert
 from dualarm_control.ros.cell_topic import CellPublisher
 from dualarm_control.ros.hardware_io import JointStates, declare_with_profile
@@ -179,8 +178,9 @@ class TrajectoryNode:
                 self.drive.start(self.stream.generator)
             if self.drive is None:
                 self.log.info(f"targets: {self.stream.end:.2f} s (with settle {self.scenario.settle_time:.2f} s)")
-            if isinstance(self.stream, SegmentsStream):
-                self.judge = segment_judge(self.stream.trajectory, self.model, self.scenario.collision_model(self.model))
+            if self.drive is None:  # segments, a plan: each part's verdict, live
+                self.judge = self.source.judge(self.model, q, self.scenario.limits,
+                                               self.scenario.collision_model(self.model))
         if self.lockstep:
             self.publish(stamp, stamp - self.start_ns, q)
         elif self.judge is not None and self.controller_seen is not None:  # real time: the state at its receipt

@@ -40,7 +40,9 @@ from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.trajectory import MotionLimits
 
 if TYPE_CHECKING:
+    from dualarm_control.collision import CollisionModel
     from dualarm_control.controller import ControllerParams, Cycle, RelativeController
+    from dualarm_control.drive_monitor import SegmentJudge
 
 RELATIVE_TARGET = "/relative_target"
 JOINT_REFERENCE = "/joint_reference"
@@ -210,6 +212,12 @@ class ReferenceSource(Protocol):
 
     def stream(self, model: DualArmModel, q0: FloatArray, options: RunOptions, period: float) -> TargetStream: ...
 
+    def judge(self, model: DualArmModel, q0: FloatArray, limits: MotionLimits,
+              collision: CollisionModel | None) -> SegmentJudge | None:
+        """The judge of the run's parts (segments, a plan) from the start q0 (n,) [rad]: each part's verdict,
+        reached or stalled with what held the arms (issue 40); None: the source has no parts to judge."""
+        ...
+
 
 class SourceDefaults:
     """What most sources share: the cell starts at the scenario's configuration, with no extra
@@ -220,6 +228,11 @@ class SourceDefaults:
 
     def stream(self, model: DualArmModel, q0: FloatArray, options: RunOptions, period: float) -> TargetStream:
         raise NotImplementedError
+
+    def judge(self, model: DualArmModel, q0: FloatArray, limits: MotionLimits,
+              collision: CollisionModel | None) -> SegmentJudge | None:
+        """No parts to judge (goals are judged by their own monitor, tasks by their metrics)."""
+        return None
 
     def follower(self, model: DualArmModel, params: ControllerParams, q0: FloatArray,
                  options: RunOptions) -> StreamFollower:

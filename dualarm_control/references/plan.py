@@ -15,7 +15,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from dualarm_control.collision import CollisionModel
 from dualarm_control.controller import ControllerParams, Cycle, RelativeController
+from dualarm_control.drive_monitor import SegmentJudge
 from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.planning.config import PlanConfig, load_plan_config
 from dualarm_control.planning.joint_trajectory import plan_trajectory
@@ -28,6 +30,7 @@ from dualarm_control.references.base import (
     StreamSample,
     relative_report,
 )
+from dualarm_control.trajectory import MotionLimits
 
 
 @dataclass(frozen=True)
@@ -93,6 +96,15 @@ class PlanSource(SourceDefaults):
 
     def stream(self, model: DualArmModel, q0: FloatArray, options: RunOptions, period: float) -> PlanStream:
         return PlanStream(self)
+
+    def judge(self, model: DualArmModel, q0: FloatArray, limits: MotionLimits,
+              collision: CollisionModel | None) -> SegmentJudge:
+        """The plan's one verdict (issue 39): at the end of the run, the relative pose of the plan's last
+        configuration reached (0.5 mm / 5 mrad), or stalled, naming the collision pair or joint limit that
+        held the arms (a plan through the other arm stops at the safety distance)."""
+        end = self.sample(self.duration)
+        return SegmentJudge(model, [self.config.name], [self.duration], [(end.position, end.rotation)], collision,
+                            kind="plan")
 
     def sample(self, t: float) -> PlanReference:
         """The reference at ``t`` [s] (held at the last configuration after the end)."""

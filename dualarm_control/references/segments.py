@@ -73,6 +73,12 @@ class SegmentsSource(SourceDefaults):
         end = trajectory.sample(trajectory.duration)
         return end.position, end.rotation
 
+    def judge(self, model: DualArmModel, q0: FloatArray, limits: MotionLimits,
+              collision: CollisionModel | None) -> SegmentJudge:
+        """Every segment's verdict (:func:`segment_judge`), the trajectory planned from q0's relative pose as the
+        trajectory node plans it."""
+        return segment_judge(self.trajectory(*model.relative_pose(q0), limits), model, collision)
+
     def trajectory(self, start_position: FloatArray, start_rotation: FloatArray,
                    limits: MotionLimits) -> RelativeTrajectory:
         """The ruckig relative trajectory from the measured start pose through all segments."""

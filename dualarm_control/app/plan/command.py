@@ -88,5 +88,8 @@ def run_plan_command(args: argparse.Namespace, progress: ProgressFactory = progr
         print(f"executed path error      max {execution.max_error_m * 1e3:.3f} mm, {execution.max_error_rad:.2e} rad; "
               f"rms {execution.rms_error_m * 1e3:.3f} mm, {execution.rms_error_rad:.2e} rad")
         print(f"executed closest pair    {execution.closest_pair} at {execution.closest_distance_m * 1e3:.1f} mm")
+        print(f"execution                {execution.outcome}")
+        if execution.stalled:
+            print(f"warning: the plan's execution stalled: {execution.outcome}", file=sys.stderr)
     print(f"\nwrote {path}, {' and '.join(figures)}")
     return 0

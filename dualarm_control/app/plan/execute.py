@@ -51,6 +51,8 @@ class ExecutionResult:
         steps: control periods simulated.
         closest_distance_m, closest_pair: the closest link pair over the executed run [m] (coal, the
             robot's allowed pairs excluded; at most the collision model's margin).
+        outcome: the plan's verdict (:meth:`PlanSource.judge`): "plan 1 'NAME' (t = T s): reached, ..." or
+            "...: stalled: collision constraint: A – B at 0.031 m; remaining error ...".
     """
 
     duration: float
@@ -66,6 +68,12 @@ class ExecutionResult:
     steps: int
     closest_distance_m: float = float("inf")
     closest_pair: str = ""
+    outcome: str = ""
+
+    @property
+    def stalled(self) -> bool:
+        """Whether the plan ended short of its last configuration's relative pose."""
+        return ": stalled" in self.outcome
 
 
 def execute_plan(
@@ -104,8 +112,10 @@ def execute_plan(
             sample_pos.append(float(np.linalg.norm(p - path.positions[i])))
             sample_rot.append(rotation_angle(r, r_d))
     pe, re_ = np.array(pos_err), np.array(rot_err)
-    closest = closest_pair(CollisionModel.shared(model, model.description.collision_allowed),
-                           np.vstack((record.positions, record.final_positions)))
+    collision = CollisionModel.shared(model, model.description.collision_allowed)
+    closest = closest_pair(collision, np.vstack((record.positions, record.final_positions)))
+    verdicts = source.judge(model, configurations[0], scenario.limits, collision).run(
+        record.time, record.positions, record.final_positions)
     return ExecutionResult(
         duration=traj.duration,
         max_error_m=float(pe.max()),
@@ -120,4 +130,5 @@ def execute_plan(
         steps=len(record.time),
         closest_distance_m=closest.distance,
         closest_pair=closest.text,
+        outcome=" | ".join(v.text() for v in verdicts),
     )

@@ -28,7 +28,7 @@ import numpy as np
 
 from dualarm_control.app.record.run_record import RunRecord, TaskValues
 from dualarm_control.collision import CollisionModel
-from dualarm_control.drive_monitor import closest_pair, judge_goals
+from dualarm_control.drive_monitor import SegmentJudge, closest_pair, judge_goals
 from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel, FloatArray, rotation_angle
 from dualarm_control.metrics import (
@@ -40,7 +40,6 @@ from dualarm_control.metrics import (
     velocity_norm_metrics,
 )
 from dualarm_control.planning.plan_file import PLAN_FORMAT
-from dualarm_control.references.segments import SegmentsSource, segment_judge
 from dualarm_control.scenario import Scenario
 from dualarm_control.solvers.base import ACTIVITY_THRESHOLD
 from dualarm_control.status import FAILURE_STATUSES
@@ -50,7 +49,6 @@ from dualarm_control.tasks import (
     ManipulabilityTask,
     TablePlaneTask,
 )
-from dualarm_control.trajectory import MotionLimits
 
 if TYPE_CHECKING:  # the planner and the simulator are only imported where a plan is made or executed
     from dualarm_control.app.plan.execute import ExecutionResult
@@ -118,9 +116,9 @@ def summarize_run(record: RunRecord, scenario: Scenario | None, model: DualArmMo
         commands_script = getattr(scenario.reference, "commands", None)
         if commands_script:
             out.update(goal_metrics(record, commands_script, model, scenario.collision_model(model)))
-        if isinstance(scenario.reference, SegmentsSource):
-            out.update(segment_metrics(record, scenario.reference, scenario.limits, model,
-                                       scenario.collision_model(model)))
+        judge = scenario.reference.judge(model, record.positions[0], scenario.limits, scenario.collision_model(model))
+        if judge is not None:  # segments, a plan
+            out.update(segment_metrics(record, judge))
     return out
 
 
@@ -147,12 +145,10 @@ def timed_positions(record: RunRecord) -> tuple[FloatArray, FloatArray]:
     return record.time[:n], record.positions[:n]
 
 
-def segment_metrics(record: RunRecord, source: SegmentsSource, limits: MotionLimits, model: DualArmModel,
-                    collision: CollisionModel) -> dict[str, float | int | str]:
-    """How each segment of a relative trajectory ended (issue 40, :func:`~dualarm_control.drive_monitor.judge_segments`;
-    a stall explained by the collision pair or the joint limit that held the arms), the trajectory planned
-    from the recorded start as the trajectory node plans it."""
-    judge = segment_judge(source.trajectory(*model.relative_pose(record.positions[0]), limits), model, collision)
+def segment_metrics(record: RunRecord, judge: SegmentJudge) -> dict[str, float | int | str]:
+    """How each part of a run ended (issue 40: each segment of a relative trajectory, a plan; the source's
+    :meth:`~dualarm_control.references.base.ReferenceSource.judge` from the recorded start, as the trajectory
+    node judges it live): reached, or stalled explained by the collision pair or the joint limit that held the arms."""
     outcomes = judge.run(*timed_positions(record), record.final_positions)
     return {"segments_reached": sum(o.state == "reached" for o in outcomes),
             "segments_stalled": sum(o.state == "stalled" for o in outcomes),
