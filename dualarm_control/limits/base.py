@@ -196,25 +196,35 @@ class Bounds:
         return cls(np.full(n, -np.inf), np.full(n, np.inf), None, np.zeros(0))
 
     def narrow(self, lower: FloatArray | None, upper: FloatArray | None) -> None:
-        """Intersect the box with [lower, upper] (None: no bound on that side), keeping the box's own
-        range where the two do not meet: per joint the result is the point of the box nearest to
-        the new range (lower' = min(max(l, lower), u), upper' = max(min(u, upper), lower'))."""
-        if lower is not None:
-            self.lower = np.minimum(np.maximum(self.lower, lower), self.upper)
-        if upper is not None:
-            self.upper = np.maximum(np.minimum(self.upper, upper), self.lower)
+        """Intersect the box with [lower, upper] (:func:`narrowed`)."""
+        new_lower, new_upper = narrowed(self.lower, self.upper, lower, upper)
+        assert new_lower is not None and new_upper is not None  # the box had both sides
+        self.lower, self.upper = new_lower, new_upper
 
     def add_rows(self, rows: DeferredRows, labels: tuple[str, ...]) -> None:
         """Append m rows ``A qd <= b`` (``rows``, m labels) after those already given."""
         self.rows = rows if self.rows is None else self.rows.stacked(rows)
         self.bound, self.labels = self.rows.bound, self.labels + labels
 
-    def add(self, constraint: Constraint) -> None:
-        """Intersect with one limit's constraint (:meth:`narrow`, :meth:`add_rows`)."""
-        if constraint.lower is not None or constraint.upper is not None:
-            self.narrow(constraint.lower, constraint.upper)
-        if constraint.rows is not None:
-            self.add_rows(constraint.rows, constraint.labels)
+
+def narrowed(lower: FloatArray | None, upper: FloatArray | None, new_lower: FloatArray | None,
+             new_upper: FloatArray | None) -> tuple[FloatArray | None, FloatArray | None]:
+    """The box [lower, upper] intersected with [new_lower, new_upper] (None: no bound on that side; (n,) [rad/s]),
+    keeping the first box's range where the two do not meet: per joint the result is the point of the first box
+    nearest to the new range,
+
+        lower' = min(max(lower, new_lower), upper),   upper' = max(min(upper, new_upper), lower').
+
+    A side without a bound yet takes the new one as it is (no arithmetic: the first limit's box costs nothing)."""
+    if new_lower is not None:
+        lower = new_lower if lower is None else np.maximum(lower, new_lower)
+        if upper is not None:
+            lower = np.minimum(lower, upper)
+    if new_upper is not None:
+        upper = new_upper if upper is None else np.minimum(upper, new_upper)
+        if lower is not None:
+            upper = np.maximum(upper, lower)
+    return lower, upper
 
 
 class LimitReport(Protocol):
@@ -267,9 +277,20 @@ def ordered(limits: Iterable[Limit]) -> tuple[Limit, ...]:
 
 
 def apply_limits(limits: Iterable[Limit], configuration: Configuration, previous: FloatArray) -> Bounds:
-    """One cycle's constraints: every limit's :class:`Constraint` intersected (:meth:`Bounds.add`) in
-    the order of :func:`ordered` (n = configuration.q.shape[0]); ``previous`` [rad/s], (n,)."""
-    bounds = Bounds.free(configuration.q.shape[0])
+    """One cycle's constraints: every limit's :class:`Constraint` intersected, in the order of their priority
+    whatever the order given (boxes by :func:`narrowed`, rows stacked); n = configuration.q.shape[0],
+    ``previous`` [rad/s], (n,). A side no limit bounds is infinite."""
+    lower: FloatArray | None = None
+    upper: FloatArray | None = None
+    rows: DeferredRows | None = None
+    labels: tuple[str, ...] = ()
     for limit in sorted(limits, key=_priority):
-        bounds.add(limit.constraints(configuration, previous))
-    return bounds
+        constraint = limit.constraints(configuration, previous)
+        if constraint.lower is not None or constraint.upper is not None:
+            lower, upper = narrowed(lower, upper, constraint.lower, constraint.upper)
+        if constraint.rows is not None:
+            rows = constraint.rows if rows is None else rows.stacked(constraint.rows)
+            labels += constraint.labels
+    n = configuration.q.shape[0]
+    return Bounds(np.full(n, -np.inf) if lower is None else lower, np.full(n, np.inf) if upper is None else upper,
+                  rows, np.zeros(0) if rows is None else rows.bound, labels)
