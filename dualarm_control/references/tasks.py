@@ -1,7 +1,7 @@
 """Reference source of paper 001: a set of tasks with gains and bounds instead of relative segments.
 
 Keys under ``scenario.`` (flattened, see :mod:`dualarm_control.scenario`):
-  ``duration`` [s]; ``table_height`` [m, world z of the table top];
+  ``duration`` [s]; ``table_height`` [m, world z of the table top; none: no table];
   ``convergence_time`` [s] (metrics after it); ``gains`` (k values to compare, 1/s);
   ``tasks`` (ordered names) and per task ``<task>.type``:
 
@@ -62,7 +62,7 @@ class TasksSource(SourceDefaults):
     No stream besides /joint_states; the force variant (a run option) adds /wrench.
 
     Attributes:
-        duration: run time [s]. table_height: table top, world z [m].
+        duration: run time [s]. table_height: table top, world z [m] (None: no table in the cell).
         convergence_time: time after which tracking metrics are taken [s].
         gains: the k values [1/s] the experiment compares by default.
         tasks: task specs in order. force: the force variant's parameters.
@@ -70,7 +70,7 @@ class TasksSource(SourceDefaults):
     """
 
     duration: float
-    table_height: float
+    table_height: float | None
     convergence_time: float
     gains: tuple[float, ...]
     tasks: tuple[TaskSpec, ...]
@@ -249,7 +249,7 @@ def parse_tasks(flat: Mapping[str, Any], base: Path | None = None) -> TasksSourc
     links = get(flat, "contact_links", ["left_flange", "right_tool"])
     if not isinstance(links, list) or len(links) != 2 or not all(isinstance(n, str) for n in links):
         raise ScenarioError(f"scenario parameter '{PREFIX}contact_links': got {links!r}, expected two link names")
-    out = TasksSource(duration=number(flat, "duration"), table_height=number(flat, "table_height"),
+    out = TasksSource(duration=number(flat, "duration"), table_height=number(flat, "table_height") if PREFIX + "table_height" in flat else None,
                       convergence_time=number(flat, "convergence_time", 5.0), gains=tuple(float(g) for g in gains),
                       tasks=tuple(specs), force=force, contact_links=(links[0], links[1]))
     if out.duration <= out.convergence_time:

@@ -2,13 +2,20 @@
 
 * :mod:`.base`: what a task is (:class:`TaskRows`, :class:`Task`) and how the rows become one
   QP (:func:`assemble_problem`, paper 001 eq (12)-(14));
-* :mod:`.relative_pose`: paper 000's relative pose task, eq (8)-(13);
+* :mod:`.relative_pose`: paper 000's relative pose task, eq (8)-(13) (type ``relative_pose``: a held target);
+* :mod:`.absolute_pose`: the two tools' absolute pose (the cooperative task space; type ``absolute_pose``);
 * :mod:`.circle`, :mod:`.cone`, :mod:`.manipulability`, :mod:`.table`: paper 001's f_1-3, f_4, f_5, f_6;
 * :mod:`.registry`: task types by name for task scenarios, a user's own from their own file.
 
 A new task is one file here plus its import below (the import registers its type).
 """
 
+from dualarm_control.tasks.absolute_pose import (
+    AbsolutePoseTask,
+    AbsoluteState,
+    grasp_state,
+    halfway_state,
+)
 from dualarm_control.tasks.base import (
     DEFAULT_EQUALITY_WEIGHT,
     DEFAULT_INEQUALITY_WEIGHT,
@@ -32,7 +39,11 @@ from dualarm_control.tasks.registry import (
     register_task,
     task_types,
 )
-from dualarm_control.tasks.relative_pose import RelativePoseTask, RelativeTarget
+from dualarm_control.tasks.relative_pose import (
+    FixedTarget,
+    RelativePoseTask,
+    RelativeTarget,
+)
 from dualarm_control.tasks.table import UP, TablePlaneTask
 
 __all__ = [
@@ -41,8 +52,11 @@ __all__ = [
     "EQUALITY",
     "INEQUALITY",
     "UP",
+    "AbsolutePoseTask",
+    "AbsoluteState",
     "CircleTask",
     "ConeTask",
+    "FixedTarget",
     "Kind",
     "ManipulabilityTask",
     "RelativePoseTask",
@@ -57,6 +71,8 @@ __all__ = [
     "check_gain_weight",
     "check_task_type",
     "evaluate_tasks",
+    "grasp_state",
+    "halfway_state",
     "manipulability",
     "register_task",
     "task_types",

@@ -51,12 +51,12 @@ class TaskContext:
 
     Attributes:
         gain: the task gain k [1/s] of the run.
-        table_height: the scenario's table top, world z [m].
+        table_height: the scenario's table top, world z [m] (None: the scenario has no table).
         height_offset: a modelling error along the pan normal added to a circle's height [m] (force variant).
     """
 
     gain: float
-    table_height: float
+    table_height: float | None
     height_offset: float = 0.0
 
 

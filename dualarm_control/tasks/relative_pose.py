@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
+import pinocchio as pin
 
 from dualarm_control.kinematics import Configuration, FloatArray, luh_components
 from dualarm_control.tasks.base import (
@@ -15,6 +17,7 @@ from dualarm_control.tasks.base import (
     TaskRows,
     check_gain_weight,
 )
+from dualarm_control.tasks.registry import TaskContext, TaskSpec, register_task
 
 
 class RelativeTarget(Protocol):
@@ -63,3 +66,24 @@ class RelativePoseTask:
         np.negative(time_derivative, out=time_derivative)
         return TaskRows(self.name, self.kind, value, np.zeros(6), state.jacobian, time_derivative, self.gain,
                         self.weight)
+
+
+@dataclass(frozen=True)
+class FixedTarget:
+    """A relative target at rest: p* [m] (3,) and R* (3, 3) of F2 in F1, zero twist."""
+
+    position: FloatArray
+    rotation: FloatArray
+    linear_velocity: FloatArray = field(default_factory=lambda: np.zeros(3))
+    angular_velocity: FloatArray = field(default_factory=lambda: np.zeros(3))
+
+
+@register_task("relative_pose")
+def relative_pose(spec: TaskSpec, context: TaskContext) -> RelativePoseTask:
+    """``position`` [m] and ``rpy_deg`` of the right tool in the left tool's frame F1, held (zero twist)."""
+    position = [float(v) for v in spec.value("position", list)]
+    rpy = [math.radians(float(v)) for v in spec.value("rpy_deg", list, [0.0, 0.0, 0.0])]
+    if len(position) != 3 or len(rpy) != 3 or not all(map(math.isfinite, position + rpy)):
+        raise ValueError("position and rpy_deg must be 3 finite numbers each")
+    target = FixedTarget(np.array(position), pin.rpy.rpyToMatrix(*rpy))
+    return RelativePoseTask(target, context.gain, spec.value("weight", float, DEFAULT_EQUALITY_WEIGHT), spec.name)

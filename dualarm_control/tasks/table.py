@@ -79,6 +79,8 @@ class TablePlaneTask:
 @register_task("table")
 def table(spec: TaskSpec, context: TaskContext) -> TablePlaneTask:
     """``frames`` and ``radii`` [m] (spheres), ``bound`` (b_6 < 0, m); the plane at the scenario's table height."""
+    if context.table_height is None:
+        raise ScenarioError(f"scenario task {spec.name!r}: a table task needs 'scenario.table_height'")
     frames, radii = spec.value("frames", list), spec.value("radii", list)
     if len(frames) != len(radii):
         raise ScenarioError(f"scenario parameter 'scenario.{spec.name}': {len(frames)} frames but "
