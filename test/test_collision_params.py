@@ -7,11 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from dualarm_control.controller import (
-    ControllerParams,
-    RelativeController,
-    controller_params,
-)
+from dualarm_control.controller import ControllerParams, RelativeController
+from dualarm_control.controller_params import controller_params
 from dualarm_control.errors import ParameterError, ScenarioError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.robot import RobotError, robot_from_parameters

@@ -85,7 +85,7 @@ def test_interactive_demo_lockstep_bag_metrics_equal_in_process(demo: tuple, tmp
     from dualarm_control.app.record.report import summarize_run
     from dualarm_control.app.run.experiment import run_scenario
     from dualarm_control.app.run.launcher import launch_scenario
-    from dualarm_control.controller import controller_params
+    from dualarm_control.controller_params import controller_params
 
     scenario, model = demo
     bag = tmp_path / "bag"
@@ -116,7 +116,8 @@ def test_a_wrist_tie_is_one_lasso_switch_and_the_acceleration_bound_caps_it(demo
     it is capped and tracking is kept (docs/ros2.md)."""
     from dualarm_control.app.record.report import summarize_run
     from dualarm_control.app.run.experiment import run_scenario
-    from dualarm_control.controller import DEFAULT_ACCELERATION_LIMIT, controller_params
+    from dualarm_control.controller import DEFAULT_ACCELERATION_LIMIT
+    from dualarm_control.controller_params import controller_params
 
     _, model = demo
     scenario = load_scenario(str(Path(__file__).parent / "data" / "interactive_demo_wrist_tie.yaml"))
