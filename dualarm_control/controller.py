@@ -43,7 +43,7 @@ from dualarm_control.solvers import (
     SolverResult,
     make_solver,
 )
-from dualarm_control.solvers.base import rest_command
+from dualarm_control.solvers.policy import rest_command
 from dualarm_control.status import Status
 from dualarm_control.tasks import (
     INEQUALITY,
