@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from dualarm_control.drive_status import REACHED
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel
-from dualarm_control.online_trajectory import REACHED
 from dualarm_control.references.base import RELATIVE_TARGET, RunOptions
 from dualarm_control.references.goals import GoalsSource
 from dualarm_control.scenario import load_scenario
@@ -58,7 +58,7 @@ def test_bad_goals_entry_is_a_scenario_error_naming_it(tmp_path: Path) -> None:
 
 def test_goal_monitor_reports_reached_and_stalled_with_the_joints_at_a_limit(demo: tuple) -> None:
     from dualarm_control.drive_monitor import GoalMonitor
-    from dualarm_control.online_trajectory import STALLED, GoalProgress
+    from dualarm_control.drive_status import STALLED, GoalProgress
 
     scenario, model = demo
     q = scenario.initial_positions.copy()
