@@ -29,7 +29,7 @@ from dualarm_control.controller_params import controller_params
 from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import read_params_files
-from dualarm_control.robot import robot_defaults
+from dualarm_control.robot_params import robot_defaults
 from dualarm_control.scenario import load_scenario
 
 EXIT_INTERRUPTED = 130
