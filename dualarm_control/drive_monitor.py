@@ -29,9 +29,9 @@ import numpy as np
 import pinocchio as pin
 
 from dualarm_control.collision import CollisionModel, CollisionParams
+from dualarm_control.drive_status import MOVING, REACHED, STALLED, GoalProgress
 from dualarm_control.goal_script import TimedCommand, TimedGoal
 from dualarm_control.kinematics import DualArmModel, FloatArray
-from dualarm_control.online_trajectory import MOVING, REACHED, STALLED, GoalProgress
 
 POSITION_TOLERANCE = 5e-4  # m
 ANGLE_TOLERANCE = 5e-3  # rad

@@ -19,13 +19,9 @@ import numpy.typing as npt
 import pinocchio as pin
 
 from dualarm_control.errors import DimensionError
-from dualarm_control.robot import (
-    LEFT_TOOL,
-    RIGHT_TOOL,
-    RobotDescription,
-    RobotError,
-    load_robot,
-)
+from dualarm_control.robot import LEFT_TOOL, RIGHT_TOOL, RobotDescription
+from dualarm_control.robot_files import RobotError
+from dualarm_control.robot_params import load_robot
 
 FloatArray = npt.NDArray[np.float64]
 

@@ -43,12 +43,9 @@ from dualarm_control.references.base import ReferenceSource
 from dualarm_control.references.goals import GoalsSource, parse_goals_source
 from dualarm_control.references.segments import SegmentsSource, parse_segments
 from dualarm_control.references.tasks import TasksSource, parse_tasks
-from dualarm_control.robot import (
-    DEFAULT_ROBOT,
-    RobotDescription,
-    RobotError,
-    load_robot,
-)
+from dualarm_control.robot import RobotDescription
+from dualarm_control.robot_files import RobotError
+from dualarm_control.robot_params import DEFAULT_ROBOT, load_robot
 from dualarm_control.scenario_keys import PREFIX, get, number, vector
 from dualarm_control.trajectory import MotionLimits, RelativeTrajectory
 

@@ -81,13 +81,8 @@ import numpy.typing as npt
 import pybullet as p
 
 from dualarm_control.errors import DimensionError
-from dualarm_control.robot import (
-    LEFT_TOOL,
-    RIGHT_TOOL,
-    TOOL_JOINTS,
-    RobotDescription,
-    load_robot,
-)
+from dualarm_control.robot import LEFT_TOOL, RIGHT_TOOL, TOOL_JOINTS, RobotDescription
+from dualarm_control.robot_params import load_robot
 
 if TYPE_CHECKING:  # typing.Self is 3.11+ but ROS Humble runs 3.10: type-checking only
     from typing import Self

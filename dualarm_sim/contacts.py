@@ -28,7 +28,8 @@ import numpy.typing as npt
 import pybullet as p
 
 from dualarm_control.errors import DimensionError
-from dualarm_control.robot import RobotDescription, load_robot
+from dualarm_control.robot import RobotDescription
+from dualarm_control.robot_params import load_robot
 from dualarm_sim.cell import CellConfig, DualArmCell
 
 FloatArray = npt.NDArray[np.float64]

@@ -77,7 +77,7 @@ LAUNCH_FILES = {"cell.launch.py": NODES, "pan_cleaning.launch.py": ("sim_node", 
 
 def declared_parameters(executable: str) -> set[str]:
     """Names the node declares (its specs), plus rclpy's own use_sim_time."""
-    from dualarm_control.controller import CONTROLLER_PARAMETERS
+    from dualarm_control.controller_params import CONTROLLER_PARAMETERS
     from dualarm_control.nodes import controller_node, trajectory_node
     from dualarm_sim import sim_node
 

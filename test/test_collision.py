@@ -30,7 +30,7 @@ from dualarm_control.collision import (
 from dualarm_control.errors import ParameterError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.qp import QPProblem, make_backend
-from dualarm_control.robot import RobotError
+from dualarm_control.robot_files import RobotError
 from dualarm_sim.cell import CellConfig, DualArmCell
 
 ROBOTS = ("lwr4_cell", "baxter")

@@ -27,7 +27,7 @@ from test_ros_live import Launch, dualarm
 from dualarm_control.app.record.bag import read_bag
 from dualarm_control.app.record.report import summarize_run
 from dualarm_control.app.run.experiment import run_scenario
-from dualarm_control.controller import controller_params
+from dualarm_control.controller_params import controller_params
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.scenario import load_scenario
 from dualarm_sim.cell import robot_collision_pairs

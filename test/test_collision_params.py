@@ -7,14 +7,12 @@ from pathlib import Path
 
 import pytest
 
-from dualarm_control.controller import (
-    ControllerParams,
-    RelativeController,
-    controller_params,
-)
+from dualarm_control.controller import ControllerParams, RelativeController
+from dualarm_control.controller_params import controller_params
 from dualarm_control.errors import ParameterError, ScenarioError
 from dualarm_control.kinematics import DualArmModel
-from dualarm_control.robot import RobotError, robot_from_parameters
+from dualarm_control.robot_files import RobotError
+from dualarm_control.robot_params import robot_from_parameters
 from dualarm_control.scenario import load_scenario
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from dualarm_control.controller import controller_params
+from dualarm_control.controller_params import controller_params
 from dualarm_control.params import read_params_files
 from dualarm_control.paths import config_path
 from dualarm_control.qp import QPSettings

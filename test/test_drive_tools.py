@@ -20,7 +20,7 @@ import pytest
 import yaml
 from reading import read_line
 
-from dualarm_control.online_trajectory import (
+from dualarm_control.drive_status import (
     KEY_ANGLE,
     KEY_DISTANCE,
     KEY_GOAL_STAMP,

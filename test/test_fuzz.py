@@ -28,7 +28,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from waiting import NodeProcess, exited, tail, wait_until
 
-from dualarm_control.controller import CONTROLLER_PARAMETERS, controller_params
+from dualarm_control.controller_params import CONTROLLER_PARAMETERS, controller_params
 from dualarm_control.errors import DualArmError
 from dualarm_control.params import read_params_file
 from dualarm_control.scenario import load_scenario

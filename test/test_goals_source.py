@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from dualarm_control.drive_status import REACHED
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel
-from dualarm_control.online_trajectory import REACHED
 from dualarm_control.references.base import RELATIVE_TARGET, RunOptions
 from dualarm_control.references.goals import GoalsSource
 from dualarm_control.scenario import load_scenario
@@ -58,7 +58,7 @@ def test_bad_goals_entry_is_a_scenario_error_naming_it(tmp_path: Path) -> None:
 
 def test_goal_monitor_reports_reached_and_stalled_with_the_joints_at_a_limit(demo: tuple) -> None:
     from dualarm_control.drive_monitor import GoalMonitor
-    from dualarm_control.online_trajectory import STALLED, GoalProgress
+    from dualarm_control.drive_status import STALLED, GoalProgress
 
     scenario, model = demo
     q = scenario.initial_positions.copy()
@@ -85,7 +85,7 @@ def test_interactive_demo_lockstep_bag_metrics_equal_in_process(demo: tuple, tmp
     from dualarm_control.app.record.report import summarize_run
     from dualarm_control.app.run.experiment import run_scenario
     from dualarm_control.app.run.launcher import launch_scenario
-    from dualarm_control.controller import controller_params
+    from dualarm_control.controller_params import controller_params
 
     scenario, model = demo
     bag = tmp_path / "bag"
@@ -116,7 +116,8 @@ def test_a_wrist_tie_is_one_lasso_switch_and_the_acceleration_bound_caps_it(demo
     it is capped and tracking is kept (docs/ros2.md)."""
     from dualarm_control.app.record.report import summarize_run
     from dualarm_control.app.run.experiment import run_scenario
-    from dualarm_control.controller import DEFAULT_ACCELERATION_LIMIT, controller_params
+    from dualarm_control.controller import DEFAULT_ACCELERATION_LIMIT
+    from dualarm_control.controller_params import controller_params
 
     _, model = demo
     scenario = load_scenario(str(Path(__file__).parent / "data" / "interactive_demo_wrist_tie.yaml"))

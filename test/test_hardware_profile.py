@@ -19,7 +19,7 @@ from dualarm_control.hardware import (
     waiting_reason,
 )
 from dualarm_control.params import read_params_file
-from dualarm_control.robot import load_robot
+from dualarm_control.robot_params import load_robot
 from dualarm_sim.ports import CommandMerger, state_layout
 
 CONFIG = Path(__file__).parents[1] / "config" / "hardware"

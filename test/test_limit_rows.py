@@ -20,7 +20,7 @@ from dualarm_control.solvers import (
     make_solver,
     solver_names,
 )
-from dualarm_control.solvers.base import separating_step
+from dualarm_control.solvers.policy import separating_step
 
 N = 14
 SOLVERS = solver_names()

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from dualarm_control import controller as core
+from dualarm_control.controller_params import controller_params
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.references.base import RunOptions
 from dualarm_control.scenario import load_scenario
@@ -45,7 +46,7 @@ def run_with_changes(swap: Swap) -> tuple[np.ndarray, list[str], core.RelativeCo
     scenario = load_scenario("assembly")
     model = DualArmModel(scenario.robot)
     values: dict[str, object] = {"solver": "standard_qp", "acceleration_limit": [A_MAX]}
-    params = core.controller_params(values)
+    params = controller_params(values)
     options = RunOptions(scenario.limits, scenario.settle_time)
     source = scenario.reference
     config = CellConfig.for_robot(scenario.robot, control_period=params.period, **source.cell(options))
@@ -56,7 +57,7 @@ def run_with_changes(swap: Swap) -> tuple[np.ndarray, list[str], core.RelativeCo
         for k in range(CYCLES):
             if k in CHANGES:
                 values = {**values, **CHANGES[k]}
-                built = core.RelativeController(model, core.controller_params(values))
+                built = core.RelativeController(model, controller_params(values))
                 follower.controller = swap(follower.controller, built)
             out = follower.cycle(k * params.period, state.positions, None)
             cell.apply_command(out.velocities)
@@ -100,15 +101,15 @@ def test_without_continue_from_the_bound_breaks() -> None:
 def test_same_solver_keeps_its_memory_and_new_solver_is_seeded() -> None:
     model = DualArmModel()
     base = {"solver": "sparse_qp", "acceleration_limit": [A_MAX]}
-    old = core.RelativeController(model, core.controller_params(base))
+    old = core.RelativeController(model, controller_params(base))
     old._previous = np.linspace(-0.1, 0.1, model.nq)
-    gain_change = core.RelativeController(model, core.controller_params({**base, "gain": 7.0})).continue_from(old)
+    gain_change = core.RelativeController(model, controller_params({**base, "gain": 7.0})).continue_from(old)
     assert gain_change.solver is old.solver  # warm start and proximal memory go on
     np.testing.assert_array_equal(gain_change.previous_command, old.previous_command)
     assert gain_change.previous_command is not old.previous_command
-    other = core.RelativeController(model, core.controller_params({**base, "solver": "hierarchical_sparse_qp"}))
+    other = core.RelativeController(model, controller_params({**base, "solver": "hierarchical_sparse_qp"}))
     other.continue_from(old)
     assert other.solver is not old.solver
     np.testing.assert_array_equal(other.solver._primary._previous, old.previous_command)  # proximal centre
-    weight_change = core.RelativeController(model, core.controller_params({**base, "l1_weight": 1e-5}))
+    weight_change = core.RelativeController(model, controller_params({**base, "l1_weight": 1e-5}))
     assert weight_change.continue_from(old).solver is not old.solver  # other solver parameters: a new solver

@@ -18,7 +18,7 @@ from launching import selected_tests, side_by_side
 
 from dualarm_control.app.run.experiment import run_scenario
 from dualarm_control.app.run.launcher import launch_scenario
-from dualarm_control.controller import controller_params
+from dualarm_control.controller_params import controller_params
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import read_params_files
 from dualarm_control.scenario import load_scenario

@@ -12,6 +12,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from dualarm_control.drive_commands import QUATERNION_NORM_TOLERANCE
+from dualarm_control.drive_status import (
+    IDLE,
+    JOGGING,
+    MOVING,
+    REACHED,
+    parse_status,
+    status_values,
+)
 from dualarm_control.goal_script import (
     ScriptError,
     TimedGoal,
@@ -19,19 +27,13 @@ from dualarm_control.goal_script import (
     parse_goals,
     run_script,
 )
-from dualarm_control.online_trajectory import (
-    IDLE,
-    JOGGING,
-    MOVING,
-    REACHED,
-    OnlineTrajectory,
+from dualarm_control.online_rotation import (
     angular_acceleration,
     angular_velocity,
     least_shares,
-    parse_status,
     rotation_box,
-    status_values,
 )
+from dualarm_control.online_trajectory import OnlineTrajectory
 from dualarm_control.trajectory import (
     MotionLimits,
     RelativeTrajectory,
@@ -474,7 +476,7 @@ def test_a_state_one_cycle_from_rest_on_the_goal_ends_there_where_ruckig_fails()
 def test_rotation_box_basis_is_orthonormal_for_a_hint_nearly_along_the_direction() -> None:
     """The case hypothesis found under stress-ng (direction 1e-9 rad from the acceleration share):
     the box's frame is orthonormal to 1e-12."""
-    from dualarm_control.online_trajectory import rotation_box
+    from dualarm_control.online_rotation import rotation_box
 
     q, _ = rotation_box(np.array([0.0, 1e-9, 1.0]), np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.1)
     np.testing.assert_allclose(q.T @ q, np.eye(3), atol=1e-12)

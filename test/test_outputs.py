@@ -25,7 +25,7 @@ from dualarm_control.outputs import (
     register,
     unregister,
 )
-from dualarm_control.robot import load_robot
+from dualarm_control.robot_params import load_robot
 from dualarm_control.ros import cdr
 from dualarm_control.ros.cdr import CdrError
 from dualarm_sim.ports import CommandMerger

@@ -12,7 +12,7 @@ import pytest
 from dualarm_control.app.cli import main
 from dualarm_control.app.record.report import summarize_run
 from dualarm_control.app.run.experiment import run_scenario
-from dualarm_control.controller import controller_params
+from dualarm_control.controller_params import controller_params
 from dualarm_control.errors import ScenarioError
 from dualarm_control.force import (
     ForceParams,

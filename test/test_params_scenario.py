@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dualarm_control.controller import controller_params
+from dualarm_control.controller_params import controller_params
 from dualarm_control.errors import ParameterError, ScenarioError
 from dualarm_control.kinematics import rotation_angle
 from dualarm_control.params import (

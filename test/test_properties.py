@@ -36,12 +36,8 @@ from dualarm_control.solvers import (
     make_solver,
     solver_names,
 )
-from dualarm_control.solvers.base import (
-    FALLBACK_DAMPING,
-    LIMIT_ROWS_TOLERANCE_FACTOR,
-    ROUND_OFF,
-    rest_command,
-)
+from dualarm_control.solvers.base import LIMIT_ROWS_TOLERANCE_FACTOR
+from dualarm_control.solvers.policy import FALLBACK_DAMPING, ROUND_OFF, rest_command
 
 PERIOD = 0.005
 OWN_RESULT = ("solved", "scaled")

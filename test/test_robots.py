@@ -15,13 +15,9 @@ import pinocchio as pin
 import pytest
 
 from dualarm_control.kinematics import DualArmModel
-from dualarm_control.robot import (
-    LEFT_TOOL,
-    RIGHT_TOOL,
-    RobotError,
-    load_robot,
-    robot_names,
-)
+from dualarm_control.robot import LEFT_TOOL, RIGHT_TOOL
+from dualarm_control.robot_files import RobotError
+from dualarm_control.robot_params import load_robot, robot_names
 from dualarm_control.scenario import load_scenario
 from dualarm_sim.cell import CellConfig, DualArmCell
 

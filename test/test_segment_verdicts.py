@@ -89,7 +89,7 @@ def test_the_ur5_pairs_assembly_says_which_pair_held_it() -> None:
     the run names the segments that stalled, the pair and the distance left (26.7 mm measured)."""
     from dualarm_control.app.record.report import summarize_run
     from dualarm_control.app.run.experiment import run_scenario
-    from dualarm_control.controller import controller_params
+    from dualarm_control.controller_params import controller_params
 
     scenario = load_scenario("assembly", "ur5_pair")
     model = DualArmModel(scenario.robot)
@@ -146,7 +146,7 @@ def test_a_record_with_a_state_fewer_than_its_commands_still_gets_its_verdicts()
 
     from dualarm_control.app.record.report import summarize_run
     from dualarm_control.app.run.experiment import run_scenario
-    from dualarm_control.controller import controller_params
+    from dualarm_control.controller_params import controller_params
 
     scenario = load_scenario(str(Path(__file__).parent / "data" / "short.yaml"))
     model = DualArmModel(scenario.robot)

@@ -269,7 +269,7 @@ def test_visual_shapes_change_no_physics() -> None:
     """The cell loads without the URDF's visual meshes by default (CellConfig.visual_shapes): the
     same motion and contacts bit for bit as with them, on a robot whose meshes pybullet would load
     (the Panda pair, self-collision on), the arms driven into each other."""
-    from dualarm_control.robot import load_robot
+    from dualarm_control.robot_params import load_robot
 
     robot = load_robot("panda_pair")
     samples = []

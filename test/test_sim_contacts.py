@@ -21,7 +21,7 @@ from waiting import exited, node_env, wait_until
 from dualarm_control.collision import CollisionModel
 from dualarm_control.errors import DimensionError
 from dualarm_control.kinematics import DualArmModel
-from dualarm_control.robot import load_robot
+from dualarm_control.robot_params import load_robot
 from dualarm_control.scenario import load_scenario
 from dualarm_sim.cell import CellConfig, DualArmCell, robot_collision_pairs
 from dualarm_sim.contacts import ContactCounter, min_distances

@@ -308,12 +308,12 @@ def test_an_overshoot_beyond_the_tolerance_is_a_failure_with_the_fallback_comman
 def test_a_bound_violation_whose_fallback_fails_gives_the_command_nearest_to_rest(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """If the bounded least squares fails too: status "bounds_violated" and clip(0, lower, upper)."""
-    from dualarm_control.solvers import base
+    from dualarm_control.solvers import policy
 
     solver = make_solver("standard_qp")
     p = random_problem(np.random.default_rng(29), 1.0)
     monkeypatch.setattr(solver, "_solve", lambda problem: (overshooting(p, 2, 0.1), "solved", 0, ""))
-    monkeypatch.setattr(base, "bounded_least_squares", lambda *args: None)
+    monkeypatch.setattr(policy, "bounded_least_squares", lambda *args: None)
     res = solver.solve(p)
     assert res.status == "bounds_violated" and "nearest-to-rest" in res.detail
     np.testing.assert_array_equal(res.velocities, np.zeros(14))
@@ -448,11 +448,11 @@ def test_numerical_failures_give_the_bounded_least_squares_fallback(name: str, f
 @pytest.mark.parametrize("name", solver_names())
 def test_failed_fallback_gives_the_command_nearest_to_rest(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """If the bounded least squares fails too: the original failure status and clip(0, lower, upper)."""
-    from dualarm_control.solvers import base
+    from dualarm_control.solvers import policy
 
     solver = make_solver(name)
     monkeypatch.setattr(solver, "_solve", return_nothing)
-    monkeypatch.setattr(base, "bounded_least_squares", lambda *args: None)
+    monkeypatch.setattr(policy, "bounded_least_squares", lambda *args: None)
     p = random_problem(np.random.default_rng(28), 1.0)
     lower = p.lower.copy()
     lower[2] = 0.3  # a joint that must move (beyond its lower limit): rest is not inside its bounds

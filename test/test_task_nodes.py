@@ -28,7 +28,7 @@ from dualarm_control.app.record.bag import (
 from dualarm_control.app.record.report import summarize_run
 from dualarm_control.app.run.experiment import run_scenario
 from dualarm_control.app.run.launcher import Launch, launch_scenario, node_command
-from dualarm_control.controller import controller_params
+from dualarm_control.controller_params import controller_params
 from dualarm_control.params import read_params_files
 from dualarm_control.scenario import load_scenario
 

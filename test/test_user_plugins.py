@@ -10,11 +10,8 @@ import numpy as np
 import pytest
 from test_properties import Target
 
-from dualarm_control.controller import (
-    ControllerParams,
-    RelativeController,
-    controller_params,
-)
+from dualarm_control.controller import ControllerParams, RelativeController
+from dualarm_control.controller_params import controller_params
 from dualarm_control.errors import ParameterError, ScenarioError
 from dualarm_control.kinematics import Configuration, DualArmModel
 from dualarm_control.scenario import load_scenario

@@ -34,7 +34,7 @@ from dualarm_control.app.view.from_bag import (
 )
 from dualarm_control.app.view.live import LiveLog
 from dualarm_control.app.view.server import WebViewer
-from dualarm_control.controller import controller_params
+from dualarm_control.controller_params import controller_params
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.ros.convert import quaternion_xyzw
 from dualarm_control.scenario import load_scenario

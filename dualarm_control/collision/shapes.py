@@ -27,7 +27,7 @@ import pinocchio as pin
 
 from dualarm_control.collision.params import FloatArray
 from dualarm_control.kinematics import DualArmModel
-from dualarm_control.robot import RobotError
+from dualarm_control.robot_files import RobotError
 
 
 def shape_distance(a: pin.GeometryObject, b: pin.GeometryObject) -> float:

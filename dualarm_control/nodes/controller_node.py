@@ -45,6 +45,7 @@ from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
 from dualarm_control import controller as core
+from dualarm_control.controller_params import CONTROLLER_PARAMETERS, controller_params
 from dualarm_control.errors import DualArmError
 from dualarm_control.hardware import HARDWARE_PARAMETERS, profile_from_values
 from dualarm_control.kinematics import DualArmModel
@@ -104,7 +105,7 @@ NODE_PARAMETERS = (
     ROBOT_PARAMETER,
     *HARDWARE_PARAMETERS,
 )
-ALL_PARAMETERS = core.CONTROLLER_PARAMETERS + NODE_PARAMETERS
+ALL_PARAMETERS = CONTROLLER_PARAMETERS + NODE_PARAMETERS
 
 
 class ControllerNode:
@@ -119,7 +120,7 @@ class ControllerNode:
         self.scenario = load_scenario(self.values["scenario"], self.values["robot"])
         self.profile = profile_from_values(self.values, self.scenario.robot.joint_names, n.get_name())
         # the parameters, with the scenario's allowed contacts (the assembly's tools) in the collision limit
-        self.params = self.scenario.controller_params(core.controller_params(self.values, n.get_name()))
+        self.params = self.scenario.controller_params(controller_params(self.values, n.get_name()))
         self.model = DualArmModel(self.scenario.robot)
         self.robot_ref = self.model.description.reference
         # The same tracker as the in-process runner's (source.tracker): model, gain and cycle count
@@ -162,7 +163,7 @@ class ControllerNode:
             subscribe(WrenchStamped, WRENCH, lambda msg: self.on_input(
                 WRENCH, convert.stamp_ns(msg.header.stamp), convert.wrench_vector(msg)), 10)
         self.live = shell.LiveParameters(n, {s.name: s for s in ALL_PARAMETERS}, self.values, lambda merged: (
-            core.RelativeController(self.model, self.scenario.controller_params(core.controller_params(merged, n.get_name())),
+            core.RelativeController(self.model, self.scenario.controller_params(controller_params(merged, n.get_name())),
                                     collision=self.tracker.controller.collision_model)))
         self.ticks: list[shell.Tick] = ([] if self.lockstep else  # ros.node.Ticker, not an rclpy timer
                                         [(max(self.params.period, WATCHDOG_MIN_PERIOD_S), self.on_watchdog)])

@@ -7,7 +7,7 @@ generator; a refused command (NaN/inf, quaternion far from unit norm, unknown fr
 reach, stamp older than the last accepted: :mod:`dualarm_control.drive_commands`) changes
 nothing and is reported ``rejected`` with its reason. The motion limits
 (``limits.<MotionLimits field>``) are live parameters, validated as the scenario file's. Every
-cycle the drive keys (:func:`~dualarm_control.online_trajectory.status_values`: state, goal
+cycle the drive keys (:func:`~dualarm_control.drive_status.status_values`: state, goal
 stamp, measured distance and angle to the goal, time to go) go on ``/diagnostics``; the arms'
 arrival and stalls are judged by :class:`~dualarm_control.drive_monitor.GoalMonitor` (a stall
 at the collision limit names the pair: "collision constraint: left_flange – right_link_5 at
@@ -27,19 +27,18 @@ from rcl_interfaces.msg import SetParametersResult
 
 from dualarm_control.collision import CollisionModel
 from dualarm_control.drive_monitor import GoalMonitor
-from dualarm_control.errors import DualArmError
-from dualarm_control.kinematics import DualArmModel, FloatArray
-from dualarm_control.online_trajectory import (
+from dualarm_control.drive_status import (
     JOGGING,
     MOVING,
     REACHED,
     REJECTED,
     STALLED,
     STATUS_NAME,
-    CommandResult,
-    OnlineTrajectory,
     status_values,
 )
+from dualarm_control.errors import DualArmError
+from dualarm_control.kinematics import DualArmModel, FloatArray
+from dualarm_control.online_trajectory import CommandResult, OnlineTrajectory
 from dualarm_control.params import ParamSpec, positive
 from dualarm_control.ros import convert
 from dualarm_control.ros.drive import GOAL_TOPIC, TWIST_TOPIC

@@ -37,9 +37,9 @@ from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
 from dualarm_control.drive_monitor import GoalOutcome, SegmentJudge
+from dualarm_control.drive_status import STALLED
 from dualarm_control.hardware import HARDWARE_PARAMETERS, profile_from_values
 from dualarm_control.kinematics import DualArmModel
-from dualarm_control.online_trajectory import STALLED
 from dualarm_control.params import ParamSpec, positive
 from dualarm_control.references.base import (
     JOINT_REFERENCE,

@@ -25,7 +25,8 @@ from dualarm_control.errors import ScenarioError
 from dualarm_control.params import ParameterError, read_params_file
 from dualarm_control.planning.baseline import BaselineParams
 from dualarm_control.planning.path import CornerPath
-from dualarm_control.robot import RobotDescription, load_robot
+from dualarm_control.robot import RobotDescription
+from dualarm_control.robot_params import load_robot
 from dualarm_control.scenario import scenario_file, scenario_robot
 from dualarm_control.scenario_keys import number
 

@@ -9,7 +9,7 @@
   :func:`set_message_fields` is a small equivalent over ``get_fields_and_field_types()``.
 * ``goal`` publishes one geometry_msgs/PoseStamped on ``/relative_goal`` (frame ``left_tool``)
   and with ``--wait`` follows the trajectory node's ``/diagnostics`` drive keys
-  (:data:`dualarm_control.online_trajectory.STATUS_KEYS`) until the goal is reached (exit 0),
+  (:data:`dualarm_control.drive_status.STATUS_KEYS`) until the goal is reached (exit 0),
   or rejected, stalled or timed out (exit 1).
 * ``jog`` streams geometry_msgs/TwistStamped on ``/relative_twist`` at ``--rate`` for
   ``--seconds``; the node brakes to rest ``jog_timeout`` after the last one.
@@ -31,15 +31,15 @@ from dualarm_control.drive_commands import (
     rotation_from_quaternion,
     rotation_from_rpy,
 )
-from dualarm_control.errors import DualArmError
-from dualarm_control.kinematics import LEFT_TOOL
-from dualarm_control.online_trajectory import (
+from dualarm_control.drive_status import (
     REACHED,
     REJECTED,
     STALLED,
     STATUS_NAME,
     parse_status,
 )
+from dualarm_control.errors import DualArmError
+from dualarm_control.kinematics import LEFT_TOOL
 from dualarm_control.ros.convert import quaternion_xyzw
 from dualarm_control.ros.graph import fq_topic, message_class
 from dualarm_control.ros.node import tool_node

@@ -6,11 +6,11 @@ from dualarm_control.solvers import constraint_based as _constraint_based  # noq
 from dualarm_control.solvers import methods as _methods  # noqa: F401 - fills the registry
 from dualarm_control.solvers.base import (
     ACTIVITY_THRESHOLD,
-    ControlProblem,
     Solver,
     SolverParams,
     SolverResult,
 )
+from dualarm_control.solvers.problem import ControlProblem
 from dualarm_control.solvers.registry import (
     register,
     solver_class,

@@ -1,18 +1,12 @@
-"""What every kinematic solver takes and returns, and the solver failure policy.
+"""What every kinematic solver takes and returns: :class:`Solver`, its parameters and its result.
 
 A solver is a pure function of the problem (Jacobian, reference twist, velocity bounds,
 repulsive velocity) to joint velocities, plus its own warm-start memory. The same object
 serves the in-process experiment, the controller node and the benchmark.
 
-Failure policy (docs/safety.md, "Input validation and solver failure"): when a solver's QP
-is infeasible, stops at its iteration cap, fails numerically, raises, or returns a
-non-finite vector, the command is the best bounded least-squares step
-(:func:`bounded_least_squares`), status "fallback" with the reason in ``detail``; if that
-fails too, the bounded command nearest to rest (:func:`rest_command`). A result beyond a
-velocity bound by more than the solver's ``bound_tolerance`` (its QP back-end's tolerance,
-:attr:`Solver.bound_tolerance`) is a failure of its own, status "bounds_violated", with the
-same command; within that tolerance the clip into the bounds absorbs the overshoot. Every
-command is finite and inside the velocity bounds of eq (23).
+The failure policy the base class applies around each solver (docs/safety.md, "Input validation
+and solver failure") is in :mod:`dualarm_control.solvers.policy`; the problem in
+:mod:`dualarm_control.solvers.problem`.
 """
 
 from __future__ import annotations
@@ -22,165 +16,20 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import numpy.typing as npt
 
-# scipy.optimize imported here, not in the fallback: a first import inside the loop takes ~0.3 s
-from scipy.optimize import lsq_linear
-
-from dualarm_control.limits.base import DeferredRows
 from dualarm_control.qp import DEFAULT_BACKEND, QPSettings, QPSolution, make_backend
-from dualarm_control.solvers.slack_qp import slack_qp
+from dualarm_control.solvers.policy import (
+    ROUND_OFF,
+    bound_excess,
+    fallback,
+    row_violation_text,
+    violation_text,
+)
+from dualarm_control.solvers.problem import ControlProblem, FloatArray
 from dualarm_control.status import FAILURE_STATUSES, FALLBACK_TRIGGERS, Status
-
-FloatArray = npt.NDArray[np.float64]
 
 ACTIVITY_THRESHOLD = 1e-3
 """A joint is active when |qd_i| > 1e-3 rad/s (paper 000, Fig. 5 and Table I)."""
-
-ROUND_OFF = 1e-12
-"""Bound tolerance of a closed form [rad/s]: floating-point round-off only (a pseudo-inverse
-shrunk onto a bound, a sum of two bounded parts); bounds are at most a few rad/s, so this is
-some 1e3 ulp of them."""
-FALLBACK_DAMPING = 1e-6
-"""Damping of :func:`bounded_least_squares` [(m/s)^2 per (rad/s)^2]: selects a small step
-among the least-squares ones and keeps the problem well posed at singular configurations."""
-
-
-@dataclass(slots=True)
-class ControlProblem:
-    """Inputs of one control cycle.
-
-    A per-cycle record: slotted, not frozen (cheaper to build, docs/bench.md); read-only by convention.
-
-    Attributes:
-        jacobian: relative Jacobian J of eq (5), (6, n); (6 k, n) for k relative tasks stacked
-            (the benchmark's 3- and 4-arm chains).
-        reference: closed-loop reference twist xd* + K e of eq (13)/(26) [m/s; rad/s], (6,) or (6 k,).
-        lower, upper: joint velocity bounds Qd_min, Qd_max of eq (23) [rad/s], (n,).
-        repulsive: repulsive joint velocity qd_r of eq (25) [rad/s], (n,); used by the
-            hierarchical solver's secondary task only.
-        inequality_jacobian: A_ie of paper 001 eq (13), (m_ie, n), or None (no inequality
-            rows; the solvers of paper 000 ignore them).
-        inequality_bound: h of ``A_ie qd <= h``, k(b - f) - df/dt of eq (13), (m_ie,).
-        equality_weights: slack weight of each row of ``jacobian`` (>= 0), (m,), or None (1).
-        inequality_weights: slack weight of each inequality row (> 0), (m_ie,), or None.
-        limit_rows: hard rows ``limit_rows @ qd <= limit_bound`` of the limits beyond the box, (m_l, n), or
-            None: the collision limit's velocity damper (:mod:`dualarm_control.limits.collision`). Every
-            solver takes them as hard constraints (docs/collision.md, "Limits").
-        limit_bound: their right-hand side [m/s], (m_l,).
-        limit_labels: what each row keeps apart (the link pair), m_l strings, for reports.
-        limit_deferred: the rows given instead as :class:`~dualarm_control.limits.DeferredRows`
-            (limit_rows None): built only when a solver needs them (:meth:`limit_matrix`); where
-            their speed bound vouches for a qd (:meth:`limit_excess`), they are not.
-    """
-
-    jacobian: FloatArray
-    reference: FloatArray
-    lower: FloatArray
-    upper: FloatArray
-    repulsive: FloatArray
-    inequality_jacobian: FloatArray | None = None
-    inequality_bound: FloatArray | None = None
-    equality_weights: FloatArray | None = None
-    inequality_weights: FloatArray | None = None
-    limit_rows: FloatArray | None = None
-    limit_bound: FloatArray | None = None
-    limit_labels: tuple[str, ...] = ()
-    limit_deferred: DeferredRows | None = None
-
-    @property
-    def has_limit_rows(self) -> bool:
-        """Whether the problem has at least one hard limit row."""
-        return (self.limit_rows is not None and self.limit_rows.shape[0] > 0) or self.limit_deferred is not None
-
-    def limit_matrix(self) -> FloatArray | None:
-        """A of the hard limit rows (m_l, n), built now when deferred; None without rows."""
-        if self.limit_rows is None and self.limit_deferred is not None:
-            self.limit_rows = self.limit_deferred.matrix
-        return self.limit_rows
-
-    def limit_excess(self, qd: FloatArray) -> float:
-        """How far qd (n,) [rad/s] breaks the hard limit rows at their worst: max(A qd - b, 0) [m/s]
-        (0 without building deferred rows where their speed bound vouches for qd)."""
-        if self.limit_bound is None or not self.has_limit_rows:
-            return 0.0
-        if self.limit_rows is None and self.limit_deferred is not None and self.limit_deferred.meets(qd):
-            return 0.0
-        a = self.limit_matrix()
-        assert a is not None
-        return float((a @ qd - self.limit_bound).max(initial=0.0))
-
-    def without_limit_rows(self) -> ControlProblem:
-        """The same problem without the limits' rows (its relaxation: a solution of it that meets the
-        rows solves the problem with them, as the QPs are convex)."""
-        return ControlProblem(self.jacobian, self.reference, self.lower, self.upper, self.repulsive,
-                              self.inequality_jacobian, self.inequality_bound, self.equality_weights,
-                              self.inequality_weights)
-
-    def problem_with_invalid_input(self) -> str:
-        """Return a description of what is wrong with the inputs, or '' when they are usable.
-
-        Runs every cycle, so the common case costs four reductions: shapes are compared as
-        tuples, and one sum is finite only if J, the reference and the repulsive velocity are
-        finite and g = max(lower - upper) is finite (a NaN or an infinite bound makes it NaN
-        or +-inf). g > 1e-12 means crossing bounds. Only when a test fails are the arrays
-        examined one by one to name the culprit.
-        """
-        m, n = self.jacobian.shape if self.jacobian.ndim == 2 else (-1, -1)
-        if m < 1 or self.reference.shape != (m,):
-            return f"bad shapes: J {self.jacobian.shape}, reference {self.reference.shape}"
-        if self.lower.shape != (n,) or self.upper.shape != (n,) or self.repulsive.shape != (n,):
-            for name in ("lower", "upper", "repulsive"):
-                if getattr(self, name).shape != (n,):
-                    return f"bad shape of {name}: {getattr(self, name).shape}, expected ({n},)"
-        gap = (self.lower - self.upper).max()
-        if not math.isfinite(self.jacobian.sum() + self.reference.sum() + self.repulsive.sum() + gap):
-            for name in ("jacobian", "reference", "lower", "upper", "repulsive"):
-                if not np.all(np.isfinite(getattr(self, name))):
-                    return f"non-finite values in {name}"
-        if self.inequality_jacobian is not None or self.inequality_bound is not None \
-                or self.equality_weights is not None or self.inequality_weights is not None \
-                or self.limit_rows is not None or self.limit_bound is not None or self.limit_deferred is not None:
-            optional = self._problem_with_optional_rows(m, n)
-            if optional:
-                return optional
-        if gap > 1e-12:
-            i = int(np.argmax(self.lower - self.upper))
-            return f"velocity bounds cross at joint {i}: lower {self.lower[i]:.4g} > upper {self.upper[i]:.4g} (joint outside its position range)"
-        return ""
-
-    def _problem_with_optional_rows(self, m: int, n: int) -> str:
-        """Shapes and finiteness of the optional inequality rows and weights ('' when usable)."""
-        a, h = self.inequality_jacobian, self.inequality_bound
-        if (a is None) != (h is None):
-            return "inequality_jacobian and inequality_bound must be given together"
-        m_ie = 0
-        if a is not None and h is not None:
-            m_ie = a.shape[0] if a.ndim == 2 else -1
-            if a.shape != (m_ie, n) or h.shape != (m_ie,):
-                return f"bad shapes: inequality_jacobian {a.shape}, inequality_bound {h.shape}"
-            if not math.isfinite(a.sum() + h.sum()):
-                return "non-finite values in the inequality rows"
-        a, h = self.limit_rows, self.limit_bound
-        if a is None and self.limit_deferred is not None:  # checked without building the rows: their speed bound
-            a = self.limit_deferred.speed
-        if (a is None) != (h is None):
-            return "limit_rows and limit_bound must be given together"
-        if a is not None and h is not None:
-            m_l = a.shape[0] if a.ndim == 2 else -1
-            if a.shape != (m_l, n) or h.shape != (m_l,):
-                return f"bad shapes: limit_rows {a.shape}, limit_bound {h.shape}"
-            if not math.isfinite(a.sum() + h.sum()):
-                return "non-finite values in the limit rows"
-        for name, size in (("equality_weights", m), ("inequality_weights", m_ie)):
-            w = getattr(self, name)
-            if w is None:
-                continue
-            if w.shape != (size,):
-                return f"bad shape of {name}: {w.shape}, expected ({size},)"
-            if not math.isfinite(w.sum()) or w.min(initial=0.0) < 0:
-                return f"{name} must be finite and >= 0"
-        return ""
 
 
 @dataclass(slots=True)
@@ -388,154 +237,8 @@ class Solver:
         return self.box_tolerance(problem) * (1.0 + float(np.abs(rows).sum(axis=1).max(initial=0.0)))
 
 
-def fallback(problem: ControlProblem, qd: FloatArray | None, status: Status, detail: str) -> tuple[FloatArray, Status, str]:
-    """The failure policy for a valid problem whose solver gave no usable result.
-
-    Returns (velocities, status, detail): the bounded least-squares step with status
-    "fallback" ("bounds_violated" for a result beyond its bounds), or :func:`rest_command`
-    with the original failure status ("failed" for a "max_iter", non-finite or wrongly shaped
-    result) when the least-squares step fails too.
-
-    With hard limit rows (the collision limit), a least-squares step that breaks them is not
-    commanded: :func:`separating_step` is (the rows relaxed as little as the box allows: it moves
-    the pairs apart as fast as the bounds let it, or stops), and ``detail`` says by how much the
-    rows were relaxed; when that fails too, the command nearest to rest.
-    """
-    if qd is not None and status not in FALLBACK_TRIGGERS and status != Status.BOUNDS_VIOLATED:
-        status, detail = Status.FAILED, detail or f"solver returned non-finite velocities or shape {qd.shape}"
-    reason = f"{status}: {detail or 'no solution'}"
-    final_status = status if status == Status.BOUNDS_VIOLATED else Status.FALLBACK
-    step = bounded_least_squares(problem.jacobian, problem.reference, problem.lower, problem.upper)
-    if step is not None and problem.limit_excess(step) <= ROUND_OFF:
-        return step, final_status, f"{reason}; bounded least-squares step used"
-    if problem.has_limit_rows:
-        separated = separating_step(problem)
-        if separated is not None:
-            velocities, slack = separated
-            relaxed = f", limit rows relaxed by up to {slack:.3g} m/s" if slack > ROUND_OFF else ""
-            return velocities, final_status, f"{reason}; separating step used (limit rows hard{relaxed})"
-    final = Status.FAILED if status == Status.MAX_ITER else status
-    return rest_command(problem.lower, problem.upper), final, f"{reason}; bounded least squares failed, nearest-to-rest command"
-
-
 LIMIT_ROWS_TOLERANCE_FACTOR = 4.0
 """Factor on a solver's bound tolerance for a problem with limit rows (:meth:`Solver.box_tolerance`)."""
-SEPARATING_WEIGHT = 1e3
-"""rho of :func:`separating_step`: the linear cost of a limit row's slack [per m/s], an exact penalty
-(no slack while the rows are feasible with multipliers below rho)."""
-
-
-def separating_step(problem: ControlProblem) -> tuple[FloatArray, float] | None:
-    """The fallback when the limit rows conflict with the box (a pair already inside d_s that the
-    box does not let move apart fast enough, or a solver that failed with rows):
-
-        min 1/2 ||J qd - r||^2 + eps ||qd||^2 + rho 1^T s + mu/2 ||s||^2
-        s.t. lower <= qd <= upper,  A qd - s <= b,  s >= 0
-
-    (paper 001's slack QP, :func:`~dualarm_control.solvers.slack_qp.slack_qp`, with the
-    limit rows as its inequality rows and rho = :data:`SEPARATING_WEIGHT`): where the rows can be
-    met inside the box, s = 0 and this is the task's best step that meets them; where they cannot,
-    the rows are relaxed by the least slack: the pair moves apart as fast as the box allows (zero
-    approach where zero is all it allows: a stop). Solved by daqp.
-
-    Returns:
-        (qd [rad/s] (n,), inside the box, the largest slack [m/s]); None when the QP fails.
-    """
-    rows = problem.limit_matrix()
-    assert rows is not None and problem.limit_bound is not None
-    m = rows.shape[0]
-    qp = slack_qp(problem.jacobian, problem.reference, problem.equality_weights, problem.lower, problem.upper,
-                  FALLBACK_DAMPING, rows, problem.limit_bound, np.full(m, SEPARATING_WEIGHT))
-    n = problem.lower.shape[0]
-    solution = make_backend("daqp").solve(qp)
-    if solution.x is None or not math.isfinite(float(solution.x.sum())):
-        return None
-    qd = np.minimum(np.maximum(solution.x[:n], problem.lower), problem.upper)
-    return qd, float(solution.x[n:].max(initial=0.0))
-
-
-def row_violation_text(problem: ControlProblem, qd: FloatArray, tolerance: float) -> str:
-    """The worst limit row broken by qd (n,) [rad/s], for a "bounds_violated" detail."""
-    rows = problem.limit_matrix()
-    assert rows is not None and problem.limit_bound is not None
-    over = rows @ qd - problem.limit_bound
-    i = int(np.argmax(over))
-    label = problem.limit_labels[i] if i < len(problem.limit_labels) else f"row {i}"
-    return f"limit row {label} broken by {over[i]:.3g} m/s (tolerance {tolerance:.3g} m/s)"
-
-
-def bound_excess(x: FloatArray, lower: FloatArray, upper: FloatArray) -> float:
-    """How far x lies beyond [lower, upper] at its worst entry: max(lower - x, x - upper, 0).
-
-    Args:
-        x, lower, upper: (n,) [rad/s].
-
-    Returns:
-        The excess [rad/s], 0 when x is inside; NaN or inf when x is not finite, NaN when its
-        shape is not (n,).
-    """
-    if x.shape != lower.shape:
-        return math.nan
-    return float(np.maximum(lower - x, x - upper).max(initial=0.0))
-
-
-def violation_text(x: FloatArray, lower: FloatArray, upper: FloatArray, tolerance: float) -> str:
-    """The worst bound violation of x, for a "bounds_violated" detail (shapes (n,), rad/s)."""
-    below, above = lower - x, x - upper
-    i = int(np.argmax(np.maximum(below, above)))
-    side, bound = ("lower", lower[i]) if below[i] >= above[i] else ("upper", upper[i])
-    return (f"joint {i} at {x[i]:.6g} rad/s beyond its {side} bound {bound:.6g} by {max(below[i], above[i]):.3g} "
-            f"(tolerance {tolerance:.3g} rad/s)")
-
-
-def inside(x: FloatArray, lower: FloatArray, upper: FloatArray) -> bool:
-    """True when lower <= x <= upper everywhere (False for any NaN), shapes (n,).
-
-    One pass (max(lower - x, x - upper) <= 0): twice as cheap as two np.all tests, and a
-    closed form's result is tested this way every cycle."""
-    return bool(np.maximum(lower - x, x - upper).max() <= 0.0)
-
-
-def rest_command(lower: FloatArray, upper: FloatArray) -> FloatArray:
-    """The command inside [lower, upper] nearest to rest: clip(0, lower, upper) [rad/s], (n,).
-
-    Zero velocity while every joint is inside its position range (eq 23 contains 0); for a
-    joint beyond a limit, the slowest motion back toward the range (:func:`velocity_bounds`).
-    """
-    return np.minimum(np.maximum(0.0, lower), upper)
-
-
-def bounded_least_squares(jacobian: FloatArray, reference: FloatArray, lower: FloatArray, upper: FloatArray,
-                          damping: float = FALLBACK_DAMPING) -> FloatArray | None:
-    """The fallback step: argmin ||J qd - r||^2 + damping ||qd||^2  s.t.  lower <= qd <= upper.
-
-    Eq (14) with its bounds (eq 23), solved by bounded-variable least squares
-    (scipy.optimize.lsq_linear, BVLS) on the stacked system [J; sqrt(damping) I] qd = [r; 0],
-    which is well posed even where J is singular. Joints whose bounds (nearly) coincide are
-    fixed at them first (BVLS needs lower < upper).
-
-    Args:
-        jacobian: J (m, n); reference: r (m,) [m/s; rad/s]; lower, upper: bounds [rad/s], (n,).
-        damping: weight of ||qd||^2, >= 0.
-
-    Returns:
-        qd [rad/s], (n,), finite and inside the bounds; None when the solve fails.
-    """
-    qd = rest_command(lower, upper)
-    free = upper - lower > 1e-12
-    if not free.any():
-        return qd
-    a = np.vstack((jacobian[:, free], math.sqrt(damping) * np.eye(int(free.sum()))))
-    b = np.concatenate((reference - jacobian[:, ~free] @ qd[~free], np.zeros(int(free.sum()))))
-    try:
-        solution = lsq_linear(a, b, bounds=(lower[free], upper[free]), method="bvls")
-    except (ValueError, np.linalg.LinAlgError):  # e.g. non-finite data
-        return None
-    x = np.asarray(solution.x, dtype=float)
-    if solution.status < 0 or x.shape != (int(free.sum()),) or not math.isfinite(x.sum()):
-        return None
-    qd[free] = x
-    return np.minimum(np.maximum(qd, lower), upper)
 
 
 def from_qp(solution: QPSolution, transform=None) -> tuple[FloatArray | None, Status, int, str]:

@@ -37,16 +37,10 @@ from __future__ import annotations
 import numpy as np
 
 from dualarm_control.qp import QPProblem, check_backend
-from dualarm_control.solvers.base import (
-    ROUND_OFF,
-    ControlProblem,
-    FloatArray,
-    Solver,
-    SolverParams,
-    from_qp,
-    inside,
-)
+from dualarm_control.solvers.base import Solver, SolverParams, from_qp
 from dualarm_control.solvers.methods import damped_least_squares
+from dualarm_control.solvers.policy import ROUND_OFF, inside
+from dualarm_control.solvers.problem import ControlProblem, FloatArray
 from dualarm_control.solvers.registry import register
 from dualarm_control.solvers.slack_qp import slack_qp
 from dualarm_control.status import Status

@@ -11,16 +11,9 @@ import numpy.typing as npt
 from scipy.linalg import lapack
 
 from dualarm_control.qp import QPBackend, QPProblem, check_backend
-from dualarm_control.solvers.base import (
-    ROUND_OFF,
-    ControlProblem,
-    FloatArray,
-    Solver,
-    SolverParams,
-    bound_excess,
-    from_qp,
-    inside,
-)
+from dualarm_control.solvers.base import Solver, SolverParams, from_qp
+from dualarm_control.solvers.policy import ROUND_OFF, bound_excess, inside
+from dualarm_control.solvers.problem import ControlProblem, FloatArray
 from dualarm_control.solvers.registry import register
 from dualarm_control.solvers.slack_qp import INFINITY
 from dualarm_control.status import Status
@@ -40,7 +33,7 @@ class PseudoInverse(Solver):
     with b >= 0 (rest meets it). A row with b < 0 (a pair inside the safety distance: it must move
     apart) cannot be met by shrinking eq (13)'s direction, which is the task's: the pseudo-inverse
     then gives up, status "infeasible" with the row named, and the failure policy's separating
-    step (:func:`~dualarm_control.solvers.base.separating_step`) is commanded.
+    step (:func:`~dualarm_control.solvers.policy.separating_step`) is commanded.
     """
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, Status, int, str]:

@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Literal, Protocol
 import numpy as np
 
 from dualarm_control.kinematics import FloatArray
-from dualarm_control.solvers.base import ControlProblem
+from dualarm_control.solvers.problem import ControlProblem
 
 if TYPE_CHECKING:
     from dualarm_control.kinematics import Configuration

@@ -296,7 +296,7 @@ class Bag:
     def robot(self) -> RobotDescription:
         """The robot of the run: the controller's ``robot`` on /diagnostics (a bag recorded before
         robots were data: the LWR4 cell)."""
-        from dualarm_control.robot import DEFAULT_ROBOT, load_robot
+        from dualarm_control.robot_params import DEFAULT_ROBOT, load_robot
 
         return load_robot(next((v["robot"] for _, v in self.cycles if v.get("robot")), DEFAULT_ROBOT))
 

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from dualarm_control.robot import load_robot, robot_names
+from dualarm_control.robot_params import load_robot, robot_names
 
 
 def list_command() -> int:

@@ -24,11 +24,12 @@ from dualarm_control.app.record.run_record import RunRecord
 from dualarm_control.app.run import DEFAULT_SOLVERS
 from dualarm_control.app.run.experiment import run_scenario
 from dualarm_control.app.run.progress import progress_bar
-from dualarm_control.controller import ControllerParams, controller_params
+from dualarm_control.controller import ControllerParams
+from dualarm_control.controller_params import controller_params
 from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import read_params_files
-from dualarm_control.robot import robot_defaults
+from dualarm_control.robot_params import robot_defaults
 from dualarm_control.scenario import load_scenario
 
 EXIT_INTERRUPTED = 130

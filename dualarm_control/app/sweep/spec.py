@@ -29,9 +29,10 @@ from typing import Any
 import yaml
 
 from dualarm_control.app.sweep.tasks import TaskSampling
-from dualarm_control.controller import ControllerParams, controller_params
+from dualarm_control.controller import ControllerParams
+from dualarm_control.controller_params import controller_params
 from dualarm_control.errors import DualArmError
-from dualarm_control.robot import load_robot, robot_defaults
+from dualarm_control.robot_params import load_robot, robot_defaults
 
 
 class SpecError(DualArmError):

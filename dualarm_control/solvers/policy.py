@@ -1,0 +1,184 @@
+"""The solver failure policy: what a result beyond its bounds is, and what is commanded instead.
+
+Failure policy (docs/safety.md, "Input validation and solver failure"): when a solver's QP
+is infeasible, stops at its iteration cap, fails numerically, raises, or returns a
+non-finite vector, the command is the best bounded least-squares step
+(:func:`bounded_least_squares`), status "fallback" with the reason in ``detail``; if that
+fails too, the bounded command nearest to rest (:func:`rest_command`). A result beyond a
+velocity bound by more than the solver's ``bound_tolerance`` (its QP back-end's tolerance,
+:attr:`~dualarm_control.solvers.base.Solver.bound_tolerance`) is a failure of its own, status "bounds_violated", with the
+same command; within that tolerance the clip into the bounds absorbs the overshoot. Every
+command is finite and inside the velocity bounds of eq (23).
+
+:class:`~dualarm_control.solvers.base.Solver` applies it around every solver's ``_solve``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+# scipy.optimize imported here, not in the fallback: a first import inside the loop takes ~0.3 s
+from scipy.optimize import lsq_linear
+
+from dualarm_control.qp import make_backend
+from dualarm_control.solvers.problem import ControlProblem, FloatArray
+from dualarm_control.solvers.slack_qp import slack_qp
+from dualarm_control.status import FALLBACK_TRIGGERS, Status
+
+ROUND_OFF = 1e-12
+"""Bound tolerance of a closed form [rad/s]: floating-point round-off only (a pseudo-inverse
+shrunk onto a bound, a sum of two bounded parts); bounds are at most a few rad/s, so this is
+some 1e3 ulp of them."""
+FALLBACK_DAMPING = 1e-6
+"""Damping of :func:`bounded_least_squares` [(m/s)^2 per (rad/s)^2]: selects a small step
+among the least-squares ones and keeps the problem well posed at singular configurations."""
+
+
+def fallback(problem: ControlProblem, qd: FloatArray | None, status: Status, detail: str) -> tuple[FloatArray, Status, str]:
+    """The failure policy for a valid problem whose solver gave no usable result.
+
+    Returns (velocities, status, detail): the bounded least-squares step with status
+    "fallback" ("bounds_violated" for a result beyond its bounds), or :func:`rest_command`
+    with the original failure status ("failed" for a "max_iter", non-finite or wrongly shaped
+    result) when the least-squares step fails too.
+
+    With hard limit rows (the collision limit), a least-squares step that breaks them is not
+    commanded: :func:`separating_step` is (the rows relaxed as little as the box allows: it moves
+    the pairs apart as fast as the bounds let it, or stops), and ``detail`` says by how much the
+    rows were relaxed; when that fails too, the command nearest to rest.
+    """
+    if qd is not None and status not in FALLBACK_TRIGGERS and status != Status.BOUNDS_VIOLATED:
+        status, detail = Status.FAILED, detail or f"solver returned non-finite velocities or shape {qd.shape}"
+    reason = f"{status}: {detail or 'no solution'}"
+    final_status = status if status == Status.BOUNDS_VIOLATED else Status.FALLBACK
+    step = bounded_least_squares(problem.jacobian, problem.reference, problem.lower, problem.upper)
+    if step is not None and problem.limit_excess(step) <= ROUND_OFF:
+        return step, final_status, f"{reason}; bounded least-squares step used"
+    if problem.has_limit_rows:
+        separated = separating_step(problem)
+        if separated is not None:
+            velocities, slack = separated
+            relaxed = f", limit rows relaxed by up to {slack:.3g} m/s" if slack > ROUND_OFF else ""
+            return velocities, final_status, f"{reason}; separating step used (limit rows hard{relaxed})"
+    final = Status.FAILED if status == Status.MAX_ITER else status
+    return rest_command(problem.lower, problem.upper), final, f"{reason}; bounded least squares failed, nearest-to-rest command"
+
+
+SEPARATING_WEIGHT = 1e3
+"""rho of :func:`separating_step`: the linear cost of a limit row's slack [per m/s], an exact penalty
+(no slack while the rows are feasible with multipliers below rho)."""
+
+
+def separating_step(problem: ControlProblem) -> tuple[FloatArray, float] | None:
+    """The fallback when the limit rows conflict with the box (a pair already inside d_s that the
+    box does not let move apart fast enough, or a solver that failed with rows):
+
+        min 1/2 ||J qd - r||^2 + eps ||qd||^2 + rho 1^T s + mu/2 ||s||^2
+        s.t. lower <= qd <= upper,  A qd - s <= b,  s >= 0
+
+    (paper 001's slack QP, :func:`~dualarm_control.solvers.slack_qp.slack_qp`, with the
+    limit rows as its inequality rows and rho = :data:`SEPARATING_WEIGHT`): where the rows can be
+    met inside the box, s = 0 and this is the task's best step that meets them; where they cannot,
+    the rows are relaxed by the least slack: the pair moves apart as fast as the box allows (zero
+    approach where zero is all it allows: a stop). Solved by daqp.
+
+    Returns:
+        (qd [rad/s] (n,), inside the box, the largest slack [m/s]); None when the QP fails.
+    """
+    rows = problem.limit_matrix()
+    assert rows is not None and problem.limit_bound is not None
+    m = rows.shape[0]
+    qp = slack_qp(problem.jacobian, problem.reference, problem.equality_weights, problem.lower, problem.upper,
+                  FALLBACK_DAMPING, rows, problem.limit_bound, np.full(m, SEPARATING_WEIGHT))
+    n = problem.lower.shape[0]
+    solution = make_backend("daqp").solve(qp)
+    if solution.x is None or not math.isfinite(float(solution.x.sum())):
+        return None
+    qd = np.minimum(np.maximum(solution.x[:n], problem.lower), problem.upper)
+    return qd, float(solution.x[n:].max(initial=0.0))
+
+
+def row_violation_text(problem: ControlProblem, qd: FloatArray, tolerance: float) -> str:
+    """The worst limit row broken by qd (n,) [rad/s], for a "bounds_violated" detail."""
+    rows = problem.limit_matrix()
+    assert rows is not None and problem.limit_bound is not None
+    over = rows @ qd - problem.limit_bound
+    i = int(np.argmax(over))
+    label = problem.limit_labels[i] if i < len(problem.limit_labels) else f"row {i}"
+    return f"limit row {label} broken by {over[i]:.3g} m/s (tolerance {tolerance:.3g} m/s)"
+
+
+def bound_excess(x: FloatArray, lower: FloatArray, upper: FloatArray) -> float:
+    """How far x lies beyond [lower, upper] at its worst entry: max(lower - x, x - upper, 0).
+
+    Args:
+        x, lower, upper: (n,) [rad/s].
+
+    Returns:
+        The excess [rad/s], 0 when x is inside; NaN or inf when x is not finite, NaN when its
+        shape is not (n,).
+    """
+    if x.shape != lower.shape:
+        return math.nan
+    return float(np.maximum(lower - x, x - upper).max(initial=0.0))
+
+
+def violation_text(x: FloatArray, lower: FloatArray, upper: FloatArray, tolerance: float) -> str:
+    """The worst bound violation of x, for a "bounds_violated" detail (shapes (n,), rad/s)."""
+    below, above = lower - x, x - upper
+    i = int(np.argmax(np.maximum(below, above)))
+    side, bound = ("lower", lower[i]) if below[i] >= above[i] else ("upper", upper[i])
+    return (f"joint {i} at {x[i]:.6g} rad/s beyond its {side} bound {bound:.6g} by {max(below[i], above[i]):.3g} "
+            f"(tolerance {tolerance:.3g} rad/s)")
+
+
+def inside(x: FloatArray, lower: FloatArray, upper: FloatArray) -> bool:
+    """True when lower <= x <= upper everywhere (False for any NaN), shapes (n,).
+
+    One pass (max(lower - x, x - upper) <= 0): twice as cheap as two np.all tests, and a
+    closed form's result is tested this way every cycle."""
+    return bool(np.maximum(lower - x, x - upper).max() <= 0.0)
+
+
+def rest_command(lower: FloatArray, upper: FloatArray) -> FloatArray:
+    """The command inside [lower, upper] nearest to rest: clip(0, lower, upper) [rad/s], (n,).
+
+    Zero velocity while every joint is inside its position range (eq 23 contains 0); for a
+    joint beyond a limit, the slowest motion back toward the range (:func:`velocity_bounds`).
+    """
+    return np.minimum(np.maximum(0.0, lower), upper)
+
+
+def bounded_least_squares(jacobian: FloatArray, reference: FloatArray, lower: FloatArray, upper: FloatArray,
+                          damping: float = FALLBACK_DAMPING) -> FloatArray | None:
+    """The fallback step: argmin ||J qd - r||^2 + damping ||qd||^2  s.t.  lower <= qd <= upper.
+
+    Eq (14) with its bounds (eq 23), solved by bounded-variable least squares
+    (scipy.optimize.lsq_linear, BVLS) on the stacked system [J; sqrt(damping) I] qd = [r; 0],
+    which is well posed even where J is singular. Joints whose bounds (nearly) coincide are
+    fixed at them first (BVLS needs lower < upper).
+
+    Args:
+        jacobian: J (m, n); reference: r (m,) [m/s; rad/s]; lower, upper: bounds [rad/s], (n,).
+        damping: weight of ||qd||^2, >= 0.
+
+    Returns:
+        qd [rad/s], (n,), finite and inside the bounds; None when the solve fails.
+    """
+    qd = rest_command(lower, upper)
+    free = upper - lower > 1e-12
+    if not free.any():
+        return qd
+    a = np.vstack((jacobian[:, free], math.sqrt(damping) * np.eye(int(free.sum()))))
+    b = np.concatenate((reference - jacobian[:, ~free] @ qd[~free], np.zeros(int(free.sum()))))
+    try:
+        solution = lsq_linear(a, b, bounds=(lower[free], upper[free]), method="bvls")
+    except (ValueError, np.linalg.LinAlgError):  # e.g. non-finite data
+        return None
+    x = np.asarray(solution.x, dtype=float)
+    if solution.status < 0 or x.shape != (int(free.sum()),) or not math.isfinite(x.sum()):
+        return None
+    qd[free] = x
+    return np.minimum(np.maximum(qd, lower), upper)
