@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -45,7 +46,7 @@ from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
 from dualarm_control import controller as core
-from dualarm_control.errors import DualArmError
+from dualarm_control.errors import DualArmError, InputRejected
 from dualarm_control.hardware import HARDWARE_PARAMETERS, profile_from_values
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.limits.collision import CollisionReport
@@ -148,7 +149,8 @@ class ControllerNode:
         order = {name: i for i, name in enumerate(self.model.joint_names)}
 
         def subscribe(msg_type: Any, topic: str, callback: Any, qos: Any, decoder: Any = None) -> None:
-            inputs.subscribe_checked(n, msg_type, topic, callback, qos, self.on_malformed, decoder, bus)
+            inputs.subscribe_checked(n, msg_type, topic, callback, qos, self.on_malformed, decoder, bus,
+                                     lambda exc: self.on_rejected(topic, exc))
 
         self.joint_states = JointStates(n, self.profile, m.joint_names, qos, self.on_joint_state, self.out.reject,
                                         self.on_malformed, bus)
@@ -156,11 +158,10 @@ class ControllerNode:
             subscribe(MultiDOFJointTrajectory, RELATIVE_TARGET, lambda s: self.on_input(RELATIVE_TARGET, *s),
                       qos, convert.TargetInput(self.model.relative_reach()))
         if JOINT_REFERENCE in self.streams:
-            subscribe(JointTrajectory, JOINT_REFERENCE, lambda msg: self.on_input(
-                JOINT_REFERENCE, convert.stamp_ns(msg.header.stamp), convert.joint_reference(msg, order)), qos)
+            subscribe(JointTrajectory, JOINT_REFERENCE,
+                      self.message_input(JOINT_REFERENCE, lambda msg: convert.joint_reference(msg, order)), qos)
         if WRENCH in self.streams:
-            subscribe(WrenchStamped, WRENCH, lambda msg: self.on_input(
-                WRENCH, convert.stamp_ns(msg.header.stamp), convert.wrench_vector(msg)), 10)
+            subscribe(WrenchStamped, WRENCH, self.message_input(WRENCH, convert.wrench_vector), 10)
         self.live = shell.LiveParameters(n, {s.name: s for s in ALL_PARAMETERS}, self.values, lambda merged: (
             core.RelativeController(self.model, self.scenario.controller_params(core.controller_params(merged, n.get_name())),
                                     collision=self.tracker.controller.collision_model)))
@@ -233,11 +234,25 @@ class ControllerNode:
         self.sink.measure(q)
         self.try_cycle()
 
+    def message_input(self, stream: str, decode: Callable[[Any], Any]) -> Callable[[Any], None]:
+        """The callback of a stream read from the rclpy message: ``decode(msg)`` at the header's stamp to
+        :meth:`on_input`, or its rejection (:class:`InputRejected`) to :meth:`on_rejected`."""
+        def receive(msg: Any) -> None:
+            try:
+                value = decode(msg)
+            except InputRejected as exc:
+                self.on_rejected(stream, exc)
+            else:
+                self.on_input(stream, convert.stamp_ns(msg.header.stamp), value)
+        return receive
+
+    def on_rejected(self, stream: str, exc: InputRejected) -> None:
+        """A sample of one of the source's streams that its decoder rejected: counted and reported at its stamp."""
+        self.out.reject(exc.stamp or 0, f"{stream.lstrip('/')} rejected: {exc.reason}")
+
     def on_input(self, stream: str, stamp: int, value: Any) -> None:
-        """A sample of one of the source's streams (a str: why it was rejected); lockstep: it may complete a cycle."""
-        if isinstance(value, str):
-            self.out.reject(stamp, f"{stream.lstrip('/')} rejected: {value}")
-        elif self.stamp_accepted(stream, stamp):
+        """A sample of one of the source's streams; lockstep: it may complete a cycle."""
+        if self.stamp_accepted(stream, stamp):
             self.inputs.put(stream, stamp, value)
             if self.lockstep:
                 self.try_cycle()
