@@ -50,16 +50,16 @@ def _acceleration_check(value: Any) -> str:
 
 def _allowed(value: Any) -> tuple[tuple[str, str], ...]:
     """``collision.allowed`` as link pairs (validated by :func:`_pairs_check`)."""
-    pairs = link_pairs(value)
-    if isinstance(pairs, str):
-        raise ParameterError("collision.allowed", value, pairs)
-    return pairs
+    return link_pairs(value, "collision.allowed")
 
 
 def _pairs_check(value: Any) -> str:
     """[''] or 'link_a link_b' strings"""
-    pairs = link_pairs(value)
-    return pairs if isinstance(pairs, str) else ""
+    try:
+        link_pairs(value, "collision.allowed")
+    except ParameterError as exc:
+        return exc.expected
+    return ""
 
 
 def _names_check(value: Any) -> str:

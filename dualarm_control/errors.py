@@ -53,3 +53,26 @@ class UnknownOutputError(DualArmError, KeyError):
 
 class DimensionError(DualArmError, ValueError):
     """An array has the wrong shape (e.g. a joint vector with the wrong joint count)."""
+
+
+class InputRejected(DualArmError, ValueError):
+    """A received message (a joint state, a target, a command, ...) is unusable: the node drops it,
+    counts it and reports ``reason`` (the log line, the /diagnostics text).
+
+    Raised only for a bad message (the good path does no extra work). The decoders that read a
+    stamp set :attr:`stamp` before the exception leaves them, so that the rejection is reported at
+    the message's stamp.
+
+    Attributes:
+        reason: why the message is unusable, the text the node logs and reports.
+        field: the message field at fault (``name``, ``position``, ``points``, ...); '' if none.
+        value: the offending value (the joint names, the distance [m], ...); None if none.
+        stamp: the message's header stamp [ns]; None where the decoder reads none (a command).
+    """
+
+    def __init__(self, reason: str, field: str = "", value: object = None, stamp: int | None = None) -> None:
+        self.reason = reason
+        self.field = field
+        self.value = value
+        self.stamp = stamp
+        super().__init__(reason)

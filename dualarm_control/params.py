@@ -244,17 +244,19 @@ def open_unit_interval(value: Any) -> str:
 LINK_PAIR_RULE = "'link_a link_b' strings (two link names separated by a space)"
 
 
-def link_pairs(value: Any) -> tuple[tuple[str, str], ...] | str:
+def link_pairs(value: Any, key: str) -> tuple[tuple[str, str], ...]:
     """A list of ``"link_a link_b"`` strings (empty strings skipped: ROS's ``[""]`` for none) as link
-    pairs, or what is wrong with it (the robot's, the scenario's and the controller's allowed pairs)."""
+    pairs (the robot's, the scenario's and the controller's allowed pairs). :class:`ParameterError`
+    for parameter ``key`` otherwise, its ``expected`` saying what is wrong (``got [...], expected a
+    list of ...`` or ``entry '...', expected ...``: the text the robot's and the scenario's errors quote)."""
     if not isinstance(value, list):
-        return f"got {value!r}, expected a list of {LINK_PAIR_RULE}"
+        raise ParameterError(key, value, f"got {value!r}, expected a list of {LINK_PAIR_RULE}")
     pairs = []
     for item in value:
         if item == "":
             continue
         parts = item.split() if isinstance(item, str) else []
         if len(parts) != 2:
-            return f"entry {item!r}, expected {LINK_PAIR_RULE}"
+            raise ParameterError(key, value, f"entry {item!r}, expected {LINK_PAIR_RULE}")
         pairs.append((parts[0], parts[1]))
     return tuple(pairs)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from dualarm_control.errors import DualArmError
+
 PACKAGE = "dualarm_control"
 
 
@@ -47,13 +49,16 @@ def registry_names(folder: str) -> list[str]:
     return sorted(p.stem for p in config_path(folder).glob("*.yaml"))
 
 
-def registry_file(folder: str, name_or_path: str, what: str) -> Path | str:
+def registry_file(folder: str, name_or_path: str, what: str, error: type[DualArmError], hint: str = "") -> Path:
     """The YAML of ``name_or_path``: a file path (ending .yaml/.yml) or a name of ``config/<folder>/``;
-    a message for the caller's error (naming ``what`` and the valid names) when there is none."""
+    when there is none, ``error`` (the caller's: ScenarioError, RobotError) naming ``what`` and, for an
+    unknown name, the valid names followed by ``hint``."""
     path = Path(name_or_path)
     if path.suffix in (".yaml", ".yml"):
-        return path if path.is_file() else f"{what} file not found: {path}"
+        if not path.is_file():
+            raise error(f"{what} file not found: {path}")
+        return path
     candidate = config_path(folder, f"{name_or_path}.yaml")
     if candidate.is_file():
         return candidate
-    return f"unknown {what} {name_or_path!r}; valid choices: {', '.join(registry_names(folder))}"
+    raise error(f"unknown {what} {name_or_path!r}; valid choices: {', '.join(registry_names(folder))}{hint}")

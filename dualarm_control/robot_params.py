@@ -55,10 +55,7 @@ def robot_names() -> list[str]:
 
 def robot_file(name_or_path: str) -> Path:
     """Path of a robot description by registry name or file path (RobotError if unknown)."""
-    found = registry_file("robots", name_or_path, "robot")
-    if isinstance(found, str):
-        raise RobotError(found + (" (or a YAML file of your own, docs/robots.md)" if "unknown" in found else ""))
-    return found
+    return registry_file("robots", name_or_path, "robot", RobotError, " (or a YAML file of your own, docs/robots.md)")
 
 
 _LOADED: dict[Path, tuple[int, RobotDescription]] = {}
@@ -162,7 +159,7 @@ def robot_from_parameters(flat: Mapping[str, Any], source: Path | None = None) -
 
 def _link_pairs(flat: Mapping[str, Any], key: str) -> tuple[tuple[str, str], ...]:
     """``robot.<key>``: a list of ``"link_a link_b"`` strings as pairs (RobotError naming a bad entry)."""
-    pairs = link_pairs(flat.get(PREFIX + key, []))
-    if isinstance(pairs, str):
-        raise RobotError(f"robot parameter {_key(key)}: {pairs}")
-    return pairs
+    try:
+        return link_pairs(flat.get(PREFIX + key, []), PREFIX + key)
+    except ParameterError as exc:
+        raise RobotError(f"robot parameter {_key(key)}: {exc.expected}") from None

@@ -124,10 +124,7 @@ def scenario_names() -> list[str]:
 
 def scenario_file(name_or_path: str) -> Path:
     """Path of a scenario given by registry name or file path (ScenarioError if unknown)."""
-    found = registry_file("scenarios", name_or_path, "scenario")
-    if isinstance(found, str):
-        raise ScenarioError(found)
-    return found
+    return registry_file("scenarios", name_or_path, "scenario", ScenarioError)
 
 
 def load_scenario(name_or_path: str, robot: str | RobotDescription | None = None) -> Scenario:
@@ -144,10 +141,10 @@ def load_scenario(name_or_path: str, robot: str | RobotDescription | None = None
 def _link_pairs(flat: Mapping[str, Any]) -> tuple[tuple[str, str], ...]:
     """``scenario.collision_allowed``: 'link_a link_b' strings (``left_tool right_tool``: the two end
     effectors, :class:`~dualarm_control.collision.CollisionModel`) as pairs; ScenarioError naming a bad entry."""
-    pairs = link_pairs(get(flat, "collision_allowed", []))
-    if isinstance(pairs, str):
-        raise ScenarioError(f"scenario parameter '{PREFIX}collision_allowed': {pairs}")
-    return pairs
+    try:
+        return link_pairs(get(flat, "collision_allowed", []), f"{PREFIX}collision_allowed")
+    except ParameterError as exc:
+        raise ScenarioError(f"scenario parameter '{PREFIX}collision_allowed': {exc.expected}") from None
 
 
 def _motion_limits(flat: Mapping[str, Any]) -> MotionLimits:

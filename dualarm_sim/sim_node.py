@@ -55,6 +55,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
+from dualarm_control.errors import InputRejected
 from dualarm_control.hardware import HARDWARE_PARAMETERS, profile_from_values
 from dualarm_control.params import ParamSpec, non_negative, positive
 from dualarm_control.ros import convert
@@ -173,7 +174,7 @@ class SimNode:
         for o in profile.outputs:  # each output's registered message type (dualarm_control.outputs)
             decoder = self.merger.decoders[o.name]
             subscribe_checked(n, decoder.kind.message_class(), o.topic, functools.partial(self.on_command, o.name),
-                              qos, self.reject, decoder, bus)
+                              qos, self.reject, decoder, bus, self.on_rejected_command)
         self.log = n.get_logger()
         self.throttle = Throttle(1.0)
         self.steps = 0
@@ -234,12 +235,14 @@ class SimNode:
         self.pub_diag.publish(convert.diagnostics(self._stamp_ns(), "sim_node", 1, reason,
                                                   {"status": "input_rejected", "rejected_inputs": self.rejected}))
 
-    def on_command(self, output: str, data: np.ndarray | str) -> None:
+    def on_rejected_command(self, exc: InputRejected) -> None:
+        """A command its output's decoder rejected (count, NaN/inf, joints): received, then rejected."""
+        self.received += 1
+        self.reject(exc.reason)
+
+    def on_command(self, output: str, data: np.ndarray) -> None:
         """A command of one output of the profile; lockstep: the step runs once every output's has arrived."""
         self.received += 1
-        if isinstance(data, str):
-            self.reject(data)
-            return
         self.merger.put(output, data, self.cell.reference)
         if self.lockstep and not self.merger.complete:
             return

@@ -77,11 +77,10 @@ LAUNCH_FILES = {"cell.launch.py": NODES, "pan_cleaning.launch.py": ("sim_node", 
 
 def declared_parameters(executable: str) -> set[str]:
     """Names the node declares (its specs), plus rclpy's own use_sim_time."""
-    from dualarm_control.controller_params import CONTROLLER_PARAMETERS
     from dualarm_control.nodes import controller_node, trajectory_node
     from dualarm_sim import sim_node
 
-    specs = {"controller_node": CONTROLLER_PARAMETERS + controller_node.NODE_PARAMETERS,
+    specs = {"controller_node": controller_node.ALL_PARAMETERS,
              "trajectory_node": trajectory_node.PARAMETERS, "sim_node": sim_node.PARAMETERS}[executable]
     return {s.name for s in specs} | {"use_sim_time"}
 

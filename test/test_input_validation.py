@@ -7,11 +7,13 @@ test_fuzz.py::test_garbled_cdr_and_bad_messages_on_running_nodes.
 
 from __future__ import annotations
 
+import re
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from dualarm_control.errors import InputRejected
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.ros import convert
 from dualarm_control.ros.inputs import StampGate, Throttle
@@ -42,7 +44,6 @@ def test_joint_order_is_mapped_by_name(order: dict[str, int]) -> None:
     q = np.arange(14) * 0.1
     msg = joint_state([*reversed(names), "gripper"], [*reversed(q.tolist()), 9.0], [*reversed((q * 2).tolist()), 0.0])
     decoded = convert.JointStateInput(order).message_vectors(msg)
-    assert not isinstance(decoded, str)
     np.testing.assert_array_equal(decoded[0], q)
     np.testing.assert_array_equal(decoded[1], 2 * q)
 
@@ -57,15 +58,30 @@ def test_joint_order_is_mapped_by_name(order: dict[str, int]) -> None:
     (lambda n, q, v: (n, q, [*v[:-1], -np.inf]), "NaN or inf"),
 ])
 def test_unusable_joint_states_are_rejected_with_the_reason(order: dict[str, int], edit, fragment: str) -> None:
-    """Missing, unknown or duplicate names, wrong counts, NaN/inf: a reason string, never arrays."""
+    """Missing, unknown or duplicate names, wrong counts, NaN/inf: InputRejected with the reason, never arrays."""
     names, q, v = edit(list(order), [0.0] * 14, [0.0] * 14)
-    decoded = convert.JointStateInput(order).message_vectors(joint_state(names, q, v))
-    assert isinstance(decoded, str) and fragment in decoded, decoded
+    with pytest.raises(InputRejected, match=re.escape(fragment)) as caught:
+        convert.JointStateInput(order).message_vectors(joint_state(names, q, v))
+    assert caught.value.reason == str(caught.value) and caught.value.field in ("name", "position", "velocity")
+
+
+def test_a_rejected_joint_state_carries_its_stamp_and_the_names_are_mapped_again(order: dict[str, int]) -> None:
+    """The stamp of the rejected message is on the exception; a good message with the same names after
+    a bad one (the partial topic's mapping) decodes."""
+    names = list(order)
+    decoder = convert.JointStateInput(order)
+    bad = SimpleNamespace(name=names[:-1], position=[0.0] * 13, velocity=[],
+                          header=SimpleNamespace(stamp=SimpleNamespace(sec=3, nanosec=4)))
+    with pytest.raises(InputRejected, match="missing 1 of the 14 joints") as caught:
+        decoder.from_message(bad)
+    assert caught.value.stamp == 3 * NS + 4 and caught.value.value == [names[-1]]
+    assert decoder.names == tuple(names[:-1])
+    good = SimpleNamespace(name=names, position=[0.1] * 14, velocity=[], header=bad.header)
+    np.testing.assert_array_equal(decoder.from_message(good)[1][0], np.full(14, 0.1))
 
 
 def test_joint_state_without_velocities_gives_zero_velocities(order: dict[str, int]) -> None:
     decoded = convert.JointStateInput(order).message_vectors(joint_state(list(order), [0.2] * 14))
-    assert not isinstance(decoded, str)
     np.testing.assert_array_equal(decoded[1], np.zeros(14))
 
 
@@ -79,21 +95,25 @@ def test_joint_reference_checks_names_counts_and_values(order: dict[str, int]) -
             stamp=SimpleNamespace(sec=1, nanosec=0)))
 
     ok = convert.joint_reference(message(names[::-1], list(range(14))[::-1]), order)
-    assert not isinstance(ok, str) and ok[0] == NS
+    assert ok[0] == NS
     np.testing.assert_array_equal(ok[1], np.arange(14))
-    assert "duplicate" in str(convert.joint_reference(message([names[1], *names[1:]], [0.0] * 14), order))
-    assert "13 positions" in str(convert.joint_reference(message(names, [0.0] * 13), order))
+    with pytest.raises(InputRejected, match="duplicate") as caught:
+        convert.joint_reference(message([names[1], *names[1:]], [0.0] * 14), order)
+    assert caught.value.stamp == NS
+    with pytest.raises(InputRejected, match="13 positions"):
+        convert.joint_reference(message(names, [0.0] * 13), order)
 
 
 # ---- commands (sim_node) ------------------------------------------------------------------------
 
 
 def test_commands_with_wrong_length_or_non_finite_values_are_rejected() -> None:
-    assert convert.CommandInput(14).from_message(SimpleNamespace(data=[0.0] * 13)) == "command with 13 values rejected: expected 14"
-    bad = convert.CommandInput(14).from_message(SimpleNamespace(data=[0.0] * 3 + [np.nan] + [0.0] * 10))
-    assert isinstance(bad, str) and "NaN or inf at indices [3]" in bad
+    with pytest.raises(InputRejected, match=r"^command with 13 values rejected: expected 14$"):
+        convert.CommandInput(14).from_message(SimpleNamespace(data=[0.0] * 13))
+    with pytest.raises(InputRejected, match=re.escape("NaN or inf at indices [3]")) as caught:
+        convert.CommandInput(14).from_message(SimpleNamespace(data=[0.0] * 3 + [np.nan] + [0.0] * 10))
+    assert caught.value.stamp is None and caught.value.value.shape == (14,)
     good = convert.CommandInput(14).from_message(SimpleNamespace(data=[0.5] * 14))
-    assert not isinstance(good, str)
     np.testing.assert_array_equal(good, np.full(14, 0.5))
 
 
@@ -122,9 +142,10 @@ def test_relative_reach_bounds_every_configuration(model: DualArmModel) -> None:
 def test_target_beyond_the_reach_is_rejected(model: DualArmModel) -> None:
     reach = model.relative_reach()
     inside = convert.TargetInput(reach).from_message(target([0.0, 0.0, 0.5]))[1]
-    assert not isinstance(inside, str) and inside.stamp_ns == 2 * NS + 5
-    beyond = convert.TargetInput(reach).from_message(target([3.0, 0.0, 0.0]))[1]
-    assert isinstance(beyond, str) and "3.000 m" in beyond and "reach 2.870 m" in beyond
+    assert inside.stamp_ns == 2 * NS + 5
+    with pytest.raises(InputRejected, match=r"3\.000 m .*reach 2\.870 m") as caught:
+        convert.TargetInput(reach).from_message(target([3.0, 0.0, 0.0]))
+    assert caught.value.stamp == 2 * NS + 5 and caught.value.value == pytest.approx(3.0)
 
 
 @pytest.mark.parametrize("bad", [
@@ -132,13 +153,15 @@ def test_target_beyond_the_reach_is_rejected(model: DualArmModel) -> None:
     target([0.0, 0.0, 0.0], (np.inf, 0.0, 0.0, 1.0)),
 ])
 def test_non_finite_targets_or_zero_quaternions_are_rejected(bad: SimpleNamespace) -> None:
-    assert "NaN or inf" in str(convert.TargetInput(2.87).from_message(bad)[1])
+    with pytest.raises(InputRejected, match="NaN or inf"):
+        convert.TargetInput(2.87).from_message(bad)
 
 
 def test_target_with_several_points_is_rejected() -> None:
     msg = target([0.0, 0.0, 0.0])
     msg.points = msg.points * 2
-    assert "exactly one point" in str(convert.TargetInput().from_message(msg)[1])
+    with pytest.raises(InputRejected, match="exactly one point"):
+        convert.TargetInput().from_message(msg)
 
 
 # ---- stamps -------------------------------------------------------------------------------------

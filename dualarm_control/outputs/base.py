@@ -20,7 +20,7 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
-from dualarm_control.errors import UnknownOutputError
+from dualarm_control.errors import InputRejected, UnknownOutputError
 from dualarm_control.ros.cdr import CdrError
 from dualarm_control.ros.checks import finite, joint_indices
 
@@ -78,12 +78,13 @@ class OutputType(ABC):
         return deserialize_message(self.encode(spec, values, period), self.message_class())
 
     @abstractmethod
-    def decode(self, spec: OutputSpec, msg: Any) -> FloatArray | str:
+    def decode(self, spec: OutputSpec, msg: Any) -> FloatArray:
         """A received message (rclpy's, or any object with its fields: a rosbags message) -> its values
-        (k,) in ``spec.joints``' order [rad/s or rad], or why it is unusable. The values' count and
-        finiteness are checked by the caller (:class:`CommandDecoder`)."""
+        (k,) in ``spec.joints``' order [rad/s or rad]; raises :class:`~dualarm_control.errors.InputRejected`
+        with the reason if it is unusable. The values' count and finiteness are checked by the caller
+        (:class:`CommandDecoder`)."""
 
-    def decode_bytes(self, spec: OutputSpec, data: bytes) -> FloatArray | str:
+    def decode_bytes(self, spec: OutputSpec, data: bytes) -> FloatArray:
         """As :meth:`decode` from the CDR bytes (the fast path); raises
         :class:`~dualarm_control.ros.cdr.CdrError` for what it does not read, and then the receiver
         decodes the rclpy message. This default reads nothing: rclpy decodes every message."""
@@ -129,43 +130,43 @@ def joint_order(joints: tuple[str, ...]) -> dict[str, int]:
     return {name: i for i, name in enumerate(joints)}
 
 
-def by_name(spec: OutputSpec, names: Any, values: Any, what: str) -> FloatArray | str:
+def by_name(spec: OutputSpec, names: Any, values: Any, what: str) -> FloatArray:
     """``values`` (one per name of ``names``) in ``spec.joints``' order, matched by name (extra names
-    ignored), or why not: a missing or duplicated joint, or not one value per name."""
+    ignored); :class:`~dualarm_control.errors.InputRejected` naming ``what`` for a missing or duplicated
+    joint, or not one value per name."""
     idx = joint_indices(list(names), joint_order(spec.joints), what)
-    if isinstance(idx, str):
-        return idx
     array = np.asarray(values, dtype=float)
     if array.shape != (len(names),):
-        return f"{what} with {array.size} {spec.interface}s for {len(names)} joints rejected"
+        raise InputRejected(f"{what} with {array.size} {spec.interface}s for {len(names)} joints rejected",
+                            spec.interface, array)
     return array[idx]
 
 
-def check_command(values: FloatArray, size: int) -> FloatArray | str:
-    """A copy of ``values`` if it is (size,) and finite, else why the command is rejected."""
+def check_command(values: FloatArray, size: int) -> FloatArray:
+    """A copy of ``values`` if it is (size,) and finite; else :class:`~dualarm_control.errors.InputRejected`
+    saying why the command is rejected (``value``: the values)."""
     if values.shape != (size,):
-        return f"command with {values.size} values rejected: expected {size}"
+        raise InputRejected(f"command with {values.size} values rejected: expected {size}", "data", values)
     if not finite(values):
-        return f"command with NaN or inf at indices {np.flatnonzero(~np.isfinite(values))[:5].tolist()} rejected"
+        raise InputRejected(f"command with NaN or inf at indices {np.flatnonzero(~np.isfinite(values))[:5].tolist()}"
+                            " rejected", "data", values)
     return values.copy()
 
 
 class CommandDecoder:
     """The commands of one output as a receiver takes them (a
     :class:`~dualarm_control.ros.inputs.Decoder`: the simulator's command ports): the values
-    (len(spec.joints),) in the output's joint order [rad/s or rad], checked (count, finite), or why
-    the command is unusable. Refuses an unregistered message type (UnknownOutputError)."""
+    (len(spec.joints),) in the output's joint order [rad/s or rad], checked (count, finite); an unusable
+    command raises :class:`~dualarm_control.errors.InputRejected`. Refuses an unregistered message type
+    (UnknownOutputError)."""
 
     def __init__(self, spec: OutputSpec) -> None:
         self.spec = spec
         self.kind = spec.kind
         self.size = len(spec.joints)
 
-    def from_bytes(self, data: bytes) -> FloatArray | str:
-        return self.check(self.kind.decode_bytes(self.spec, data))
+    def from_bytes(self, data: bytes) -> FloatArray:
+        return check_command(self.kind.decode_bytes(self.spec, data), self.size)
 
-    def from_message(self, msg: Any) -> FloatArray | str:
-        return self.check(self.kind.decode(self.spec, msg))
-
-    def check(self, values: FloatArray | str) -> FloatArray | str:
-        return values if isinstance(values, str) else check_command(values, self.size)
+    def from_message(self, msg: Any) -> FloatArray:
+        return check_command(self.kind.decode(self.spec, msg), self.size)

@@ -22,8 +22,8 @@ class Float64MultiArrayOutput(OutputType):
     def encode(self, spec: OutputSpec, values: FloatArray, period: float) -> bytes:
         return cdr.float64_multi_array(values)
 
-    def decode(self, spec: OutputSpec, msg: Any) -> FloatArray | str:
+    def decode(self, spec: OutputSpec, msg: Any) -> FloatArray:
         return np.asarray(msg.data, dtype=float)
 
-    def decode_bytes(self, spec: OutputSpec, data: bytes) -> FloatArray | str:
+    def decode_bytes(self, spec: OutputSpec, data: bytes) -> FloatArray:
         return cdr.float64_multi_array_data(data)

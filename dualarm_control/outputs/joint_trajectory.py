@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from dualarm_control.errors import InputRejected
 from dualarm_control.outputs.base import (
     FloatArray,
     OutputSpec,
@@ -32,9 +33,10 @@ class JointTrajectoryOutput(OutputType):
         return cdr.joint_trajectory_point(spec.joints, values if spec.position else _EMPTY,
                                           _EMPTY if spec.position else values, round(period * 1e9))
 
-    def decode(self, spec: OutputSpec, msg: Any) -> FloatArray | str:
+    def decode(self, spec: OutputSpec, msg: Any) -> FloatArray:
         if len(msg.points) != 1:
-            return f"trajectory command with {len(msg.points)} points rejected: expected 1"
+            raise InputRejected(f"trajectory command with {len(msg.points)} points rejected: expected 1", "points",
+                                len(msg.points))
         point = msg.points[0]
         return by_name(spec, msg.joint_names, point.positions if spec.position else point.velocities,
                        "trajectory command")

@@ -5,7 +5,8 @@ send or receive every control period is written and read as CDR bytes (:mod:`.cd
 ``Publisher.publish(bytes)``): at 1 kHz rclpy's message objects cost more than the control
 step (docs/bench.md). Inputs are decoded by :class:`JointStateInput` and
 :class:`TargetInput`, which read the bytes directly and fall back to the rclpy message
-(:func:`dualarm_control.ros.inputs.subscribe_checked`); both paths share the checks.
+(:func:`dualarm_control.ros.inputs.subscribe_checked`); both paths share the checks. An unusable
+message raises :class:`~dualarm_control.errors.InputRejected` with the reason (and its stamp).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from builtin_interfaces.msg import Duration, Time
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from dualarm_control.errors import InputRejected
 from dualarm_control.outputs import CommandDecoder, OutputSpec
 from dualarm_control.ros import cdr
 from dualarm_control.ros.checks import finite, joint_indices
@@ -49,11 +51,13 @@ def joint_state(names: Sequence[str], ns: int, q: np.ndarray, qd: np.ndarray) ->
 
 
 class JointStateInput:
-    """/joint_states -> (stamp ns, (q, qd) in the model's joint order | why the message is unusable).
+    """/joint_states -> (stamp ns, (q, qd) in the model's joint order); an unusable message raises
+    :class:`InputRejected` (its ``stamp`` set).
 
     Rejected: duplicate or missing names, a position count different from the name count, a
     velocity count that is neither 0 (then qd = 0) nor the name count, NaN or inf. The name ->
-    index mapping is computed once per distinct names tuple (a stream repeats its names).
+    index mapping is computed once per distinct names tuple (a stream repeats its names; names
+    that cannot be mapped are mapped again at each message).
     ``partial`` (one of several joint-state topics, issue 29): the model's joints the message carries,
     in model order, their model indices in :attr:`present`; none of them makes it unusable.
     """
@@ -63,7 +67,7 @@ class JointStateInput:
         self.partial = partial
         self.read = cdr.JointStateReader()
         self._names: tuple[str, ...] | None = None
-        self._idx: list[int] | str = ""
+        self._idx: list[int] | None = None  # None: the names are not mapped
         self.present = np.arange(len(order))
         """Model index of each value decoded (``partial``: the model's joints the last message carried)."""
 
@@ -72,50 +76,62 @@ class JointStateInput:
         """The joint names of the last message decoded (None before one)."""
         return self._names
 
-    def indices(self, names: tuple[str, ...]) -> list[int] | str:
+    def indices(self, names: tuple[str, ...]) -> list[int]:
         """Index in ``names`` of each joint decoded (``partial``: of the model's joints among ``names``,
-        whose model indices become :attr:`present`), or why the message is unusable."""
+        whose model indices become :attr:`present`); :class:`InputRejected` if the names are unusable."""
         if not self.partial:
             return joint_indices(list(names), self.order, "joint_states")
         carried = {n: i for n, i in self.order.items() if n in names}
         if not carried:
-            return f"joint_states carries none of the robot's joints (got {list(names)[:3]}...)"
+            raise InputRejected(f"joint_states carries none of the robot's joints (got {list(names)[:3]}...)",
+                                "name", names)
         self.present = np.array(list(carried.values()), dtype=int)
         return joint_indices(list(names), carried, "joint_states")
 
-    def from_bytes(self, data: bytes) -> tuple[int, tuple[np.ndarray, np.ndarray] | str]:
+    def from_bytes(self, data: bytes) -> tuple[int, tuple[np.ndarray, np.ndarray]]:
         """The fast path: the CDR payload (raises :class:`cdr.CdrError` if it cannot read it)."""
         stamp, names, position, velocity = self.read(data)
-        return stamp, self.vectors(names, position, velocity)
+        try:
+            return stamp, self.vectors(names, position, velocity)
+        except InputRejected as exc:
+            exc.stamp = stamp
+            raise
 
-    def from_message(self, msg: Any) -> tuple[int, tuple[np.ndarray, np.ndarray] | str]:
-        return stamp_ns(msg.header.stamp), self.message_vectors(msg)
+    def from_message(self, msg: Any) -> tuple[int, tuple[np.ndarray, np.ndarray]]:
+        stamp = stamp_ns(msg.header.stamp)
+        try:
+            return stamp, self.message_vectors(msg)
+        except InputRejected as exc:
+            exc.stamp = stamp
+            raise
 
-    def message_vectors(self, msg: Any) -> tuple[np.ndarray, np.ndarray] | str:
-        """(q, qd) | reason from a message's ``name``, ``position`` and ``velocity``."""
+    def message_vectors(self, msg: Any) -> tuple[np.ndarray, np.ndarray]:
+        """(q, qd) from a message's ``name``, ``position`` and ``velocity`` (:class:`InputRejected` if unusable)."""
         return self.vectors(tuple(msg.name), np.asarray(msg.position, dtype=float),
                             np.asarray(msg.velocity, dtype=float))
 
     def vectors(self, names: tuple[str, ...], position: np.ndarray,
-                velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray] | str:
-        if names is not self._names and names != self._names:
-            self._names, self._idx = names, self.indices(names)
+                velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(q, qd) [rad, rad/s] in the model's order from a message's fields (:class:`InputRejected` if unusable)."""
         idx = self._idx
-        if isinstance(idx, str):
-            return idx
+        if idx is None or (names is not self._names and names != self._names):
+            self._names, self._idx = names, None
+            self._idx = idx = self.indices(names)  # InputRejected: not mapped, mapped again at the next message
         n = len(names)
         if len(position) != n or len(velocity) not in (0, n):
-            return f"joint_states with {n} names but {len(position)} positions and {len(velocity)} velocities"
+            raise InputRejected(f"joint_states with {n} names but {len(position)} positions and {len(velocity)} "
+                                "velocities", "position" if len(position) != n else "velocity",
+                                (len(position), len(velocity)))
         q = position[idx]
         qd = velocity[idx] if len(velocity) else np.zeros(len(idx))
         if not finite(q) or not finite(qd):
-            return "joint_states contains NaN or inf"
+            raise InputRejected("joint_states contains NaN or inf", "position" if not finite(q) else "velocity")
         return q, qd
 
 
 class CommandInput(CommandDecoder):
-    """/velocity_controller/commands (Float64MultiArray) -> the joint velocity command [rad/s], (size,), or why
-    it is unusable: the default profile's output (:class:`~dualarm_control.outputs.CommandDecoder`)."""
+    """/velocity_controller/commands (Float64MultiArray) -> the joint velocity command [rad/s], (size,)
+    (:class:`InputRejected` if unusable): the default profile's output (:class:`~dualarm_control.outputs.CommandDecoder`)."""
 
     def __init__(self, size: int) -> None:
         super().__init__(OutputSpec("velocity_controller", "/velocity_controller/commands", "float64_multi_array",
@@ -203,7 +219,8 @@ def target_message(ns: int, elapsed_ns: int, sample: Any) -> bytes:
 
 
 class TargetInput:
-    """/relative_target -> (stamp ns, :class:`TargetValue` | why the message is unusable).
+    """/relative_target -> (stamp ns, :class:`TargetValue`); an unusable message raises
+    :class:`InputRejected` (its ``stamp`` set).
 
     Rejected: not exactly one point with one transform and one velocity, NaN or inf, a zero
     quaternion, a relative position farther than ``max_distance`` [m] (the cell's reach,
@@ -213,12 +230,12 @@ class TargetInput:
     def __init__(self, max_distance: float = float("inf")) -> None:
         self.max_distance = max_distance
 
-    def from_bytes(self, data: bytes) -> tuple[int, TargetValue | str]:
+    def from_bytes(self, data: bytes) -> tuple[int, TargetValue]:
         """The fast path: the CDR payload (raises :class:`cdr.CdrError` if it cannot read it)."""
         stamp, points, transforms, velocities = cdr.relative_target(data)
         return stamp, self.value(stamp, points, transforms, velocities)
 
-    def from_message(self, msg: Any) -> tuple[int, TargetValue | str]:
+    def from_message(self, msg: Any) -> tuple[int, TargetValue]:
         stamp = stamp_ns(msg.header.stamp)
         points = msg.points
         if not points:
@@ -229,19 +246,22 @@ class TargetInput:
                                for v in points[0].velocities], dtype=float)
         return stamp, self.value(stamp, len(points), transforms, velocities)
 
-    def value(self, stamp: int, points: int, transforms: np.ndarray, velocities: np.ndarray) -> TargetValue | str:
-        """The checks on the first point's transforms (k, 7) [x y z qx qy qz qw] and velocities (m, 6)."""
+    def value(self, stamp: int, points: int, transforms: np.ndarray, velocities: np.ndarray) -> TargetValue:
+        """The checks on the first point's transforms (k, 7) [x y z qx qy qz qw] and velocities (m, 6);
+        :class:`InputRejected` (at ``stamp`` [ns]) if they fail."""
         if points != 1 or len(transforms) != 1 or len(velocities) != 1:
-            return "relative_target must carry exactly one point with one transform and one velocity"
+            raise InputRejected("relative_target must carry exactly one point with one transform and one velocity",
+                                "points", (points, len(transforms), len(velocities)), stamp)
         pose, twist = transforms[0], velocities[0]
         rot = rotation_xyzw(pose[3:])
         if not finite(pose[:3]) or not finite(twist) or not finite(rot):
-            return "relative_target contains NaN or inf (or a zero quaternion)"
+            raise InputRejected("relative_target contains NaN or inf (or a zero quaternion)", "points",
+                                np.concatenate((pose, twist)), stamp)
         position = pose[:3].copy()
         distance = float(np.linalg.norm(position))
         if distance > self.max_distance:
-            return (f"relative_target position {distance:.3f} m from the left tool is beyond the cell's reach "
-                    f"{self.max_distance:.3f} m")
+            raise InputRejected(f"relative_target position {distance:.3f} m from the left tool is beyond the "
+                                f"cell's reach {self.max_distance:.3f} m", "points", distance, stamp)
         linear, angular = twist[:3].copy(), twist[3:].copy()
         return TargetValue(stamp, position, rot, linear, angular,
                            max(float(np.linalg.norm(linear)), float(np.linalg.norm(angular))))
@@ -266,12 +286,13 @@ def contact_force(ns: int, normal_force: float) -> bytes:
     return cdr.stamped_doubles(ns, CONTACT_FRAME, (0.0, 0.0, float(normal_force)))
 
 
-def wrench_vector(msg: Any) -> np.ndarray | str:
-    """geometry_msgs/WrenchStamped -> [fx, fy, fz, tx, ty, tz] (6,), or why it is unusable."""
+def wrench_vector(msg: Any) -> np.ndarray:
+    """geometry_msgs/WrenchStamped -> [fx, fy, fz, tx, ty, tz] (6,) [N, N m]; :class:`InputRejected`
+    (at the message's stamp) if a value is not finite."""
     f, t = msg.wrench.force, msg.wrench.torque
     values = np.array([f.x, f.y, f.z, t.x, t.y, t.z], dtype=float)
     if not np.all(np.isfinite(values)):
-        return "wrench has non-finite values"
+        raise InputRejected("wrench has non-finite values", "wrench", values, stamp_ns(msg.header.stamp))
     return values
 
 
@@ -292,20 +313,30 @@ def joint_reference_message(ns: int, elapsed_ns: int, names: Sequence[str], q: n
     return JointTrajectory(header=header(ns), joint_names=list(names), points=[point])
 
 
-def joint_reference(msg: Any, order: Mapping[str, int]) -> tuple[int, np.ndarray, np.ndarray] | str:
-    """(stamp ns, q_ref, qd_ref) in the model's joint order, or why the message is unusable."""
+def joint_reference(msg: Any, order: Mapping[str, int]) -> tuple[int, np.ndarray, np.ndarray]:
+    """(stamp ns, q_ref [rad], qd_ref [rad/s]) in the model's joint order; :class:`InputRejected` (at
+    the message's stamp) if the message is unusable."""
+    stamp = stamp_ns(msg.header.stamp)
+    try:
+        return (stamp, *_joint_reference_vectors(msg, order))
+    except InputRejected as exc:
+        exc.stamp = stamp
+        raise
+
+
+def _joint_reference_vectors(msg: Any, order: Mapping[str, int]) -> tuple[np.ndarray, np.ndarray]:
+    """(q_ref, qd_ref) of a /joint_reference message's one point, checked (:class:`InputRejected`)."""
     names = list(msg.joint_names)
     if len(msg.points) != 1:
-        return "joint_reference must carry exactly one point"
+        raise InputRejected("joint_reference must carry exactly one point", "points", len(msg.points))
     point = msg.points[0]
     idx = joint_indices(names, order, "joint_reference")
-    if isinstance(idx, str):
-        return idx
     if len(point.positions) != len(names) or len(point.velocities) != len(names):
-        return (f"joint_reference with {len(names)} names but {len(point.positions)} positions and "
-                f"{len(point.velocities)} velocities")
+        raise InputRejected(f"joint_reference with {len(names)} names but {len(point.positions)} positions and "
+                            f"{len(point.velocities)} velocities", "points",
+                            (len(point.positions), len(point.velocities)))
     q = np.asarray(point.positions, dtype=float)[idx]
     qd = np.asarray(point.velocities, dtype=float)[idx]
     if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
-        return "joint_reference contains NaN or inf"
-    return stamp_ns(msg.header.stamp), q, qd
+        raise InputRejected("joint_reference contains NaN or inf", "points", np.concatenate((q, qd)))
+    return q, qd

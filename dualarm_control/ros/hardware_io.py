@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from dualarm_control.errors import InputRejected
 from dualarm_control.hardware import (
     HARDWARE_PARAMETERS,
     HardwareProfile,
@@ -74,24 +75,28 @@ class JointStates:
             self.decoders[topic] = decoder = convert.JointStateInput(order, partial=len(topics) > 1)
             self.subscriptions.append(subscribe_checked(
                 node, JointState, topic, self.receiver(topic, decoder), qos, self.malformed(topic, on_malformed),
-                decoder, bus))
+                decoder, bus, self.rejecter(topic)))
 
     def receiver(self, topic: str, decoder: convert.JointStateInput) -> Callable[[Any], None]:
-        several = len(self.assembler.topics) > 1
-
-        def receive(sample: tuple[int, tuple[np.ndarray, np.ndarray] | str]) -> None:
+        def receive(sample: tuple[int, tuple[np.ndarray, np.ndarray]]) -> None:
             stamp, decoded = sample
             self.delivered[topic] += 1
-            if isinstance(decoded, str):
-                self.rejection[topic] = decoded
-                self.on_reject(stamp, f"{topic}: {decoded}" if several else decoded)
-                return
             now = time.monotonic_ns()
             self.rejection[topic] = ""
             state = self.assembler.put(topic, StateSample(stamp, now, decoder.present, decoded[0]))
             if state is not None:
                 self.on_state(state[0], state[1], now)
         return receive
+
+    def rejecter(self, topic: str) -> Callable[[InputRejected], None]:
+        """A sample of ``topic`` its decoder rejected: counted, noted for the topic, reported at its stamp."""
+        several = len(self.assembler.topics) > 1
+
+        def reject(exc: InputRejected) -> None:
+            self.delivered[topic] += 1
+            self.rejection[topic] = exc.reason
+            self.on_reject(exc.stamp or 0, f"{topic}: {exc.reason}" if several else exc.reason)
+        return reject
 
     def malformed(self, topic: str, on_malformed: Callable[[str], None]) -> Callable[[str], None]:
         def note(reason: str) -> None:

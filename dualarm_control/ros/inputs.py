@@ -27,6 +27,7 @@ from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
+from dualarm_control.errors import InputRejected
 from dualarm_control.metrics import percentiles
 from dualarm_control.ros.cdr import CdrError
 from dualarm_control.ros.local_bus import LocalBus, LocalSubscription
@@ -111,7 +112,8 @@ class Throttle:
 
 class Decoder(Protocol[T_co]):
     """Turns a sample into what a node's callback uses: from its CDR bytes (the fast path, may
-    raise :class:`~dualarm_control.ros.cdr.CdrError`) or from the rclpy message."""
+    raise :class:`~dualarm_control.ros.cdr.CdrError`) or from the rclpy message. Either raises
+    :class:`~dualarm_control.errors.InputRejected` for a sample it reads but cannot use."""
 
     def from_bytes(self, data: bytes) -> T_co: ...
 
@@ -120,7 +122,8 @@ class Decoder(Protocol[T_co]):
 
 def subscribe_checked(node: Any, msg_type: Any, topic: str, callback: Callable[[Any], None], qos: Any,
                       on_malformed: Callable[[str], None], decoder: Decoder[Any] | None = None,
-                      bus: LocalBus | None = None) -> Any:
+                      bus: LocalBus | None = None,
+                      on_rejected: Callable[[InputRejected], None] | None = None) -> Any:
     """A subscription on ``topic`` that never lets a malformed sample reach ``callback`` or kill the node.
 
     Subscribes raw (serialized CDR bytes). With a ``decoder``, ``callback`` receives
@@ -129,10 +132,14 @@ def subscribe_checked(node: Any, msg_type: Any, topic: str, callback: Callable[[
     what is malformed. Without one, ``callback`` receives the deserialized message (~16 us
     per 14-joint JointState). A sample that fails to deserialize is reported through
     ``on_malformed("malformed message on /topic: <reason>")`` and dropped (a typed
-    subscription would drop it silently inside the middleware). With a ``bus`` that carries
-    ``topic`` (nodes in one process), the samples come from the bus, not the wire.
+    subscription would drop it silently inside the middleware). A sample the decoder rejects
+    (:class:`~dualarm_control.errors.InputRejected`) goes to ``on_rejected``, without one its reason
+    to ``on_malformed``. With a ``bus`` that carries ``topic`` (nodes in one process), the samples
+    come from the bus, not the wire.
     """
     from rclpy.serialization import deserialize_message
+
+    rejected = on_rejected or (lambda exc: on_malformed(exc.reason))
 
     def receive(data: bytes) -> None:
         if decoder is not None:
@@ -140,6 +147,9 @@ def subscribe_checked(node: Any, msg_type: Any, topic: str, callback: Callable[[
                 value = decoder.from_bytes(data)
             except CdrError:
                 pass
+            except InputRejected as exc:
+                rejected(exc)
+                return
             else:
                 callback(value)
                 return
@@ -148,7 +158,15 @@ def subscribe_checked(node: Any, msg_type: Any, topic: str, callback: Callable[[
         except DESERIALIZE_ERRORS as exc:
             on_malformed(f"malformed message on {topic} ({len(data)} bytes): {exc}")
             return
-        callback(msg if decoder is None else decoder.from_message(msg))
+        if decoder is None:
+            callback(msg)
+            return
+        try:
+            value = decoder.from_message(msg)
+        except InputRejected as exc:
+            rejected(exc)
+            return
+        callback(value)
 
     if bus is not None and bus.carries(topic):
         return bus.subscribe(topic, receive)

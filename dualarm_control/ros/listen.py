@@ -48,8 +48,8 @@ class Listener:
 
     def subscribe(self, topics: Mapping[str, Topic]) -> None:
         """Subscribe ``topics``; a sample that is not raw goes through
-        :func:`~dualarm_control.ros.inputs.subscribe_checked` (a malformed one is reported to
-        ``on_malformed`` and dropped)."""
+        :func:`~dualarm_control.ros.inputs.subscribe_checked` (a malformed one, or one its decoder
+        rejects, is reported to ``on_malformed`` and dropped)."""
         for name, topic in topics.items():
             cls = message_class(topic.type_name)
             if topic.raw:

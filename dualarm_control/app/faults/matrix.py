@@ -39,7 +39,7 @@ from dualarm_control.app.faults.netns import (
 from dualarm_control.paths import config_path
 
 PERIOD = 0.005
-STALE_TIMEOUT = 0.015  # controller defaults (controller_node.NODE_PARAMETERS)
+STALE_TIMEOUT = 0.015  # controller defaults (nodes/controller_setup.py: NODE_PARAMETERS)
 TARGET_TIMEOUT = 0.05
 COMMAND_TIMEOUT_STEPS = 10  # sim_node command_timeout 0.05 s / 5 ms
 PAUSE_S = 0.5

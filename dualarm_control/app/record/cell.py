@@ -30,7 +30,7 @@ import numpy as np
 import numpy.typing as npt
 import yaml
 
-from dualarm_control.errors import DualArmError
+from dualarm_control.errors import DualArmError, InputRejected
 from dualarm_control.hardware import (
     HardwareProfile,
     OutputSpec,
@@ -203,10 +203,10 @@ def command_values(output: OutputSpec, msg: Any) -> FloatArray:
     :meth:`~dualarm_control.outputs.OutputType.decode`: a Float64MultiArray's data, a one-point
     JointTrajectory's positions or velocities by joint name, ...); DualArmError naming the topic if the
     message is unusable."""
-    values = output.kind.decode(output, msg)
-    if isinstance(values, str):
-        raise DualArmError(f"{output.topic}: {values}")
-    return values
+    try:
+        return output.kind.decode(output, msg)
+    except InputRejected as exc:
+        raise DualArmError(f"{output.topic}: {exc.reason}") from exc
 
 
 def _ordered(state: State, joint_names: Sequence[str]) -> FloatArray:
