@@ -34,13 +34,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 import pinocchio as pin
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import LEFT_TOOL
-
-FloatArray = npt.NDArray[np.float64]
 
 QUATERNION_NORM_TOLERANCE = 0.01
 """Largest ``| ||q|| - 1 |`` normalised silently; a quaternion farther from unit norm is refused."""

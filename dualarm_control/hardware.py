@@ -34,11 +34,11 @@ from typing import Any
 
 import numpy as np
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import ParameterError
 from dualarm_control.outputs import OutputSpec, output_names
 from dualarm_control.params import ParamSpec, non_negative, positive, resolve
 
-FloatArray = np.ndarray
 DEFAULT_MESSAGE = "float64_multi_array"
 INTERFACES = ("velocity", "position")
 DEFAULT_OUTPUT = "velocity_controller"

@@ -15,15 +15,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import numpy.typing as npt
 import pinocchio as pin
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import DimensionError
 from dualarm_control.robot import LEFT_TOOL, RIGHT_TOOL, RobotDescription
 from dualarm_control.robot_files import RobotError
 from dualarm_control.robot_params import load_robot
-
-FloatArray = npt.NDArray[np.float64]
 
 
 def skew(v: FloatArray) -> FloatArray:

@@ -19,10 +19,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 import pinocchio as pin
 
-FloatArray = npt.NDArray[np.float64]
+from dualarm_control.arrays import FloatArray
 
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 STRING_TYPE = "std_msgs/msg/String"

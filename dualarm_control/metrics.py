@@ -11,11 +11,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.solvers.base import ACTIVITY_THRESHOLD
-
-FloatArray = npt.NDArray[np.float64]
 
 
 def l0_norms(qd: FloatArray, threshold: float = ACTIVITY_THRESHOLD) -> FloatArray:

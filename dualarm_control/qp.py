@@ -24,10 +24,9 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import ParameterError, UnknownSolverError
 from dualarm_control.status import Status
-
-FloatArray = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True)

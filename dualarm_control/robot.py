@@ -30,8 +30,8 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
-import numpy.typing as npt
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.paths import config_path
 from dualarm_control.robot_files import (
     PREFIX,
@@ -48,7 +48,6 @@ RIGHT_TOOL = "right_tool"
 TOOL_JOINTS = {LEFT_TOOL: "left_tool_joint", RIGHT_TOOL: "right_tool_joint"}
 SIDES = ("left", "right")
 MOVABLE = ("revolute", "prismatic", "continuous")
-FloatArray = npt.NDArray[np.float64]
 TOOL_MASS = 1e-3  # kg: the generated tool links (a massless link gets pybullet's default 1 kg)
 
 

@@ -46,13 +46,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass, fields
 
 import numpy as np
-import numpy.typing as npt
 import pinocchio as pin
 import ruckig
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import DimensionError, DualArmError, ParameterError
-
-FloatArray = npt.NDArray[np.float64]
 
 _Z_AXIS = (0.0, 0.0, 1.0)
 _ROTATION_TOLERANCE = 1e-6  # max |R^T R - I| entry accepted for a rotation matrix

@@ -77,9 +77,9 @@ from types import TracebackType
 from typing import TYPE_CHECKING
 
 import numpy as np
-import numpy.typing as npt
 import pybullet as p
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import DimensionError
 from dualarm_control.robot import LEFT_TOOL, RIGHT_TOOL, TOOL_JOINTS, RobotDescription
 from dualarm_control.robot_params import load_robot
@@ -87,7 +87,6 @@ from dualarm_control.robot_params import load_robot
 if TYPE_CHECKING:  # typing.Self is 3.11+ but ROS Humble runs 3.10: type-checking only
     from typing import Self
 
-FloatArray = npt.NDArray[np.float64]
 
 SENSOR_JOINT = TOOL_JOINTS[RIGHT_TOOL]
 """The F/T sensor: the fixed joint of F2 (every resolved URDF has it, :mod:`dualarm_control.robot`)."""

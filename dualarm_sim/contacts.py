@@ -27,12 +27,12 @@ import numpy as np
 import numpy.typing as npt
 import pybullet as p
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import DimensionError
 from dualarm_control.robot import RobotDescription
 from dualarm_control.robot_params import load_robot
 from dualarm_sim.cell import CellConfig, DualArmCell
 
-FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.intp]
 Pair = tuple[str, str]
 DEFAULT_CUTOFF = 0.2

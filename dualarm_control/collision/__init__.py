@@ -20,6 +20,7 @@ Modules, one job each (their docstrings have the equations and the measured accu
 Every name other modules use is importable from here.
 """
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.collision.damper import (
     velocity_damper,
     velocity_damper_bound,
@@ -48,7 +49,6 @@ from dualarm_control.collision.params import (
     WORLD_JOINT_DISTANCE,
     CollisionError,
     CollisionParams,
-    FloatArray,
 )
 
 __all__ = [

@@ -20,8 +20,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.collision.distances import PairDistance
-from dualarm_control.collision.params import CollisionParams, FloatArray
+from dualarm_control.collision.params import CollisionParams
 from dualarm_control.errors import DimensionError
 
 

@@ -44,6 +44,7 @@ import coal
 import numpy as np
 import numpy.typing as npt
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.collision.features import polish_witness
 from dualarm_control.collision.params import (
     _FAILED,
@@ -51,7 +52,6 @@ from dualarm_control.collision.params import (
     FALLBACK_GJK_TOLERANCES,
     KNOWN_MARGIN,
     CollisionError,
-    FloatArray,
     distance_request,
 )
 

@@ -13,10 +13,10 @@ import coal
 import numpy as np
 import pinocchio as pin
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.collision.params import (
     WITNESS_FEATURE_TOLERANCE,
     WITNESS_POLISH_LIMIT,
-    FloatArray,
 )
 
 Feature = tuple  # ("point", P, rad) | ("segment", P, Q, rad) | ("circle", C, u, v, r, theta, 0.0) | ("face", N)

@@ -33,6 +33,7 @@ import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.collision.distances import (
     NearPairs,
     PairDistance,
@@ -50,7 +51,6 @@ from dualarm_control.collision.params import (
     TOOL_FRAMES,
     WORLD,
     WORLD_JOINT_DISTANCE,
-    FloatArray,
     distance_request,
 )
 from dualarm_control.collision.shapes import (

@@ -8,12 +8,9 @@ import math
 from dataclasses import dataclass
 
 import coal
-import numpy as np
-import numpy.typing as npt
 
 from dualarm_control.errors import DualArmError, ParameterError
 
-FloatArray = npt.NDArray[np.float64]
 TOOL_FRAMES = ("left_tool", "right_tool")
 """The tool frames F1, F2 every resolved URDF has (``dualarm_control.robot``)."""
 WORLD = "world"

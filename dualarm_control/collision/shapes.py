@@ -25,7 +25,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from dualarm_control.collision.params import FloatArray
+from dualarm_control.arrays import FloatArray
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.robot_files import RobotError
 

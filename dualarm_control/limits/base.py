@@ -16,12 +16,12 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
-import numpy.typing as npt
+
+from dualarm_control.arrays import FloatArray
 
 if TYPE_CHECKING:
     from dualarm_control.kinematics import Configuration
 
-FloatArray = npt.NDArray[np.float64]
 
 ROW_SPEED_MARGIN = 1e-6
 """m/s: how far below its bound b a row's speed bound C |qd| must lie for :meth:`DeferredRows.meets`

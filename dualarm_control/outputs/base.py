@@ -20,11 +20,10 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import InputRejected, UnknownOutputError
 from dualarm_control.ros.cdr import CdrError
 from dualarm_control.ros.checks import finite, joint_indices
-
-FloatArray = np.ndarray
 
 
 @dataclass(frozen=True)

@@ -10,11 +10,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.limits.base import DeferredRows
-
-FloatArray = npt.NDArray[np.float64]
 
 
 @dataclass(slots=True)

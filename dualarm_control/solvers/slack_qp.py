@@ -13,11 +13,10 @@ Over x = [u (n); s (m_ie)], u the joint velocities [rad/s]:
 from __future__ import annotations
 
 import numpy as np
-import numpy.typing as npt
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.qp import QPProblem
 
-FloatArray = npt.NDArray[np.float64]
 SLACK_CURVATURE = 1e-6
 """mu: quadratic cost on the inequality slacks (keeps H positive definite) [-]."""
 INFINITY = 1e20

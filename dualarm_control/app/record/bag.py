@@ -41,6 +41,7 @@ from dualarm_control.app.record.cell import (
     cell_parameters,
     recorded_topics,
 )
+from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import DualArmError
 from dualarm_control.ros.cell_topic import CELL_TOPIC
 from dualarm_control.ros.convert import stamp_ns
@@ -50,7 +51,6 @@ if TYPE_CHECKING:
     from dualarm_control.robot import RobotDescription
     from dualarm_control.scenario import Scenario
 
-FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
 COMMANDS_TOPIC = "/velocity_controller/commands"

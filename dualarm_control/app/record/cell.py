@@ -27,9 +27,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 import yaml
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import DualArmError, InputRejected
 from dualarm_control.hardware import (
     HardwareProfile,
@@ -43,7 +43,6 @@ from dualarm_control.params import parse_params_text, resolve
 from dualarm_control.ros.cell_topic import CELL_TOPIC
 from dualarm_control.ros.convert import stamp_ns
 
-FloatArray = npt.NDArray[np.float64]
 CONTROLLER = "controller_node"
 DEFAULT_PERIOD_S = 0.005
 

@@ -23,13 +23,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
+from dualarm_control.arrays import FloatArray
 from dualarm_control.metrics import l0_norms
 from dualarm_control.solvers.base import ACTIVITY_THRESHOLD
 from dualarm_control.status import FAILURE_STATUSES
-
-FloatArray = npt.NDArray[np.float64]
 
 APPLICATION_ID = "dualarm_control"
 TIMELINE = "time"
