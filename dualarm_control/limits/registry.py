@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 from dualarm_control.errors import ParameterError
 from dualarm_control.limits.base import FloatArray, JointLimits, Limit
+from dualarm_control.registry import Registry
 
 if TYPE_CHECKING:
     from dualarm_control.collision import CollisionModel
@@ -46,7 +47,8 @@ class LimitContext:
 LimitFactory = Callable[[LimitContext], "Limit | None"]
 """Builds a limit from a context; None: the parameters leave it off."""
 
-_FACTORIES: dict[str, LimitFactory] = {}
+LIMITS: Registry[LimitFactory] = Registry("limit", lambda name, known: ParameterError(
+    "limits", name, "a registered limit: " + ", ".join(known)))
 
 DEFAULT_LIMITS = ("joint_velocity", "joint_acceleration", "collision")
 """The limits every controller has when their parameters turn them on (the joint limits always)."""
@@ -55,18 +57,12 @@ DEFAULT_LIMITS = ("joint_velocity", "joint_acceleration", "collision")
 def register_limit(name: str) -> Callable[[LimitFactory], LimitFactory]:
     """Decorator registering a limit factory under ``name`` (ValueError if the name is taken)."""
 
-    def add(factory: LimitFactory) -> LimitFactory:
-        if name in _FACTORIES and _FACTORIES[name] is not factory:
-            raise ValueError(f"limit {name!r} is registered already ({_FACTORIES[name].__module__})")
-        _FACTORIES[name] = factory
-        return factory
-
-    return add
+    return LIMITS.decorator(name)
 
 
 def limit_names() -> list[str]:
     """Every registered limit name, sorted."""
-    return sorted(_FACTORIES)
+    return LIMITS.names()
 
 
 def make_limits(names: tuple[str, ...], context: LimitContext, key: str = "limits") -> list[Limit]:
@@ -74,10 +70,9 @@ def make_limits(names: tuple[str, ...], context: LimitContext, key: str = "limit
     name and the registered ones."""
     out = []
     for name in names:
-        factory = _FACTORIES.get(name)
-        if factory is None:
+        if name not in LIMITS:
             raise ParameterError(key, name, "a registered limit: " + ", ".join(limit_names()))
-        limit = factory(context)
+        limit = LIMITS.get(name)(context)
         if limit is not None:
             out.append(limit)
     return out

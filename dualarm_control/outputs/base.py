@@ -22,6 +22,7 @@ import numpy as np
 
 from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import InputRejected, UnknownOutputError
+from dualarm_control.registry import Registry
 from dualarm_control.ros.cdr import CdrError
 from dualarm_control.ros.checks import finite, joint_indices
 
@@ -91,36 +92,31 @@ class OutputType(ABC):
 
 
 T = TypeVar("T", bound=OutputType)
-_REGISTRY: dict[str, OutputType] = {}
+OUTPUTS: Registry[OutputType] = Registry("output message type", UnknownOutputError)
 
 
 def register(cls: type[T]) -> type[T]:
     """Class decorator: an instance of ``cls`` serves the outputs whose message is ``cls.key``."""
-    if cls.key in _REGISTRY:
+    if cls.key in OUTPUTS:
         raise ValueError(f"output message type {cls.key!r} registered twice")
-    _REGISTRY[cls.key] = cls()
+    OUTPUTS.add(cls.key, cls())
     return cls
 
 
 def unregister(key: str) -> OutputType:
     """Remove the type registered under ``key`` and return it (UnknownOutputError otherwise): for a
     type registered for a while only, e.g. a test's."""
-    kind = output_type(key)
-    del _REGISTRY[key]
-    return kind
+    return OUTPUTS.remove(key)
 
 
 def output_names() -> list[str]:
     """The registered keys, sorted (the valid values of ``hardware.<name>.message``)."""
-    return sorted(_REGISTRY)
+    return OUTPUTS.names()
 
 
 def output_type(key: str) -> OutputType:
     """The type registered under ``key``; UnknownOutputError names the known keys."""
-    try:
-        return _REGISTRY[key]
-    except KeyError:
-        raise UnknownOutputError(key, output_names()) from None
+    return OUTPUTS.get(key)
 
 
 @functools.lru_cache(maxsize=64)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from dualarm_control.errors import ScenarioError
+from dualarm_control.registry import Registry
 from dualarm_control.scenario_keys import PREFIX, get, number
 
 if TYPE_CHECKING:
@@ -62,29 +63,24 @@ class TaskContext:
 
 TaskBuilder = Callable[[TaskSpec, TaskContext], "Task"]
 
-_BUILDERS: dict[str, TaskBuilder] = {}
+TASK_TYPES: Registry[TaskBuilder] = Registry("task type", lambda name, known: ScenarioError(
+    f"unknown task type {name!r}; registered: {', '.join(known)}"))
 
 
 def register_task(type_name: str) -> Callable[[TaskBuilder], TaskBuilder]:
     """Decorator registering a builder for the scenario task type ``type_name`` (ValueError if taken)."""
 
-    def add(builder: TaskBuilder) -> TaskBuilder:
-        if type_name in _BUILDERS and _BUILDERS[type_name] is not builder:
-            raise ValueError(f"task type {type_name!r} is registered already ({_BUILDERS[type_name].__module__})")
-        _BUILDERS[type_name] = builder
-        return builder
-
-    return add
+    return TASK_TYPES.decorator(type_name)
 
 
 def task_types() -> list[str]:
     """Every registered task type, sorted."""
-    return sorted(_BUILDERS)
+    return TASK_TYPES.names()
 
 
 def check_task_type(spec: TaskSpec) -> None:
     """ScenarioError naming the key, the value and the registered types when ``spec.type`` is unknown."""
-    if spec.type not in _BUILDERS:
+    if spec.type not in TASK_TYPES:
         raise ScenarioError(f"scenario parameter '{PREFIX}{spec.name}.type': got {spec.type!r}, expected one of: "
                             f"{', '.join(task_types())}")
 
@@ -93,7 +89,7 @@ def build_task(spec: TaskSpec, context: TaskContext) -> Task:
     """The task ``spec`` describes; ScenarioError naming the task (and the key) on a bad value."""
     check_task_type(spec)
     try:
-        return _BUILDERS[spec.type](spec, context)
+        return TASK_TYPES.get(spec.type)(spec, context)
     except ScenarioError:
         raise
     except ValueError as exc:
