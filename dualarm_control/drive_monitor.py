@@ -48,9 +48,16 @@ def stall_reason(model: DualArmModel, q: FloatArray, distance: float, angle: flo
     "collision constraint: A – B at 0.030 m; " first when ``collision`` has a pair closer than
     ``near`` [m], then the remaining error ``when`` (e.g. "2 s after the target arrived") and the
     joints at a position limit."""
+    return held_by(model, q, f"remaining error {distance * 1000:.2f} mm, {angle:.4f} rad {when}", collision, near)
+
+
+def held_by(model: DualArmModel, q: FloatArray, error: str, collision: CollisionModel | None = None,
+            near: float = COLLISION_NEAR) -> str:
+    """What held the arms at q (n,) [rad] short of a reference, around the ``error`` text: "collision constraint:
+    A – B at 0.030 m; " first when ``collision`` has a pair closer than ``near`` [m], then ``error``, then the
+    joints within :data:`LIMIT_MARGIN` of a position limit."""
     joints = joints_at_limit(model, q)
-    text = (f"remaining error {distance * 1000:.2f} mm, {angle:.4f} rad {when}; joints at a limit: "
-            f"{', '.join(joints) if joints else 'none'}")
+    text = f"{error}; joints at a limit: {', '.join(joints) if joints else 'none'}"
     if collision is not None and collision.pairs:
         near_pairs = collision.distances(q, within=near)
         if near_pairs:

@@ -137,3 +137,18 @@ def test_a_broken_plugin_is_named_with_its_error(tmp_path: Path, model: DualArmM
     bad.write_text("raise RuntimeError('no licence')\n")
     with pytest.raises(ParameterError, match=r"broken\.py.*RuntimeError: no licence"):
         RelativeController(model, ControllerParams(plugins=(str(bad),)))
+
+
+def test_a_task_held_by_a_limit_is_reported_stalled(model: DualArmModel) -> None:
+    """Issue 40: a task's stall said out loud. The tool_height scenario in the simulated cell (the one runner of
+    `dualarm experiment`): reached without the user's floor; with it, stalled 0.200 m short."""
+    from dualarm_control.app.record.report import summarize_run
+    from dualarm_control.app.run.experiment import run_scenario
+
+    scenario = load_scenario(str(DATA / "tool_height.yaml"))
+    free = summarize_run(run_scenario(scenario, ControllerParams(solver="constraint_based"), model), scenario, model)
+    assert (free["tasks_reached"], free["tasks_stalled"]) == (1, 0), free["task_outcomes"]
+    params = ControllerParams(solver="constraint_based", limits=("keep_above",), plugins=(str(PLUGIN),))
+    held = summarize_run(run_scenario(scenario, params, model), scenario, model)
+    assert (held["tasks_reached"], held["tasks_stalled"]) == (0, 1), held["task_outcomes"]
+    assert "task 'lower' (t = 4 s): stalled: |f - b| = 0.2 (tolerance 0.001)" in str(held["task_outcomes"])

@@ -28,7 +28,12 @@ import numpy as np
 
 from dualarm_control.app.record.run_record import RunRecord, TaskValues
 from dualarm_control.collision import CollisionModel
-from dualarm_control.drive_monitor import SegmentJudge, closest_pair, judge_goals
+from dualarm_control.drive_monitor import (
+    SegmentJudge,
+    closest_pair,
+    held_by,
+    judge_goals,
+)
 from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel, FloatArray, rotation_angle
 from dualarm_control.metrics import (
@@ -85,7 +90,8 @@ def summarize_run(record: RunRecord, scenario: Scenario | None, model: DualArmMo
     None for a relative-motion record that holds its ``final_errors`` (a bag's)."""
     if record.tasks is not None:
         assert scenario is not None
-        return task_metrics(record, record.tasks, scenario)
+        return {**task_metrics(record, record.tasks, scenario),
+                **task_verdicts(record, record.tasks, scenario, model or DualArmModel(scenario.robot))}
     model = model or (DualArmModel(scenario.robot) if scenario is not None else DualArmModel())
     errors = record.final_errors
     if errors is None:
@@ -163,6 +169,10 @@ def goal_lines(results: Mapping[str, Mapping[str, Any]]) -> str:
     """The goals' verdicts and the closest pair of every goals run, for the terminal ('' without goals)."""
     out = []
     for label, summary in results.items():
+        if "task_outcomes" in summary:
+            total = int(summary["tasks_reached"]) + int(summary["tasks_stalled"])
+            out.append(f"\n{label}: {summary['tasks_reached']} of {total} equality tasks reached")
+            out += [f"  {line}" for line in str(summary["task_outcomes"]).split(" | ") if ": stalled" in line]
         if "segment_outcomes" in summary:
             stalled = [line for line in str(summary["segment_outcomes"]).split(" | ") if ": stalled" in line]
             total = int(summary["segments_reached"]) + int(summary["segments_stalled"])
@@ -247,6 +257,39 @@ def task_metrics(log: RunRecord, part: TaskValues, scenario: Scenario) -> dict[s
     if part.force:
         record.update(force_metrics(log, part.set_point, spec.convergence_time, spec.force.contact_threshold))
     return record
+
+
+TASK_TOLERANCE = 1e-3
+"""A task's default tolerance on |f - b| at the end of a run (its units: m for positions; ``<task>.tolerance``)."""
+
+
+def task_verdicts(log: RunRecord, part: TaskValues, scenario: Scenario, model: DualArmModel
+                  ) -> dict[str, float | int | str]:
+    """Each equality task's verdict at the end of a task run (issue 40, a stall said out loud for tasks too):
+    ``reached`` when |f - b| <= its tolerance (``scenario.<task>.tolerance``, default :data:`TASK_TOLERANCE`),
+    else ``stalled``, naming the collision pair and the joint limits that held the arms at the final
+    configuration (:func:`~dualarm_control.drive_monitor.held_by`, the scenario's collision model). A circle
+    task (a moving target) is judged the same way, at the run's last cycle."""
+    spec = scenario.tasks
+    assert spec is not None
+    tolerances = {s.name: s.value("tolerance", float, TASK_TOLERANCE) for s in spec.tasks}
+    q = log.final_positions if np.all(np.isfinite(log.final_positions)) else log.positions[-1]
+    t = float(log.time[-1] + log.period)
+    collision = scenario.collision_model(model)
+    outcomes = []
+    for name, kind in part.kinds.items():
+        if kind == INEQUALITY:
+            continue
+        error = float(np.linalg.norm(part.values[name][-1] - part.bounds[name]))
+        head = f"task '{name}' (t = {t:g} s)"
+        if error <= tolerances[name]:
+            outcomes.append((True, f"{head}: reached, |f - b| = {error:.3g}"))
+        else:
+            text = held_by(model, q, f"|f - b| = {error:.3g} (tolerance {tolerances[name]:g}) at the end of the run",
+                           collision)
+            outcomes.append((False, f"{head}: stalled: {text}"))
+    return {"tasks_reached": sum(ok for ok, _ in outcomes), "tasks_stalled": sum(not ok for ok, _ in outcomes),
+            "task_outcomes": " | ".join(text for _, text in outcomes)}
 
 
 def force_metrics(log: RunRecord, set_point: float, settle: float, threshold: float) -> dict[str, float | int]:
