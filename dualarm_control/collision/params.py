@@ -12,6 +12,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dualarm_control.errors import DualArmError, ParameterError
+from dualarm_control.obstacles import Obstacle
 
 FloatArray = npt.NDArray[np.float64]
 TOOL_FRAMES = ("left_tool", "right_tool")
@@ -96,6 +97,9 @@ class CollisionParams:
     """m, >= 0: the limit keeps d_s between the shapes grown by this much each (d >= d_s + 2 margin in
     coal's distance of the URDF's shapes): pybullet's collision margin, 1 mm, by which the simulator's
     shapes are larger (its distances are 0.5-2 mm shorter than coal's, docs/collision.md)."""
+    obstacles: tuple[Obstacle, ...] = ()
+    """The scenario's static obstacles (``scenario.obstacles``, :mod:`dualarm_control.obstacles`): world
+    shapes the collision model checks against every arm link (docs/obstacles.md)."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.enabled, bool):
