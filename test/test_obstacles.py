@@ -336,3 +336,40 @@ def test_pan_cleaning_declares_its_table_once() -> None:
     assert tasks.cell_table is None
     collision = scenario.collision_model(DualArmModel(scenario.robot))
     assert ("left_link_3", "obstacle:table") in collision.pairs
+
+
+# ---- busy_cell: the whole loop, checked on the simulator's own shapes -----------------------------------
+
+@pytest.fixture(scope="module")
+def busy_run() -> tuple[object, object]:
+    """busy_cell in one process (standard_qp, the acceleration bound of config/acceleration_limit.yaml) and its report."""
+    from dualarm_control.app.record.report import summarize_run
+    from dualarm_control.app.run.experiment import run_scenario
+
+    scenario = load_scenario("busy_cell")
+    model = DualArmModel(scenario.robot)
+    params = ControllerParams(solver="standard_qp", acceleration_limit=[10.0])
+    record = run_scenario(scenario, params, model)
+    return record, summarize_run(record, scenario, model, params.alpha)
+
+
+def test_busy_cell_keeps_every_arm_link_away_from_the_obstacles(busy_run: tuple[object, object]) -> None:
+    """No (arm link, obstacle) pair closer than d_s = 3 cm minus a 2 mm allowance for the shapes' margins, on
+    pybullet's shapes (closest points of the cell with its obstacle bodies, every recorded cycle). Fails when
+    the collision limit does not get the obstacles (then a flange goes into the plate: < 0)."""
+    from dualarm_sim.contacts import obstacle_min_distances
+
+    record, _ = busy_run
+    scenario = load_scenario("busy_cell")
+    check = obstacle_min_distances(scenario.robot, record.positions, scenario.obstacles)  # type: ignore[attr-defined]
+    print(f"busy_cell: pybullet min {check.minimum * 1e3:.2f} mm, {check.pair}")
+    assert check.minimum >= 0.028, (check.minimum, check.pair)
+
+
+def test_busy_cell_stalls_at_the_fixture_naming_it(busy_run: tuple[object, object]) -> None:
+    _, summary = busy_run
+    outcomes = str(summary["segment_outcomes"])  # type: ignore[index]
+    print(outcomes)
+    assert "segment 1 'approach'" in outcomes and "stalled: collision constraint: " in outcomes
+    assert "– obstacle:fixture at 0.03" in outcomes.split(" | ")[0]
+    assert summary["segments_stalled"] == 1 and summary["segments_reached"] == 1  # type: ignore[index]
