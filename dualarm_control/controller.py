@@ -198,8 +198,10 @@ class RelativeController:
         self.collision_model: CollisionModel | None = None
         if self.params.collision.enabled:
             allowed = allowed_pairs(model, self.params.collision)
-            if collision is None or collision.allowed_given != frozenset(frozenset(p) for p in allowed):
-                collision = CollisionModel.shared(model, allowed)
+            obstacles = self.params.collision.obstacles
+            if collision is None or collision.allowed_given != frozenset(frozenset(p) for p in allowed) \
+                    or collision.obstacles != obstacles:
+                collision = CollisionModel.shared(model, allowed, obstacles)
             self.collision_model = collision
         self.constraints: tuple[Limit, ...] = self._limits()
         self._projection: TrackingProjection | None = None  # a plan's tracking QP (track_joints), made on first use
@@ -242,7 +244,8 @@ class RelativeController:
             raise ValueError(f"continue_from: {old.model.nq} joints, expected {self.model.nq}")
         self._previous = old._previous.copy()
         if self.collision_model is not None and old.collision_model is not None \
-                and old.collision_model.allowed == self.collision_model.allowed:
+                and old.collision_model.allowed == self.collision_model.allowed \
+                and old.collision_model.obstacles == self.collision_model.obstacles:
             self.collision_model = old.collision_model
             self.constraints = self._limits()
         if (old.params.solver, old.params.solver_params) == (self.params.solver, self.params.solver_params):

@@ -7,6 +7,7 @@ read the same keys. Registry: every ``config/scenarios/<name>.yaml`` is scenario
 Keys under ``scenario.`` (flattened names):
   name, description; ``robot``: a robot description's name (``config/robots/``) or a YAML path
   (relative to the scenario file; default ``lwr4_cell``, :mod:`dualarm_control.robot`);
+  ``obstacles`` (static obstacles by name, each one's keys under its name: :mod:`dualarm_control.obstacles`);
   ``initial_positions_deg`` (one value per joint of the robot, left then right; default: the
   robot's ready positions); ``robot_starts.<robot name>``: the start on another robot (used when
   the run's robot, e.g. ``--robot``, is that one; else its ready positions); settle_time [s], limits.<MotionLimits field>; and the keys of the
@@ -32,6 +33,7 @@ from dualarm_control.collision import CollisionModel
 from dualarm_control.controller import ControllerParams
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel, FloatArray
+from dualarm_control.obstacles import Obstacle, parse_obstacles
 from dualarm_control.params import (
     ParameterError,
     ParamSpec,
@@ -62,6 +64,9 @@ class Scenario:
         settle_time: control time after the trajectory ends [s] (error convergence).
         source: file it came from.
         robot: the robot description the scenario runs on.
+        collision_allowed: link pairs the collision limit never checks (``scenario.collision_allowed``).
+        obstacles: static obstacles of the cell (``scenario.obstacles``): the collision limit avoids
+            them, the simulator has them (docs/obstacles.md).
     """
 
     name: str
@@ -73,19 +78,23 @@ class Scenario:
     source: Path
     robot: RobotDescription = field(default_factory=load_robot)
     collision_allowed: tuple[tuple[str, str], ...] = ()
+    obstacles: tuple[Obstacle, ...] = ()
 
     def controller_params(self, params: ControllerParams) -> ControllerParams:
         """``params`` with the scenario's allowed contacts added to the collision limit's
-        (``scenario.collision_allowed``: e.g. the assembly's tools, which meet on purpose)."""
-        if not self.collision_allowed:
+        (``scenario.collision_allowed``: e.g. the assembly's tools, which meet on purpose) and its
+        obstacles (``scenario.obstacles``) as the limit's."""
+        if not self.collision_allowed and not self.obstacles:
             return params
-        collision = replace(params.collision, allowed=tuple(params.collision.allowed) + self.collision_allowed)
+        collision = replace(params.collision, allowed=tuple(params.collision.allowed) + self.collision_allowed,
+                            obstacles=self.obstacles)
         return replace(params, collision=collision)
 
     def collision_model(self, model: DualArmModel) -> CollisionModel:
         """The collision model a controller runs this scenario with (the robot's allowed pairs and the
-        scenario's, default settings; shared on ``model``): what a stall's reason names."""
-        return CollisionModel.shared(model, (*model.description.collision_allowed, *self.collision_allowed))
+        scenario's, its obstacles, default settings; shared on ``model``): what a stall's reason names."""
+        return CollisionModel.shared(model, (*model.description.collision_allowed, *self.collision_allowed),
+                                     self.obstacles)
 
     @property
     def tasks(self) -> TasksSource | None:
@@ -221,6 +230,7 @@ def scenario_from_parameters(flat: Mapping[str, Any], source: Path,
                             + ", ".join(outside))
     return Scenario(
         collision_allowed=_link_pairs(flat),
+        obstacles=parse_obstacles(flat, Path(source).parent),
         name=str(get(flat, "name")),
         description=str(get(flat, "description", "")),
         initial_positions=start,

@@ -61,6 +61,9 @@ Physics choices (all measured on ``urdf/dualarm_cell.urdf``):
   Contact stiffness/damping/friction come from the URDF's ``<contact>`` tags.
 * ``CellConfig.table_height`` adds a table: a static 1.2 x 1.6 x 0.05 m box in front of the
   torso (centre at x = 0.7 m, clear of the torso) whose top is at that world height; it collides with every link.
+* ``CellConfig.obstacles`` (a scenario's ``obstacles``, :mod:`dualarm_control.obstacles`; docs/obstacles.md):
+  one static body each (:mod:`dualarm_sim.obstacles`), colliding with every link. An obstacle named
+  ``table`` is the table of :meth:`DualArmCell.table_contacts` when ``table_height`` is None.
 * Joint position limits ARE enforced by pybullet (it creates joint-limit constraints from
   the URDF ``<limit>``, also in velocity mode): a joint commanded past its limit stops
   there (overshoot of a few 1e-5 rad). Keeping away from the limits is still the
@@ -81,8 +84,10 @@ import pybullet as p
 
 from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import DimensionError
+from dualarm_control.obstacles import Obstacle
 from dualarm_control.robot import LEFT_TOOL, RIGHT_TOOL, TOOL_JOINTS, RobotDescription
 from dualarm_control.robot_params import load_robot
+from dualarm_sim.obstacles import add_obstacle_bodies
 
 if TYPE_CHECKING:  # typing.Self is 3.11+ but ROS Humble runs 3.10: type-checking only
     from typing import Self
@@ -158,6 +163,7 @@ class CellConfig:
             pybullet skips them (``URDF_IGNORE_VISUAL_SHAPES``), which changes no physics (bit for
             bit, tested) and loads a cell with meshes 20-100x faster (the Panda pair's: 1.2 s against
             0.011 s; a sweep builds one cell per run).
+        obstacles: static obstacles (:mod:`dualarm_control.obstacles`), one pybullet body each.
     """
 
     urdf: Path = field(default_factory=lambda: load_robot().urdf_path)
@@ -174,6 +180,7 @@ class CellConfig:
     joints: tuple[str, ...] = ()
     held: tuple[tuple[str, float], ...] = ()
     visual_shapes: bool = False
+    obstacles: tuple[Obstacle, ...] = ()
 
     @classmethod
     def for_robot(cls, robot: RobotDescription | str, allowed: tuple[tuple[str, str], ...] = (),
@@ -341,6 +348,10 @@ class DualArmCell:
         self._filter_tool_collisions(infos)
         if self.config.table_height is not None:
             self._table = self._add_table(self.config.table_height)
+        self.obstacle_bodies: dict[str, int] = add_obstacle_bodies(self.config.obstacles, cid)
+        """The obstacles' pybullet body ids by name (``config.obstacles``)."""
+        if self._table is None:
+            self._table = self.obstacle_bodies.get("table")
         self._sensor = self._joint_index.get(SENSOR_JOINT)
         if self._sensor is not None:
             p.enableJointForceTorqueSensor(self._body, self._sensor, True, physicsClientId=cid)

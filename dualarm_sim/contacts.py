@@ -9,6 +9,8 @@ Two things, both on pybullet's collision shapes of the robot's resolved URDF as 
   and over the run. Only WHICH pairs to check comes from the controller's side: the caller passes
   them, usually :func:`~dualarm_sim.cell.robot_collision_pairs` (the pairs of
   :class:`~dualarm_control.collision.CollisionModel`, the robot's ``collision_allowed`` left out).
+* :func:`obstacle_min_distances`: the same for the links an arm joint moves against a scenario's
+  obstacles (issue 42, docs/obstacles.md), on the obstacles' pybullet bodies.
 * :class:`ContactCounter`: the contact-steps per link pair the simulator counted
   (:meth:`~dualarm_sim.cell.DualArmCell.contacts` after each step), the events when a pair comes
   into contact or separates (for a log line), and the values the sim node puts on ``/diagnostics``.
@@ -29,6 +31,7 @@ import pybullet as p
 
 from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import DimensionError
+from dualarm_control.obstacles import Obstacle
 from dualarm_control.robot import RobotDescription
 from dualarm_control.robot_params import load_robot
 from dualarm_sim.cell import CellConfig, DualArmCell
@@ -143,6 +146,59 @@ def min_distances(robot: RobotDescription | str, positions: FloatArray, pairs: S
                 if d < best:
                     best, best_i = d, i
             distances[k], closest[k] = best, best_i
+    return MinDistances(names, distances, closest, pair_minimum, float(cutoff))
+
+
+def moved_links(cell: DualArmCell) -> list[str]:
+    """The links of ``cell`` that one of its commanded (arm) joints moves, in pybullet's link order."""
+    cid, body = cell.client_id, cell.body_id
+    infos = [p.getJointInfo(body, j, physicsClientId=cid) for j in range(p.getNumJoints(body, physicsClientId=cid))]
+    arm = set(cell.joint_names)
+    moved: set[int] = set()
+    for j, info in enumerate(infos):  # a joint's parent link comes before it in pybullet's order
+        if info[1].decode() in arm or info[16] in moved:
+            moved.add(j)
+    return [infos[j][12].decode() for j in sorted(moved)]
+
+
+def obstacle_min_distances(robot: RobotDescription | str, positions: FloatArray, obstacles: Sequence[Obstacle],
+                           cutoff: float = DEFAULT_CUTOFF) -> MinDistances:
+    """The smallest distance between the links an arm joint moves and the ``obstacles``, at every row of
+    ``positions``, from pybullet (as :func:`min_distances`, on the simulator's own shapes: the
+    robot's cell with the obstacles' bodies, :mod:`dualarm_sim.obstacles`): one
+    ``p.getClosestPoints(robot, obstacle, cutoff)`` per obstacle and row, every link at once. The
+    pairs are (link, ``obstacle:<name>``), every moved link against every obstacle; a pair farther
+    than ``cutoff`` [m] counts as ``inf``. Raises as :func:`min_distances` (ValueError: no obstacle)."""
+    r = load_robot(robot)
+    q = np.asarray(positions, dtype=float)
+    if q.ndim != 2 or q.shape[1] != r.nq:
+        raise DimensionError(f"obstacle_min_distances: positions must be (k, {r.nq}) for robot {r.name!r}, "
+                             f"got {q.shape}")
+    if not (math.isfinite(cutoff) and cutoff > 0.0):
+        raise ValueError(f"obstacle_min_distances: cutoff={cutoff!r} must be a distance > 0 [m]")
+    if not obstacles:
+        raise ValueError("obstacle_min_distances: no obstacle to check")
+    with DualArmCell(CellConfig.for_robot(r, collisions=False, obstacles=tuple(obstacles))) as cell:
+        cid, body = cell.client_id, cell.body_id
+        links = moved_links(cell)
+        names = tuple((link, o.label) for o in obstacles for link in links)
+        column = {(cell.link_index(link), k): i for i, (link, k) in enumerate(
+            (link, k) for k in range(len(obstacles)) for link in links)}
+        bodies = [cell.obstacle_bodies[o.name] for o in obstacles]
+        distances = np.full(len(q), math.inf)
+        closest = np.full(len(q), -1, dtype=np.intp)
+        pair_minimum = np.full(len(names), math.inf)
+        for k, row in enumerate(q):
+            cell.pose(row)
+            for o, other in enumerate(bodies):
+                for c in p.getClosestPoints(body, other, cutoff, physicsClientId=cid):
+                    i = column.get((c[3], o))
+                    if i is None:
+                        continue
+                    d = float(c[8])
+                    pair_minimum[i] = min(pair_minimum[i], d)
+                    if d < distances[k]:
+                        distances[k], closest[k] = d, i
     return MinDistances(names, distances, closest, pair_minimum, float(cutoff))
 
 

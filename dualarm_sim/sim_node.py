@@ -138,7 +138,8 @@ class SimNode:
                                  collisions=p["collisions"],
                                  control_period=p["control_period"],
                                  physics_rate_hz=p["physics_rate_hz"], command_timeout=p["command_timeout"],
-                                 table_height=tasks.table_height if tasks is not None else None,
+                                 table_height=tasks.cell_table if tasks is not None else None,
+                                 obstacles=scenario.obstacles,
                                  contact_pairs=(tasks.contact_links,) if tasks is not None and p["force"] else ()),
             initial_positions=plan_start(p["plan"], robot.joint_names) if p["plan"] else scenario.initial_positions,
         )

@@ -92,6 +92,8 @@ def _feature(shape: coal.CollisionGeometry, rotation: FloatArray, translation: F
     x = rotation.T @ (point - translation)
     if isinstance(shape, coal.Sphere):
         return ("point", translation.copy(), float(shape.radius))
+    if isinstance(shape, coal.Halfspace):  # an obstacle plane: its normal, out of the obstacle
+        return ("face", rotation @ np.asarray(shape.n, dtype=float))
     if isinstance(shape, coal.Cylinder):
         r, h = float(shape.radius), float(shape.halfLength)
         side = abs(math.hypot(x[0], x[1]) - r) <= tol

@@ -15,6 +15,8 @@ touch or overlap at the joint, by design):
 * with ``self_collision``, each arm against its own links at joint distance >= 3 (links i and i+2
   of an arm share link i+1 between them and are not checked: on the LWR4 link i's cylinder reaches
   past joint i+1's origin, and on Baxter the elbow and forearm shapes overlap their neighbours');
+* every link moved by an arm joint (the arms' first links too) against every obstacle of the scenario
+  (:mod:`dualarm_control.obstacles`: world shapes ``obstacle:<name>``, :mod:`~dualarm_control.collision.obstacles`);
 * minus the ``allowed`` link pairs (e.g. a peg and its hole), minus the pairs the broadphase proves
   can never come within ``margin`` of each other (:meth:`CollisionModel.lower_bound`).
 
@@ -42,6 +44,7 @@ from dualarm_control.collision.distances import (
     read_witness,
     witness_pair_rows,
 )
+from dualarm_control.collision.obstacles import add_obstacles
 from dualarm_control.collision.params import (
     DEFAULT_GJK_TOLERANCE,
     DEFAULT_MARGIN,
@@ -62,16 +65,19 @@ from dualarm_control.collision.shapes import (
     urdf_tree,
 )
 from dualarm_control.kinematics import DualArmModel
+from dualarm_control.obstacles import Obstacle
 
 
 @dataclass(frozen=True)
 class _Body:
-    """A link with collision shapes: its joint (0 = the world) and its side ('left', 'right', WORLD)."""
+    """A link with collision shapes: its joint (0 = the world) and its side ('left', 'right', WORLD);
+    an obstacle is a world body checked against every arm link."""
 
     name: str
     joint: int
     side: str
     geometries: tuple[int, ...]
+    obstacle: bool = False
 
 
 
@@ -88,15 +94,19 @@ class CollisionModel:
             configuration is dropped; must be >= the influence distance it is used with.
         gjk_tolerance: coal's GJK tolerance, on the duality gap [m^2] (:data:`DEFAULT_GJK_TOLERANCE`;
             EPA keeps :data:`EPA_TOLERANCE`).
+        obstacles: a scenario's static obstacles (:mod:`dualarm_control.obstacles`): world shapes
+            ``obstacle:<name>`` checked against every link an arm joint moves (docs/obstacles.md).
 
     Attributes:
-        pairs: the link pairs checked, (link_a, link_b): left before right, world before an arm.
+        pairs: the link pairs checked, (link_a, link_b): left before right, world before an arm, an arm
+            link before an obstacle (the obstacles' pairs last, by obstacle).
         pruned: the pairs the broadphase dropped, with their distance lower bound [m].
         geometry_pairs: how many shape pairs the link pairs hold (one link may have several shapes).
     """
 
     def __init__(self, model: DualArmModel, allowed: Sequence[tuple[str, str]] = (), self_collision: bool = True,
-                 margin: float = DEFAULT_MARGIN, gjk_tolerance: float = DEFAULT_GJK_TOLERANCE) -> None:
+                 margin: float = DEFAULT_MARGIN, gjk_tolerance: float = DEFAULT_GJK_TOLERANCE,
+                 obstacles: Sequence[Obstacle] = ()) -> None:
         if not (math.isfinite(margin) and margin > 0.0):
             raise ValueError(f"margin={margin!r} must be a distance > 0 [m]")
         if not (math.isfinite(gjk_tolerance) and gjk_tolerance > 0.0):
@@ -105,6 +115,8 @@ class CollisionModel:
         self.margin = float(margin)
         self.self_collision = self_collision
         self.model, self.geometry = reduced_geometry(model)
+        self.obstacles: tuple[Obstacle, ...] = tuple(obstacles)
+        self._obstacle_names = frozenset(add_obstacles(self.model, self.geometry, self.obstacles))
         self.data = self.model.createData()
         self._bodies = self._find_bodies()
         self._body_index = {b.name: i for i, b in enumerate(self._bodies)}
@@ -160,16 +172,17 @@ class CollisionModel:
     # ---- links and pairs -------------------------------------------------------------------
 
     @classmethod
-    def shared(cls, model: DualArmModel, allowed: Sequence[tuple[str, str]] = ()) -> CollisionModel:
-        """``model``'s collision model for the ``allowed`` pairs (default settings), built on first use
+    def shared(cls, model: DualArmModel, allowed: Sequence[tuple[str, str]] = (),
+               obstacles: Sequence[Obstacle] = ()) -> CollisionModel:
+        """``model``'s collision model for the ``allowed`` pairs and ``obstacles`` (default settings), built on first use
         and kept on the model (``model.derived``): the controllers, the task sampler and the reports of
         one robot in one process share it instead of building one each (0.05-0.3 s; a sweep builds a
         controller per run). Sharing changes no result: what a collision model carries from call to
         call (the known bounds of :meth:`near`) only decides what is computed, never what it returns."""
-        key = (cls, frozenset(frozenset(p) for p in allowed))
+        key = (cls, frozenset(frozenset(p) for p in allowed), tuple(obstacles))
         found = model.derived.get(key)
         if not isinstance(found, cls):
-            found = cls(model, allowed=allowed)
+            found = cls(model, allowed=allowed, obstacles=obstacles)
             model.derived[key] = found
         return found
 
@@ -234,7 +247,7 @@ class CollisionModel:
         for name in order:
             joint = joint_of[name]
             side = WORLD if joint == 0 else "left" if self.model.names[joint] in left else "right"
-            bodies.append(_Body(name, joint, side, tuple(shapes[name])))
+            bodies.append(_Body(name, joint, side, tuple(shapes[name]), name in self._obstacle_names))
         return bodies
 
     def end_effector(self, link: str) -> list[str]:
@@ -298,6 +311,7 @@ class CollisionModel:
     def _candidates(self) -> list[tuple[int, int]]:
         """Body index pairs by the rules of the module docstring, before the broadphase."""
         out = []
+        obstacle_pairs = []  # (arm link, obstacle), after the others
         bodies = self._bodies
         rank = {WORLD: 0, "left": 1, "right": 2}
         for i, a in enumerate(bodies):
@@ -310,6 +324,9 @@ class CollisionModel:
                     i2, j2, a2, b2 = i, j, a, b
                 if frozenset((a2.name, b2.name)) in self.allowed or a2.side == b2.side == WORLD:
                     continue
+                if a2.obstacle:  # an obstacle against every arm link, the first links too
+                    obstacle_pairs.append((j2, i2))
+                    continue
                 jd = self.joint_distance(a2.name, b2.name)
                 if a2.side == WORLD:
                     keep = jd >= WORLD_JOINT_DISTANCE
@@ -320,7 +337,7 @@ class CollisionModel:
                 if keep:
                     out.append((i2, j2))
         out.sort(key=lambda ij: (rank[bodies[ij[0]].side], rank[bodies[ij[1]].side], ij))
-        return out
+        return out + sorted(obstacle_pairs, key=lambda ij: (ij[1], ij[0]))
 
     def _reach(self, body: _Body, start: int) -> float:
         """Radius [m] of a sphere about the origin of joint ``start`` (an ancestor of the body's

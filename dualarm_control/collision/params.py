@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import coal
 
 from dualarm_control.errors import DualArmError, ParameterError
+from dualarm_control.obstacles import Obstacle
 
 TOOL_FRAMES = ("left_tool", "right_tool")
 """The tool frames F1, F2 every resolved URDF has (``dualarm_control.robot``)."""
@@ -93,6 +94,9 @@ class CollisionParams:
     """m, >= 0: the limit keeps d_s between the shapes grown by this much each (d >= d_s + 2 margin in
     coal's distance of the URDF's shapes): pybullet's collision margin, 1 mm, by which the simulator's
     shapes are larger (its distances are 0.5-2 mm shorter than coal's, docs/collision.md)."""
+    obstacles: tuple[Obstacle, ...] = ()
+    """The scenario's static obstacles (``scenario.obstacles``, :mod:`dualarm_control.obstacles`): world
+    shapes the collision model checks against every arm link (docs/obstacles.md)."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.enabled, bool):

@@ -81,7 +81,9 @@ def farthest_from(shape: coal.CollisionGeometry, origin: FloatArray) -> float:
 
 def bounding_sphere(shape: coal.CollisionGeometry) -> tuple[FloatArray, float]:
     """A sphere holding a shape: the centre of its local AABB (shape frame) [m], (3,), and the
-    farthest point's distance from it [m]."""
+    farthest point's distance from it [m]; for a half-space or plane (an obstacle) the origin and inf."""
+    if isinstance(shape, coal.Halfspace | coal.Plane):
+        return np.zeros(3), math.inf
     shape.computeLocalAABB()
     centre = np.array(shape.aabb_center, dtype=float)
     return centre, farthest_from(shape, centre)

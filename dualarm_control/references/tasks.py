@@ -1,7 +1,9 @@
 """Reference source of paper 001: a set of tasks with gains and bounds instead of relative segments.
 
 Keys under ``scenario.`` (flattened, see :mod:`dualarm_control.scenario`):
-  ``duration`` [s]; ``table_height`` [m, world z of the table top; none: no table];
+  ``duration`` [s]; ``table_height`` [m, world z of the table top; or the top of the obstacle named
+  ``table``, :func:`~dualarm_control.obstacles.table_top`: one definition of the plane for f6 and the cell;
+  neither: no table];
   ``convergence_time`` [s] (metrics after it); ``gains`` (k values to compare, 1/s);
   ``tasks`` (ordered names) and per task ``<task>.type``:
 
@@ -37,6 +39,7 @@ from dualarm_control.force import (
     contact_normal_force,
 )
 from dualarm_control.kinematics import Configuration, DualArmModel, FloatArray
+from dualarm_control.obstacles import parse_obstacles, table_top
 from dualarm_control.plugins import load_plugins
 from dualarm_control.references.base import (
     RunOptions,
@@ -67,6 +70,8 @@ class TasksSource(SourceDefaults):
         gains: the k values [1/s] the experiment compares by default.
         tasks: task specs in order. force: the force variant's parameters.
         contact_links: the two links that make contact in the force variant.
+        table_obstacle: the table is the scenario's obstacle ``table`` (its top is ``table_height``):
+            the cell has it as an obstacle body, not as :class:`~dualarm_sim.cell.CellConfig`'s table.
     """
 
     duration: float
@@ -76,6 +81,7 @@ class TasksSource(SourceDefaults):
     tasks: tuple[TaskSpec, ...]
     force: ForceParams
     contact_links: tuple[str, str] = ("left_flange", "right_tool")
+    table_obstacle: bool = False
     kind: ClassVar[str] = "tasks"
     streams: ClassVar[tuple[str, ...]] = ()
 
@@ -86,8 +92,14 @@ class TasksSource(SourceDefaults):
         """The run's task gain k [1/s]: the option's, else force.gain (force variant) or the first of ``gains``."""
         return options.gain if options.gain is not None else (self.force.gain if options.force else self.gains[0])
 
+    @property
+    def cell_table(self) -> float | None:
+        """The cell's own table top [m] (:class:`~dualarm_sim.cell.CellConfig`'s ``table_height``), None when
+        the table is an obstacle of the scenario (the cell gets it with the obstacles)."""
+        return None if self.table_obstacle else self.table_height
+
     def cell(self, options: RunOptions) -> dict[str, Any]:
-        return {"table_height": self.table_height, "contact_pairs": (self.contact_links,) if options.force else ()}
+        return {"table_height": self.cell_table, "contact_pairs": (self.contact_links,) if options.force else ()}
 
     def tracker(self, model: DualArmModel, params: ControllerParams, options: RunOptions) -> TasksController:
         duration = options.duration if options.duration is not None else self.duration
@@ -205,6 +217,19 @@ class TasksController:
         return out
 
 
+def _table_height(flat: Mapping[str, Any], base: Path | None) -> tuple[float | None, bool]:
+    """The table plane's height [m] and whether it is the top of the obstacle ``table``: that top, or
+    ``scenario.table_height`` (both given: they must agree to 1e-9 m; ScenarioError otherwise); None: neither
+    (no table)."""
+    top = table_top(parse_obstacles(flat, base or Path.cwd()))
+    if top is None:
+        return (number(flat, "table_height") if PREFIX + "table_height" in flat else None), False
+    if PREFIX + "table_height" in flat and abs(number(flat, "table_height") - top) > 1e-9:
+        raise ScenarioError(f"scenario parameter '{PREFIX}table_height': got {flat[PREFIX + 'table_height']!r}, "
+                            f"but the obstacle 'table' has its top at {top!r} m (give one of them)")
+    return top, True
+
+
 def parse_tasks(flat: Mapping[str, Any], base: Path | None = None) -> TasksSource:
     """Read the task keys (module docstring) from flattened parameters; ScenarioError on a bad value.
 
@@ -249,7 +274,8 @@ def parse_tasks(flat: Mapping[str, Any], base: Path | None = None) -> TasksSourc
     links = get(flat, "contact_links", ["left_flange", "right_tool"])
     if not isinstance(links, list) or len(links) != 2 or not all(isinstance(n, str) for n in links):
         raise ScenarioError(f"scenario parameter '{PREFIX}contact_links': got {links!r}, expected two link names")
-    out = TasksSource(duration=number(flat, "duration"), table_height=number(flat, "table_height") if PREFIX + "table_height" in flat else None,
+    table, from_obstacle = _table_height(flat, base)
+    out = TasksSource(duration=number(flat, "duration"), table_height=table, table_obstacle=from_obstacle,
                       convergence_time=number(flat, "convergence_time", 5.0), gains=tuple(float(g) for g in gains),
                       tasks=tuple(specs), force=force, contact_links=(links[0], links[1]))
     if out.duration <= out.convergence_time:
