@@ -17,19 +17,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from dualarm_control.metrics import ACTIVITY_THRESHOLD
 from dualarm_control.qp import DEFAULT_BACKEND, QPSettings, QPSolution, make_backend
 from dualarm_control.solvers.policy import (
     ROUND_OFF,
     bound_excess,
     fallback,
+    load_fallback,
     row_violation_text,
     violation_text,
 )
 from dualarm_control.solvers.problem import ControlProblem, FloatArray
 from dualarm_control.status import FAILURE_STATUSES, FALLBACK_TRIGGERS, Status
-
-ACTIVITY_THRESHOLD = 1e-3
-"""A joint is active when |qd_i| > 1e-3 rad/s (paper 000, Fig. 5 and Table I)."""
 
 
 @dataclass(slots=True)
@@ -146,6 +145,7 @@ class Solver:
 
     def __init__(self, params: SolverParams | None = None) -> None:
         self.params = params or SolverParams()
+        load_fallback()  # the fallback's import now, never inside the control loop
 
     def reset(self) -> None:
         """Forget warm-start memory (e.g. after a discontinuity)."""
