@@ -104,6 +104,17 @@ def test_kill_controller_row(runs: Runs, tmp_path_factory: pytest.TempPathFactor
     assert stop["speed_at_kill"] > 0.01 and 0 <= stop["steps"] <= faults.COMMAND_TIMEOUT_STEPS + 3
 
 
+@pytest.mark.parametrize("name", list(faults.PROFILE_KILLS))
+def test_kill_controller_on_each_shipped_profile(runs: Runs, tmp_path_factory: pytest.TempPathFactory,
+                                                 name: str) -> None:
+    """Issue 40 item 5: the controller killed mid-motion on ros2_control_velocity.yaml (a trajectory controller
+    with a 0.05 s cmd_timeout) and on lbr_dual_position.yaml (the last position holds): the arms at rest within
+    the row's steps of the last command (counted in simulator steps), read from a bag of the profile's topics."""
+    row = passed(runs, tmp_path_factory, name)
+    stop = row.figures
+    assert stop["speed_at_kill"] > 0.01 and 0 <= stop["steps"] <= faults.PROFILE_KILLS[name][1], row.observed
+
+
 @pytest.mark.parametrize("name", ["recorder_sigint", "recorder_sigterm"])
 def test_recorder_signal_rows(runs: Runs, tmp_path_factory: pytest.TempPathFactory, name: str) -> None:
     """A recorder stopped by a signal keeps every /joint_states received up to it."""
