@@ -112,3 +112,18 @@ def test_a_node_says_where_its_robot_comes_from() -> None:
     assert scenario.robot.name == "panda_pair" and "from the hardware profile" in note
     with pytest.raises(ParameterError, match="sim_node.hardware.robot"):
         node_scenario({"scenario": "assembly", "robot": "baxter", "hardware.robot": "panda_pair"}, "sim_node")
+
+
+@pytest.mark.parametrize("verb", [["hardware", "check", "--timeout", "1"], ["launch", "assembly", "--lockstep"],
+                                  ["experiment", "assembly"], ["view", "--save", "unused.rrd", "--duration", "1"]])
+def test_every_verb_refuses_a_robot_the_profile_does_not_name(verb: list[str], capsys: pytest.CaptureFixture[str],
+                                                              tmp_path: Path) -> None:
+    """Before anything starts: exit 2, naming the profile's robot and the other one."""
+    from dualarm_control.app.cli import main
+
+    profile = ROOT / "config" / "hardware" / "lbr_dual_position.yaml"
+    out = ["--output", str(tmp_path)] if verb[0] == "experiment" else []
+    assert main([*verb, *out, "--robot", "baxter", "--params", str(profile)]) == 2
+    err = capsys.readouterr().err
+    assert "hardware.robot" in err and "'lwr4_cell'" in err and "'baxter'" in err, err
+    assert not (tmp_path / "metrics.json").exists()
