@@ -181,3 +181,9 @@ def real_cell_step(cell: Path, scenario: str, timeout: float) -> None:
 @pytest.mark.realtime
 def test_the_renamed_cell_with_the_pages_node_commands(cell: Path) -> None:
     real_cell_step(cell, SHORT, 120.0)
+
+
+@pytest.mark.slow
+@pytest.mark.realtime
+def test_the_renamed_cell_runs_the_assembly_with_the_pages_node_commands(cell: Path) -> None:
+    real_cell_step(cell, "assembly", 240.0)
