@@ -115,6 +115,19 @@ def test_kill_controller_on_each_shipped_profile(runs: Runs, tmp_path_factory: p
     assert stop["speed_at_kill"] > 0.01 and 0 <= stop["steps"] <= faults.PROFILE_KILLS[name][1], row.observed
 
 
+def test_the_kill_row_fails_on_a_group_velocity_controller(tmp_path: Path) -> None:
+    """The row can fail: on test/data/group_velocity.yaml (a JointGroupVelocityController, which keeps the last
+    velocity: the simulator with no command timeout) the arms never come to rest after the kill."""
+    from dualarm_control.app.faults.profile_kills import kill_row
+
+    name = "kill_controller_velocity_profile"
+    group = Path(__file__).parent / "data" / "group_velocity.yaml"
+    row = kill_row(tmp_path, FAULT_MOVE, name, group, faults.PROFILE_KILLS[name][1], print)
+    print(f"[{row.status}] {row.observed}")
+    assert not row.observed.startswith("run failed"), row.observed
+    assert row.status == "FAIL" and row.figures["speed_at_kill"] > 0.01 and row.figures["steps"] == -1, row.observed
+
+
 @pytest.mark.parametrize("name", ["recorder_sigint", "recorder_sigterm"])
 def test_recorder_signal_rows(runs: Runs, tmp_path_factory: pytest.TempPathFactory, name: str) -> None:
     """A recorder stopped by a signal keeps every /joint_states received up to it."""

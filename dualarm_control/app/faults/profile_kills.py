@@ -40,22 +40,21 @@ def recorded_topics(profile: Path, scenario: str) -> tuple[str, ...]:
     return with_profile_topics(RECORDED, [str(profile)], load_scenario(scenario, robot).robot.joint_names)
 
 
-def profile_kill_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[str], None]) -> list[Row]:
-    """One real-time run per selected profile row: the controller killed mid-motion, the arms' stop judged."""
-    rows: list[Row] = []
-    for name, (profile, steps) in PROFILE_KILLS.items():
-        if name not in only:
-            continue
-        path = profile_file(profile)
-        run = CellRun(out / name, scenario, ["--params-file", str(path)], topics=recorded_topics(path, scenario))
-        try:
-            say(f"{name}: the cell on {path.name}")
-            run.start()
-            killed = _kill_controller(run, name, say)
-        except RunError as exc:
-            run.stop()
-            rows += _failed([name], str(exc))
-            continue
+def kill_row(out: Path, scenario: str, name: str, profile: Path, steps: int, say: Callable[[str], None]) -> Row:
+    """Row ``name``: the cell in real time on ``profile``, the controller killed mid-motion, at rest within ``steps``?"""
+    run = CellRun(out / name, scenario, ["--params-file", str(profile)], topics=recorded_topics(profile, scenario))
+    try:
+        say(f"{name}: the cell on {profile.name}")
+        run.start()
+        killed = _kill_controller(run, name, say)
+    except RunError as exc:
         run.stop()
-        rows.append(_stop_row(name, run.record(), killed, steps))
-    return rows
+        return _failed([name], str(exc))[0]
+    run.stop()
+    return _stop_row(name, run.record(), killed, steps)
+
+
+def profile_kill_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[str], None]) -> list[Row]:
+    """One real-time run per selected profile row (:data:`~dualarm_control.app.faults.matrix.PROFILE_KILLS`)."""
+    return [kill_row(out, scenario, name, profile_file(profile), steps, say)
+            for name, (profile, steps) in PROFILE_KILLS.items() if name in only]
