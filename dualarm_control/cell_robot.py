@@ -86,3 +86,18 @@ def cell_robot(params: Sequence[str | Path], robot: str | None) -> tuple[str | N
     profile_robot = params_robot(params)
     given = robot or str(read_params_files(params, CONTROLLER).get("robot", "") or "")
     return choose_robot(profile_robot, given) or None, profile_robot
+
+
+def with_absolute_robot(ros_args: Sequence[str]) -> list[str]:
+    """A node's ROS arguments with ``-p hardware.robot:=PATH`` added when a ``--params-file`` names a relative
+    ``hardware.robot`` path (made absolute against that file's folder, as the tools read it; a node alone
+    would read it against its working directory). Unchanged when an argument sets hardware.robot itself."""
+    args = list(ros_args)
+    files = [args[i + 1] for i, a in enumerate(args[:-1]) if a == "--params-file"]
+    if not files or any(a.startswith((f"{KEY}:=", f"{CONTROLLER}:{KEY}:=")) for a in args):
+        return args
+    raw = [str(read_params_file(f, CONTROLLER).get(KEY, "") or "") for f in files]
+    last = next((r for r in reversed(raw) if r), "")
+    if not last.endswith((".yaml", ".yml")) or Path(last).is_absolute():
+        return args
+    return [*args, "-p", f"{KEY}:={params_robot(files)}"]

@@ -14,6 +14,7 @@ from dualarm_control.cell_robot import (
     choose_robot,
     node_scenario,
     params_robot,
+    with_absolute_robot,
 )
 from dualarm_control.errors import ParameterError
 from dualarm_control.hardware import (
@@ -102,6 +103,11 @@ def test_a_relative_robot_path_is_the_profile_files(tmp_path: Path) -> None:
     assert cell_robot([profile], None) == (str(tmp_path / "cell" / "my_robot.yaml"), str(tmp_path / "cell" / "my_robot.yaml"))
     with pytest.raises(ParameterError, match="baxter"):
         cell_robot([profile], "baxter")
+    args = ["--ros-args", "--params-file", str(profile), "-p", "scenario:=assembly"]
+    assert with_absolute_robot(args) == [*args, "-p", f"hardware.robot:={tmp_path / 'cell' / 'my_robot.yaml'}"]
+    assert with_absolute_robot([*args, "-p", "hardware.robot:=baxter"]) == [*args, "-p", "hardware.robot:=baxter"]
+    shipped = ["--params-file", str(ROOT / "config" / "hardware" / "lbr_dual_position.yaml")]
+    assert with_absolute_robot(shipped) == shipped  # a robot's name: nothing to resolve
 
 
 def test_a_node_says_where_its_robot_comes_from() -> None:
