@@ -4,12 +4,14 @@ A profile is ROS-style parameters under ``hardware.`` (one parser, :func:`load_p
 nodes and ``dualarm hardware check``)::
 
     hardware:
+      robot: lwr4_cell                        # the cell's robot description (dualarm_control/cell_robot.py)
+      joint_map: ["left_joint_1 lbr_left_A1", ...]   # description name -> hardware name (joint_map.py)
       outputs: [left_arm, right_arm]          # names of the command outputs
       left_arm:
         topic: /left/forward_position_controller/commands
         message: float64_multi_array          # or joint_trajectory (one point), any registered type
         interface: position                   # or velocity
-        joints: [lbr_A1, ...]                 # any subset and order of the description's joints
+        joints: [lbr_left_A1, ...]            # any subset and order of the joints (hardware names)
       right_arm: {...}
       joint_states: [/left/joint_states, /right/joint_states]
       stamp_tolerance: 0.0025                 # [s] stamps of one consistent state differ by at most this
