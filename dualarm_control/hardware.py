@@ -4,12 +4,14 @@ A profile is ROS-style parameters under ``hardware.`` (one parser, :func:`load_p
 nodes and ``dualarm hardware check``)::
 
     hardware:
+      robot: lwr4_cell                        # the cell's robot description (dualarm_control/cell_robot.py)
+      joint_map: ["left_joint_1 lbr_left_A1", ...]   # description name -> hardware name (joint_map.py)
       outputs: [left_arm, right_arm]          # names of the command outputs
       left_arm:
         topic: /left/forward_position_controller/commands
         message: float64_multi_array          # or joint_trajectory (one point), any registered type
         interface: position                   # or velocity
-        joints: [lbr_A1, ...]                 # any subset and order of the description's joints
+        joints: [lbr_left_A1, ...]            # any subset and order of the joints (hardware names)
       right_arm: {...}
       joint_states: [/left/joint_states, /right/joint_states]
       stamp_tolerance: 0.0025                 # [s] stamps of one consistent state differ by at most this
@@ -36,6 +38,12 @@ import numpy as np
 
 from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import ParameterError
+from dualarm_control.joint_map import (
+    IDENTITY,
+    JointMap,
+    joint_map_entries,
+    parse_joint_map,
+)
 from dualarm_control.outputs import OutputSpec, output_names
 from dualarm_control.params import ParamSpec, non_negative, positive, resolve
 
@@ -52,12 +60,12 @@ def _topic_list(value: Any) -> str:
     return ""
 
 
-RESERVED = ("outputs", "joint_states", "stamp_tolerance", "startup_check")
+RESERVED = ("outputs", "joint_states", "stamp_tolerance", "startup_check", "robot", "joint_map")
 
 
 def _output_names(value: Any) -> str:
-    """output names (letters, digits, '_'; not outputs, joint_states, stamp_tolerance, startup_check), at least
-    one, no duplicates"""
+    """output names (letters, digits, '_'; not outputs, joint_states, stamp_tolerance, startup_check, robot,
+    joint_map), at least one, no duplicates"""
     names = [v for v in value if v]
     if (not names or len(set(names)) != len(names) or not all(n.replace("_", "").isalnum() for n in names)
             or set(names) & set(RESERVED)):
@@ -76,6 +84,12 @@ HARDWARE_PARAMETERS = (
               "joint-state topic published, every joint on one, every command topic subscribed with its type); "
               "refused (exit 2, the problems named) if it does not within this time [s] (0: no check)",
               check=non_negative, read_only=True),
+    ParamSpec("hardware.robot", "", "the cell's robot description (config/robots/<name>.yaml or a YAML path): every "
+              "node and tool on this profile runs on it; '': the robot parameter's, else the scenario's "
+              "(dualarm_control/cell_robot.py)", read_only=True),
+    ParamSpec("hardware.joint_map", [""], "'description_name hardware_name' strings: the description's joint as "
+              "the hardware names it on joint states and commands (['']: the description's names)",
+              check=joint_map_entries, read_only=True),
 )
 
 
@@ -101,10 +115,17 @@ class HardwareProfile:
     outputs: tuple[OutputSpec, ...]
     joint_states: tuple[str, ...]
     stamp_tolerance: float
+    joint_map: JointMap = IDENTITY
+
+    def hardware_names(self, joint_names: Sequence[str]) -> tuple[str, ...]:
+        """The description's ``joint_names`` as the hardware names them (``hardware.joint_map``): the one
+        place the map is applied, by every reader of joint states and writer of commands."""
+        return self.joint_map.hardware(joint_names)
 
     def indices(self, joint_names: Sequence[str]) -> list[np.ndarray]:
-        """Per output, the index in ``joint_names`` (the description's order) of each of its joints."""
-        order = {n: i for i, n in enumerate(joint_names)}
+        """Per output, the index in ``joint_names`` (the description's names and order) of each of its
+        joints (hardware names)."""
+        order = {n: i for i, n in enumerate(self.hardware_names(joint_names))}
         return [np.array([order[j] for j in o.joints], dtype=int) for o in self.outputs]
 
     @property
@@ -128,16 +149,19 @@ def load_profile(given: Mapping[str, Any], joint_names: Sequence[str], node: str
 def profile_from_values(values: Mapping[str, Any], joint_names: Sequence[str], node: str = "") -> HardwareProfile:
     """The profile of resolved (declared) values; checks joint coverage and topics across outputs."""
     prefix = f"{node}." if node else ""
-    known = set(joint_names)
+    joint_map = parse_joint_map(values.get("hardware.joint_map", [""]), joint_names, f"{prefix}hardware.joint_map")
+    hardware = joint_map.hardware(joint_names)
+    known = set(hardware)
     owner: dict[str, str] = {}
     outputs: list[OutputSpec] = []
     for name in [n for n in values["hardware.outputs"] if n]:
         key = f"hardware.{name}"
-        joints = tuple(j for j in values[f"{key}.joints"] if j) or tuple(joint_names)
+        joints = tuple(j for j in values[f"{key}.joints"] if j) or hardware
         for j in joints:
             if j not in known:
-                raise ParameterError(f"{prefix}{key}.joints", j, f"a joint of the robot description "
-                                     f"({', '.join(joint_names)})")
+                what = "a joint of the hardware (hardware.joint_map applied)" if joint_map.to_hardware else \
+                    "a joint of the robot description"
+                raise ParameterError(f"{prefix}{key}.joints", j, f"{what} ({', '.join(hardware)})")
             if j in owner:
                 raise ParameterError(f"{prefix}{key}.joints", j, f"a joint no other output commands "
                                      f"(already in hardware.{owner[j]}.joints)")
@@ -150,12 +174,12 @@ def profile_from_values(values: Mapping[str, Any], joint_names: Sequence[str], n
             raise ParameterError(f"{prefix}{key}.topic", topic, f"a topic no other output uses "
                                  f"(hardware.{clash[0]}.topic)")
         outputs.append(OutputSpec(name, topic, values[f"{key}.message"], values[f"{key}.interface"], joints))
-    missing = [j for j in joint_names if j not in owner]
+    missing = [j for j in hardware if j not in owner]
     if missing:
         raise ParameterError(f"{prefix}hardware.outputs", list(values["hardware.outputs"]),
                              f"outputs that command every joint: {', '.join(missing)} in none")
     states = tuple(t for t in values["hardware.joint_states"] if t)
-    return HardwareProfile(tuple(outputs), states, float(values["hardware.stamp_tolerance"]))
+    return HardwareProfile(tuple(outputs), states, float(values["hardware.stamp_tolerance"]), joint_map)
 
 
 def position_command(reference: FloatArray, velocity: FloatArray, measured: FloatArray, period: float,
@@ -271,7 +295,8 @@ class TopicView:
 STATE_TYPE = "sensor_msgs/msg/JointState"
 
 
-def waiting_reason(views: Sequence[TopicView], assembler: StateAssembler, joint_names: Sequence[str]) -> str:
+def waiting_reason(views: Sequence[TopicView], assembler: StateAssembler, joint_names: Sequence[str],
+                   joint_map: JointMap = IDENTITY) -> str:
     """Why there is no consistent joint state yet, every cause found, '; '-separated: a topic with no
     publisher, a topic with more than one publisher or a publisher of another type (the node names
     and types), a topic that has delivered nothing, a topic whose samples are refused (the last reason),
@@ -294,7 +319,7 @@ def waiting_reason(views: Sequence[TopicView], assembler: StateAssembler, joint_
     for sample in assembler.latest.values():
         carried[sample.indices] = True
     if assembler.latest and not carried.all():
-        missing = [n for n, c in zip(joint_names, carried, strict=True) if not c]
+        missing = [joint_map.label(n) for n, c in zip(joint_names, carried, strict=True) if not c]
         causes.append(f"joints of the description missing from every topic: {', '.join(missing)}")
     if len(assembler.latest) > 1 and assembler.spread() > assembler.tolerance_ns:
         causes.append(f"stamps of {', '.join(assembler.latest)} differ by {assembler.spread() / 1e6:.1f} ms > "

@@ -44,14 +44,14 @@ def state_layout(profile: HardwareProfile, joint_names: Sequence[str], held: Seq
     ``order`` (:data:`STATE_ORDERS`): the description's order, reversed, or sorted by name."""
     if order not in STATE_ORDERS:
         raise ValueError(f"state order {order!r}: one of {', '.join(STATE_ORDERS)}")
-    full = [*joint_names, *held, *extra]
+    full = [*profile.hardware_names(joint_names), *held, *extra]  # as the hardware names them (joint_map)
     index = {n: i for i, n in enumerate(full)}
     out = []
     for topic in profile.joint_states:
         ns = _namespace(topic)
         mine = [j for o in profile.outputs if ns and _namespace(o.topic).startswith(ns) for j in o.joints]
-        arms = list(joint_names) if len(profile.joint_states) == 1 or not mine else \
-            [j for j in joint_names if j in set(mine)]
+        arms = list(full[:len(joint_names)]) if len(profile.joint_states) == 1 or not mine else \
+            [j for j in full[:len(joint_names)] if j in set(mine)]
         names = [*arms, *held, *extra]
         if order == "reversed":
             names.reverse()

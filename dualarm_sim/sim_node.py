@@ -55,6 +55,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
+from dualarm_control.cell_robot import node_scenario
 from dualarm_control.errors import InputRejected
 from dualarm_control.hardware import HARDWARE_PARAMETERS, profile_from_values
 from dualarm_control.params import ParamSpec, non_negative, positive
@@ -81,7 +82,7 @@ from dualarm_control.ros.qos import (
     publisher_depth,
     stream_qos,
 )
-from dualarm_control.scenario import ROBOT_PARAMETER, load_scenario, scenario_names
+from dualarm_control.scenario import ROBOT_PARAMETER, scenario_names
 from dualarm_sim.cell import CellConfig, DualArmCell, JointSample
 from dualarm_sim.contacts import ContactCounter
 from dualarm_sim.ports import STATE_ORDERS, CommandMerger, state_layout
@@ -130,7 +131,7 @@ class SimNode:
     def __init__(self, context: Any, priority_note: str = "disabled", bus: LocalBus | None = None) -> None:
         self.node = Node("sim_node", context=context)
         p = declare_with_profile(self.node, PARAMETERS)
-        scenario = load_scenario(p["scenario"], p["robot"])
+        scenario, robot_note = node_scenario(p, "sim_node")
         tasks = scenario.tasks  # a task scenario: its cell (pan and brush), table and contact pair
         robot = scenario.robot
         self.cell = DualArmCell(
@@ -177,6 +178,7 @@ class SimNode:
             subscribe_checked(n, decoder.kind.message_class(), o.topic, functools.partial(self.on_command, o.name),
                               qos, self.reject, decoder, bus, self.on_rejected_command)
         self.log = n.get_logger()
+        self.log.info(robot_note)
         self.throttle = Throttle(1.0)
         self.steps = 0
         self.stepped: JointSample | None = None  # the state the last step returned, until published

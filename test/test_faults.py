@@ -104,6 +104,30 @@ def test_kill_controller_row(runs: Runs, tmp_path_factory: pytest.TempPathFactor
     assert stop["speed_at_kill"] > 0.01 and 0 <= stop["steps"] <= faults.COMMAND_TIMEOUT_STEPS + 3
 
 
+@pytest.mark.parametrize("name", list(faults.PROFILE_KILLS))
+def test_kill_controller_on_each_shipped_profile(runs: Runs, tmp_path_factory: pytest.TempPathFactory,
+                                                 name: str) -> None:
+    """Issue 40 item 5: the controller killed mid-motion on ros2_control_velocity.yaml (a trajectory controller
+    with a 0.05 s cmd_timeout) and on lbr_dual_position.yaml (the last position holds): the arms at rest within
+    the row's steps of the last command (counted in simulator steps), read from a bag of the profile's topics."""
+    row = passed(runs, tmp_path_factory, name)
+    stop = row.figures
+    assert stop["speed_at_kill"] > 0.01 and 0 <= stop["steps"] <= faults.PROFILE_KILLS[name][1], row.observed
+
+
+def test_the_kill_row_fails_on_a_group_velocity_controller(tmp_path: Path) -> None:
+    """The row can fail: on test/data/group_velocity.yaml (a JointGroupVelocityController, which keeps the last
+    velocity: the simulator with no command timeout) the arms never come to rest after the kill."""
+    from dualarm_control.app.faults.profile_kills import kill_row
+
+    name = "kill_controller_velocity_profile"
+    group = Path(__file__).parent / "data" / "group_velocity.yaml"
+    row = kill_row(tmp_path, FAULT_MOVE, name, group, faults.PROFILE_KILLS[name][1], print)
+    print(f"[{row.status}] {row.observed}")
+    assert not row.observed.startswith("run failed"), row.observed
+    assert row.status == "FAIL" and row.figures["speed_at_kill"] > 0.01 and row.figures["steps"] == -1, row.observed
+
+
 @pytest.mark.parametrize("name", ["recorder_sigint", "recorder_sigterm"])
 def test_recorder_signal_rows(runs: Runs, tmp_path_factory: pytest.TempPathFactory, name: str) -> None:
     """A recorder stopped by a signal keeps every /joint_states received up to it."""

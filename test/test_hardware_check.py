@@ -55,4 +55,4 @@ def test_another_profile_is_refused_with_one_line_per_problem(lbr_sim: None) -> 
     assert result.returncode == 1, result.stdout + result.stderr
     problems = [line for line in result.stdout.splitlines() if line.startswith("problem: ")]
     assert problems == ["problem: no publisher on /joint_states",
-                        "problem: no subscriber on /arms_velocity_controller/commands"], result.stdout
+                        "problem: no subscriber on /arms_trajectory_controller/joint_trajectory"], result.stdout

@@ -109,7 +109,9 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     if args.node not in NODES:
         raise DualArmError(f"unknown node {args.node!r}; valid choices: {', '.join(NODES)}")
-    cmd = node_command(args.node, args.ros_args)
+    from dualarm_control.cell_robot import with_absolute_robot
+
+    cmd = node_command(args.node, with_absolute_robot(args.ros_args))  # a profile's relative robot path: the file's
     os.execv(cmd[0], cmd)
     return 0  # not reached
 

@@ -45,6 +45,7 @@ from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
 from dualarm_control import controller as core
+from dualarm_control.cell_robot import node_scenario
 from dualarm_control.errors import DualArmError
 from dualarm_control.hardware import profile_from_values
 from dualarm_control.kinematics import DualArmModel
@@ -81,7 +82,6 @@ from dualarm_control.ros.hardware_io import (
 )
 from dualarm_control.ros.output import CommandOutput
 from dualarm_control.ros.qos import publisher_depth, stream_qos
-from dualarm_control.scenario import load_scenario
 
 WATCHDOG_MIN_PERIOD_S = 0.005  # the watchdog ticks at the control rate, at most 200 Hz
 STATS_EVERY = 200  # cycles between percentile updates
@@ -97,7 +97,8 @@ class ControllerNode:
         self.log = n.get_logger()
         self.values = declare_with_profile(n, ALL_PARAMETERS)
         self.lockstep = bool(self.values["lockstep"])
-        self.scenario = load_scenario(self.values["scenario"], self.values["robot"])
+        self.scenario, robot_note = node_scenario(self.values, n.get_name())
+        self.log.info(robot_note)
         self.profile = profile_from_values(self.values, self.scenario.robot.joint_names, n.get_name())
         self.params = controller_params(self.scenario, self.values, n.get_name())
         self.model = m = DualArmModel(self.scenario.robot)

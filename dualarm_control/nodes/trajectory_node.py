@@ -36,6 +36,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
+from dualarm_control.cell_robot import node_scenario
 from dualarm_control.drive_monitor import GoalOutcome, SegmentJudge
 from dualarm_control.drive_status import STALLED
 from dualarm_control.hardware import HARDWARE_PARAMETERS, profile_from_values
@@ -64,7 +65,7 @@ from dualarm_control.ros.node import (
     usage,
 )
 from dualarm_control.ros.qos import QOS_PARAMETER, publisher_depth, stream_qos
-from dualarm_control.scenario import ROBOT_PARAMETER, load_scenario
+from dualarm_control.scenario import ROBOT_PARAMETER
 from dualarm_control.trajectory import MotionLimits
 
 DEFAULT_PRIORITY = 40
@@ -106,7 +107,8 @@ class TrajectoryNode:
         self.node = Node("trajectory_node", context=context)
         self.bus = bus
         p = declare_with_profile(self.node, PARAMETERS)
-        self.scenario = load_scenario(p["scenario"], p["robot"])
+        self.scenario, robot_note = node_scenario(p, "trajectory_node")
+        self.node.get_logger().info(robot_note)
         self.profile = profile_from_values(p, self.scenario.robot.joint_names, "trajectory_node")
         self.lockstep = bool(p["lockstep"])
         self.repeat = bool(p["repeat"])

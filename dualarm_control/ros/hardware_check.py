@@ -62,6 +62,7 @@ def check_graph(node: Any, profile: HardwareProfile, joint_names: Sequence[str],
         return [i for i in infos if i.node_name != ignore_node]
 
     carried: dict[str, list[str]] = {}
+    hardware = profile.hardware_names(joint_names)  # the joints as the hardware names them (hardware.joint_map)
     for topic in profile.joint_states:
         pubs = others(node.get_publishers_info_by_topic(topic))
         endpoints += pubs
@@ -72,8 +73,8 @@ def check_graph(node: Any, profile: HardwareProfile, joint_names: Sequence[str],
             problems.append(f"{topic} is published as {wrong}, not {JOINT_STATE_TYPE}")
         if topic in seen:
             names = list(seen[topic])
-            mine = [n for n in names if n in set(joint_names)]
-            extra = [n for n in names if n not in set(joint_names)]
+            mine = [n for n in names if n in set(hardware)]
+            extra = [n for n in names if n not in set(hardware)]
             lines.append(f"  {len(names)} joints, {len(mine)} of the robot's" +
                          (f", extra: {', '.join(extra)}" if extra else ""))
             for n in mine:
@@ -81,7 +82,7 @@ def check_graph(node: Any, profile: HardwareProfile, joint_names: Sequence[str],
         elif pubs:
             problems.append(f"no message on {topic}")
     if len(seen) == len(profile.joint_states):
-        missing = [n for n in joint_names if n not in carried]
+        missing = [profile.joint_map.label(d) for d, h in zip(joint_names, hardware, strict=True) if h not in carried]
         twice = [f"{n} ({', '.join(t)})" for n, t in carried.items() if len(t) > 1]
         lines.append(f"joints matched: {len(joint_names) - len(missing)} of {len(joint_names)}")
         problems += [f"joint {n} is on no joint-state topic" for n in missing]

@@ -63,12 +63,13 @@ class JointStates:
 
         self.node = node
         self.joint_names = tuple(joint_names)
+        self.joint_map = profile.joint_map
         topics = profile.joint_states
         self.delivered = dict.fromkeys(topics, 0)
         self.rejection = dict.fromkeys(topics, "")
         self.assembler = StateAssembler(topics, len(joint_names), round(profile.stamp_tolerance * 1e9))
         self.on_state, self.on_reject = on_state, on_reject
-        order = {name: i for i, name in enumerate(joint_names)}
+        order = {name: i for i, name in enumerate(profile.hardware_names(joint_names))}  # matched by hardware name
         self.subscriptions = []
         self.decoders: dict[str, convert.JointStateInput] = {}
         for topic in topics:
@@ -118,7 +119,7 @@ class JointStates:
     def waiting_reason(self) -> str:
         """Why no consistent state has come (:func:`~dualarm_control.hardware.waiting_reason`); '' if
         nothing explains it."""
-        return waiting_reason(self.views(), self.assembler, self.joint_names)
+        return waiting_reason(self.views(), self.assembler, self.joint_names, self.joint_map)
 
     def close(self) -> None:
         for sub in self.subscriptions:

@@ -53,9 +53,11 @@ class CellRun:
     def __init__(self, out: Path, scenario: str, node_args: Sequence[str] = (), sim_ns: str = "",
                  ctrl_ns: str = "", env: Mapping[str, str] | None = None,
                  sim_env: Mapping[str, str] | None = None, node_extra: Mapping[str, Sequence[str]] | None = None,
-                 helpers: Mapping[str, list[str]] | None = None) -> None:
+                 helpers: Mapping[str, list[str]] | None = None, topics: Sequence[str] = RECORDED) -> None:
         """``node_extra``: more ROS arguments per node (remappings); ``helpers``: more processes (name ->
-        command, in ``ctrl_ns``) started before the nodes, e.g. a lossy relay."""
+        command, in ``ctrl_ns``) started before the nodes, e.g. a lossy relay; ``topics``: what the run's
+        bag records (a hardware profile's topics in place of the default ones)."""
+        self.topics = tuple(topics)
         self.out = Path(out)
         self.scenario = scenario
         self.node_args = list(node_args)
@@ -86,7 +88,7 @@ class CellRun:
     def start(self, extra_recorders: Mapping[str, Path] = {}) -> None:
         """Start everything; return once every recorder is subscribed and the trajectory has started."""
         self.out.mkdir(parents=True, exist_ok=True)
-        recorders = [self.start_recorder("bag", self.bag)]
+        recorders = [self.start_recorder("bag", self.bag, self.topics)]
         recorders += [self.start_recorder(name, path) for name, path in extra_recorders.items()]
         for name, cmd in self.helpers.items():
             self.launch.start(name, self._cmd(self.ctrl_ns, cmd), self.env)

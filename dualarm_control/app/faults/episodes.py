@@ -123,6 +123,9 @@ class ArmStop:
     late_steps: int = 0  # steps from the last answered state to its command's arrival (the controller's lag)
 
     def text(self, period: float) -> str:
+        if self.steps < 0:
+            return (f"moving at {self.speed_at_last:.3f} rad/s when the controller died; never at rest (< "
+                    f"{STOPPED_SPEED:g} rad/s) in the states recorded after its last command")
         return (f"moving at {self.speed_at_last:.3f} rad/s when the controller died; at rest (< {STOPPED_SPEED:g} "
                 f"rad/s) {self.steps} steps = {self.steps * period * 1e3:.0f} ms sim time "
                 f"({self.wall_ms:.0f} ms wall) after its last command arrived ({self.late_steps} steps after the last "

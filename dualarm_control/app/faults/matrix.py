@@ -57,7 +57,11 @@ LINK_NETEM = ("delay", "2ms", "1ms", "loss", "2%")
 
 LOOPBACK_ROWS = ("stale_states", "target_stopped", "kill_sim", "kill_controller", "recorder_sigint",
                  "recorder_sigterm")
-ROWS = (*LOOPBACK_ROWS, "best_effort_loss", "across_hosts", "link_cut", "link_netem", "goal_into_collision")
+PROFILE_KILLS = {"kill_controller_velocity_profile": ("ros2_control_velocity", COMMAND_TIMEOUT_STEPS + 3),
+                 "kill_controller_position_profile": ("lbr_dual_position", 3)}
+"""Controller kills on the shipped hardware profiles (app/faults/profile_kills.py): profile, at rest within steps."""
+ROWS = (*LOOPBACK_ROWS, *PROFILE_KILLS, "best_effort_loss", "across_hosts", "link_cut", "link_netem",
+        "goal_into_collision")
 COLLISION_GOAL = ("0", "0", "-0.35", "3.14159265", "0", "0")
 """goal_into_collision: F2 35 cm behind F1, through the left forearm (xyz [m], rpy [rad])."""
 SAFE_GOAL = ("0", "0", "0.15", "3.14159265", "0", "0")
@@ -81,6 +85,10 @@ EXPECTED = {
                 f"gone, cycles resume (OK) once the new simulator publishes (< {RESTART_RECOVER_WITHIN_MS / 1e3:.0f} s)",
     "kill_controller": f"kill -9 controller_node mid-motion: the arms are at rest (all joints < 1e-3 rad/s) within "
                        f"command_timeout ({COMMAND_TIMEOUT_STEPS} steps) + 3 steps of its last command's arrival",
+    **{name: f"kill -9 controller_node mid-motion on config/hardware/{profile}.yaml: the arms at rest (< 1e-3 rad/s) "
+              f"within {steps} steps of its last command's arrival" + (" (the trajectory controller's cmd_timeout)"
+                                                                      if steps > 3 else " (the last position holds)")
+       for name, (profile, steps) in PROFILE_KILLS.items()},
     "recorder_sigint": "SIGINT to a bag recorder mid-run: exit 0, bag readable (rosbags AnyReader), every message "
                        "decodes, every /joint_states stamped before the signal (- 1 ms) is in it",
     "recorder_sigterm": "SIGTERM to a bag recorder mid-run: as for SIGINT",
@@ -158,6 +166,31 @@ def _recently_safe(run: CellRun, seconds: float) -> bool:
     return False
 
 
+def _kill_controller(run: CellRun, name: str, say: Callable[[str], None]) -> bool:
+    """SIGKILL the controller while the arms move at speed (not just after a watchdog episode); then 1 s."""
+    earliest = run.elapsed() + 0.5
+    while True:
+        run.wait_moving(1.5, earliest=earliest)
+        time.sleep(KILL_INTO_MOTION_S)  # past the segment's jerk-limited start: the arms move at speed
+        if not _recently_safe(run, KILL_INTO_MOTION_S):
+            break
+        # a watchdog episode of a loaded machine just now: the arms may be at rest; the next window
+        say(f"{name}: the controller was in the safe state within {KILL_INTO_MOTION_S:g} s; waiting")
+        earliest = run.elapsed() + 0.5
+    say(f"{name}: SIGKILL controller_node at t={run.elapsed():.2f} s")
+    run.send("controller_node", signal.SIGKILL)
+    time.sleep(1.0)
+    return True
+
+
+def _stop_row(name: str, rec: GraphStreams, killed: bool, within_steps: int) -> Row:
+    """A controller-kill row: moving when killed, at rest within ``within_steps`` simulator steps of its last command."""
+    stop = arm_stop(rec, 0)
+    passed = killed and stop.speed_at_last > 0.01 and 0 <= stop.steps <= within_steps
+    return _row(name, passed, stop.text(PERIOD), speed_at_kill=stop.speed_at_last, steps=stop.steps,
+                sim_ms=stop.steps * PERIOD * 1e3, wall_ms=stop.wall_ms)
+
+
 def loopback_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[str], None]) -> list[Row]:
     """The process faults on one loopback run, in sequence, each while the target moves."""
     names = [n for n in LOOPBACK_ROWS if n in only]
@@ -195,19 +228,7 @@ def loopback_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[
             run.start_node("sim_node")
             episodes["kill_sim"] = _Episode(start, resume, _recovered(run, line, RESTART_RECOVER_WITHIN_MS / 1e3))
         if "kill_controller" in names:
-            earliest = run.elapsed() + 0.5
-            while True:
-                run.wait_moving(1.5, earliest=earliest)
-                time.sleep(KILL_INTO_MOTION_S)  # past the segment's jerk-limited start: the arms move at speed
-                if not _recently_safe(run, KILL_INTO_MOTION_S):
-                    break
-                # a watchdog episode of a loaded machine just now: the arms may be at rest; the next window
-                say(f"kill_controller: the controller was in the safe state within {KILL_INTO_MOTION_S:g} s; waiting")
-                earliest = run.elapsed() + 0.5
-            say(f"kill_controller: SIGKILL controller_node at t={run.elapsed():.2f} s")
-            run.send("controller_node", signal.SIGKILL)
-            killed_controller = True
-            time.sleep(1.0)
+            killed_controller = _kill_controller(run, "kill_controller", say)
     except RunError as exc:
         run.stop()
         return _failed(names, str(exc))
@@ -228,10 +249,7 @@ def loopback_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[
             within = RESTART_RECOVER_WITHIN_MS if name == "kill_sim" else RECOVER_WITHIN_MS
             rows.append(_episode_row(name, rec, episodes[name], reasons[name], limits[name], within))
         elif name == "kill_controller":
-            stop = arm_stop(rec, 0)
-            passed = killed_controller and stop.speed_at_last > 0.01 and 0 <= stop.steps <= COMMAND_TIMEOUT_STEPS + 3
-            rows.append(_row(name, passed, stop.text(PERIOD), speed_at_kill=stop.speed_at_last, steps=stop.steps,
-                             sim_ms=stop.steps * PERIOD * 1e3, wall_ms=stop.wall_ms))
+            rows.append(_stop_row(name, rec, killed_controller, COMMAND_TIMEOUT_STEPS + 3))
         elif name in signalled:
             check = check_signalled_bag(recorders[name], rec, signalled[name])
             code = codes.get(name)
@@ -453,8 +471,10 @@ def run_matrix(out: Path, scenario: str = "assembly", only: Sequence[str] = ROWS
     unknown = [n for n in only if n not in ROWS]
     if unknown:
         raise ValueError(f"unknown fault rows {', '.join(unknown)}; valid: {', '.join(ROWS)}")
+    from dualarm_control.app.faults.profile_kills import profile_kill_rows
+
     rows: list[Row] = []
-    for group in (loopback_rows, loss_rows, link_rows, collision_rows):
+    for group in (loopback_rows, profile_kill_rows, loss_rows, link_rows, collision_rows):
         t = time.monotonic()
         got = group(out, scenario, only, say)
         for row in got:

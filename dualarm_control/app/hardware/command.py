@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from dualarm_control.cell_robot import cell_robot, robot_note
 from dualarm_control.hardware import load_profile
 from dualarm_control.params import read_params_files
 from dualarm_control.ros.hardware_check import wait_for_graph
@@ -17,15 +18,18 @@ EXIT_PROBLEMS = 1
 
 def check_command(params: Sequence[str], robot: str | None, timeout_s: float) -> int:
     """Check the profile of ``params`` (the controller's parameter files: its ``hardware.*``, ``scenario``
-    and ``robot``) for ``timeout_s`` at most, answering as soon as it matches."""
+    and ``robot``; the robot is the profile's ``hardware.robot``, dualarm_control/cell_robot.py) for ``timeout_s`` at most, answering as soon as it matches."""
     from dualarm_control.ros.hardware_io import JointStates
     from dualarm_control.ros.node import tool_node
     from dualarm_control.ros.qos import stream_qos
 
     given = read_params_files(params, "controller_node")
-    description = load_scenario(str(given.get("scenario", "assembly")), robot or given.get("robot") or None).robot
+    chosen, profile_robot = cell_robot(params, robot)  # the profile's robot (hardware.robot) first
+    scenario = load_scenario(str(given.get("scenario", "assembly")), chosen)
+    description = scenario.robot
     names = description.joint_names
     profile = load_profile(given, names, "controller_node")
+    print(robot_note(scenario, profile_robot, chosen or ""))
     print(f"profile: {', '.join(params) or 'default'} on robot '{description.name}' ({len(names)} joints)")
     with tool_node(NODE_NAME) as (node, executor, _):
         states = JointStates(node, profile, names, stream_qos("best_effort"), lambda *_: None,

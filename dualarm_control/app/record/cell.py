@@ -39,6 +39,8 @@ from dualarm_control.hardware import (
     profile_from_values,
     profile_parameters,
 )
+from dualarm_control.joint_map import KEY as JOINT_MAP_KEY
+from dualarm_control.joint_map import JointMap, parse_joint_map
 from dualarm_control.params import parse_params_text, resolve
 from dualarm_control.ros.cell_topic import CELL_TOPIC
 from dualarm_control.ros.convert import stamp_ns
@@ -79,6 +81,10 @@ class RecordedTopics:
     def profile(self, joint_names: Sequence[str]) -> HardwareProfile:
         """The validated profile on a robot with ``joint_names`` (DualArmError if it does not fit it)."""
         return profile_from_values(self.values, joint_names, CONTROLLER)
+
+    def joint_map(self, joint_names: Sequence[str]) -> JointMap:
+        """The profile's ``hardware.joint_map`` on a robot with ``joint_names`` (empty for bags without one)."""
+        return parse_joint_map(self.values.get(JOINT_MAP_KEY, [""]), joint_names, f"{CONTROLLER}.{JOINT_MAP_KEY}")
 
 
 def recorded_topics(controller: Mapping[str, Any]) -> RecordedTopics:
@@ -135,11 +141,12 @@ class ProfileStreams:
 
     def _assemble(self, joint_names: tuple[str, ...]) -> list[State]:
         topics = self.topics.joint_states
+        names = self.topics.joint_map(joint_names)  # the hardware's names back to the description's
         if len(topics) == 1:
-            return [(t, stamp_ns(m.header.stamp), list(m.name), m) for t, m in self.raw[topics[0]]]
+            return [(t, stamp_ns(m.header.stamp), list(names.description(m.name)), m) for t, m in self.raw[topics[0]]]
         merged = sorted(((t, i, topic, m) for topic in topics for i, (t, m) in enumerate(self.raw[topic])),
                         key=lambda item: (item[0], item[1]))
-        index = {name: i for i, name in enumerate(joint_names)}
+        index = {name: i for i, name in enumerate(names.hardware(joint_names))}
         n = len(joint_names)
         assembler = StateAssembler(topics, n, round(float(self.topics.values["hardware.stamp_tolerance"]) * 1e9))
         velocity: dict[str, tuple[np.ndarray, FloatArray | None]] = {}

@@ -24,6 +24,7 @@ from dualarm_control.app.record.run_record import RunRecord
 from dualarm_control.app.run import DEFAULT_SOLVERS
 from dualarm_control.app.run.experiment import run_scenario
 from dualarm_control.app.run.progress import progress_bar
+from dualarm_control.cell_robot import cell_robot, robot_note
 from dualarm_control.controller import ControllerParams
 from dualarm_control.controller_params import controller_params
 from dualarm_control.errors import DualArmError
@@ -41,7 +42,10 @@ def experiment_command(scenario_name: str, solver_names: str | None, params_file
     """``dualarm experiment``: one run per solver, or for a task scenario one per gain k (force
     variant with ``force``); write ``out/metrics.json`` and the figures of the scenario's kind,
     print the table. Returns the exit code (130 when interrupted)."""
+    robot, profile_robot = cell_robot(params_files, robot)  # the hardware profile's robot (hardware.robot) first
     scenario = load_scenario(scenario_name, robot)
+    if params_files:
+        print(robot_note(scenario, profile_robot, robot or ""), file=sys.stderr)
     spec = scenario.tasks
     base = {**robot_defaults(scenario.robot), **read_params_files(params_files, "controller_node")}
     runs: list[tuple[str, ControllerParams, float | None]]

@@ -246,9 +246,12 @@ def launch_scenario(
     ``robot`` (``--robot``): the robot every node runs on instead of the scenario's (a name or a YAML path);
     every node gets ``-p robot:=`` the robot's reference (the controller has no scenario in relative mode).
     """
+    from dualarm_control.cell_robot import cell_robot, robot_note
     from dualarm_control.scenario import load_scenario
 
+    robot, profile_robot = cell_robot(params, robot)  # the profile's robot (hardware.robot) first
     loaded = load_scenario(scenario, robot)
+    print(f"[launch] {robot_note(loaded, profile_robot, robot or '')}", flush=True)
     tasks = loaded.tasks is not None
     if interactive and (tasks or lockstep or plan is not None):
         raise ValueError("interactive runs in real time on a relative motion scenario (no lockstep, plan or tasks)")
@@ -267,6 +270,8 @@ def launch_scenario(
         with_scenario += ["-p", f"plan:={Path(plan).resolve()}"]
     for f in params:
         common += ["--params-file", str(Path(f).resolve())]
+    if profile_robot:  # a relative hardware.robot is the profile file's: every node gets it made absolute
+        common += ["-p", f"hardware.robot:={profile_robot}"]
     trajectory_args = [*with_scenario, "-p", "mode:=interactive"] if interactive else with_scenario
     if tasks:
         with_scenario += ["-p", f"force:={'true' if force else 'false'}"]

@@ -13,9 +13,12 @@ import signal
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from dualarm_control.errors import DualArmError
+
+if TYPE_CHECKING:
+    from dualarm_control.robot import RobotDescription
 
 NO_VIEWER = 2
 LIVE_VIEW_NICENESS = 19
@@ -63,11 +66,25 @@ See docs/visualization.md.""")
                              help="--web: page port (default: %(default)s)")
     rerun_group.add_argument("--duration", type=float, metavar="S", help="live: stop after S seconds")
     view.add_argument("--robot", default=None, metavar="NAME|PATH",
-                      help="live: the running cell's robot (config/robots/ name or YAML; default lwr4_cell); a bag "
-                      "names its own")
+                      help="live: the running cell's robot (config/robots/ name or YAML; default: the --params "
+                      "profile's hardware.robot, else lwr4_cell, said in one line); a bag names its own")
+    view.add_argument("--params", action="append", default=[], metavar="FILE",
+                      help="live: the cell's hardware profile (its hardware.robot is the robot; repeatable)")
     add_video_arguments(view.add_argument_group("video of a bag (--video)"))
     add_foxglove_arguments(view.add_argument_group("Foxglove WebSocket server (--foxglove)"))
     view.set_defaults(func=cmd_view)
+
+
+def cell_robot_of(params: list[str], robot: str | None) -> RobotDescription:
+    """The live cell's robot: the ``params`` profile's ``hardware.robot``, else ``robot``, else the LWR4 cell, said
+    in one line (dualarm_control/cell_robot.py); ParameterError when the two disagree."""
+    from dualarm_control.cell_robot import cell_robot, robot_note
+    from dualarm_control.scenario import load_scenario
+
+    chosen, profile_robot = cell_robot(params, robot)
+    scenario = load_scenario("assembly", chosen)
+    print(f"dualarm view: {robot_note(scenario, profile_robot, chosen or '')}", flush=True)
+    return scenario.robot
 
 
 def _interrupt(signum: int, frame: object) -> None:
@@ -119,6 +136,7 @@ def _rerun_view(args: argparse.Namespace) -> int:
     if args.bag is None:
         yield_to_the_cell()
     arrays = None
+    live_robot = None if args.bag else cell_robot_of(args.params, args.robot)  # a bad --params fails before a viewer
     if args.bag:
         from dualarm_control.app.view.from_bag import bag_run_arrays
 
@@ -146,7 +164,8 @@ def _rerun_view(args: argparse.Namespace) -> int:
             from dualarm_control.app.view.live import live_groups, run_live
             from dualarm_control.kinematics import DualArmModel
 
-            model = DualArmModel(args.robot or "lwr4_cell")
+            assert live_robot is not None  # no bag: the live cell
+            model = DualArmModel(live_robot)
             rec.send_blueprint(rv.blueprint(rv.robot_name(Path(model.urdf)), live_groups()))
             run_live(model, rec, args.duration)
         rec.flush()
