@@ -10,6 +10,8 @@ damper the hand comes closer than d_s (measured: into the left flange, -5.5 mm).
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -109,3 +111,40 @@ def test_the_hands_path() -> None:
     assert np.allclose(hand.state(hand.start_time + hand.travel + 0.25)[1], 0.0)  # dwelling
     assert np.allclose(hand.state(hand.end_time - 0.1)[1], [0.0, 0.0, 0.4])  # going out
     assert np.allclose(hand.state(hand.end_time + 1.0)[0], hand.start)
+
+
+@pytest.mark.slow
+def test_over_ros_recorded(tmp_path: Path) -> None:
+    """The three nodes in lockstep with a recorder: the simulator moves the hand and publishes it on
+    /collision_objects every step, the controller takes it in (velocity from the stamps) off its control
+    thread. From the bag: the same pybullet check (>= d_s - 2 mm, hand and static obstacles), the scene
+    latched on /dualarm/obstacles, the controller's /diagnostics naming the hand while it held the arms,
+    'apart' reached after the hand left."""
+    from rosbags.highlevel import AnyReader
+
+    from dualarm_control.app.record.bag import read_bag, read_run
+    from dualarm_control.app.run.launcher import launch_scenario
+
+    bag = tmp_path / "bag"
+    params = [str(Path(__file__).parents[1] / "config" / "acceleration_limit.yaml")]
+    assert launch_scenario("busy_cell", params, ["-p", "solver:=standard_qp"], True, bag, timeout=400.0) == 0
+    (run,), _ = read_run(bag, read_bag(bag))
+    overall, hand = distances(run), distances(run, hand_only=True)
+    print(f"over ROS: pybullet min {overall.minimum * 1e3:.1f} mm {overall.pair}, the hand's own "
+          f"{hand.minimum * 1e3:.1f} mm {hand.pair}")
+    assert overall.minimum >= SAFE and hand.minimum >= SAFE
+    held = []
+    with AnyReader([bag]) as reader:
+        counts = {t: i.msgcount for t, i in reader.topics.items()}
+        conns = [c for c in reader.connections if c.topic == "/diagnostics"]
+        for c, _, raw in reader.messages(connections=conns):
+            for status in reader.deserialize(raw, c.msgtype).status:
+                values = {kv.key: kv.value for kv in status.values}
+                if values.get("live_obstacle_active", "0") != "0":
+                    held.append(values["live_obstacle_pair"])
+    assert counts.get("/dualarm/obstacles") == 1 and counts.get("/collision_objects", 0) > 100, counts
+    assert held and all(p.endswith("obstacle:hand") for p in held), held[:3]
+    scenario = load_scenario("busy_cell")
+    summary = summarize_run(run, scenario, DualArmModel(scenario.robot), ControllerParams().alpha)
+    outcomes = str(summary["segment_outcomes"]).split(" | ")
+    assert "reached" in outcomes[1], outcomes

@@ -46,10 +46,11 @@ class LiveReport:
 
     def values(self) -> dict[str, str]:
         """/diagnostics keys: ``live_obstacles``, ``live_obstacle_distance_m``, ``live_obstacle_pair``,
-        ``live_obstacle_rows``, ``live_obstacle_active``."""
+        ``live_obstacle_approach_mps`` (n^T v_B of the closest pair), ``live_obstacle_rows``, ``live_obstacle_active``."""
         return {"live_obstacles": str(self.obstacles),
                 "live_obstacle_distance_m": f"{self.distance:.6f}" if self.pair is not None else "inf",
                 "live_obstacle_pair": f"{self.pair[0]} – {self.pair[1]}" if self.pair is not None else "",
+                "live_obstacle_approach_mps": f"{self.approach:.4f}",
                 "live_obstacle_rows": str(self.rows), "live_obstacle_active": str(self.active)}
 
     def text(self) -> str:

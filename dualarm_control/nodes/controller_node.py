@@ -80,6 +80,7 @@ from dualarm_control.ros.hardware_io import (
     declare_with_profile,
 )
 from dualarm_control.ros.obstacle_io import obstacle_intake, share_feed
+from dualarm_control.ros.obstacle_markers import ObstacleTopics
 from dualarm_control.ros.output import CommandOutput
 from dualarm_control.ros.qos import publisher_depth, stream_qos
 from dualarm_control.scenario import load_scenario
@@ -141,6 +142,7 @@ class ControllerNode:
         shell.log_priority(self.log, priority_note, self.values["thread_priority"])
         self.cell_topic = CellPublisher(n)  # /dualarm/cell: what this run runs with, latched (for its bag)
         self.obstacles = obstacle_intake(n, self.tracker.controller, self.values)  # off the control thread
+        self.scene_topic = ObstacleTopics(n, self.scenario.obstacles, self.scenario.moving_obstacles)  # latched
 
     def subscribe_streams(self, qos: Any, bus: local_bus.LocalBus | None) -> None:
         """The streams of :attr:`inputs`: each sample (or its rejection) to :class:`ControllerInputs`."""

@@ -6,7 +6,7 @@ bytes to a bounded queue (markers: the 64 latest; a cloud: the latest only). A w
 deserializes, checks and converts them, updates the :class:`~dualarm_control.collision.live_feed.LiveScene`
 and publishes a finished snapshot that the control thread swaps in (one attribute read per cycle).
 
-Markers (``ns`` and ``id`` name the obstacle ``<ns>_<id>``): CUBE (a box of ``scale``), SPHERE
+Markers (``ns`` and ``id`` name the obstacle: ``<ns>`` for id 0, else ``<ns>_<id>``): CUBE (a box of ``scale``), SPHERE
 (``scale`` the diameters: a sphere, or an ellipsoid when they differ), CYLINDER (diameters x, y:
 the larger one, height z), MESH_RESOURCE (``file://`` .obj/.stl, its convex hull, scaled); actions
 ADD/MODIFY, DELETE, DELETEALL; ``lifetime`` honoured (0: forever); ``frame_id`` a frame of the robot
@@ -78,6 +78,12 @@ def fixed_frames(model: pin.Model) -> dict[str, tuple[FloatArray, FloatArray]]:
     return frames
 
 
+def marker_name(marker: Any) -> str:
+    """An obstacle's name from its marker: ``ns`` for id 0, else ``<ns>_<id>`` (``marker`` for an empty ns)."""
+    ns = str(marker.ns) or "marker"
+    return ns if marker.id == 0 else f"{ns}_{marker.id}"
+
+
 def _finite(*values: float) -> bool:
     return all(math.isfinite(v) for v in values)
 
@@ -86,7 +92,7 @@ def marker_shape(marker: Any) -> coal.CollisionGeometry:
     """The coal shape of a CUBE, SPHERE, CYLINDER or MESH_RESOURCE marker (InputRejected otherwise)."""
     s = marker.scale
     size = (float(s.x), float(s.y), float(s.z))
-    name = f"{marker.ns}_{marker.id}"
+    name = marker_name(marker)
     if marker.type not in TYPES:
         raise InputRejected(f"marker {name!r}: type {marker.type} is not one of "
                             + ", ".join(f"{v} ({k})" for k, v in TYPES.items()), "type", marker.type)
@@ -114,7 +120,7 @@ def marker_shape(marker: Any) -> coal.CollisionGeometry:
 def marker_obstacle(marker: Any, frames: dict[str, tuple[FloatArray, FloatArray]], now: float) -> LiveObstacle:
     """A marker (ADD) as a live obstacle in the world, expiring ``lifetime`` after ``now`` [s, the
     feed's clock]; InputRejected naming the marker and the bad field."""
-    name = f"{marker.ns}_{marker.id}"
+    name = marker_name(marker)
     frame = frames.get(str(marker.header.frame_id))
     if frame is None:
         raise InputRejected(f"marker {name!r}: frame_id {marker.header.frame_id!r} is not a fixed frame of the robot "
@@ -241,7 +247,7 @@ class ObstacleIntake:
             if marker.action == DELETEALL:
                 self.scene.clear()
                 continue
-            name = f"{marker.ns}_{marker.id}"
+            name = marker_name(marker)
             if marker.action == DELETE:
                 self.scene.delete(name)
                 continue
