@@ -1,0 +1,119 @@
+"""The cell's obstacles as a bag recorded them, drawn by ``dualarm view`` (Rerun) and the video (docs/obstacles.md).
+
+A bag keeps the scene latched on ``/dualarm/obstacles`` and, when something moves, its markers on
+``/collision_objects`` at every step (:mod:`dualarm_control.ros.obstacle_markers`): both
+visualization_msgs/MarkerArray in the frame ``world``. :func:`read_obstacles` reads them into plain
+values; :func:`log_obstacles` logs them to Rerun under ``obstacles/<name>``: a shape at the
+entity's origin (a box, an ellipsoid, a cylinder, a mesh's file) and its pose as a transform, static
+or, for a marker that moves, on the run's timeline (the markers' stamps, the clock of the joint states).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dualarm_control.arrays import FloatArray
+
+SCENE_TOPIC = "/dualarm/obstacles"
+LIVE_TOPIC = "/collision_objects"
+CUBE, SPHERE, CYLINDER, MESH_RESOURCE = 1, 2, 3, 10
+
+
+@dataclass
+class ObstacleTrack:
+    """One obstacle's shape and poses.
+
+    Attributes:
+        name: the marker's ns (``<ns>_<id>`` for an id other than 0). kind: the marker type.
+        scale: [m] (3,). colour: RGBA 0-1 (4,). mesh: a MESH_RESOURCE's file path ('' otherwise).
+        stamps: the poses' stamps [ns], (k,). positions: [m], (k, 3). quaternions: (x, y, z, w), (k, 4).
+    """
+
+    name: str
+    kind: int
+    scale: FloatArray
+    colour: FloatArray
+    mesh: str = ""
+    stamps: list[int] = field(default_factory=list)
+    positions: list[FloatArray] = field(default_factory=list)
+    quaternions: list[FloatArray] = field(default_factory=list)
+
+    def add(self, stamp: int, marker: Any) -> None:
+        p, o = marker.pose.position, marker.pose.orientation
+        self.stamps.append(stamp)
+        self.positions.append(np.array([p.x, p.y, p.z], dtype=float))
+        self.quaternions.append(np.array([o.x, o.y, o.z, o.w], dtype=float))
+
+
+def _name(marker: Any) -> str:
+    ns = str(marker.ns) or "marker"
+    return ns if marker.id == 0 else f"{ns}_{marker.id}"
+
+
+def read_obstacles(bag: Path) -> dict[str, ObstacleTrack]:
+    """The obstacles a bag recorded, by name: the latched scene's (one pose each) and the live markers'
+    (one pose per message, ADD only), in the order first seen. {} for a bag without them."""
+    from rosbags.highlevel import AnyReader
+
+    tracks: dict[str, ObstacleTrack] = {}
+    with AnyReader([Path(bag)]) as reader:
+        conns = [c for c in reader.connections if c.topic in (SCENE_TOPIC, LIVE_TOPIC)]
+        if not conns:
+            return tracks
+        for connection, _, raw in reader.messages(connections=conns):
+            message: Any = reader.deserialize(raw, connection.msgtype)
+            for marker in message.markers:
+                if marker.action != 0 or marker.type not in (CUBE, SPHERE, CYLINDER, MESH_RESOURCE):
+                    continue
+                name = _name(marker)
+                track = tracks.get(name)
+                if track is None:
+                    s, c = marker.scale, marker.color
+                    track = tracks[name] = ObstacleTrack(
+                        name, int(marker.type), np.array([s.x, s.y, s.z], dtype=float),
+                        np.array([c.r, c.g, c.b, c.a if c.a > 0 else 1.0], dtype=float),
+                        str(marker.mesh_resource).removeprefix("file://"))
+                stamp = marker.header.stamp.sec * 1_000_000_000 + marker.header.stamp.nanosec
+                track.add(stamp if connection.topic == LIVE_TOPIC else -1, marker)
+    return tracks
+
+
+def log_obstacles(tracks: dict[str, ObstacleTrack], start_ns: int, recording: Any = None) -> None:
+    """Each obstacle under ``obstacles/<name>``: its shape (static) and its pose, static when it has one
+    pose from the scene only, else on the ``time`` timeline at (stamp - ``start_ns``) [s]."""
+    import rerun as rr
+
+    from dualarm_control.app.view.rerun_view import TIMELINE
+
+    for track in tracks.values():
+        path = f"obstacles/{track.name}"
+        half = track.scale / 2.0
+        colour = (np.clip(track.colour, 0.0, 1.0) * 255).astype(np.uint8)
+        if track.kind == CUBE:
+            shape: Any = rr.Boxes3D(half_sizes=[half], colors=[colour], fill_mode="solid")
+        elif track.kind == SPHERE:
+            shape = rr.Ellipsoids3D(half_sizes=[half], colors=[colour], fill_mode="solid")
+        elif track.kind == CYLINDER:
+            shape = rr.Cylinders3D(lengths=[track.scale[2]], radii=[max(half[0], half[1])], colors=[colour],
+                                   fill_mode="solid")
+        elif track.mesh and Path(track.mesh).is_file():
+            rr.log(path + "/shape", rr.Transform3D(scale=track.scale), static=True, recording=recording)
+            shape = rr.Asset3D(path=track.mesh)
+        else:
+            continue
+        rr.log(path + "/shape", shape, static=True, recording=recording)
+        live = [i for i, s in enumerate(track.stamps) if s >= 0]
+        if not live:  # static data wins over temporal data in Rerun: only for a still obstacle
+            rr.log(path, rr.Transform3D(translation=track.positions[0],
+                                             quaternion=rr.Quaternion(xyzw=track.quaternions[0])),
+                   static=True, recording=recording)
+            continue
+        stamps = (np.array([track.stamps[i] for i in live], dtype=np.int64) - start_ns) * 1e-9
+        rr.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, duration=stamps)],
+                        columns=rr.Transform3D.columns(translation=np.array([track.positions[i] for i in live]),
+                                                       quaternion=np.array([track.quaternions[i] for i in live])),
+                        recording=recording)
