@@ -89,6 +89,14 @@ def voxelise(points: npt.NDArray[np.floating], side: float, max_points: int = DE
     return Voxels(centres, side, k, len(sample), stride)
 
 
+def voxel_sphere(voxels: Voxels) -> tuple[FloatArray, float]:
+    """A sphere holding every occupied voxel: its centre [m] (3,) in the cloud's frame and radius [m]
+    (the voxels' bounding box's; no octree traversal)."""
+    half = voxels.side / 2.0
+    low, high = voxels.centres.min(axis=0) - half, voxels.centres.max(axis=0) + half
+    return (low + high) / 2.0, float(np.linalg.norm(high - low)) / 2.0
+
+
 def voxel_octree(voxels: Voxels) -> coal.OcTree:
     """A coal octree of resolution ``voxels.side`` holding exactly the occupied voxels."""
     return coal.makeOctree(np.ascontiguousarray(voxels.centres, dtype=float), voxels.side)

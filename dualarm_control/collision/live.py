@@ -18,9 +18,10 @@ and the velocity damper d_dot >= -xi (d - d_s) / (d_i - d_s) becomes the row
 An approaching obstacle (n^T v_B < 0) lowers the bound below zero near d_s: the arm has to move
 away (yield), not only stop. Without v_B the arm waits at d_s and the obstacle pushes through it.
 
-Cost: per cycle, one ``computeJointJacobians`` and ``updateGeometryPlacements`` (tens of us), a
-bounding-sphere test of every (link shape, obstacle) pair in numpy, and one ``coal.distance`` per
-pair whose spheres are closer than d_i (about 3 us for primitives, more for an octree).
+Cost: per cycle, the pairs whose known lower bound (:class:`LiveDistances`) is below d_i get a
+bounding-sphere test (one ``computeJointJacobians``, numpy on every such pair at once) and those
+whose spheres are closer than d_i one ``coal.distance`` each (about 3-30 us for primitives at the
+1e-12 GJK tolerance, more for an octree); no pair in reach costs no kinematics at all.
 """
 
 from __future__ import annotations
@@ -35,8 +36,8 @@ import pinocchio as pin
 
 from dualarm_control.arrays import FloatArray
 from dualarm_control.collision.distances import witness_rows
-from dualarm_control.collision.params import distance_request
-from dualarm_control.collision.shapes import bounding_sphere
+from dualarm_control.collision.params import KNOWN_MARGIN, distance_request
+from dualarm_control.collision.shapes import bounding_sphere, farthest
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,9 +64,11 @@ class LiveObstacle:
 
     @classmethod
     def make(cls, name: str, shape: coal.CollisionGeometry, rotation: FloatArray, position: FloatArray,
-             velocity: FloatArray | None = None, expires: float = math.inf) -> LiveObstacle:
-        """An obstacle with its bounding sphere computed (:func:`shape_sphere`)."""
-        centre, radius = shape_sphere(shape)
+             velocity: FloatArray | None = None, expires: float = math.inf,
+             sphere: tuple[FloatArray, float] | None = None) -> LiveObstacle:
+        """An obstacle with its bounding sphere (centre in its frame [m], radius [m]): ``sphere``, or
+        computed (:func:`shape_sphere`)."""
+        centre, radius = shape_sphere(shape) if sphere is None else sphere
         return cls(name, shape, np.asarray(rotation, dtype=float), np.asarray(position, dtype=float),
                    np.zeros(3) if velocity is None else np.asarray(velocity, dtype=float), expires, centre, radius)
 
@@ -123,6 +126,14 @@ class LivePairs:
 class LiveDistances:
     """Distances of every shape an arm joint moves to live obstacles (module docstring).
 
+    Known bounds (temporal coherence, as the collision model's): each (shape, obstacle) pair's last
+    distance less :data:`~dualarm_control.collision.params.KNOWN_MARGIN` is kept as a lower bound,
+    moved to the next q by d(q) >= d(q') - sum_j c_j |q_j - q'_j| (c_j the reach of the shape about
+    joint j: the joint offsets down the chain plus the shape's extent, a bound on how far a point of
+    the shape moves per radian of joint j). The bounds hold while the obstacles are the same snapshot
+    (the same tuple object: the feed swaps a new one whenever something moves or comes or goes); a
+    pair whose bound is at least the influence distance costs no kinematics and no coal call.
+
     Args:
         model, geometry: the collision model's reduced pinocchio model and geometry
             (``CollisionModel.model`` and ``.geometry``); read, never modified.
@@ -136,16 +147,32 @@ class LiveDistances:
         objects = geometry.geometryObjects
         self.shapes = [k for k, obj in enumerate(objects) if obj.parentJoint != 0]
         self.names = [model.frames[objects[k].parentFrame].name for k in self.shapes]
-        spheres = [bounding_sphere(objects[k].geometry) for k in self.shapes]
-        self._centres = np.array([c for c, _ in spheres]).reshape(-1, 3)
+        self._first = [self.names.index(name) for name in self.names]  # a link's first shape: its pairs' key
+        self._geometries = [objects[k].geometry for k in self.shapes]
+        spheres = [bounding_sphere(g) for g in self._geometries]
+        self._centres = np.array([c for c, _ in spheres]).reshape(-1, 3)  # in each shape's frame
         self._radii = np.array([r for _, r in spheres])
+        self._joint = np.array([objects[k].parentJoint for k in self.shapes], dtype=np.intp)
+        placement = [objects[k].placement for k in self.shapes]
+        self._place_rotation = np.array([pl.rotation for pl in placement]).reshape(-1, 3, 3)
+        self._place_translation = np.array([pl.translation for pl in placement]).reshape(-1, 3)
         support = np.zeros((len(self.shapes), model.nv))
+        reach = np.zeros((len(self.shapes), model.nv))
         for i, k in enumerate(self.shapes):
-            for j in model.supports[objects[k].parentJoint].tolist()[1:]:
-                support[i, model.idx_vs[j]:model.idx_vs[j] + model.joints[j].nv] = 1.0
+            chain = model.supports[objects[k].parentJoint].tolist()[1:]
+            extent = farthest(objects[k])
+            for position, j in enumerate(chain):
+                columns = slice(model.idx_vs[j], model.idx_vs[j] + model.joints[j].nv)
+                support[i, columns] = 1.0
+                offsets = sum(float(np.linalg.norm(model.jointPlacements[o].translation)) for o in chain[position + 1:])
+                reach[i, columns] = extent + offsets
         self._support = support
+        self._reach = reach
         self.request = distance_request(gjk_tolerance)
         self._result = coal.DistanceResult()
+        self._known: FloatArray = np.zeros((0, 0))  # (shapes, obstacles) lower bounds [m] ...
+        self._known_q: FloatArray | None = None  # ... at these joint positions ...
+        self._known_for: object = None  # ... for this snapshot (identity)
 
     def near(self, q: FloatArray, obstacles: Sequence[LiveObstacle], within: float) -> LivePairs:
         """The (link, obstacle) pairs closer than ``within`` [m] at q [rad] (n,), each link's closest
@@ -153,66 +180,69 @@ class LiveDistances:
         n = self.model.nv
         if not obstacles or not self.shapes:
             return LivePairs.empty(n)
-        pin.computeJointJacobians(self.model, self.data, q)
+        if obstacles is not self._known_for or self._known_q is None or not np.isfinite(q).all():
+            self._known = np.full((len(self.shapes), len(obstacles)), -np.inf)
+            self._known_for = obstacles if isinstance(obstacles, tuple) else None
+        else:
+            self._known -= (self._reach @ np.abs(q - self._known_q))[:, None]
+        self._known_q = q.copy()
+        candidates = self._known < within
+        if not candidates.any():
+            return LivePairs.empty(n)
+        pin.computeJointJacobians(self.model, self.data, q)  # data.oMi and data.J
+        joints = np.array([self.data.oMi[j].homogeneous for j in self._joint.tolist()])  # (shapes, 4, 4)
+        centres_joint = (self._place_rotation @ self._centres[:, :, None])[:, :, 0] + self._place_translation
+        centres = (joints[:, :3, :3] @ centres_joint[:, :, None])[:, :, 0] + joints[:, :3, 3]  # world
+        obstacle_centres = np.array([o.rotation @ o.centre + o.position for o in obstacles])
+        radii = np.array([o.radius for o in obstacles])
+        gaps = (np.linalg.norm(centres[:, None, :] - obstacle_centres[None, :, :], axis=2)
+                - self._radii[:, None] - radii[None, :])  # sphere bounds, (shapes, obstacles)
+        self._known = np.where(candidates, np.maximum(self._known, gaps), self._known)
+        close = np.argwhere(candidates & (gaps < within))  # (shape, obstacle) rows, shape-major
+        if not len(close):
+            return LivePairs.empty(n)
         pin.updateGeometryPlacements(self.model, self.data, self.geometry, self.geometry_data)
         placed = self.geometry_data.oMg
-        frames = [placed[k] for k in self.shapes]
-        rotations = np.array([f.rotation for f in frames])
-        origins = np.array([f.translation for f in frames])
-        centres = (rotations @ self._centres[:, :, None])[:, :, 0] + origins  # (shapes, 3), world
-        best: dict[tuple[int, str], tuple[float, FloatArray, FloatArray, FloatArray, int]] = {}
-        order: list[tuple[int, str]] = []
+        best: dict[tuple[int, int], tuple[float, FloatArray, FloatArray, FloatArray, int]] = {}
         result, request = self._result, self.request
-        for obstacle in obstacles:
-            centre = obstacle.rotation @ obstacle.centre + obstacle.position
-            gaps = np.linalg.norm(centres - centre, axis=1) - self._radii - obstacle.radius
-            close = np.flatnonzero(gaps < within).tolist()
-            if not close:
+        transforms: dict[int, coal.Transform3s] = {}
+        for i, j in sorted(close.tolist(), key=lambda row: (row[1], row[0])):  # obstacle by obstacle
+            obstacle = obstacles[j]
+            tf = transforms.get(j)
+            if tf is None:
+                tf = transforms[j] = coal.Transform3s(obstacle.rotation, obstacle.position)
+            shape, frame = self._geometries[i], placed[self.shapes[i]]
+            result.clear()
+            if isinstance(obstacle.shape, coal.OcTree):  # coal answers with the octree's point first, n from it
+                d = coal.distance(obstacle.shape, tf, shape, frame, request, result)
+                p_b, p_a, normal = result.getNearestPoint1(), result.getNearestPoint2(), -result.normal
+            else:
+                d = coal.distance(shape, frame, obstacle.shape, tf, request, result)
+                p_a, p_b, normal = result.getNearestPoint1(), result.getNearestPoint2(), result.normal
+            if not math.isfinite(d):
                 continue
-            tf = coal.Transform3s(obstacle.rotation, obstacle.position)
-            octree = isinstance(obstacle.shape, coal.OcTree)
-            for i in close:
-                k = self.shapes[i]
-                result.clear()
-                if octree:  # coal answers an octree pair with the octree's point first, the normal from it
-                    d = coal.distance(obstacle.shape, tf, self.geometry.geometryObjects[k].geometry, placed[k],
-                                      request, result)
-                    p_b, p_a, normal = result.getNearestPoint1(), result.getNearestPoint2(), -result.normal
-                else:
-                    d = coal.distance(self.geometry.geometryObjects[k].geometry, placed[k], obstacle.shape, tf,
-                                      request, result)
-                    p_a, p_b, normal = result.getNearestPoint1(), result.getNearestPoint2(), result.normal
-                if not (math.isfinite(d) and d < within):
-                    continue
-                key = (i, obstacle.name)
-                link_key = (self._link_index(i), obstacle.name)
-                if link_key not in best:
-                    order.append(link_key)
-                elif best[link_key][0] <= d:
-                    continue
-                best[link_key] = (float(d), np.array(p_a), np.array(p_b), np.array(normal), key[0])
+            self._known[i, j] = d - KNOWN_MARGIN
+            key = (j, self._first[i])
+            if d < within and (key not in best or d < best[key][0]):
+                best[key] = (float(d), np.array(p_a), np.array(p_b), np.array(normal), i)
         if not best:
             return LivePairs.empty(n)
+        order = sorted(best)
         m = len(order)
         distance = np.empty(m)
         points = np.empty((2, m, 3))
         normals = np.empty((m, 3))
         shape_rows = np.empty(m, dtype=np.intp)
-        velocity = {o.name: o.velocity for o in obstacles}
         approach = np.empty(m)
         for r, key in enumerate(order):
             d, p_a, p_b, normal, i = best[key]
             length = float(np.linalg.norm(normal))
             normal = normal / length if length > 0.0 else np.array([0.0, 0.0, 1.0])
             distance[r], points[0, r], points[1, r], normals[r], shape_rows[r] = d, p_a, p_b, normal, i
-            approach[r] = float(normal @ velocity[key[1]])
+            approach[r] = float(normal @ obstacles[key[0]].velocity)
         rows = -witness_rows(normals, points[0], self.data.J) * self._support[shape_rows]
-        links = tuple((self.names[shape_rows[r]], "obstacle:" + key[1]) for r, key in enumerate(order))
+        links = tuple((self.names[shape_rows[r]], obstacles[key[0]].label) for r, key in enumerate(order))
         return LivePairs(links, distance, rows, approach, points, normals)
-
-    def _link_index(self, i: int) -> int:
-        """The first shape index of shape i's link (a link with several shapes keeps its closest)."""
-        return self.names.index(self.names[i])
 
 
 def live_damper_bound(distance: FloatArray, approach: FloatArray, influence: float, safety: float,

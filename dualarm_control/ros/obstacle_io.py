@@ -36,6 +36,7 @@ from dualarm_control.collision.cloud import (
     DEFAULT_MAX_POINTS,
     DEFAULT_VOXEL,
     voxel_octree,
+    voxel_sphere,
     voxelise,
 )
 from dualarm_control.collision.live import LiveObstacle
@@ -286,7 +287,8 @@ class ObstacleIntake:
         if len(voxels.centres):
             now = self.scene.feed.clock()
             expires = now + self.cloud_lifetime if self.cloud_lifetime > 0.0 else math.inf
-            obstacle = LiveObstacle.make("cloud", voxel_octree(voxels), frame[0], frame[1], expires=expires)
+            obstacle = LiveObstacle.make("cloud", voxel_octree(voxels), frame[0], frame[1], expires=expires,
+                                         sphere=voxel_sphere(voxels))
             reason = self.scene.add(obstacle, now, velocity_given=True)
             if reason is not None:
                 self.warn("clouds_refused", reason)
