@@ -154,8 +154,10 @@ class LiveDistances:
         self._radii = np.array([r for _, r in spheres])
         self._joint = np.array([objects[k].parentJoint for k in self.shapes], dtype=np.intp)
         placement = [objects[k].placement for k in self.shapes]
-        self._place_rotation = np.array([pl.rotation for pl in placement]).reshape(-1, 3, 3)
-        self._place_translation = np.array([pl.translation for pl in placement]).reshape(-1, 3)
+        rotation = np.array([pl.rotation for pl in placement]).reshape(-1, 3, 3)
+        translation = np.array([pl.translation for pl in placement]).reshape(-1, 3)
+        centres_joint = (rotation @ self._centres[:, :, None])[:, :, 0] + translation  # in the joint's frame
+        self._centres_joint = np.hstack((centres_joint, np.ones((len(self.shapes), 1))))  # homogeneous, (shapes, 4)
         support = np.zeros((len(self.shapes), model.nv))
         reach = np.zeros((len(self.shapes), model.nv))
         for i, k in enumerate(self.shapes):
@@ -172,7 +174,10 @@ class LiveDistances:
         self._result = coal.DistanceResult()
         self._known: FloatArray = np.zeros((0, 0))  # (shapes, obstacles) lower bounds [m] ...
         self._known_q: FloatArray | None = None  # ... at these joint positions ...
-        self._known_for: object = None  # ... for this snapshot (identity)
+        self._known_for: object = None  # ... for this snapshot (identity), whose per-obstacle values are:
+        self._obstacle_centres = np.zeros((0, 3))  # bounding sphere centres in the world [m], (m, 3)
+        self._obstacle_radii = np.zeros(0)
+        self._transforms: list[coal.Transform3s] = []
 
     def near(self, q: FloatArray, obstacles: Sequence[LiveObstacle], within: float) -> LivePairs:
         """The (link, obstacle) pairs closer than ``within`` [m] at q [rad] (n,), each link's closest
@@ -183,6 +188,9 @@ class LiveDistances:
         if obstacles is not self._known_for or self._known_q is None or not np.isfinite(q).all():
             self._known = np.full((len(self.shapes), len(obstacles)), -np.inf)
             self._known_for = obstacles if isinstance(obstacles, tuple) else None
+            self._obstacle_centres = np.array([o.rotation @ o.centre + o.position for o in obstacles])
+            self._obstacle_radii = np.array([o.radius for o in obstacles])
+            self._transforms = [coal.Transform3s(o.rotation, o.position) for o in obstacles]
         else:
             self._known -= (self._reach @ np.abs(q - self._known_q))[:, None]
         self._known_q = q.copy()
@@ -190,13 +198,12 @@ class LiveDistances:
         if not candidates.any():
             return LivePairs.empty(n)
         pin.computeJointJacobians(self.model, self.data, q)  # data.oMi and data.J
-        joints = np.array([self.data.oMi[j].homogeneous for j in self._joint.tolist()])  # (shapes, 4, 4)
-        centres_joint = (self._place_rotation @ self._centres[:, :, None])[:, :, 0] + self._place_translation
-        centres = (joints[:, :3, :3] @ centres_joint[:, :, None])[:, :, 0] + joints[:, :3, 3]  # world
-        obstacle_centres = np.array([o.rotation @ o.centre + o.position for o in obstacles])
-        radii = np.array([o.radius for o in obstacles])
-        gaps = (np.linalg.norm(centres[:, None, :] - obstacle_centres[None, :, :], axis=2)
-                - self._radii[:, None] - radii[None, :])  # sphere bounds, (shapes, obstacles)
+        oMi = self.data.oMi
+        joints = np.array([oMi[j].homogeneous[:3] for j in self._joint.tolist()])  # (shapes, 3, 4)
+        centres = np.einsum("sij,sj->si", joints, self._centres_joint)  # the shapes' sphere centres, world
+        offset = centres[:, None, :] - self._obstacle_centres[None, :, :]
+        gaps = (np.sqrt(np.einsum("smk,smk->sm", offset, offset))
+                - self._radii[:, None] - self._obstacle_radii[None, :])  # sphere bounds, (shapes, obstacles)
         self._known = np.where(candidates, np.maximum(self._known, gaps), self._known)
         close = np.argwhere(candidates & (gaps < within))  # (shape, obstacle) rows, shape-major
         if not len(close):
@@ -205,12 +212,9 @@ class LiveDistances:
         placed = self.geometry_data.oMg
         best: dict[tuple[int, int], tuple[float, FloatArray, FloatArray, FloatArray, int]] = {}
         result, request = self._result, self.request
-        transforms: dict[int, coal.Transform3s] = {}
+        transforms = self._transforms
         for i, j in sorted(close.tolist(), key=lambda row: (row[1], row[0])):  # obstacle by obstacle
-            obstacle = obstacles[j]
-            tf = transforms.get(j)
-            if tf is None:
-                tf = transforms[j] = coal.Transform3s(obstacle.rotation, obstacle.position)
+            obstacle, tf = obstacles[j], transforms[j]
             shape, frame = self._geometries[i], placed[self.shapes[i]]
             result.clear()
             if isinstance(obstacle.shape, coal.OcTree):  # coal answers with the octree's point first, n from it

@@ -3,9 +3,10 @@
 
 * Cycle: the assembly task is run once in one process; its recorded joint states and targets are
   replayed through two controllers per solver, one with N live obstacles (spheres, boxes and
-  cylinders scattered around the arms' path, none closer than 3.5 cm to a link along it, so that
-  some come within the influence distance) and one without, interleaved case by case (the order
-  alternating), so both see the same machine at the same moment; p50/p99 and their ratios.
+  cylinders scattered around the arms' path) and one without, interleaved case by case (the order
+  alternating), so both see the same machine at the same moment; p50/p99 and their ratios. Two
+  scenes: the obstacles at least 3.5 cm from every link along the path (about 6 pairs within d_i
+  every cycle: what avoiding them costs) and at least 12 cm (none in reach: what having them costs).
 * Cloud: a 100,000-point PointCloud2 (a table top and three boxes seen from above, 2 cm voxels)
   taken in by the intake's worker from its CDR bytes (deserialize, voxelise, octree): p50/p99 over
   repetitions, in control periods; and what the executor's callback costs (a queue append).
@@ -30,14 +31,17 @@ from dualarm_control.kinematics import DualArmModel
 from dualarm_control.metrics import percentiles
 from dualarm_control.scenario import load_scenario
 
-CLEARANCE = 0.035
-"""m: the scattered obstacles stay at least this far from every link along the replayed run."""
+NEAR, FAR = 0.035, 0.12
+"""m: the scattered obstacles stay at least this far from every link along the replayed run: NEAR, many
+pairs within the influence distance d_i (0.10 m + 2 shape margins) every cycle (the limit's rows, its
+coal calls); FAR, none within d_i (what having them costs when they are out of reach)."""
 CLOUD_POINTS = 100_000
 
 
-def scattered_obstacles(count: int, distances: LiveDistances, path: np.ndarray, seed: int = 0) -> list[LiveObstacle]:
+def scattered_obstacles(count: int, distances: LiveDistances, path: np.ndarray, seed: int = 0,
+                        clearance: float = NEAR) -> list[LiveObstacle]:
     """``count`` obstacles around the LWR4 cell's workspace (x 0.3-1.3, y -0.6-0.6, z 0.9-1.8 m), each at
-    least :data:`CLEARANCE` from every link at every configuration of ``path`` (k, n) [rad] (every 20th)."""
+    least ``clearance`` [m] from every link at every configuration of ``path`` (k, n) [rad] (every 20th)."""
     rng = np.random.default_rng(seed)
     out: list[LiveObstacle] = []
     rows = path[::20]
@@ -48,10 +52,30 @@ def scattered_obstacles(count: int, distances: LiveDistances, path: np.ndarray, 
                  else coal.Cylinder(size / 2, size * 3))
         candidate = LiveObstacle.make(f"o{len(out)}", shape, np.eye(3),
                                       rng.uniform([0.3, -0.6, 0.9], [1.3, 0.6, 1.8]))
-        if all(not len(pairs) or pairs.distance.min() >= CLEARANCE
-               for pairs in (distances.near(q, [candidate], CLEARANCE) for q in rows)):
+        if all(not len(pairs) or pairs.distance.min() >= clearance
+               for pairs in (distances.near(q, [candidate], clearance) for q in rows)):
             out.append(candidate)
     return out
+
+
+def interleaved(on: RelativeController, off: RelativeController, cases: Sequence[tuple[Any, Any]]) -> dict[str, Any]:
+    """Each case's cycle through ``on`` (with live obstacles) and ``off``, the order alternating: p50/p99 [ms],
+    their ratios, the live obstacle rows per cycle."""
+    times = {True: np.empty(len(cases)), False: np.empty(len(cases))}
+    near = np.empty(len(cases))
+    for k, (q, target) in enumerate(cases):
+        for with_obstacles in ((True, False) if k % 2 == 0 else (False, True)):
+            controller = on if with_obstacles else off
+            start = time.perf_counter()
+            cycle = controller.step(q, target)
+            times[with_obstacles][k] = time.perf_counter() - start
+            if with_obstacles:
+                report: Any = cycle.reports.get("live_obstacles")
+                near[k] = report.rows if report is not None else 0
+    (on50, on99), (off50, off99) = percentiles(times[True]), percentiles(times[False])
+    return {"cycles": len(cases), "rows_mean": float(near.mean()), "cycles_with_rows": int(np.count_nonzero(near)),
+            "with_p50_ms": on50 * 1e3, "with_p99_ms": on99 * 1e3, "without_p50_ms": off50 * 1e3,
+            "without_p99_ms": off99 * 1e3, "ratio_p50": on50 / off50, "ratio_p99": on99 / off99}
 
 
 def bench_live_obstacles(count: int, solvers: Sequence[str], progress: Callable[[str], None] | None = None,
@@ -66,31 +90,18 @@ def bench_live_obstacles(count: int, solvers: Sequence[str], progress: Callable[
     cases = [(q, trajectory.sample(t)) for q, t in zip(log.positions, log.time, strict=True)]
     rows: dict[str, dict[str, Any]] = {}
     for solver in solvers:
-        params = scenario.controller_params(ControllerParams(solver=solver))
-        on = RelativeController(model, replace(params, collision=replace(params.collision, live_obstacles=count)))
-        off = RelativeController(model, params)
-        limit: Any = on.limit("live_obstacles")
-        obstacles = scattered_obstacles(count, limit.distances, log.positions)
-        limit.feed.publish(tuple(obstacles))
-        if progress:
-            progress(f"obstacles: {solver}, {len(cases)} cycles with {count} live obstacles and without")
-        times = {True: np.empty(len(cases)), False: np.empty(len(cases))}
-        near = np.empty(len(cases))
-        for k, (q, target) in enumerate(cases):
-            for with_obstacles in ((True, False) if k % 2 == 0 else (False, True)):
-                controller = on if with_obstacles else off
-                start = time.perf_counter()
-                cycle = controller.step(q, target)
-                times[with_obstacles][k] = time.perf_counter() - start
-                if with_obstacles:
-                    report: Any = cycle.reports.get("live_obstacles")
-                    near[k] = report.rows if report is not None else 0
-        (on50, on99), (off50, off99) = percentiles(times[True]), percentiles(times[False])
-        rows[solver] = {"obstacles": count, "cycles": len(cases), "rows_mean": float(near.mean()),
-                        "cycles_with_rows": int(np.count_nonzero(near)),
-                        "with_p50_ms": on50 * 1e3, "with_p99_ms": on99 * 1e3,
-                        "without_p50_ms": off50 * 1e3, "without_p99_ms": off99 * 1e3,
-                        "ratio_p50": on50 / off50, "ratio_p99": on99 / off99}
+        for clearance in (NEAR, FAR):
+            params = scenario.controller_params(ControllerParams(solver=solver))
+            on = RelativeController(model, replace(params, collision=replace(params.collision, live_obstacles=count)))
+            off = RelativeController(model, params)
+            limit: Any = on.limit("live_obstacles")
+            obstacles = scattered_obstacles(count, limit.distances, log.positions, clearance=clearance)
+            limit.feed.publish(tuple(obstacles))
+            if progress:
+                progress(f"obstacles: {solver}, {len(cases)} cycles with {count} live obstacles >= {clearance * 100:g} cm "
+                         "from the path and without")
+            rows[f"{solver} | >= {clearance * 100:g} cm"] = {"obstacles": count, "clearance_m": clearance,
+                                                               **interleaved(on, off, cases)}
     return rows
 
 
@@ -147,7 +158,7 @@ def bench_cloud(period: float, repetitions: int = 30, points: int = CLOUD_POINTS
 
 def format_obstacle_bench(rows: dict[str, dict[str, Any]], cloud: dict[str, Any]) -> str:
     """The two tables as Markdown."""
-    lines = ["| solver | obstacles | rows/cycle | with p50 / p99 [ms] | without p50 / p99 [ms] | ratio p50 / p99 |",
+    lines = ["| solver, obstacles' clearance | obstacles | rows/cycle | with p50 / p99 [ms] | without p50 / p99 [ms] | ratio p50 / p99 |",
              "|---|---:|---:|---|---|---|"]
     for solver, r in rows.items():
         lines.append(f"| {solver} | {r['obstacles']} | {r['rows_mean']:.2f} | {r['with_p50_ms']:.3f} / "

@@ -117,3 +117,40 @@ def log_obstacles(tracks: dict[str, ObstacleTrack], start_ns: int, recording: An
                         columns=rr.Transform3D.columns(translation=np.array([track.positions[i] for i in live]),
                                                        quaternion=np.array([track.quaternions[i] for i in live])),
                         recording=recording)
+
+
+class CameraObstacles:
+    """The obstacles as visual-only bodies of the video's pybullet client, the moving ones placed per frame."""
+
+    def __init__(self, tracks: dict[str, ObstacleTrack], client: int) -> None:
+        import pybullet as p
+
+        self._p, self.client = p, client
+        self.bodies: dict[str, int] = {}
+        self.tracks = tracks
+        for track in tracks.values():
+            half, colour = (track.scale / 2.0).tolist(), track.colour.tolist()
+            if track.kind == CUBE:
+                visual = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=colour, physicsClientId=client)
+            elif track.kind == SPHERE:
+                visual = p.createVisualShape(p.GEOM_SPHERE, radius=max(half), rgbaColor=colour, physicsClientId=client)
+            elif track.kind == CYLINDER:
+                visual = p.createVisualShape(p.GEOM_CYLINDER, radius=max(half[0], half[1]), length=track.scale[2],
+                                             rgbaColor=colour, physicsClientId=client)
+            elif track.mesh and Path(track.mesh).is_file():
+                visual = p.createVisualShape(p.GEOM_MESH, fileName=track.mesh, meshScale=track.scale.tolist(),
+                                             rgbaColor=colour, physicsClientId=client)
+            else:
+                continue
+            self.bodies[track.name] = p.createMultiBody(0.0, -1, visual, basePosition=track.positions[0].tolist(),
+                                                        baseOrientation=track.quaternions[0].tolist(),
+                                                        physicsClientId=client)
+
+    def place(self, stamp_ns: int) -> None:
+        """Each moving obstacle at its last recorded pose at or before ``stamp_ns``."""
+        for name, body in self.bodies.items():
+            track = self.tracks[name]
+            i = int(np.searchsorted(track.stamps, stamp_ns, side="right")) - 1  # stamps ascending (the scene's: -1)
+            if i >= 0 and track.stamps[i] >= 0:
+                self._p.resetBasePositionAndOrientation(body, track.positions[i].tolist(),
+                                                        track.quaternions[i].tolist(), physicsClientId=self.client)
