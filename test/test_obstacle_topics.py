@@ -227,12 +227,14 @@ def test_bad_clouds_are_refused() -> None:
     msg.fields = [PointField(name="x", offset=0, datatype=PointField.FLOAT64, count=1)]
     target.on_cloud(serialize_message(msg))
     target.process()
+    target.on_cloud(cloud_message(np.array([[0.5, 0.0, 1.0], [3e10, 0.0, 1.0]])))  # beyond the voxel grid
+    target.process()
     target.on_cloud(b"\x00\x01\x00\x00garbage")
     time.sleep(1.05)  # past the throttle, so that each reason is logged
     target.process()
     assert names(target) == []
     assert "frame_id 'camera_link' is not a fixed frame" in logged[0]
-    assert target.count["clouds_refused"] == 3, (target.count, logged)
+    assert target.count["clouds_refused"] == 4, (target.count, logged)
 
 
 def test_a_live_obstacle_is_what_the_limit_sees() -> None:

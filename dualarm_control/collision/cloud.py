@@ -72,20 +72,30 @@ def voxelise(points: npt.NDArray[np.floating], side: float, max_points: int = DE
         sample = sample[np.isfinite(sample).all(axis=1)]
     if not len(sample):
         return Voxels(np.zeros((0, 3)), side, k, 0, stride)
-    # coordinates as rows (3, k): numpy's reductions along a contiguous row are 5-10x faster than down a column
-    index = np.floor(np.ascontiguousarray(sample.T) * (1.0 / side)).astype(np.int64)
+    # coordinates as rows (3, k), in place on one float32 copy: numpy's reductions along a contiguous row
+    # are 5-10x faster than down a column, and int32 indices halve the memory traffic
+    scaled = np.array(sample.T, dtype=np.float32, order="C")
+    scaled *= np.float32(1.0 / side)
+    np.floor(scaled, out=scaled)
+    if not np.abs(scaled).max() < 2**30:
+        raise ValueError(f"a point {float(np.abs(sample).max())!r} m from the origin: beyond the voxel grid of "
+                         f"side {side} m")
+    index = scaled.astype(np.int32)
     low = index.min(axis=1)
-    span = index.max(axis=1) - low + 1
-    key = ((index[0] - low[0]) * span[1] + (index[1] - low[1])) * span[2] + (index[2] - low[2])
+    index -= low[:, None]
+    span = index.max(axis=1).astype(np.int64) + 1
     cells_total = int(span[0] * span[1] * span[2])
     if cells_total <= BITMAP_CELLS:  # an occupancy bitmap of the cloud's bounding box: no sort
+        key = index[0] * np.int32(span[1] * span[2])
+        key += index[1] * np.int32(span[2])
+        key += index[2]
         occupied = np.zeros(cells_total, dtype=bool)
         occupied[key] = True
         unique = np.flatnonzero(occupied)
     else:
-        unique = np.unique(key)
+        unique = np.unique((index[0] * span[1] + index[1]) * span[2] + index[2])  # int64 keys
     cells = np.stack((unique // (span[1] * span[2]), (unique // span[2]) % span[1], unique % span[2]), axis=1)
-    centres: FloatArray = (cells + low + 0.5) * side
+    centres: FloatArray = (cells + low.astype(np.int64) + 0.5) * side
     return Voxels(centres, side, k, len(sample), stride)
 
 

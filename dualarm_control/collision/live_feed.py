@@ -45,6 +45,10 @@ class LiveObstacleFeed:
             raise ValueError(f"{len(obstacles)} live obstacles for {self.slots} slots")
         self._snapshot = obstacles
 
+    def snapshot_now(self) -> tuple[LiveObstacle, ...]:
+        """The snapshot as published (lifetimes not applied)."""
+        return self._snapshot
+
     def snapshot(self) -> tuple[LiveObstacle, ...]:
         """The obstacles now, those past their lifetime left out (no lock: one attribute read)."""
         current = self._snapshot
@@ -92,12 +96,16 @@ class LiveScene:
         self.obstacles.clear()
         self._stamps.clear()
 
-    def publish(self) -> None:
-        """Hand the current obstacles to the control thread (those past their lifetime dropped here too)."""
+    def publish(self) -> tuple[LiveObstacle, ...]:
+        """Hand the current obstacles to the control thread (those past their lifetime dropped here too);
+        returns the snapshot it replaced (the caller drops it when it likes: freeing an octree takes about a
+        millisecond, which need not delay the new snapshot)."""
         now = self.feed.clock()
         for name in [n for n, o in self.obstacles.items() if o.expires <= now]:
             self.delete(name)
+        previous = self.feed.snapshot_now()
         self.feed.publish(tuple(self.obstacles.values()))
+        return previous
 
 
 def estimated_velocity(before: FloatArray, before_stamp: float, after: FloatArray, after_stamp: float) -> FloatArray:

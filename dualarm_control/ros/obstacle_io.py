@@ -187,7 +187,7 @@ class ObstacleIntake:
         self._stop = threading.Event()
         self._throttles: dict[str, Throttle] = collections.defaultdict(Throttle)
         self.count = collections.Counter[str]()
-        self.cloud_seconds: list[float] = []  # each cloud's intake time [s] (deserialize, voxelise, octree)
+        self.cloud_seconds: list[float] = []  # each cloud's intake [s]: its bytes to the snapshot holding it
         self._thread = threading.Thread(target=self._run, name="obstacle_intake", daemon=True)
 
     # ---- the executor's side: append and return ------------------------------------------------
@@ -220,16 +220,24 @@ class ObstacleIntake:
             self.process()
 
     def process(self) -> None:
-        """Everything queued, then one snapshot (also called directly by tests and benchmarks)."""
+        """Everything queued, then one snapshot (also called directly by tests and benchmarks); a cloud's
+        intake time runs from its bytes to the snapshot that holds it (:attr:`cloud_seconds`)."""
         changed = False
         while self._markers:
             self.take_markers(self._markers.popleft())
             changed = True
+        cloud_start = None
         if self._cloud:
-            self.take_cloud(self._cloud.popleft())
-            changed = True
+            cloud_start = time.perf_counter()
+            if self.take_cloud(self._cloud.popleft()):
+                changed = True
+            else:
+                cloud_start = None
         if changed or self.scene.obstacles:
-            self.scene.publish()
+            previous = self.scene.publish()
+            if cloud_start is not None:
+                self.cloud_seconds.append(time.perf_counter() - cloud_start)
+            del previous  # the replaced snapshot (an old cloud's octree) is freed after the swap
 
     def warn(self, kind: str, reason: str) -> None:
         self.count[kind] += 1
@@ -264,27 +272,32 @@ class ObstacleIntake:
             else:
                 self.warn("markers_refused", reason)
 
-    def take_cloud(self, data: bytes) -> None:
-        start = time.perf_counter()
+    def take_cloud(self, data: bytes) -> bool:
+        """A cloud's bytes into the scene (not yet published); False when it was refused."""
         try:
             msg = self.deserialize(data, "cloud")
             points = cloud_points(msg)
         except InputRejected as exc:
             self.warn("clouds_refused", "point cloud refused: " + exc.reason)
-            return
+            return False
         except DESERIALIZE_ERRORS as exc:
             self.warn("clouds_refused", f"malformed PointCloud2 ({len(data)} bytes): {exc}")
-            return
+            return False
         frame = self.frames.get(str(msg.header.frame_id))
         if frame is None:
             self.warn("clouds_refused", f"point cloud refused: frame_id {msg.header.frame_id!r} is not a fixed frame "
                                         f"of the robot (one of: {', '.join(sorted(self.frames))})")
-            return
-        voxels = voxelise(points, self.voxel, self.max_points)
+            return False
+        try:
+            voxels = voxelise(points, self.voxel, self.max_points)
+        except ValueError as exc:  # a point beyond the voxel grid (a corrupt cloud)
+            self.warn("clouds_refused", f"point cloud refused: {exc}")
+            return False
         if voxels.note():
             self.warn("clouds_reduced", voxels.note())
-        self.scene.delete("cloud")
-        if len(voxels.centres):
+        if not len(voxels.centres):
+            self.scene.delete("cloud")
+        else:  # replaces the last cloud in the scene; its octree is freed once the new snapshot is out
             now = self.scene.feed.clock()
             expires = now + self.cloud_lifetime if self.cloud_lifetime > 0.0 else math.inf
             obstacle = LiveObstacle.make("cloud", voxel_octree(voxels), frame[0], frame[1], expires=expires,
@@ -293,7 +306,7 @@ class ObstacleIntake:
             if reason is not None:
                 self.warn("clouds_refused", reason)
         self.count["clouds"] += 1
-        self.cloud_seconds.append(time.perf_counter() - start)
+        return True
 
 
 def start_intake(node: Any, feed: LiveObstacleFeed, model: pin.Model, values: dict[str, Any]) -> ObstacleIntake:
