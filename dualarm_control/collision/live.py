@@ -36,7 +36,11 @@ import pinocchio as pin
 
 from dualarm_control.arrays import FloatArray
 from dualarm_control.collision.distances import witness_rows
-from dualarm_control.collision.params import KNOWN_MARGIN, distance_request
+from dualarm_control.collision.params import (
+    KNOWN_MARGIN,
+    SPHERE_BROADPHASE_MIN,
+    distance_request,
+)
 from dualarm_control.collision.shapes import bounding_sphere, farthest
 
 
@@ -198,14 +202,17 @@ class LiveDistances:
         if not candidates.any():
             return LivePairs.empty(n)
         pin.computeJointJacobians(self.model, self.data, q)  # data.oMi and data.J
-        oMi = self.data.oMi
-        joints = np.array([oMi[j].homogeneous[:3] for j in self._joint.tolist()])  # (shapes, 3, 4)
-        centres = np.einsum("sij,sj->si", joints, self._centres_joint)  # the shapes' sphere centres, world
-        offset = centres[:, None, :] - self._obstacle_centres[None, :, :]
-        gaps = (np.sqrt(np.einsum("smk,smk->sm", offset, offset))
-                - self._radii[:, None] - self._obstacle_radii[None, :])  # sphere bounds, (shapes, obstacles)
-        self._known = np.where(candidates, np.maximum(self._known, gaps), self._known)
-        close = np.argwhere(candidates & (gaps < within))  # (shape, obstacle) rows, shape-major
+        if np.count_nonzero(candidates) <= SPHERE_BROADPHASE_MIN:  # coal on so few costs less than the spheres
+            close = np.argwhere(candidates)
+        else:
+            oMi = self.data.oMi
+            joints = np.array([oMi[j].homogeneous[:3] for j in self._joint.tolist()])  # (shapes, 3, 4)
+            centres = np.einsum("sij,sj->si", joints, self._centres_joint)  # the shapes' sphere centres, world
+            offset = centres[:, None, :] - self._obstacle_centres[None, :, :]
+            gaps = (np.sqrt(np.einsum("smk,smk->sm", offset, offset))
+                    - self._radii[:, None] - self._obstacle_radii[None, :])  # sphere bounds, (shapes, obstacles)
+            self._known = np.where(candidates, np.maximum(self._known, gaps), self._known)
+            close = np.argwhere(candidates & (gaps < within))  # (shape, obstacle) rows, shape-major
         if not len(close):
             return LivePairs.empty(n)
         pin.updateGeometryPlacements(self.model, self.data, self.geometry, self.geometry_data)
