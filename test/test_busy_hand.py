@@ -63,6 +63,7 @@ def test_the_arms_yield_to_the_hand_and_the_task_resumes(hand_run: tuple[RunReco
     hand = load_scenario("busy_cell").moving_obstacles[0]
     print(record.obstacle_events)
     assert any("yielding to obstacle:hand" in e for e in record.obstacle_events)
+    assert "yielding to obstacle:hand" in str(summary["obstacle_events"])  # in metrics.json and the terminal
     outcomes = str(summary["segment_outcomes"]).split(" | ")
     assert "segment 2 'apart'" in outcomes[1] and "reached" in outcomes[1], outcomes
     reached_at = float(outcomes[1].split("(t = ")[1].split(" s)")[0])
