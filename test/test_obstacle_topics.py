@@ -256,3 +256,48 @@ def test_a_live_obstacle_is_what_the_limit_sees() -> None:
     send(target, marker("hand", Marker.SPHERE, (0.1, 0.1, 0.1), (0.5, 0.0, 2.0)))
     assert [o.name for o in limit.feed.snapshot()] == ["hand"]  # type: ignore[attr-defined]
     assert isinstance(limit.feed.snapshot()[0], LiveObstacle)  # type: ignore[attr-defined]
+
+
+def test_the_intake_subscribes_on_a_live_graph() -> None:
+    """start_intake on an rclpy node (its own context, the session's domain): a MarkerArray on the markers topic
+    and a PointCloud2 on the cloud topic, published by another node of the process, reach the feed through the
+    raw subscriptions and the worker thread. Waits for them with a deadline, failing with what it saw."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    from dualarm_control.ros.obstacle_io import start_intake
+
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node("obstacle_intake_test", context=context)
+    sender = rclpy.create_node("obstacle_sender_test", context=context)
+    feed = LiveObstacleFeed(4)
+    values = {"obstacles.topic": "/test_intake_markers", "obstacles.cloud_topic": "/test_intake_cloud",
+              "obstacles.cloud_voxel": 0.02, "obstacles.cloud_max_points": 200_000, "obstacles.cloud_lifetime": 0.0}
+    target = start_intake(node, feed, collision().model, values)
+    markers = sender.create_publisher(MarkerArray, "/test_intake_markers", 10)
+    clouds = sender.create_publisher(PointCloud2, "/test_intake_cloud", 1)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    executor.add_node(sender)
+    msg = MarkerArray()
+    msg.markers = [marker("hand", Marker.SPHERE, (0.1, 0.1, 0.1), (0.5, 0.0, 2.0))]
+    cloud = deserialize_message(cloud_message(np.random.default_rng(5).uniform(0.0, 0.3, (1000, 3))), PointCloud2)
+    seen: list[str] = []
+    try:
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline:
+            markers.publish(msg)
+            clouds.publish(cloud)
+            executor.spin_once(timeout_sec=0.1)
+            seen = sorted(o.name for o in feed.snapshot())
+            if seen == ["cloud", "hand"]:
+                break
+        assert seen == ["cloud", "hand"], (seen, dict(target.count))
+    finally:
+        target.stop()
+        executor.shutdown()
+        node.destroy_node()
+        sender.destroy_node()
+        rclpy.try_shutdown(context=context)
