@@ -217,7 +217,7 @@ class LiveDistances:
             return LivePairs.empty(n)
         pin.updateGeometryPlacements(self.model, self.data, self.geometry, self.geometry_data)
         placed = self.geometry_data.oMg
-        best: dict[tuple[int, int], tuple[float, FloatArray, FloatArray, FloatArray, int]] = {}
+        best: dict[tuple[int, int], tuple[float, int, list[float]]] = {}  # (obstacle, link) -> d, shape, witness
         result, request = self._result, self.request
         transforms = self._transforms
         for i, j in sorted(close.tolist(), key=lambda row: (row[1], row[0])):  # obstacle by obstacle
@@ -226,33 +226,32 @@ class LiveDistances:
             result.clear()
             if isinstance(obstacle.shape, coal.OcTree):  # coal answers with the octree's point first, n from it
                 d = coal.distance(obstacle.shape, tf, shape, frame, request, result)
-                p_b, p_a, normal = result.getNearestPoint1(), result.getNearestPoint2(), -result.normal
+                witness = [*result.getNearestPoint2(), *result.getNearestPoint1(), *(-result.normal)]
             else:
                 d = coal.distance(shape, frame, obstacle.shape, tf, request, result)
-                p_a, p_b, normal = result.getNearestPoint1(), result.getNearestPoint2(), result.normal
+                witness = [*result.getNearestPoint1(), *result.getNearestPoint2(), *result.normal]
             if not math.isfinite(d):
                 continue
             self._known[i, j] = d - KNOWN_MARGIN
             key = (j, self._first[i])
             if d < within and (key not in best or d < best[key][0]):
-                best[key] = (float(d), np.array(p_a), np.array(p_b), np.array(normal), i)
+                best[key] = (float(d), i, witness)
         if not best:
             return LivePairs.empty(n)
         order = sorted(best)
-        m = len(order)
-        distance = np.empty(m)
-        points = np.empty((2, m, 3))
-        normals = np.empty((m, 3))
-        shape_rows = np.empty(m, dtype=np.intp)
-        approach = np.empty(m)
-        for r, key in enumerate(order):
-            d, p_a, p_b, normal, i = best[key]
-            length = float(np.linalg.norm(normal))
-            normal = normal / length if length > 0.0 else np.array([0.0, 0.0, 1.0])
-            distance[r], points[0, r], points[1, r], normals[r], shape_rows[r] = d, p_a, p_b, normal, i
-            approach[r] = float(normal @ obstacles[key[0]].velocity)
+        chosen = [best[key] for key in order]
+        distance = np.array([c[0] for c in chosen])
+        shape_rows = np.array([c[1] for c in chosen], dtype=np.intp)
+        raw = np.array([c[2] for c in chosen]).reshape(-1, 3, 3)  # (m, [p_a, p_b, n], 3)
+        points = raw[:, :2].transpose(1, 0, 2).copy()  # (2, m, 3)
+        normals = raw[:, 2]
+        length = np.sqrt(np.einsum("mk,mk->m", normals, normals))
+        normals = np.where(length[:, None] > 0.0, normals / np.where(length > 0.0, length, 1.0)[:, None],
+                           np.array([0.0, 0.0, 1.0]))
+        velocities = np.array([obstacles[j].velocity for j, _ in order])
+        approach = np.einsum("mk,mk->m", normals, velocities)
         rows = -witness_rows(normals, points[0], self.data.J) * self._support[shape_rows]
-        links = tuple((self.names[shape_rows[r]], obstacles[key[0]].label) for r, key in enumerate(order))
+        links = tuple((self.names[i], obstacles[j].label) for (j, _), i in zip(order, shape_rows.tolist(), strict=True))
         return LivePairs(links, distance, rows, approach, points, normals)
 
 
