@@ -80,3 +80,24 @@ def test_the_video_camera_places_the_hand_where_it_was(tmp_path: Path) -> None:
         assert np.allclose(position, [0.5, 0.2, 1.65])
     finally:
         p.disconnect(client)
+
+
+def test_foxglove_replays_them(tmp_path: Path) -> None:
+    """The Foxglove replay of a bag sends its obstacles' MarkerArrays (both topics) with their schema."""
+    import foxglove
+
+    from dualarm_control.app.view.foxglove_view import FoxgloveScene, bag_signals
+    from dualarm_control.app.view.recording import JointRecording
+    from dualarm_control.paths import urdf_path
+
+    write_scene_bag(tmp_path / "bag")
+    recording = JointRecording(np.array([1_000_000_000, 2_000_000_000]), np.zeros((2, 14)), (), urdf_path().read_text())
+    signals = bag_signals(tmp_path / "bag", recording)
+    assert {s.topic: len(s.messages) for s in signals} == {"/dualarm/obstacles": 1, "/collision_objects": 11}
+    server = foxglove.start_server(host="127.0.0.1", port=0)
+    try:
+        scene = FoxgloveScene(recording, signals)
+        schema = scene.channels["/collision_objects"].schema()
+        assert schema is not None and schema.name == "visualization_msgs/msg/MarkerArray"
+    finally:
+        server.stop()
