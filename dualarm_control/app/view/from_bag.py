@@ -46,7 +46,7 @@ class RunArrays:
     def log(self, recording: object = None) -> None:
         rv.log_run(self.urdf, self.stamps, self.q, self.joint_names, self.series, frames=self.frames,
                    statuses=self.statuses, recording=recording, closest=self.closest)
-        log_obstacles(self.obstacles, self.start_ns, recording)
+        log_obstacles(self.obstacles, self.start_ns, recording, rv.root_link(Path(self.urdf)))
 
 
 def relative_run_arrays(path: Path, model: DualArmModel, bag: Bag | None = None) -> RunArrays:

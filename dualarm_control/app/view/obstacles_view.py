@@ -82,9 +82,11 @@ def read_obstacles(bag: Path) -> dict[str, ObstacleTrack]:
     return tracks
 
 
-def log_obstacles(tracks: dict[str, ObstacleTrack], start_ns: int, recording: Any = None) -> None:
-    """Each obstacle under ``obstacles/<name>``: its shape (static) and its pose, static when it has one
-    pose from the scene only, else on the ``time`` timeline at (stamp - ``start_ns``) [s]."""
+def log_obstacles(tracks: dict[str, ObstacleTrack], start_ns: int, recording: Any = None, world: str = "world") -> None:
+    """Each obstacle under ``obstacles/<name>``: its shape (static) in its own frame ``obstacle_<name>``
+    and that frame's pose in the named frame ``world`` (the URDF's root link, where the URDF's links
+    hang: the markers' frame), static when it has one pose from the scene only, else on the ``time``
+    timeline at (stamp - ``start_ns``) [s]."""
     import rerun as rr
 
     from dualarm_control.app.view.rerun_view import TIMELINE
@@ -101,21 +103,22 @@ def log_obstacles(tracks: dict[str, ObstacleTrack], start_ns: int, recording: An
             shape = rr.Cylinders3D(lengths=[track.scale[2]], radii=[max(half[0], half[1])], colors=[colour],
                                    fill_mode="solid")
         elif track.mesh and Path(track.mesh).is_file():
-            rr.log(path + "/shape", rr.Transform3D(scale=track.scale), static=True, recording=recording)
-            shape = rr.Asset3D(path=track.mesh)
+            shape = rr.Asset3D(path=track.mesh)  # scaled: its vertices in the file's units times the marker's scale
+            rr.log(path + "/shape", rr.InstancePoses3D(scales=[track.scale]), static=True, recording=recording)
         else:
             continue
-        rr.log(path + "/shape", shape, static=True, recording=recording)
+        frame = f"obstacle_{track.name}"
+        rr.log(path + "/shape", shape, rr.CoordinateFrame(frame), static=True, recording=recording)
         live = [i for i, s in enumerate(track.stamps) if s >= 0]
         if not live:  # static data wins over temporal data in Rerun: only for a still obstacle
-            rr.log(path, rr.Transform3D(translation=track.positions[0],
-                                             quaternion=rr.Quaternion(xyzw=track.quaternions[0])),
-                   static=True, recording=recording)
+            rr.log(path, rr.Transform3D(translation=track.positions[0], quaternion=rr.Quaternion(xyzw=track.quaternions[0]),
+                                        parent_frame=world, child_frame=frame), static=True, recording=recording)
             continue
         stamps = (np.array([track.stamps[i] for i in live], dtype=np.int64) - start_ns) * 1e-9
         rr.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, duration=stamps)],
                         columns=rr.Transform3D.columns(translation=np.array([track.positions[i] for i in live]),
-                                                       quaternion=np.array([track.quaternions[i] for i in live])),
+                                                       quaternion=np.array([track.quaternions[i] for i in live]),
+                                                       parent_frame=[world] * len(live), child_frame=[frame] * len(live)),
                         recording=recording)
 
 
