@@ -61,7 +61,7 @@ TABLE = "table"
 RESERVED = frozenset({
     "name", "description", "robot", "robot_starts", "initial_positions_deg", "settle_time", "limits", "tasks",
     "segments", "goals", "duration", "convergence_time", "table_height", "gains", "contact_links", "force",
-    "collision_allowed", "obstacles", "plugins", "urdf", "corner", "plan", "baseline", "execution"})
+    "collision_allowed", "obstacles", "moving_obstacles", "plugins", "urdf", "corner", "plan", "baseline", "execution"})
 """Scenario keys an obstacle cannot be named (its keys would be theirs)."""
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 MESH_SUFFIXES = (".obj", ".stl")

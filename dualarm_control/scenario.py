@@ -33,6 +33,7 @@ from dualarm_control.collision import CollisionModel
 from dualarm_control.controller import ControllerParams
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel, FloatArray
+from dualarm_control.moving_obstacles import MovingObstacle, parse_moving_obstacles
 from dualarm_control.obstacles import Obstacle, parse_obstacles
 from dualarm_control.params import (
     ParameterError,
@@ -67,6 +68,8 @@ class Scenario:
         collision_allowed: link pairs the collision limit never checks (``scenario.collision_allowed``).
         obstacles: static obstacles of the cell (``scenario.obstacles``): the collision limit avoids
             them, the simulator has them (docs/obstacles.md).
+        moving_obstacles: shapes that come in and go out (``scenario.moving_obstacles``, a hand): live
+            obstacles of the collision limit, moved bodies of the simulator.
     """
 
     name: str
@@ -79,15 +82,17 @@ class Scenario:
     robot: RobotDescription = field(default_factory=load_robot)
     collision_allowed: tuple[tuple[str, str], ...] = ()
     obstacles: tuple[Obstacle, ...] = ()
+    moving_obstacles: tuple[MovingObstacle, ...] = ()
 
     def controller_params(self, params: ControllerParams) -> ControllerParams:
         """``params`` with the scenario's allowed contacts added to the collision limit's
         (``scenario.collision_allowed``: e.g. the assembly's tools, which meet on purpose) and its
         obstacles (``scenario.obstacles``) as the limit's."""
-        if not self.collision_allowed and not self.obstacles:
+        if not self.collision_allowed and not self.obstacles and not self.moving_obstacles:
             return params
         collision = replace(params.collision, allowed=tuple(params.collision.allowed) + self.collision_allowed,
-                            obstacles=self.obstacles)
+                            obstacles=self.obstacles,
+                            live_obstacles=max(params.collision.live_obstacles, len(self.moving_obstacles)))
         return replace(params, collision=collision)
 
     def collision_model(self, model: DualArmModel) -> CollisionModel:
@@ -230,7 +235,8 @@ def scenario_from_parameters(flat: Mapping[str, Any], source: Path,
                             + ", ".join(outside))
     return Scenario(
         collision_allowed=_link_pairs(flat),
-        obstacles=parse_obstacles(flat, Path(source).parent),
+        obstacles=(static := parse_obstacles(flat, Path(source).parent)),
+        moving_obstacles=parse_moving_obstacles(flat, static),
         name=str(get(flat, "name")),
         description=str(get(flat, "description", "")),
         initial_positions=start,

@@ -162,13 +162,14 @@ def moved_links(cell: DualArmCell) -> list[str]:
 
 
 def obstacle_min_distances(robot: RobotDescription | str, positions: FloatArray, obstacles: Sequence[Obstacle],
-                           cutoff: float = DEFAULT_CUTOFF) -> MinDistances:
+                           cutoff: float = DEFAULT_CUTOFF, paths: Mapping[str, FloatArray] | None = None) -> MinDistances:
     """The smallest distance between the links an arm joint moves and the ``obstacles``, at every row of
     ``positions``, from pybullet (as :func:`min_distances`, on the simulator's own shapes: the
     robot's cell with the obstacles' bodies, :mod:`dualarm_sim.obstacles`): one
     ``p.getClosestPoints(robot, obstacle, cutoff)`` per obstacle and row, every link at once. The
     pairs are (link, ``obstacle:<name>``), every moved link against every obstacle; a pair farther
-    than ``cutoff`` [m] counts as ``inf``. Raises as :func:`min_distances` (ValueError: no obstacle)."""
+    than ``cutoff`` [m] counts as ``inf``. ``paths``: a moving obstacle's position [m] at each row, (k, 3), by
+    name (its body placed there first). Raises as :func:`min_distances` (ValueError: no obstacle)."""
     r = load_robot(robot)
     q = np.asarray(positions, dtype=float)
     if q.ndim != 2 or q.shape[1] != r.nq:
@@ -188,8 +189,11 @@ def obstacle_min_distances(robot: RobotDescription | str, positions: FloatArray,
         distances = np.full(len(q), math.inf)
         closest = np.full(len(q), -1, dtype=np.intp)
         pair_minimum = np.full(len(names), math.inf)
+        moved = [(cell.obstacle_bodies[name], np.asarray(path, dtype=float)) for name, path in (paths or {}).items()]
         for k, row in enumerate(q):
             cell.pose(row)
+            for other, path in moved:
+                p.resetBasePositionAndOrientation(other, path[k].tolist(), (0.0, 0.0, 0.0, 1.0), physicsClientId=cid)
             for o, other in enumerate(bodies):
                 for c in p.getClosestPoints(body, other, cutoff, physicsClientId=cid):
                     i = column.get((c[3], o))

@@ -76,6 +76,7 @@ from dualarm_control.ros.node import (
     thread_priority_spec,
     usage,
 )
+from dualarm_control.ros.obstacle_markers import ObstacleTopics
 from dualarm_control.ros.qos import (
     QOS_PARAMETER,
     latched_qos,
@@ -85,6 +86,7 @@ from dualarm_control.ros.qos import (
 from dualarm_control.scenario import ROBOT_PARAMETER, scenario_names
 from dualarm_sim.cell import CellConfig, DualArmCell, JointSample
 from dualarm_sim.contacts import ContactCounter
+from dualarm_sim.moving import MovingBodies
 from dualarm_sim.ports import STATE_ORDERS, CommandMerger, state_layout
 
 PARAMETERS = (
@@ -199,6 +201,9 @@ class SimNode:
         if priority_note and priority_note != "disabled":
             self.log.warning(priority_note)
         self.cell_topic = CellPublisher(n)  # /dualarm/cell: what this run runs with, latched (for its bag)
+        self.period_s = float(p["control_period"])
+        self.moving = MovingBodies(scenario.moving_obstacles, self.cell.client_id)  # a hand: moved every step
+        self.moving_topic = ObstacleTopics(n, (), scenario.moving_obstacles, scene=False, live=True)
 
     def close(self) -> None:
         self.log.info(f"stopping after {self.steps} steps ({self.steps * self.period_ns / 1e9:.3f} s sim time), "
@@ -215,6 +220,7 @@ class SimNode:
         sample, self.stepped = self.stepped or self.cell.state(), None  # the step's own state, else a read
         ns = self._stamp_ns()
         publish_if_subscribed(self.pub_clock, lambda: convert.clock(self.steps * self.period_ns))
+        self.moving_topic.publish_moving(self.steps * self.period_s, ns)  # where the hand is at this state
         positions, velocities = sample.positions, sample.velocities
         if self.cell.held_names or self.extra:
             held_q, held_qd = self.cell.held_state()
@@ -272,6 +278,7 @@ class SimNode:
         elif self.timed_out and not timed_out:
             self.log.info("commands resumed")
         self.timed_out = timed_out
+        self.moving.place(self.steps * self.period_s)
         self.stepped = self.cell.step()
         if self.holds:  # a position command moves its joints once, then they hold it
             self.cell.hold(self.merger.position_mask)

@@ -179,8 +179,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def cmd_bench(args: argparse.Namespace) -> int:
     """Solver x QP back-end timings (random set, scenario), pink, exactness, scaling: DIR/bench.md and bench.json."""
-    if args.realtime and args.messages:
-        raise DualArmError("--realtime and --messages are separate benchmarks: choose one")
+    if sum(bool(x) for x in (args.realtime, args.messages, args.obstacles)) > 1:
+        raise DualArmError("--realtime, --messages and --obstacles are separate benchmarks: choose one")
     for option in ("with_view", "load", "scheduling", "baseline", "processes", "floor"):
         if getattr(args, option) and not args.realtime:
             raise DualArmError(f"--{option.replace('_', '-')} belongs to --realtime")
@@ -201,6 +201,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         return 0
     for name in solvers:
         make_solver(name)  # unknown names exit 2 before any run
+    if args.obstacles:
+        from dualarm_control.app.bench.obstacles import run_obstacle_bench
+
+        return run_obstacle_bench(args.obstacles, solvers, Path(args.output))
     if args.realtime:  # real-time runs over ROS per solver, rate, load, scheduling, layout (and tree)
         from dualarm_control.app.bench.floor import floor_rows, format_floor
         from dualarm_control.app.bench.realtime import (
@@ -612,6 +616,10 @@ def build_parser() -> argparse.ArgumentParser:
     ben.add_argument("--messages", action="store_true",
                      help="instead: the per-period messages (joint states, target, diagnostics, command) built and "
                      "read through rclpy message objects and as CDR bytes, in one process (messages.md/json)")
+    ben.add_argument("--obstacles", type=int, default=0, metavar="N",
+                     help="instead: the control cycle with N live obstacles and without (the assembly's states "
+                     "replayed, interleaved; --solver), and a 100k-point cloud's intake in control periods "
+                     "(obstacles.md/json; docs/obstacles.md)")
     ben.add_argument("--rates", default="200,500,1000", metavar="HZ,...",
                      help="control rates of --realtime (default: %(default)s)")
     ben.add_argument("--params", action="append", default=[], metavar="FILE",

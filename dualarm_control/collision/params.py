@@ -54,6 +54,9 @@ joint's placement) is more than the few coal calls they could save (a cylinder p
 3 us)."""
 KNOWN_MARGIN = 1e-9
 """Subtracted from a computed distance before it is kept as a known lower bound [m] (round-off)."""
+MAX_LIVE_OBSTACLES = 256
+"""The most live obstacle slots (``collision.live_obstacles``): each may add a coal call per arm link
+and cycle when near."""
 _FAILED = 1e6
 """A distance [m] beyond this is coal's failure value (-DBL_MAX or inf), not a distance."""
 
@@ -97,6 +100,9 @@ class CollisionParams:
     obstacles: tuple[Obstacle, ...] = ()
     """The scenario's static obstacles (``scenario.obstacles``, :mod:`dualarm_control.obstacles`): world
     shapes the collision model checks against every arm link (docs/obstacles.md)."""
+    live_obstacles: int = 0
+    """The most live obstacles at once (markers on a topic, a point cloud, a moving hand; slots, >= 0;
+    0: no live obstacle limit): :mod:`dualarm_control.limits.live`."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.enabled, bool):
@@ -115,6 +121,10 @@ class CollisionParams:
         if not (isinstance(self.shape_margin, int | float) and math.isfinite(self.shape_margin)
                 and self.shape_margin >= 0.0):
             raise ParameterError("collision.shape_margin", self.shape_margin, "a distance >= 0 [m]")
+        if isinstance(self.live_obstacles, bool) or not isinstance(self.live_obstacles, int) \
+                or not 0 <= self.live_obstacles <= MAX_LIVE_OBSTACLES:
+            raise ParameterError("collision.live_obstacles", self.live_obstacles,
+                                 f"an integer from 0 to {MAX_LIVE_OBSTACLES}")
 
     @property
     def kept_distances(self) -> tuple[float, float]:

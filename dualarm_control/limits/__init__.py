@@ -5,6 +5,7 @@
 * :mod:`.joint`: the joint position and velocity limits, eq (20)-(23) of paper 000;
 * :mod:`.acceleration`: the joint acceleration bound;
 * :mod:`.collision`: the collision limit (the velocity damper's rows);
+* :mod:`.live`: the live obstacles' velocity damper rows (with the obstacles' velocities);
 * :mod:`.repulsive`: the repulsive joint-limit velocity of eq (24)-(25) (the hierarchical solvers'
   secondary task, not a constraint);
 * :mod:`.registry`: limits by name (``limits`` parameter), a user's own from their own file.
@@ -29,6 +30,7 @@ from dualarm_control.limits.collision import (
     allowed_pairs,
 )
 from dualarm_control.limits.joint import JointLimits, VelocityLimit, velocity_bounds
+from dualarm_control.limits.live import LiveObstacleLimit, LiveReport
 from dualarm_control.limits.registry import (
     DEFAULT_LIMITS,
     LimitContext,
@@ -51,6 +53,8 @@ __all__ = [
     "Limit",
     "LimitContext",
     "LimitReport",
+    "LiveObstacleLimit",
+    "LiveReport",
     "RepulsiveField",
     "VelocityLimit",
     "acceleration_bounds",

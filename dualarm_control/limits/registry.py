@@ -50,7 +50,7 @@ LimitFactory = Callable[[LimitContext], "Limit | None"]
 LIMITS: Registry[LimitFactory] = Registry("limit", lambda name, known: ParameterError(
     "limits", name, "a registered limit: " + ", ".join(known)))
 
-DEFAULT_LIMITS = ("joint_velocity", "joint_acceleration", "collision")
+DEFAULT_LIMITS = ("joint_velocity", "joint_acceleration", "collision", "live_obstacles")
 """The limits every controller has when their parameters turn them on (the joint limits always)."""
 
 

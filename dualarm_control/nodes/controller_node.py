@@ -80,6 +80,8 @@ from dualarm_control.ros.hardware_io import (
     JointStates,
     declare_with_profile,
 )
+from dualarm_control.ros.obstacle_io import obstacle_intake, share_feed
+from dualarm_control.ros.obstacle_markers import ObstacleTopics
 from dualarm_control.ros.output import CommandOutput
 from dualarm_control.ros.qos import publisher_depth, stream_qos
 
@@ -140,6 +142,8 @@ class ControllerNode:
         self.log.info(start_text(self.tracker, self.scenario.name, source.describe(), m, self.params, self.lockstep))
         shell.log_priority(self.log, priority_note, self.values["thread_priority"])
         self.cell_topic = CellPublisher(n)  # /dualarm/cell: what this run runs with, latched (for its bag)
+        self.obstacles = obstacle_intake(n, self.tracker.controller, self.values)  # off the control thread
+        self.scene_topic = ObstacleTopics(n, self.scenario.obstacles, self.scenario.moving_obstacles)  # latched
 
     def subscribe_streams(self, qos: Any, bus: local_bus.LocalBus | None) -> None:
         """The streams of :attr:`inputs`: each sample (or its rejection) to :class:`ControllerInputs`."""
@@ -159,6 +163,8 @@ class ControllerNode:
             subscribe(WrenchStamped, WRENCH, self.inputs.message_input(WRENCH, convert.wrench_vector), 10)
 
     def close(self) -> None:
+        if self.obstacles is not None:
+            self.obstacles.stop()
         self.log.info(self.out.summary())
 
     def apply_pending(self) -> None:
@@ -171,6 +177,7 @@ class ControllerNode:
             self.values, built = change
             # the tracker keeps its own state (tasks: the force loop) and solves with the new controller
             self.tracker.controller = built.continue_from(self.tracker.controller)
+            share_feed(self.obstacles, self.tracker.controller)
             self.params = self.tracker.controller.params
             self.out.solver = self.params.solver
             self.out.count["parameter_switches"] += 1

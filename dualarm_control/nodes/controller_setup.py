@@ -19,6 +19,7 @@ from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import ParamSpec, non_negative, positive
 from dualarm_control.references.base import RunOptions, Tracker
 from dualarm_control.ros.node import thread_priority_spec
+from dualarm_control.ros.obstacle_io import OBSTACLE_PARAMETERS
 from dualarm_control.ros.qos import QOS_PARAMETER
 from dualarm_control.scenario import ROBOT_PARAMETER, Scenario
 
@@ -48,6 +49,7 @@ NODE_PARAMETERS = (
               check=non_negative, read_only=True),
     ROBOT_PARAMETER,
     *HARDWARE_PARAMETERS,
+    *OBSTACLE_PARAMETERS,
 )
 """controller_node's own parameters (the hardware profile's outputs' keys are added when declared)."""
 

@@ -245,7 +245,10 @@ class TrajectoryNode:
         """Each segment's verdict in the log and on /diagnostics (a stall as WARN, naming what held the arms)."""
         for verdict in verdicts:
             stalled = verdict.state == STALLED
-            (self.log.warning if stalled else self.log.info)(verdict.text())
+            if stalled:  # rclpy: one severity per call site (a shared call raised on a stall after a reach)
+                self.log.warning(verdict.text())
+            else:
+                self.log.info(verdict.text())
             self._status(stamp, 1 if stalled else 0, verdict.text(), verdict.t)
 
     def publish(self, stamp: int, elapsed_ns: int, q: np.ndarray | None = None) -> None:

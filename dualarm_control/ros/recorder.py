@@ -193,9 +193,10 @@ class BagWriter:
         meta_file.write_text(yaml.safe_dump(meta, sort_keys=False))
 
 
-ALWAYS_KEPT: Final = (DESCRIPTION_TOPIC, CELL_TOPIC)
-"""Latched topics every bag keeps whenever a node publishes them: the robot's URDF and what each node
-runs with (``ros/cell_topic.py``), so that a bag's reader knows the cell it was recorded on."""
+ALWAYS_KEPT: Final = (DESCRIPTION_TOPIC, CELL_TOPIC, "/dualarm/obstacles")
+"""Latched topics every bag keeps whenever a node publishes them: the robot's URDF, what each node
+runs with (``ros/cell_topic.py``) and the scene's obstacles (``ros/obstacle_markers.py``), so that a
+bag's reader knows the cell it was recorded on."""
 
 
 class Recorder:
@@ -258,7 +259,7 @@ class Recorder:
         return on_message
 
     def _tf_poll(self, known: dict[str, list[str]]) -> None:
-        """/robot_description and /dualarm/cell (:data:`ALWAYS_KEPT`) kept whenever published; /tf
+        """/robot_description, /dualarm/cell and /dualarm/obstacles (:data:`ALWAYS_KEPT`) kept whenever published; /tf
         computed only while no node publishes it."""
         for topic in ALWAYS_KEPT:
             if topic not in self.subscriptions and topic in known and self.node.count_publishers(topic):

@@ -125,6 +125,8 @@ def summarize_run(record: RunRecord, scenario: Scenario | None, model: DualArmMo
         judge = scenario.reference.judge(model, record.positions[0], scenario.limits, scenario.collision_model(model))
         if judge is not None:  # segments, a plan
             out.update(segment_metrics(record, judge))
+    if record.obstacle_events:  # the live obstacles the arms yielded to (in one process: moving_feed.py)
+        out["obstacle_events"] = " | ".join(record.obstacle_events)
     return out
 
 
@@ -179,6 +181,8 @@ def goal_lines(results: Mapping[str, Mapping[str, Any]]) -> str:
             out.append(f"\n{label}: {summary['segments_reached']} of {total} segments reached"
                        + ("" if stalled else " (each within 0.5 mm / 5 mrad of its end pose)"))
             out += [f"  {line}" for line in stalled]
+        if "obstacle_events" in summary:
+            out += [f"  {line}" for line in str(summary["obstacle_events"]).split(" | ")]
         if "goal_outcomes" in summary:
             out.append(f"\n{label}: closest pair {summary['collision_min_pair']} at "
                        f"{summary['collision_min_distance_m']:.4f} m")

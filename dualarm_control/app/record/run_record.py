@@ -70,6 +70,8 @@ class RunRecord:
         final_errors: final relative (position [m], orientation [rad]) error where the recording
             gives it (a bag: its last /relative_pose against its last /relative_target); None:
             the report computes it from ``final_positions`` and the scenario.
+        obstacle_events: each stretch of cycles the live obstacle limit held the command, as text with the
+            obstacle's name (``t = 16.20-17.35 s: yielding to obstacle:hand (closest 0.034 m, left_flange)``).
     """
 
     label: str
@@ -91,6 +93,7 @@ class RunRecord:
     table_contacts: FloatArray
     tasks: TaskValues | None = field(default=None)
     final_errors: tuple[float, float] | None = None
+    obstacle_events: tuple[str, ...] = ()
 
 
 def with_task_values(record: RunRecord, scenario: Scenario, model: DualArmModel, gain: float | None,

@@ -24,9 +24,11 @@ import numpy as np
 from dualarm_control.app.record.run_record import RunRecord, with_task_values
 from dualarm_control.controller import ControllerParams
 from dualarm_control.kinematics import DualArmModel
+from dualarm_control.moving_feed import MovingFeed
 from dualarm_control.references.base import RunOptions
 from dualarm_control.scenario import Scenario
 from dualarm_sim.cell import CellConfig, DualArmCell
+from dualarm_sim.moving import MovingBodies
 
 SCALARS = ("time", "solve_time", "cycle_time", "position_error", "orientation_error", "contact_force",
            "measured_force", "normal_offset", "table_contacts")
@@ -62,9 +64,16 @@ def run_scenario(
         scal = {k: np.zeros(steps) for k in SCALARS}
         status: list[str] = []
         every = max(steps // 100, 1)
+        moving = MovingFeed(scenario.moving_obstacles, follower) if scenario.moving_obstacles else None
+        bodies = MovingBodies(scenario.moving_obstacles, cell.client_id)
         for k in range(steps):
             t = k * period
+            if moving is not None:  # the hand where it is at t, for the controller and the physics
+                moving.publish(t)
+                bodies.place(t)
             out = follower.cycle(t, state.positions, cell.wrench() if follower.uses_wrench else None)
+            if moving is not None:
+                moving.observe(out.reports.get("live_obstacles"), t)
             cell.apply_command(out.velocities)
             rec["positions"][k], rec["velocities"][k], rec["commands"][k] = state.positions, state.velocities, out.velocities
             for key, value in (("time", t), ("solve_time", out.result.solve_time), ("cycle_time", out.cycle_time),
@@ -84,5 +93,6 @@ def run_scenario(
                        position_error=scal["position_error"], orientation_error=scal["orientation_error"],
                        final_positions=final_q, contact_force=scal["contact_force"],
                        measured_force=scal["measured_force"], normal_offset=scal["normal_offset"],
-                       table_contacts=scal["table_contacts"])
+                       table_contacts=scal["table_contacts"],
+                       obstacle_events=moving.finish() if moving is not None else ())
     return with_task_values(record, scenario, model, gain, force)

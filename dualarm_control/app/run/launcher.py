@@ -59,6 +59,8 @@ INTERACTIVE_CELL = "interactive_demo"
 GRAPH_TOPICS = ("/joint_states", "/velocity_controller/commands", "/relative_target", "/relative_pose",
                 "/diagnostics", "/wrench", "/clock")
 PLAN_TOPICS = (*GRAPH_TOPICS, "/joint_reference")
+LIVE_OBSTACLES = "/collision_objects"
+"""Recorded too when the scenario has moving obstacles (the simulator publishes them there every step)."""
 """What ``--record`` records: the cell's graph."""
 TASK_TOPICS = ("/joint_states", "/velocity_controller/commands", "/diagnostics", "/wrench", "/clock")
 """What ``--record`` records on a task scenario (no target, no relative pose; the force variant adds
@@ -288,6 +290,8 @@ def launch_scenario(
         try:
             if plan is not None and record_topics == GRAPH_TOPICS:
                 record_topics = PLAN_TOPICS
+            if loaded.moving_obstacles and LIVE_OBSTACLES not in record_topics:  # the hand's markers, every step
+                record_topics = (*record_topics, LIVE_OBSTACLES)
             if record is not None:  # subscribes the graph's topics once they all have a publisher
                 record_topics = with_profile_topics(record_topics, params, loaded.robot.joint_names)
                 state_topics = params_profile(params, loaded.robot.joint_names).joint_states

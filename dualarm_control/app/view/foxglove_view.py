@@ -33,8 +33,9 @@ from dualarm_control.link_frames import STRING_TYPE, TF_TYPE, LinkFrames, TfSeri
 DEFAULT_PORT: Final = 8765
 JOINT_STATE_TYPE: Final = "sensor_msgs/msg/JointState"
 SIGNAL_TOPICS: Final = ("/diagnostics", "/velocity_controller/commands", "/relative_pose", "/relative_target",
-                        "/wrench", "/contact_force")
-"""Recorded topics replayed beside the 3D scene (those a bag has)."""
+                        "/wrench", "/contact_force", "/dualarm/obstacles", "/collision_objects")
+"""Recorded topics replayed beside the 3D scene (those a bag has; the obstacles' MarkerArrays are drawn by
+Foxglove's 3D panel in the frame ``world``, the scene's at the start of the replay)."""
 LATCHED: Final = ("/robot_description", "/tf_static")
 """Sent once at start and again whenever a client subscribes to them."""
 

@@ -15,6 +15,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from dualarm_control.app.view import rerun_view as rv
+from dualarm_control.app.view.obstacles_view import (
+    ObstacleTrack,
+    log_obstacles,
+    read_obstacles,
+)
 from dualarm_control.kinematics import DualArmModel, FloatArray
 
 if TYPE_CHECKING:
@@ -34,10 +39,14 @@ class RunArrays:
     frames: dict[str, FloatArray] = field(default_factory=dict)
     statuses: list[str] | None = None
     closest: rv.ClosestPairs | None = None
+    obstacles: dict[str, ObstacleTrack] = field(default_factory=dict)
+    start_ns: int = 0
+    """The stamp [ns] of the first cycle (time 0 of :attr:`stamps`): moving obstacles' stamps are on its clock."""
 
     def log(self, recording: object = None) -> None:
         rv.log_run(self.urdf, self.stamps, self.q, self.joint_names, self.series, frames=self.frames,
                    statuses=self.statuses, recording=recording, closest=self.closest)
+        log_obstacles(self.obstacles, self.start_ns, recording, rv.root_link(Path(self.urdf)))
 
 
 def relative_run_arrays(path: Path, model: DualArmModel, bag: Bag | None = None) -> RunArrays:
@@ -74,7 +83,8 @@ def relative_run_arrays(path: Path, model: DualArmModel, bag: Bag | None = None)
     q = positions.values[nearest_index(diag_t, positions.t)]
     return RunArrays(model.urdf, t, q, list(model.joint_names), series,
                      {"relative_target": targets.values[nearest_index(diag_t, targets.t)]},
-                     [v.get("status", "") for v in cycles], rv.closest_pairs(model, q))
+                     [v.get("status", "") for v in cycles], rv.closest_pairs(model, q), read_obstacles(Path(path)),
+                     int(ns[0]))
 
 
 def record_arrays(record: RunRecord, model: DualArmModel,
@@ -112,4 +122,6 @@ def bag_run_arrays(path: Path) -> RunArrays:
         return relative_run_arrays(path, DualArmModel(bag.robot), bag)
     (record,), scenario = read_run(Path(path), bag)
     assert scenario is not None
-    return record_arrays(record, DualArmModel(scenario.robot))
+    arrays = record_arrays(record, DualArmModel(scenario.robot))
+    arrays.obstacles = read_obstacles(Path(path))  # a task scenario's: its table (no moving ones)
+    return arrays

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +14,7 @@ from dualarm_control.app.record.bag import (
     IntArray,
     read_bag,
 )
+from dualarm_control.app.view.obstacles_view import ObstacleTrack, read_obstacles
 from dualarm_control.link_frames import model_from_text
 from dualarm_control.paths import urdf_path
 
@@ -27,12 +28,14 @@ class JointRecording:
         positions: joint positions [rad], (N, n), columns in ``joint_names`` order.
         joint_names: the URDF's movable joints, (n,).
         urdf_text: the cell's URDF (the bag's /robot_description, else the package's cell URDF).
+        obstacles: the obstacles the bag recorded (/dualarm/obstacles, /collision_objects), by name.
     """
 
     stamps_ns: IntArray
     positions: FloatArray
     joint_names: tuple[str, ...]
     urdf_text: str
+    obstacles: dict[str, ObstacleTrack] = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
@@ -58,4 +61,4 @@ def read_joint_recording(bag: Path) -> JointRecording:
     positions, _ = data.joint_states(names)
     stamps = np.array([stamp for _, stamp, _, _ in data.states], dtype=np.int64)
     keep = np.argsort(stamps, kind="stable")
-    return JointRecording(stamps[keep], positions.values[keep], tuple(names), text)
+    return JointRecording(stamps[keep], positions.values[keep], tuple(names), text, read_obstacles(Path(bag)))

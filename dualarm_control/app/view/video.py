@@ -24,6 +24,7 @@ from typing import Final, TextIO
 import numpy as np
 import numpy.typing as npt
 
+from dualarm_control.app.view.obstacles_view import CameraObstacles, ObstacleTrack
 from dualarm_control.app.view.recording import JointRecording, read_joint_recording
 from dualarm_control.errors import DualArmError
 
@@ -77,7 +78,8 @@ def frame_times(duration_s: float, fps: float) -> npt.NDArray[np.float64]:
 class CellCamera:
     """The cell in a DIRECT pybullet client and a fixed camera looking at both arms."""
 
-    def __init__(self, urdf_text: str, size: tuple[int, int], joint_names: tuple[str, ...] = ()) -> None:
+    def __init__(self, urdf_text: str, size: tuple[int, int], joint_names: tuple[str, ...] = (),
+                 obstacles: dict[str, ObstacleTrack] | None = None) -> None:
         import pybullet as p
 
         from dualarm_sim.cell import CellConfig, DualArmCell
@@ -92,13 +94,17 @@ class CellCamera:
             path.write_text(urdf_text)
             self.cell = DualArmCell(CellConfig(urdf=path, joints=joint_names, visual_shapes=True))  # posed by name: q in that order
         self.lower, self.upper = self.cell.position_limits
+        self.obstacles = CameraObstacles(obstacles or {}, self.cell.client_id)  # the bag's scene, drawn
         self._view = p.computeViewMatrix(CAMERA_EYE, CAMERA_TARGET, (0.0, 0.0, 1.0))
         self._projection = p.computeProjectionMatrixFOV(FIELD_OF_VIEW_DEG, width / height, 0.05, 20.0)
 
-    def render(self, q: npt.NDArray[np.float64]) -> npt.NDArray[np.uint8]:
-        """The cell at joint positions q [rad] (clipped to the URDF limits) as RGB, (height, width, 3)."""
+    def render(self, q: npt.NDArray[np.float64], stamp_ns: int | None = None) -> npt.NDArray[np.uint8]:
+        """The cell at joint positions q [rad] (clipped to the URDF limits) as RGB, (height, width, 3); the
+        moving obstacles where they were at ``stamp_ns`` (the joint states' clock) when given."""
         p = self._p
         self.cell.reset(np.clip(q, self.lower, self.upper))
+        if stamp_ns is not None:
+            self.obstacles.place(stamp_ns)
         width, height = self.size
         _, _, rgba, _, _ = p.getCameraImage(width, height, self._view, self._projection, shadow=0,
                                             renderer=p.ER_TINY_RENDERER, physicsClientId=self.cell.client_id)
@@ -121,7 +127,7 @@ def render_recording(recording: JointRecording, out_path: Path, fps: float = DEF
     positions = recording.at(times)
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    camera = CellCamera(recording.urdf_text, size, recording.joint_names)
+    camera = CellCamera(recording.urdf_text, size, recording.joint_names, recording.obstacles)
     writer = imageio_ffmpeg.write_frames(str(out_path), size, fps=fps, codec="libx264", macro_block_size=2,
                                          ffmpeg_log_level="error")
     render_s = encode_s = 0.0
@@ -130,7 +136,7 @@ def render_recording(recording: JointRecording, out_path: Path, fps: float = DEF
         writer.send(None)  # start ffmpeg
         for k, q in enumerate(positions):
             t0 = time.perf_counter()
-            image = camera.render(q)
+            image = camera.render(q, int(recording.stamps_ns[0] + times[k] * 1e9))
             t1 = time.perf_counter()
             writer.send(np.ascontiguousarray(image))
             render_s += t1 - t0

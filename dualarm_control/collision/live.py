@@ -1,0 +1,263 @@
+"""Live obstacles (issue 42, part 2): shapes with a pose and a velocity that change while the arms
+move, and their distances to the arm links with the rows of the velocity damper.
+
+A live obstacle is not part of the pinocchio geometry (:class:`~dualarm_control.collision.CollisionModel`
+keeps its pairs fixed at construction); its distance to every shape moved by an arm joint is computed
+here, on its own pinocchio data (the model's known bounds are not disturbed), with the same coal
+request and the same conventions as the robot's pairs (:mod:`~dualarm_control.collision.distances`):
+A the link's shape, B the obstacle, n the unit normal from A to B, d = n^T (p_b - p_a) [m].
+
+Moving obstacle: B's points move at v_B [m/s] (world, translation only), so
+
+    d_dot = n^T (v_B - J_pa qd) = dd_dq qd + n^T v_B,      dd_dq = -n^T J_pa  (1, n)
+
+and the velocity damper d_dot >= -xi (d - d_s) / (d_i - d_s) becomes the row
+
+    -dd_dq qd <= xi (d - d_s) / (d_i - d_s) + n^T v_B            [m/s]
+
+An approaching obstacle (n^T v_B < 0) lowers the bound below zero near d_s: the arm has to move
+away (yield), not only stop. Without v_B the arm waits at d_s and the obstacle pushes through it.
+
+Cost: per cycle, the pairs whose known lower bound (:class:`LiveDistances`) is below d_i get a
+bounding-sphere test (one ``computeJointJacobians``, numpy on every such pair at once) and those
+whose spheres are closer than d_i one ``coal.distance`` each (about 3-30 us for primitives at the
+1e-12 GJK tolerance, more for an octree); no pair in reach costs no kinematics at all.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from dualarm_control.arrays import FloatArray
+from dualarm_control.collision.distances import witness_rows
+from dualarm_control.collision.params import (
+    KNOWN_MARGIN,
+    SPHERE_BROADPHASE_MIN,
+    distance_request,
+)
+from dualarm_control.collision.shapes import bounding_sphere, farthest
+
+
+@dataclass(frozen=True, slots=True)
+class LiveObstacle:
+    """One live obstacle, in the world frame of the cell.
+
+    Attributes:
+        name: its name (``obstacle:<name>`` in the pairs' labels).
+        shape: its coal shape in its own frame (Box, Sphere, Cylinder, Capsule, ConvexBase or OcTree).
+        rotation: its orientation, (3, 3). position: its origin [m], (3,).
+        velocity: its linear velocity [m/s], (3,) (zero for a still one).
+        expires: when it is gone [s, the feed's clock]; inf: never.
+        centre: its bounding sphere's centre in its own frame [m], (3,). radius: that sphere's radius [m].
+    """
+
+    name: str
+    shape: coal.CollisionGeometry
+    rotation: FloatArray
+    position: FloatArray
+    velocity: FloatArray = field(default_factory=lambda: np.zeros(3))
+    expires: float = math.inf
+    centre: FloatArray = field(default_factory=lambda: np.zeros(3))
+    radius: float = 0.0
+
+    @classmethod
+    def make(cls, name: str, shape: coal.CollisionGeometry, rotation: FloatArray, position: FloatArray,
+             velocity: FloatArray | None = None, expires: float = math.inf,
+             sphere: tuple[FloatArray, float] | None = None) -> LiveObstacle:
+        """An obstacle with its bounding sphere (centre in its frame [m], radius [m]): ``sphere``, or
+        computed (:func:`shape_sphere`)."""
+        centre, radius = shape_sphere(shape) if sphere is None else sphere
+        return cls(name, shape, np.asarray(rotation, dtype=float), np.asarray(position, dtype=float),
+                   np.zeros(3) if velocity is None else np.asarray(velocity, dtype=float), expires, centre, radius)
+
+    def moved(self, position: FloatArray, velocity: FloatArray | None = None,
+              rotation: FloatArray | None = None) -> LiveObstacle:
+        """The same obstacle at a new ``position`` [m] (and velocity [m/s], rotation, when given)."""
+        return LiveObstacle(self.name, self.shape, self.rotation if rotation is None else rotation,
+                            np.asarray(position, dtype=float), self.velocity if velocity is None else velocity,
+                            self.expires, self.centre, self.radius)
+
+    @property
+    def label(self) -> str:
+        """``obstacle:<name>``, as a static obstacle's."""
+        return "obstacle:" + self.name
+
+
+def shape_sphere(shape: coal.CollisionGeometry) -> tuple[FloatArray, float]:
+    """A sphere holding ``shape``: its centre in the shape's frame [m], (3,), and radius [m] (an
+    octree's from its occupied cells' bounding box)."""
+    if isinstance(shape, coal.OcTree):
+        boxes = np.asarray(shape.toBoxes())  # (k, 6): x, y, z, side, occupancy, threshold
+        if not len(boxes):
+            return np.zeros(3), 0.0
+        low = (boxes[:, :3] - boxes[:, 3:4] / 2).min(axis=0)
+        high = (boxes[:, :3] + boxes[:, 3:4] / 2).max(axis=0)
+        return (low + high) / 2, float(np.linalg.norm(high - low) / 2)
+    return bounding_sphere(shape)
+
+
+@dataclass(slots=True)
+class LivePairs:
+    """The (link, live obstacle) pairs of one cycle closer than the influence distance.
+
+    Attributes:
+        links: each pair's (link, ``obstacle:<name>``). distance: d [m], (m,).
+        rows: dd_dq [m/rad], (m, n). approach: n^T v_B [m/s], (m,) (< 0: the obstacle comes closer).
+        points: p_a on the link, p_b on the obstacle [m], (2, m, 3). normals: n, (m, 3).
+    """
+
+    links: tuple[tuple[str, str], ...]
+    distance: FloatArray
+    rows: FloatArray
+    approach: FloatArray
+    points: FloatArray
+    normals: FloatArray
+
+    def __len__(self) -> int:
+        return len(self.links)
+
+    @classmethod
+    def empty(cls, n: int) -> LivePairs:
+        return cls((), np.zeros(0), np.zeros((0, n)), np.zeros(0), np.zeros((2, 0, 3)), np.zeros((0, 3)))
+
+
+class LiveDistances:
+    """Distances of every shape an arm joint moves to live obstacles (module docstring).
+
+    Known bounds (temporal coherence, as the collision model's): each (shape, obstacle) pair's last
+    distance less :data:`~dualarm_control.collision.params.KNOWN_MARGIN` is kept as a lower bound,
+    moved to the next q by d(q) >= d(q') - sum_j c_j |q_j - q'_j| (c_j the reach of the shape about
+    joint j: the joint offsets down the chain plus the shape's extent, a bound on how far a point of
+    the shape moves per radian of joint j). The bounds hold while the obstacles are the same snapshot
+    (the same tuple object: the feed swaps a new one whenever something moves or comes or goes); a
+    pair whose bound is at least the influence distance costs no kinematics and no coal call.
+
+    Args:
+        model, geometry: the collision model's reduced pinocchio model and geometry
+            (``CollisionModel.model`` and ``.geometry``); read, never modified.
+        gjk_tolerance: coal's GJK tolerance [m^2] (the collision model's).
+    """
+
+    def __init__(self, model: pin.Model, geometry: pin.GeometryModel, gjk_tolerance: float = 1e-12) -> None:
+        self.model, self.geometry = model, geometry
+        self.data = model.createData()
+        self.geometry_data = geometry.createData()
+        objects = geometry.geometryObjects
+        self.shapes = [k for k, obj in enumerate(objects) if obj.parentJoint != 0]
+        self.names = [model.frames[objects[k].parentFrame].name for k in self.shapes]
+        self._first = [self.names.index(name) for name in self.names]  # a link's first shape: its pairs' key
+        self._geometries = [objects[k].geometry for k in self.shapes]
+        spheres = [bounding_sphere(g) for g in self._geometries]
+        self._centres = np.array([c for c, _ in spheres]).reshape(-1, 3)  # in each shape's frame
+        self._radii = np.array([r for _, r in spheres])
+        self._joint = np.array([objects[k].parentJoint for k in self.shapes], dtype=np.intp)
+        placement = [objects[k].placement for k in self.shapes]
+        rotation = np.array([pl.rotation for pl in placement]).reshape(-1, 3, 3)
+        translation = np.array([pl.translation for pl in placement]).reshape(-1, 3)
+        centres_joint = (rotation @ self._centres[:, :, None])[:, :, 0] + translation  # in the joint's frame
+        self._centres_joint = np.hstack((centres_joint, np.ones((len(self.shapes), 1))))  # homogeneous, (shapes, 4)
+        support = np.zeros((len(self.shapes), model.nv))
+        reach = np.zeros((len(self.shapes), model.nv))
+        for i, k in enumerate(self.shapes):
+            chain = model.supports[objects[k].parentJoint].tolist()[1:]
+            extent = farthest(objects[k])
+            for position, j in enumerate(chain):
+                columns = slice(model.idx_vs[j], model.idx_vs[j] + model.joints[j].nv)
+                support[i, columns] = 1.0
+                offsets = sum(float(np.linalg.norm(model.jointPlacements[o].translation)) for o in chain[position + 1:])
+                reach[i, columns] = extent + offsets
+        self._support = support
+        self._reach = reach
+        self.request = distance_request(gjk_tolerance)
+        self._result = coal.DistanceResult()
+        self._known: FloatArray = np.zeros((0, 0))  # (shapes, obstacles) lower bounds [m] ...
+        self._known_q: FloatArray | None = None  # ... at these joint positions ...
+        self._known_for: object = None  # ... for this snapshot (identity), whose per-obstacle values are:
+        self._obstacle_centres = np.zeros((0, 3))  # bounding sphere centres in the world [m], (m, 3)
+        self._obstacle_radii = np.zeros(0)
+        self._transforms: list[coal.Transform3s] = []
+
+    def near(self, q: FloatArray, obstacles: Sequence[LiveObstacle], within: float) -> LivePairs:
+        """The (link, obstacle) pairs closer than ``within`` [m] at q [rad] (n,), each link's closest
+        shape, obstacle by obstacle in the order given, links in the geometry's order."""
+        n = self.model.nv
+        if not obstacles or not self.shapes:
+            return LivePairs.empty(n)
+        if obstacles is not self._known_for or self._known_q is None or not np.isfinite(q).all():
+            self._known = np.full((len(self.shapes), len(obstacles)), -np.inf)
+            self._known_for = obstacles if isinstance(obstacles, tuple) else None
+            self._obstacle_centres = np.array([o.rotation @ o.centre + o.position for o in obstacles])
+            self._obstacle_radii = np.array([o.radius for o in obstacles])
+            self._transforms = [coal.Transform3s(o.rotation, o.position) for o in obstacles]
+        else:
+            self._known -= (self._reach @ np.abs(q - self._known_q))[:, None]
+        self._known_q = q.copy()
+        candidates = self._known < within
+        if not candidates.any():
+            return LivePairs.empty(n)
+        pin.computeJointJacobians(self.model, self.data, q)  # data.oMi and data.J
+        if np.count_nonzero(candidates) <= SPHERE_BROADPHASE_MIN:  # coal on so few costs less than the spheres
+            close = np.argwhere(candidates)
+        else:
+            oMi = self.data.oMi
+            joints = np.array([oMi[j].homogeneous[:3] for j in self._joint.tolist()])  # (shapes, 3, 4)
+            centres = np.einsum("sij,sj->si", joints, self._centres_joint)  # the shapes' sphere centres, world
+            offset = centres[:, None, :] - self._obstacle_centres[None, :, :]
+            gaps = (np.sqrt(np.einsum("smk,smk->sm", offset, offset))
+                    - self._radii[:, None] - self._obstacle_radii[None, :])  # sphere bounds, (shapes, obstacles)
+            self._known = np.where(candidates, np.maximum(self._known, gaps), self._known)
+            close = np.argwhere(candidates & (gaps < within))  # (shape, obstacle) rows, shape-major
+        if not len(close):
+            return LivePairs.empty(n)
+        pin.updateGeometryPlacements(self.model, self.data, self.geometry, self.geometry_data)
+        placed = self.geometry_data.oMg
+        best: dict[tuple[int, int], tuple[float, int, list[float]]] = {}  # (obstacle, link) -> d, shape, witness
+        result, request = self._result, self.request
+        transforms = self._transforms
+        for i, j in sorted(close.tolist(), key=lambda row: (row[1], row[0])):  # obstacle by obstacle
+            obstacle, tf = obstacles[j], transforms[j]
+            shape, frame = self._geometries[i], placed[self.shapes[i]]
+            result.clear()
+            if isinstance(obstacle.shape, coal.OcTree):  # coal answers with the octree's point first, n from it
+                d = coal.distance(obstacle.shape, tf, shape, frame, request, result)
+                witness = [*result.getNearestPoint2(), *result.getNearestPoint1(), *(-result.normal)]
+            else:
+                d = coal.distance(shape, frame, obstacle.shape, tf, request, result)
+                witness = [*result.getNearestPoint1(), *result.getNearestPoint2(), *result.normal]
+            if not math.isfinite(d):
+                continue
+            self._known[i, j] = d - KNOWN_MARGIN
+            key = (j, self._first[i])
+            if d < within and (key not in best or d < best[key][0]):
+                best[key] = (float(d), i, witness)
+        if not best:
+            return LivePairs.empty(n)
+        order = sorted(best)
+        chosen = [best[key] for key in order]
+        distance = np.array([c[0] for c in chosen])
+        shape_rows = np.array([c[1] for c in chosen], dtype=np.intp)
+        raw = np.array([c[2] for c in chosen]).reshape(-1, 3, 3)  # (m, [p_a, p_b, n], 3)
+        points = raw[:, :2].transpose(1, 0, 2).copy()  # (2, m, 3)
+        normals = raw[:, 2]
+        length = np.sqrt(np.einsum("mk,mk->m", normals, normals))
+        normals = np.where(length[:, None] > 0.0, normals / np.where(length > 0.0, length, 1.0)[:, None],
+                           np.array([0.0, 0.0, 1.0]))
+        velocities = np.array([obstacles[j].velocity for j, _ in order])
+        approach = np.einsum("mk,mk->m", normals, velocities)
+        rows = -witness_rows(normals, points[0], self.data.J) * self._support[shape_rows]
+        links = tuple((self.names[i], obstacles[j].label) for (j, _), i in zip(order, shape_rows.tolist(), strict=True))
+        return LivePairs(links, distance, rows, approach, points, normals)
+
+
+def live_damper_bound(distance: FloatArray, approach: FloatArray, influence: float, safety: float,
+                      gain: float) -> FloatArray:
+    """b = xi (d - d_s) / (d_i - d_s) + n^T v_B [m/s], (m,) (module docstring): the velocity damper's
+    bound for m pairs at d [m] whose obstacle approaches at n^T v_B [m/s] (``approach``, (m,))."""
+    result: FloatArray = gain * (distance - safety) / (influence - safety) + approach
+    return result

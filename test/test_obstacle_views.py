@@ -1,0 +1,103 @@
+"""The viewers draw a bag's obstacles (docs/obstacles.md): the scene latched on /dualarm/obstacles and a moving
+marker on /collision_objects, read back (app/view/obstacles_view.py), logged to Rerun under obstacles/<name>
+(static shape, the moving one's pose on the run's timeline) and drawn in the video's camera where it was."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from rclpy.serialization import serialize_message
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from dualarm_control.app.view.obstacles_view import (
+    CameraObstacles,
+    log_obstacles,
+    read_obstacles,
+)
+from dualarm_control.obstacles import Box, Cylinder, Sphere
+from dualarm_control.ros.obstacle_markers import obstacle_marker, scene_markers
+
+
+def write_scene_bag(path: Path) -> None:
+    """A bag with the scene (a table, a post) and a hand moving down 0.5 m in 1 s (11 markers, 0.1 s apart)."""
+    from visualization_msgs.msg import MarkerArray
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    hand = Sphere("hand", position=(0.5, 0.2, 1.9), radius=0.05)
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        scene = writer.add_connection("/dualarm/obstacles", "visualization_msgs/msg/MarkerArray", typestore=store)
+        live = writer.add_connection("/collision_objects", "visualization_msgs/msg/MarkerArray", typestore=store)
+        msg = scene_markers((Box("table", size=(1.2, 1.6, 0.05), position=(0.9, 0.0, 0.775)),
+                             Cylinder("post", radius=0.04, length=0.8, position=(1.1, 0.0, 1.2))), ())
+        writer.write(scene, 0, serialize_message(msg))
+        for k in range(11):
+            stamp = 1_000_000_000 + k * 100_000_000
+            moving = MarkerArray()
+            moving.markers = [obstacle_marker(hand, stamp, position=(0.5, 0.2, 1.9 - 0.05 * k))]
+            writer.write(live, stamp, serialize_message(moving))
+
+
+def test_a_bags_obstacles_are_read_back(tmp_path: Path) -> None:
+    write_scene_bag(tmp_path / "bag")
+    tracks = read_obstacles(tmp_path / "bag")
+    assert list(tracks) == ["table", "post", "hand"]
+    assert np.allclose(tracks["table"].scale, [1.2, 1.6, 0.05]) and tracks["table"].stamps == [-1]
+    hand = tracks["hand"]
+    assert len(hand.stamps) == 11 and np.allclose(hand.positions[-1], [0.5, 0.2, 1.4])
+    assert np.allclose(hand.scale, 0.1)
+
+
+def test_rerun_logs_them_static_and_on_the_timeline(tmp_path: Path) -> None:
+    import rerun as rr
+
+    write_scene_bag(tmp_path / "bag")
+    rec = rr.RecordingStream("dualarm_test_obstacles")
+    rec.save(str(tmp_path / "scene.rrd"))
+    log_obstacles(read_obstacles(tmp_path / "bag"), start_ns=1_000_000_000, recording=rec)
+    rec.flush()
+    rec.disconnect()
+    import subprocess
+    import sys
+
+    stats = subprocess.run([str(Path(sys.executable).parent / "rerun"), "rrd", "stats", str(tmp_path / "scene.rrd")],
+                           check=False, capture_output=True, text=True, timeout=120)
+    for entity in ("/obstacles/table/shape", "/obstacles/post", "/obstacles/hand", "/obstacles/hand/shape"):
+        assert entity in stats.stdout + stats.stderr, (entity, stats.stdout[-2000:], stats.stderr[-2000:])
+
+
+def test_the_video_camera_places_the_hand_where_it_was(tmp_path: Path) -> None:
+    import pybullet as p
+
+    write_scene_bag(tmp_path / "bag")
+    client = p.connect(p.DIRECT)
+    try:
+        camera = CameraObstacles(read_obstacles(tmp_path / "bag"), client)
+        assert set(camera.bodies) == {"table", "post", "hand"}
+        camera.place(1_000_000_000 + 520_000_000)  # the marker of 1.5 s: k = 5
+        position, _ = p.getBasePositionAndOrientation(camera.bodies["hand"], physicsClientId=client)
+        assert np.allclose(position, [0.5, 0.2, 1.65])
+    finally:
+        p.disconnect(client)
+
+
+def test_foxglove_replays_them(tmp_path: Path) -> None:
+    """The Foxglove replay of a bag sends its obstacles' MarkerArrays (both topics) with their schema."""
+    import foxglove
+
+    from dualarm_control.app.view.foxglove_view import FoxgloveScene, bag_signals
+    from dualarm_control.app.view.recording import JointRecording
+    from dualarm_control.paths import urdf_path
+
+    write_scene_bag(tmp_path / "bag")
+    recording = JointRecording(np.array([1_000_000_000, 2_000_000_000]), np.zeros((2, 14)), (), urdf_path().read_text())
+    signals = bag_signals(tmp_path / "bag", recording)
+    assert {s.topic: len(s.messages) for s in signals} == {"/dualarm/obstacles": 1, "/collision_objects": 11}
+    server = foxglove.start_server(host="127.0.0.1", port=0)
+    try:
+        scene = FoxgloveScene(recording, signals)
+        schema = scene.channels["/collision_objects"].schema()
+        assert schema is not None and schema.name == "visualization_msgs/msg/MarkerArray"
+    finally:
+        server.stop()
