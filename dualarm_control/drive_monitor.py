@@ -22,7 +22,7 @@ process or from a bag): each goal is judged where the arms are when the next com
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -149,10 +149,12 @@ class GoalOutcome:
         return head + (f": {self.reason}" if self.reason else f", error {self.distance * 1000:.3f} mm, {self.angle:.5f} rad")
 
 
-def pose_distance(model: DualArmModel, q: FloatArray, position: FloatArray, rotation: FloatArray) -> tuple[float, float]:
-    """Distance [m] and angle [rad] of the relative pose at q (n,) [rad] from ``(position (3,), rotation
-    (3, 3) or an (x, y, z, w) quaternion)``."""
-    p, r = model.relative_pose(q)
+def pose_distance(model: DualArmModel, q: FloatArray, position: FloatArray, rotation: FloatArray,
+                  frame: Callable[[DualArmModel, FloatArray], tuple[FloatArray, FloatArray]] | None = None
+                  ) -> tuple[float, float]:
+    """Distance [m] and angle [rad] of the relative pose at q (n,) [rad] (or of ``frame(model, q)``'s pose: the
+    absolute frame's, issue 41) from ``(position (3,), rotation (3, 3) or an (x, y, z, w) quaternion)``."""
+    p, r = model.relative_pose(q) if frame is None else frame(model, q)
     goal_r = np.asarray(rotation, dtype=float)
     if goal_r.shape == (4,):
         goal_r = pin.Quaternion(goal_r[3], *goal_r[:3]).normalized().toRotationMatrix()
@@ -172,8 +174,11 @@ def _outcome(model: DualArmModel, q: FloatArray, distance: float, angle: float, 
 def judge_goals(model: DualArmModel, commands: Sequence[TimedCommand], time: FloatArray, positions: FloatArray,
                 final_positions: FloatArray, collision: CollisionModel | None = None,
                 position_tolerance: float = POSITION_TOLERANCE, angle_tolerance: float = ANGLE_TOLERANCE,
-                near: float = COLLISION_NEAR) -> list[GoalOutcome]:
-    """The verdict of every goal of a script after the run (twists are not judged).
+                near: float = COLLISION_NEAR,
+                absolute: Callable[[DualArmModel, FloatArray], tuple[FloatArray, FloatArray]] | None = None
+                ) -> list[GoalOutcome]:
+    """The verdict of every goal of a script after the run (twists are not judged). An absolute goal (issue 41)
+    is judged on ``absolute``'s pose (the scenario's absolute frame: its world pose at q), not without it.
 
     A goal is judged at the last recorded cycle before the next command (the run's final
     positions for the last one): ``reached`` within the tolerances [m, rad], else ``stalled``
@@ -181,14 +186,15 @@ def judge_goals(model: DualArmModel, commands: Sequence[TimedCommand], time: Flo
     starts = [c.t for c in commands]
     out = []
     for i, command in enumerate(commands):
-        if not isinstance(command, TimedGoal):
+        if not isinstance(command, TimedGoal) or (command.absolute and absolute is None):
             continue
         if i + 1 < len(commands):
             k = int(np.searchsorted(time, starts[i + 1], side="left")) - 1
             q = positions[max(k, 0)]
         else:
             q = final_positions if np.all(np.isfinite(final_positions)) else positions[-1]
-        distance, angle = pose_distance(model, q, command.position, command.orientation)
+        distance, angle = pose_distance(model, q, command.position, command.orientation,
+                                        absolute if command.absolute else None)
         when = "when the next command came" if i + 1 < len(commands) else "at the end of the run"
         out.append(_outcome(model, q, distance, angle, i, command.t, when, "", collision, near, position_tolerance,
                             angle_tolerance))

@@ -5,6 +5,7 @@ absolute target answered with the safe command."""
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -96,3 +97,33 @@ def test_an_unusable_absolute_target_gives_the_safe_command() -> None:
     cycle = controller.step(q, relative, halfway, None)
     assert cycle.result.status == Status.INVALID_INPUT and "half turn" in cycle.result.detail
     assert np.all(np.isfinite(cycle.velocities))
+
+
+def test_the_absolute_target_rides_relative_target_as_a_second_joint() -> None:
+    """convert.target_message with an absolute sample: one point, joints [right_tool, absolute]; TargetInput reads
+    both back (bytes and message alike), and a NaN in the absolute part is rejected as the relative part's."""
+    from rclpy.serialization import deserialize_message
+    from trajectory_msgs.msg import MultiDOFJointTrajectory
+
+    from dualarm_control.errors import InputRejected
+    from dualarm_control.ros import convert
+
+    def sample(position: list[float], angle: float) -> SimpleNamespace:
+        c, s = np.cos(angle), np.sin(angle)
+        return SimpleNamespace(position=np.array(position), rotation=np.array([[c, -s, 0.0], [s, c, 0.0], [0, 0, 1]]),
+                               linear_velocity=np.array([0.01, 0.0, 0.0]), angular_velocity=np.array([0, 0, 0.1]),
+                               linear_acceleration=np.zeros(3), angular_acceleration=np.zeros(3))
+
+    data = convert.target_message(7, 0, sample([0.0, 0.0, 0.3], 0.2), sample([0.6, 0.1, 0.2], -0.4))
+    msg = deserialize_message(data, MultiDOFJointTrajectory)
+    assert list(msg.joint_names) == ["right_tool", "absolute"] and len(msg.points) == 1
+    for stamp, value in (convert.TargetInput(2.87).from_bytes(data), convert.TargetInput(2.87).from_message(msg)):
+        assert stamp == 7 and value.absolute is not None
+        np.testing.assert_allclose(value.position, [0.0, 0.0, 0.3])
+        np.testing.assert_allclose(value.absolute.position, [0.6, 0.1, 0.2])
+        np.testing.assert_allclose(value.absolute.rotation, sample([0, 0, 0], -0.4).rotation, atol=1e-12)
+        np.testing.assert_allclose(value.absolute.angular_velocity, [0.0, 0.0, 0.1])
+    assert convert.TargetInput().from_bytes(convert.target_message(7, 0, sample([0, 0, 0.3], 0.0)))[1].absolute is None
+    bad = convert.target_message(7, 0, sample([0.0, 0.0, 0.3], 0.2), sample([np.nan, 0.1, 0.2], -0.4))
+    with pytest.raises(InputRejected, match="NaN or inf"):
+        convert.TargetInput().from_bytes(bad)

@@ -271,7 +271,7 @@ class TrajectoryNode:
                 raise
             self.drive.recover(exc)
             sample = self.stream.sample(t)
-        self.pub.publish(convert.target_message(stamp, elapsed_ns, sample.relative))
+        self.pub.publish(convert.target_message(stamp, elapsed_ns, sample.relative, sample.absolute))
         if self.pub_joint is not None and sample.joints is not None:
             self.pub_joint.publish(convert.joint_reference_message(stamp, elapsed_ns, self.model.joint_names,
                                                                    *sample.joints))

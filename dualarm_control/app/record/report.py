@@ -121,7 +121,9 @@ def summarize_run(record: RunRecord, scenario: Scenario | None, model: DualArmMo
     if scenario is not None:  # the verdicts of a run of goals or segments, on the controller's collision model
         commands_script = getattr(scenario.reference, "commands", None)
         if commands_script:
-            out.update(goal_metrics(record, commands_script, model, scenario.collision_model(model)))
+            frame = getattr(scenario.reference, "frame", None)  # absolute goals: judged on the absolute frame
+            out.update(goal_metrics(record, commands_script, model, scenario.collision_model(model),
+                                    frame.pose if frame is not None else None))
         judge = scenario.reference.judge(model, record.positions[0], scenario.limits, scenario.collision_model(model))
         if judge is not None:  # segments, a plan
             out.update(segment_metrics(record, judge))
@@ -187,11 +189,12 @@ def goal_lines(results: Mapping[str, Mapping[str, Any]]) -> str:
 
 
 def goal_metrics(record: RunRecord, commands: Sequence[Any], model: DualArmModel,
-                 collision: CollisionModel) -> dict[str, float | int | str]:
+                 collision: CollisionModel, absolute: Any = None) -> dict[str, float | int | str]:
     """How each goal of a script ended (:func:`~dualarm_control.drive_monitor.judge_goals`, stalls
-    explained by the robot's collision model) and the smallest link-pair distance over the run [m]
+    explained by the robot's collision model; absolute goals on ``absolute``'s pose) and the smallest link-pair distance over the run [m]
     (coal, on the recorded positions, the pairs ``collision`` allows excluded)."""
-    outcomes = judge_goals(model, commands, *timed_positions(record), record.final_positions, collision)
+    outcomes = judge_goals(model, commands, *timed_positions(record), record.final_positions, collision,
+                           absolute=absolute)
     closest = closest_pair(collision, record.positions)
     return {"goals_reached": sum(o.state == "reached" for o in outcomes),
             "goals_stalled": sum(o.state == "stalled" for o in outcomes),
