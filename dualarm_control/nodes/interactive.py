@@ -40,8 +40,14 @@ from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.online_trajectory import CommandResult, OnlineTrajectory
 from dualarm_control.params import ParamSpec, positive
+from dualarm_control.references.absolute import HOLD_REASON, AbsoluteFrame
 from dualarm_control.ros import convert
-from dualarm_control.ros.drive import GOAL_TOPIC, TWIST_TOPIC
+from dualarm_control.ros.drive import (
+    ABSOLUTE_GOAL_TOPIC,
+    ABSOLUTE_TWIST_TOPIC,
+    GOAL_TOPIC,
+    TWIST_TOPIC,
+)
 from dualarm_control.ros.inputs import Throttle
 from dualarm_control.trajectory import MotionLimits
 
@@ -62,7 +68,8 @@ def _stamp_s(stamp: Any) -> float:
 class InteractiveDrive:
     """Commands in, drive status out, for the trajectory node (module docstring)."""
 
-    def __init__(self, node: Any, model: DualArmModel, limits: MotionLimits, qos: Any) -> None:
+    def __init__(self, node: Any, model: DualArmModel, limits: MotionLimits, qos: Any,
+                 frame: AbsoluteFrame | None = None) -> None:
         self.node = node
         self.log = node.get_logger()
         self.model = model
@@ -78,13 +85,53 @@ class InteractiveDrive:
         node.create_subscription(PoseStamped, GOAL_TOPIC, self.on_goal, 10)
         node.create_subscription(TwistStamped, TWIST_TOPIC, self.on_twist, qos)
         node.add_on_set_parameters_callback(self.on_set_parameters)
+        self.frame = frame  # the scenario's absolute frame (issue 41): its goals and twists, under the relative pose
+        self.absolute: OnlineTrajectory | None = None
+        if frame is not None:
+            node.create_subscription(PoseStamped, ABSOLUTE_GOAL_TOPIC, self.on_absolute_goal, 10)
+            node.create_subscription(TwistStamped, ABSOLUTE_TWIST_TOPIC, self.on_absolute_twist, qos)
 
-    def start(self, generator: OnlineTrajectory) -> None:
-        """Hold the generator's (measured) pose; commands apply from now."""
+    def start(self, generator: OnlineTrajectory, absolute: OnlineTrajectory | None = None) -> None:
+        """Hold the generators' (measured) poses; commands apply from now."""
         self.generator = generator
+        self.absolute = absolute
         generator.set_limits(self.limits)
         self.log.info("interactive: holding the measured relative pose; goals on "
                       f"{GOAL_TOPIC}, twists on {TWIST_TOPIC} (frame left_tool)")
+        if absolute is not None:
+            absolute.set_limits(self.limits)
+            self.log.info(f"interactive: holding the measured absolute pose; absolute goals on {ABSOLUTE_GOAL_TOPIC}, "
+                          f"twists on {ABSOLUTE_TWIST_TOPIC} (frame world)"
+                          + ("; the relative pose is held (hold: relative commands refused)"
+                             if self.frame is not None and self.frame.hold else ""))
+
+    def _held(self, stamp: float | None, what: str) -> bool:
+        """True (and the command refused, naming why) when the relative pose is held (``hold``)."""
+        if self.frame is None or not self.frame.hold:
+            return False
+        self._reject(stamp, f"{what} rejected: {HOLD_REASON}")
+        return True
+
+    def on_absolute_goal(self, msg: Any) -> None:
+        self._absolute(msg, "absolute goal", lambda gen, stamp: gen.command_goal(
+            [msg.pose.position.x, msg.pose.position.y, msg.pose.position.z],
+            [msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z, msg.pose.orientation.w],
+            frame=msg.header.frame_id, stamp=stamp))
+
+    def on_absolute_twist(self, msg: Any) -> None:
+        lin, ang = msg.twist.linear, msg.twist.angular
+        self._absolute(msg, "absolute twist", lambda gen, stamp: gen.command_twist(
+            [lin.x, lin.y, lin.z], [ang.x, ang.y, ang.z], frame=msg.header.frame_id, stamp=stamp))
+
+    def _absolute(self, msg: Any, what: str, command: Any) -> None:
+        """An absolute command to the absolute frame's generator (its own stamps), answered as a relative one."""
+        stamp = _stamp_s(msg.header.stamp)
+        if self.absolute is None:
+            self._reject(stamp, f"{what} rejected: not started (no joint state yet)")
+            return
+        if self._answer(command(self.absolute, stamp), stamp, what) and what == "absolute goal":
+            p = msg.pose.position
+            self.log.info(f"absolute goal accepted: xyz [{p.x:.4f}, {p.y:.4f}, {p.z:.4f}] m (world), stamp {stamp:.9f}")
 
     # ---------------------------------------------------------------- commands
     def on_goal(self, msg: Any) -> None:
@@ -92,6 +139,8 @@ class InteractiveDrive:
         stamp = _stamp_s(msg.header.stamp)
         if gen is None:
             self._reject(stamp, "not started (no joint state yet)")
+            return
+        if self._held(stamp, "goal"):
             return
         p, o = msg.pose.position, msg.pose.orientation
         before = gen.state if gen.goal is not None else ""
@@ -109,7 +158,7 @@ class InteractiveDrive:
     def on_twist(self, msg: Any) -> None:
         gen = self.generator
         stamp = _stamp_s(msg.header.stamp)
-        if gen is None:
+        if gen is None or self._held(None, "twist"):
             return
         lin, ang = msg.twist.linear, msg.twist.angular
         had_goal = gen.goal is not None and gen.state == MOVING
@@ -156,6 +205,9 @@ class InteractiveDrive:
                        "holding the measured relative pose")
         gen.hold(*self.model.relative_pose(self.q))
         gen.goal = None
+        if self.absolute is not None and self.frame is not None:
+            self.absolute.hold(*self.frame.pose(self.model, self.q))
+            self.absolute.goal = None
         self.monitor.reset()
         self.rejected = (None, f"trajectory failed: {type(exc).__name__}", gen.time)
 
