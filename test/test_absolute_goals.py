@@ -127,3 +127,28 @@ def test_the_absolute_target_rides_relative_target_as_a_second_joint() -> None:
     bad = convert.target_message(7, 0, sample([0.0, 0.0, 0.3], 0.2), sample([np.nan, 0.1, 0.2], -0.4))
     with pytest.raises(InputRejected, match="NaN or inf"):
         convert.TargetInput().from_bytes(bad)
+
+
+@pytest.mark.slow
+def test_carry_goals_lockstep_bag_metrics_equal_in_process(tmp_path: Path) -> None:
+    """carry_goals over ROS in lockstep (three processes, a bag) and in one process give the same metrics: the
+    velocity norms to 1e-8, the relative and absolute tracking errors to 1e-6 (the bag's /diagnostics carry 7
+    significant digits; measured 1.0e-7 relative at most), the three absolute goals reached in both."""
+    from dualarm_control.app.record.bag import report
+    from dualarm_control.app.record.report import summarize_run
+    from dualarm_control.app.run.experiment import run_scenario
+    from dualarm_control.app.run.launcher import launch_scenario
+    from dualarm_control.controller_params import controller_params
+
+    scenario = load_scenario("carry_goals")
+    model = DualArmModel(scenario.robot)
+    bag = tmp_path / "bag"
+    assert launch_scenario("carry_goals", [], ["-p", "solver:=sparse_qp"], True, bag, timeout=400.0) == 0
+    from_bag = report(bag, tmp_path / "report")[0]["sparse_qp"]
+    in_process = summarize_run(run_scenario(scenario, controller_params({"solver": "sparse_qp"}), model), scenario,
+                               model)
+    for key in ("l0_mean", "l1_mean", "l2_mean", "duration_s"):
+        assert from_bag[key] == pytest.approx(in_process[key], rel=1e-8), key
+    for key in ("max_tracking_error_m", "absolute_max_error_m", "absolute_rms_error_m", "absolute_max_error_rad"):
+        assert from_bag[key] == pytest.approx(in_process[key], rel=1e-6), key
+    assert from_bag["goals_reached"] == in_process["goals_reached"] == 3, from_bag["goal_outcomes"]

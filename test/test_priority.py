@@ -185,3 +185,29 @@ def test_the_relative_pose_holds_while_the_absolute_frame_is_pushed_too_far(solv
     assert drift["priority"] < 2e-3, drift
     if solver != "pseudo_inverse":
         assert drift["weighted"] > 5e-3, drift
+
+
+@pytest.mark.parametrize("solver", [name for name in solver_names() if name != "pseudo_inverse"])
+def test_weights_trade_the_two_tasks_in_every_solver(model: DualArmModel, solver: str) -> None:
+    """Both tasks at priority 1 (weighted beside each other, :func:`assemble_problem`): in every solver a weight of
+    100 on the second task leaves it a residual no larger than a weight of 0.01 does (the bounds make them conflict),
+    smaller in at least one of three problems (equal where the command is held by the bounds either way). Not the
+    pseudo-inverse: it meets both tasks exactly (12 independent rows, 14 joints) before its uniform shrink, so a
+    weight changes nothing unless the stacked rows are rank-deficient."""
+    from dualarm_control.tasks import EQUALITY, TaskRows, assemble_problem
+
+    smaller = 0
+    for problem in problems(model, 3, seed=17):
+        j2, r2 = problem.secondary_jacobian, problem.secondary_reference
+        assert j2 is not None and r2 is not None
+        residual = {}
+        for weight in (0.01, 100.0):
+            rows = [TaskRows("relative", EQUALITY, np.zeros(6), np.zeros(6), problem.jacobian, -problem.reference,
+                             1.0, 1.0),
+                    TaskRows("absolute", EQUALITY, np.zeros(6), np.zeros(6), j2, -r2, 1.0, weight)]
+            result = make_solver(solver).solve(assemble_problem(rows, problem.lower, problem.upper, problem.repulsive))
+            assert not result.failed, result.detail
+            residual[weight] = float(np.linalg.norm(j2 @ result.velocities - r2))
+        assert residual[100.0] <= residual[0.01] + 1e-12, residual
+        smaller += residual[100.0] < residual[0.01] - 1e-6
+    assert smaller >= 1

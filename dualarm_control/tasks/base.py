@@ -165,18 +165,21 @@ def assemble_problem(rows: Sequence[TaskRows], lower: FloatArray, upper: FloatAr
 
 def _first_priority(eq: Sequence[TaskRows], ie: Sequence[TaskRows], lower: FloatArray, upper: FloatArray,
                     repulsive: FloatArray) -> ControlProblem:
-    """The problem of the priority-1 equality rows ``eq`` (at least one) and the inequality rows ``ie``."""
+    """The problem of the priority-1 equality rows ``eq`` (at least one) and the inequality rows ``ie``.
+
+    Several equality tasks are weighted beside each other in every solver: their rows are scaled by the square root
+    of their weight (1/2 w ||a qd - r||^2 = 1/2 ||sqrt(w) a qd - sqrt(w) r||^2, the constraint-based QP's term), so
+    the problem carries no ``equality_weights``."""
     if len(eq) == 1 and not ie:
         return ControlProblem(eq[0].jacobian, eq[0].reference, lower, upper, repulsive)
-    jac = np.vstack([r.jacobian for r in eq])
-    ref = np.concatenate([r.reference for r in eq])
-    w_eq = np.concatenate([np.full(r.value.shape[0], r.weight) for r in eq])
+    scale = np.concatenate([np.full(r.value.shape[0], math.sqrt(r.weight)) for r in eq])
+    jac = np.vstack([r.jacobian for r in eq]) * scale[:, None]
+    ref = np.concatenate([r.reference for r in eq]) * scale
     if not ie:
-        return ControlProblem(jac, ref, lower, upper, repulsive, equality_weights=w_eq)
+        return ControlProblem(jac, ref, lower, upper, repulsive)
     return ControlProblem(
         jac, ref, lower, upper, repulsive,
         inequality_jacobian=np.vstack([r.jacobian for r in ie]),
         inequality_bound=np.concatenate([r.reference for r in ie]),
-        equality_weights=w_eq,
         inequality_weights=np.concatenate([np.full(r.value.shape[0], r.weight) for r in ie]),
     )

@@ -70,6 +70,8 @@ class RunRecord:
         final_errors: final relative (position [m], orientation [rad]) error where the recording
             gives it (a bag: its last /relative_pose against its last /relative_target); None:
             the report computes it from ``final_positions`` and the scenario.
+        absolute_error: the absolute frame's tracking error (position [m], orientation [rad]) per cycle, (N, 2),
+            in a run with an absolute target (issue 41; a bag: the controller's /diagnostics values), else None.
     """
 
     label: str
@@ -91,6 +93,7 @@ class RunRecord:
     table_contacts: FloatArray
     tasks: TaskValues | None = field(default=None)
     final_errors: tuple[float, float] | None = None
+    absolute_error: FloatArray | None = None
 
 
 def with_task_values(record: RunRecord, scenario: Scenario, model: DualArmModel, gain: float | None,
@@ -131,6 +134,13 @@ def with_task_values(record: RunRecord, scenario: Scenario, model: DualArmModel,
                       bounds=bounds, kinds={t.name: t.kind for t in tasks}, tip_in_pan=tip,
                       set_point=spec.force.set_point if force else float("nan"))
     return dataclasses.replace(record, tasks=part)
+
+
+def absolute_columns(position: FloatArray, orientation: FloatArray) -> FloatArray | None:
+    """(N, 2) of the absolute frame's errors [m, rad] per cycle, None when no cycle had an absolute target."""
+    if not np.isfinite(position).any():
+        return None
+    return np.column_stack((position, orientation))
 
 
 def nan_column(n: int) -> FloatArray:
