@@ -89,8 +89,10 @@ class GoalMonitor:
 
     def __init__(self, model: DualArmModel, position_tolerance: float = POSITION_TOLERANCE,
                  angle_tolerance: float = ANGLE_TOLERANCE, stall_time: float = STALL_TIME,
-                 collision: CollisionModel | None = None, collision_near: float = COLLISION_NEAR) -> None:
+                 collision: CollisionModel | None = None, collision_near: float = COLLISION_NEAR,
+                 pose: Callable[[FloatArray], tuple[FloatArray, FloatArray]] | None = None) -> None:
         self.model = model
+        self.pose = pose if pose is not None else model.relative_pose  # what the goals are poses of (issue 41)
         self.collision = collision
         self.collision_near = collision_near
         self.position_tolerance = position_tolerance
@@ -109,7 +111,7 @@ class GoalMonitor:
         (None: no goal) and the measured joint positions q (n,) [rad]."""
         if goal is None:
             return Verdict(progress.state, 0.0, 0.0)
-        p, r = self.model.relative_pose(q)
+        p, r = self.pose(q)
         distance = float(np.linalg.norm(p - goal[0]))
         angle = float(np.linalg.norm(pin.log3(goal[1] @ r.T)))
         if self.final is not None:

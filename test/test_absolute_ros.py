@@ -95,6 +95,12 @@ def test_a_relative_goal_is_refused_while_the_grasp_is_held(cell: Launch) -> Non
     cell.wait_for("goal rejected: the relative pose is held (scenario.hold")
 
 
-def test_absolute_goal_with_wait_is_refused_before_sending() -> None:
-    done = dualarm("goal", "--absolute", "--wait", "--xyz", "0.6", "0", "0.2")
-    assert done.returncode == 2 and "--wait follows a relative goal" in done.stderr, done.stderr
+def test_dualarm_goal_absolute_wait_exits_0_on_reach(cell: Launch) -> None:
+    """`dualarm goal --absolute --wait` follows the absolute frame's drive status (trajectory_node/absolute) to
+    "reached" (the node's judge: 0.5 mm, 5 mrad), and the node says so in its log."""
+    start, rotation, _ = poses()
+    q = pin.Quaternion(rotation)
+    done = dualarm("goal", "--absolute", "--wait", "--timeout", "120", "--xyz", *map(str, start + [0.0, -0.02, 0.0]),
+                   "--quat", *map(str, (q.x, q.y, q.z, q.w)))
+    assert done.returncode == 0 and "reached: distance" in done.stdout, done.stdout + done.stderr
+    cell.wait_for("absolute goal reached (stamp")

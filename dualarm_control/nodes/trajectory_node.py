@@ -277,8 +277,7 @@ class TrajectoryNode:
             self.pub_joint.publish(convert.joint_reference_message(stamp, elapsed_ns, self.model.joint_names,
                                                                    *sample.joints))
         if self.drive is not None:
-            status = self.drive.cycle(stamp)
-            if status is not None:
+            for status in self.drive.cycle(stamp):
                 self.pub_diag.publish(status)
         elif sample.stage != self.stage:
             self.stage = sample.stage

@@ -29,12 +29,12 @@ from typing import Any, TextIO
 import yaml
 
 from dualarm_control.drive_commands import (
-    CommandError,
     finite_vector,
     rotation_from_quaternion,
     rotation_from_rpy,
 )
 from dualarm_control.drive_status import (
+    ABSOLUTE_STATUS_NAME,
     REACHED,
     REJECTED,
     STALLED,
@@ -243,10 +243,11 @@ def _stamp_s(stamp: Any) -> float:
     return float(stamp.sec) + 1e-9 * float(stamp.nanosec)
 
 
-def drive_status(msg: Any) -> dict[str, str] | None:
-    """The drive keys of the trajectory node's entry in a DiagnosticArray (None if absent)."""
+def drive_status(msg: Any, name: str = STATUS_NAME) -> dict[str, str] | None:
+    """The drive keys of the trajectory node's entry ``name`` in a DiagnosticArray (None if absent): the relative
+    goals' (default), or the absolute frame's (:data:`~dualarm_control.drive_status.ABSOLUTE_STATUS_NAME`)."""
     for status in msg.status:
-        if status.name == STATUS_NAME:
+        if status.name == name:
             values = {kv.key: kv.value for kv in status.values}
             if parse_status(values) is not None:
                 return values
@@ -257,7 +258,7 @@ def send_goal(xyz: Sequence[float], rpy: Sequence[float] | None = None, quat: Se
               wait: bool = False, timeout: float | None = None, subscriber_wait: float = 5.0,
               out: TextIO = sys.stdout, absolute: bool = False) -> int:
     """Publish one goal on ``/relative_goal`` (``absolute``: on ``/absolute_goal``, frame ``world``); with ``wait``,
-    follow ``/diagnostics`` to the end (relative goals only: the drive status follows the relative one).
+    follow ``/diagnostics`` to the end (an absolute goal: the trajectory node's ``trajectory_node/absolute`` status).
 
     Exit codes: 0 published (without ``wait``) or reached; 1 no subscriber within
     ``subscriber_wait`` s, rejected, stalled, or ``timeout`` s passed.
@@ -265,17 +266,15 @@ def send_goal(xyz: Sequence[float], rpy: Sequence[float] | None = None, quat: Se
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PoseStamped
 
-    if absolute and wait:
-        raise CommandError("--wait follows a relative goal's drive status; an absolute goal's progress is not on "
-                           "/diagnostics (send it without --wait)")
     rotation = goal_rotation(rpy, quat)
     topic = ABSOLUTE_GOAL_TOPIC if absolute else GOAL_TOPIC
+    name = ABSOLUTE_STATUS_NAME if absolute else STATUS_NAME
     updates: list[dict[str, str]] = []
     with tool_node("_dualarm_goal") as (node, executor, stop):
         pub = node.create_publisher(PoseStamped, topic, 10)
         if wait:
             node.create_subscription(DiagnosticArray, "/diagnostics",
-                                     lambda m: updates.extend([v] if (v := drive_status(m)) else []), 10)
+                                     lambda m: updates.extend([v] if (v := drive_status(m, name)) else []), 10)
         if not wait_for_subscriptions(pub, executor, stop, 1, subscriber_wait, out):
             print(f"dualarm goal: nobody subscribes {topic} (start the cell with 'dualarm launch "
                   "interactive')", file=sys.stderr)
