@@ -211,3 +211,24 @@ def test_weights_trade_the_two_tasks_in_every_solver(model: DualArmModel, solver
         assert residual[100.0] <= residual[0.01] + 1e-12, residual
         smaller += residual[100.0] < residual[0.01] - 1e-6
     assert smaller >= 1
+
+
+@pytest.mark.parametrize("solver", solver_names())
+def test_the_second_priority_keeps_the_limit_rows(model: DualArmModel, solver: str) -> None:
+    """Hard limit rows (as the collision limit's, A qd <= b, b >= 0) that the second priority's unbounded step would
+    break: every solver's command meets them (to its row tolerance) and keeps the first priority's task velocity."""
+    rng = np.random.default_rng(23)
+    for problem in problems(model, 3, seed=29):
+        free = make_solver(solver).solve(problem)
+        rows = rng.normal(0.0, 1.0, (4, model.nq))
+        bound = np.abs(rows @ free.velocities) * 0.5  # each row halves what the free command does along it
+        rows *= np.sign(rows @ free.velocities)[:, None]  # so that the free command breaks every row
+        limited = dataclasses.replace(problem, limit_rows=rows, limit_bound=bound)
+        result = make_solver(solver).solve(limited)
+        assert not result.failed, result.detail
+        assert np.max(rows @ result.velocities - bound) <= 1e-6, rows @ result.velocities - bound
+        alone = make_solver(solver).solve(dataclasses.replace(limited, secondary_jacobian=None,
+                                                              secondary_reference=None))
+        if alone.status == Status.SOLVED and result.status == Status.SOLVED:
+            kept = problem.jacobian @ (result.velocities - alone.velocities)
+            assert np.abs(kept).max() < 1e-6, kept
