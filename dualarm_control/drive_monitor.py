@@ -217,13 +217,18 @@ class SegmentJudge:
     :func:`stall_reason` (the collision pair or joint limit that held the arms, and the error left). A segment
     with no sample in its window is judged at the latest sample before the window closed. ``kind`` names a
     part in the verdicts ("segment 1 'approach'"; a plan's one part: "plan 1 'corner_path'"). The batch form is
-    :func:`judge_segments`; the trajectory node feeds it live."""
+    :func:`judge_segments`; the trajectory node feeds it live. ``frame`` (issue 41) judges the poses of another
+    frame, ``frame(model, q)`` (the absolute frame's segments); ``others`` are judges fed alongside (their verdicts
+    come with this one's)."""
 
     def __init__(self, model: DualArmModel, names: Sequence[str], ends: Sequence[float],
                  poses: Sequence[tuple[FloatArray, FloatArray]], collision: CollisionModel | None = None,
                  position_tolerance: float = POSITION_TOLERANCE, angle_tolerance: float = ANGLE_TOLERANCE,
-                 near: float = COLLISION_NEAR, kind: str = "segment") -> None:
+                 near: float = COLLISION_NEAR, kind: str = "segment",
+                 frame: Callable[[DualArmModel, FloatArray], tuple[FloatArray, FloatArray]] | None = None) -> None:
         self.model, self.collision, self.near, self.kind = model, collision, near, kind
+        self.frame = frame  # the poses are of this frame (issue 41: the absolute frame's), None: the relative pose
+        self.others: list[SegmentJudge] = []  # judges fed alongside (the absolute segments' beside the relative ones)
         self.names, self.ends, self.poses = list(names), list(ends), list(poses)
         self.position_tolerance, self.angle_tolerance = position_tolerance, angle_tolerance
         self.k = 0  # the segment being judged
@@ -242,11 +247,13 @@ class SegmentJudge:
         out: list[GoalOutcome] = []
         if not np.all(np.isfinite(q)):
             return out
+        for other in self.others:
+            out += other.feed(t, q)
         while self.k + 1 < len(self.names) and t > self.ends[self.k] + SEGMENT_WINDOW[1]:
             out.append(self._close(self.k))
         self.latest = q
         if self.k + 1 < len(self.names) and t >= self.ends[self.k] - SEGMENT_WINDOW[0]:
-            distance, angle = pose_distance(self.model, q, *self.poses[self.k])
+            distance, angle = pose_distance(self.model, q, *self.poses[self.k], self.frame)
             score = self._score(distance, angle)
             if self.best is None or score < self.best[0]:
                 self.best = (score, distance, angle, q)
@@ -256,7 +263,7 @@ class SegmentJudge:
         """Segment k's verdict at its best sample (or the latest), then on to the next."""
         if self.best is None:
             q = self.latest if self.latest is not None else np.full(self.model.nq, np.nan)
-            distance, angle = pose_distance(self.model, q, *self.poses[k])
+            distance, angle = pose_distance(self.model, q, *self.poses[k], self.frame)
         else:
             _, distance, angle, q = self.best
         self.k, self.best = k + 1, None
@@ -279,9 +286,11 @@ class SegmentJudge:
         if self.k < len(self.names):
             q = final if final is not None and np.all(np.isfinite(final)) else self.latest
             if q is not None:
-                distance, angle = pose_distance(self.model, q, *self.poses[self.k])
+                distance, angle = pose_distance(self.model, q, *self.poses[self.k], self.frame)
                 out.append(self._judge(self.k, q, distance, angle, "at the end of the run"))
             self.k += 1
+        for other in self.others:
+            out += other.finish(final)
         return out
 
 

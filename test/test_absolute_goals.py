@@ -170,10 +170,13 @@ def test_carry_segments_follows_the_absolute_segments(solver: str) -> None:
     assert frame is not None
     start, rotation0 = frame.pose(model, q)
     p0 = model.relative_pose(q)[0]
+    judge = scenario.reference.judge(model, q, scenario.limits, None)
     drift = tracking = 0.0
+    verdicts = []
     for k in range(follower.steps):
         cycle = follower.cycle(k * params.period, q, None)
         assert cycle.result.status == Status.SOLVED, cycle.result.detail
+        verdicts += judge.feed(k * params.period, q)
         q = q + params.period * cycle.velocities
         drift = max(drift, float(np.linalg.norm(model.relative_pose(q)[0] - p0)))
         tracking = max(tracking, cycle.absolute_position_error)
@@ -182,6 +185,10 @@ def test_carry_segments_follows_the_absolute_segments(solver: str) -> None:
     assert np.linalg.norm(end - start) > 0.079
     assert np.linalg.norm(pin.log3(rotation.T @ rotation0)) < 1e-4  # set_down turns back to the start (to 2e-6 rad)
     assert tracking < 1e-4 and drift < 1e-4, (tracking, drift)
+    verdicts += judge.finish(q)  # the relative hold and the three absolute segments, each judged on its own frame
+    assert [(v.label, v.state) for v in verdicts] == [
+        ("absolute segment 1 'lift'", "reached"), ("absolute segment 2 'carry'", "reached"),
+        ("segment 1 'hold'", "reached"), ("absolute segment 3 'set_down'", "reached")], [v.text() for v in verdicts]
 
 
 def test_relative_segments_are_refused_while_the_grasp_is_held(tmp_path: Path) -> None:

@@ -94,8 +94,12 @@ class SegmentsSource(SourceDefaults):
     def judge(self, model: DualArmModel, q0: FloatArray, limits: MotionLimits,
               collision: CollisionModel | None) -> SegmentJudge:
         """Every segment's verdict (:func:`segment_judge`), the trajectory planned from q0's relative pose as the
-        trajectory node plans it."""
-        return segment_judge(self.trajectory(*model.relative_pose(q0), limits), model, collision)
+        trajectory node plans it; the absolute segments' too (on the absolute frame, planned from its pose at q0)."""
+        judge = segment_judge(self.trajectory(*model.relative_pose(q0), limits), model, collision)
+        if self.absolute and self.frame is not None:
+            judge.others.append(segment_judge(chain(self.absolute, *self.frame.pose(model, q0), limits), model,
+                                              collision, self.frame))
+        return judge
 
     def trajectory(self, start_position: FloatArray, start_rotation: FloatArray,
                    limits: MotionLimits) -> RelativeTrajectory:
@@ -123,13 +127,16 @@ def chain(specs: Sequence[SegmentSpec], start_position: FloatArray, start_rotati
 
 
 def segment_judge(trajectory: RelativeTrajectory, model: DualArmModel,
-                  collision: CollisionModel | None = None) -> SegmentJudge:
+                  collision: CollisionModel | None = None, frame: AbsoluteFrame | None = None) -> SegmentJudge:
     """The :class:`~dualarm_control.drive_monitor.SegmentJudge` of ``trajectory``'s segments (names, end
-    times [s] and end poses): the report's after the run, the trajectory node's live."""
+    times [s] and end poses): the report's after the run, the trajectory node's live; with ``frame`` the segments
+    of that absolute frame ("absolute segment k 'name'")."""
     n = len(trajectory.segments)
     return SegmentJudge(model, [seg.name for seg in trajectory.segments],
                         [*trajectory.segment_start_times[1:], trajectory.duration],
-                        [trajectory.segment_end_pose(k) for k in range(n)], collision)
+                        [trajectory.segment_end_pose(k) for k in range(n)], collision,
+                        kind="segment" if frame is None else "absolute segment",
+                        frame=None if frame is None else frame.pose)
 
 
 class SegmentsStream:
