@@ -83,9 +83,12 @@ def test_an_absolute_jog_moves_the_object(cell: Launch) -> None:
     start, _, relative0 = poses()
     done = dualarm("jog", "--absolute", "--linear", "0", "0", "-0.02", "--seconds", "0.5")
     assert done.returncode == 0, done.stdout + done.stderr
-    time.sleep(0.5)  # not a verdict: let the jog's brake end before the pose is read
-    position, _, relative = poses()
-    assert position[2] < start[2] - 0.005, position - start  # 20 mm/s for 0.5 s: about 1 cm down
+    deadline = time.monotonic() + DEADLINE_S
+    while True:  # 20 mm/s for 0.5 s: about 1 cm down
+        position, _, relative = poses()
+        if position[2] < start[2] - 0.005:
+            break
+        assert time.monotonic() < deadline, f"the object went {(position - start) * 1e3} mm, not 5 mm down"
     assert np.linalg.norm(relative - relative0) < 2e-4
 
 
