@@ -18,7 +18,7 @@ from dualarm_control.kinematics import DualArmModel
 from dualarm_control.online_trajectory import OnlineTrajectory
 from dualarm_control.references.absolute import AbsoluteFrame, parse_absolute_frame
 from dualarm_control.references.base import RunOptions
-from dualarm_control.scenario import load_scenario
+from dualarm_control.scenario import load_scenario, scenario_file
 from dualarm_control.solvers import solver_names
 from dualarm_control.status import Status
 from dualarm_control.tasks import FixedTarget
@@ -54,7 +54,7 @@ def test_carry_goals_moves_the_object_and_holds_the_grasp(solver: str) -> None:
 
 
 def test_a_relative_goal_is_refused_while_the_relative_pose_is_held(tmp_path: Path) -> None:
-    text = Path("config/scenarios/carry_goals.yaml").read_text()
+    text = scenario_file("carry_goals").read_text()
     bad = tmp_path / "bad.yaml"
     bad.write_text(text.replace("        - {t: 3.0, absolute: true,", "        - {t: 3.0,"))
     with pytest.raises(ScenarioError, match=r"item 1 \(t = 3 s\) is refused: the relative pose is held"):
@@ -192,7 +192,7 @@ def test_carry_segments_follows_the_absolute_segments(solver: str) -> None:
 
 
 def test_relative_segments_are_refused_while_the_grasp_is_held(tmp_path: Path) -> None:
-    text = Path("config/scenarios/carry_segments.yaml").read_text()
+    text = scenario_file("carry_segments").read_text()
     bad = tmp_path / "bad.yaml"
     bad.write_text(text.replace("      absolute_segments: [lift, carry, set_down]",
                                 "      absolute_segments: [lift, carry, set_down]\n      segments: [carry]"))
