@@ -68,9 +68,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
     interactive = args.scenario == INTERACTIVE or args.interactive
     if interactive:  # the cell and limits of the interactive demo (or of the scenario given), driven live
         args.scenario = INTERACTIVE_CELL if args.scenario == INTERACTIVE else args.scenario
-        if args.lockstep or args.plan:
-            raise DualArmError("'dualarm launch interactive' and --interactive run in real time (no --lockstep, "
-                               "no --plan)")
+        if args.plan:
+            raise DualArmError("'dualarm launch interactive' and --interactive follow live goals (no --plan)")
     if args.processes != 3 and args.lockstep:
         raise DualArmError(f"--processes {args.processes} runs in real time: --lockstep runs the nodes in "
                            "separate processes (--processes 3)")
