@@ -13,7 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualarm_control.arrays import FloatArray
-from dualarm_control.solvers.base import ACTIVITY_THRESHOLD
+
+ACTIVITY_THRESHOLD = 1e-3
+"""A joint is active when |qd_i| > 1e-3 rad/s (paper 000, Fig. 5 and Table I)."""
 
 
 def l0_norms(qd: FloatArray, threshold: float = ACTIVITY_THRESHOLD) -> FloatArray:

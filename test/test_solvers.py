@@ -752,3 +752,18 @@ def test_quadprog_backend_gives_the_same_standard_qp() -> None:
         res = solver.solve(p)
         assert res.status == "solved" and res.iterations == 0
         np.testing.assert_allclose(res.velocities, quadprog_standard(p), atol=1e-12)
+
+
+def test_the_fallback_is_loaded_with_a_solver_not_with_the_nodes_that_only_read_types() -> None:
+    """scipy.optimize (the fallback's BVLS, ~0.3 s to import) is loaded when a solver is built, so a
+    first fallback in the loop never pays the import; the simulator node, which only reads the
+    solvers' types, starts without it."""
+    import subprocess
+    import sys
+
+    probe = ("import sys, dualarm_sim.sim_node; print('scipy.optimize' in sys.modules); "
+             "from dualarm_control.solvers import make_solver; make_solver('sparse_qp'); "
+             "print('scipy.optimize' in sys.modules)")
+    lines = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True,
+                           timeout=120).stdout.split()
+    assert lines[-2:] == ["False", "True"], lines

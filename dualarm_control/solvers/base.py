@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from dualarm_control.metrics import ACTIVITY_THRESHOLD
 from dualarm_control.qp import DEFAULT_BACKEND, QPSettings, QPSolution, make_backend
 from dualarm_control.solvers import priority
 from dualarm_control.solvers.policy import (
@@ -24,14 +25,12 @@ from dualarm_control.solvers.policy import (
     bound_excess,
     fallback,
     inside,
+    load_fallback,
     row_violation_text,
     violation_text,
 )
 from dualarm_control.solvers.problem import ControlProblem, FloatArray
 from dualarm_control.status import FAILURE_STATUSES, FALLBACK_TRIGGERS, Status
-
-ACTIVITY_THRESHOLD = 1e-3
-"""A joint is active when |qd_i| > 1e-3 rad/s (paper 000, Fig. 5 and Table I)."""
 
 
 @dataclass(slots=True)
@@ -151,6 +150,7 @@ class Solver:
 
     def __init__(self, params: SolverParams | None = None) -> None:
         self.params = params or SolverParams()
+        load_fallback()  # the fallback's import now, never inside the control loop
 
     def reset(self) -> None:
         """Forget warm-start memory (e.g. after a discontinuity)."""

@@ -19,9 +19,6 @@ import math
 
 import numpy as np
 
-# scipy.optimize imported here, not in the fallback: a first import inside the loop takes ~0.3 s
-from scipy.optimize import lsq_linear
-
 from dualarm_control.qp import make_backend
 from dualarm_control.solvers.problem import ControlProblem, FloatArray
 from dualarm_control.solvers.slack_qp import slack_qp
@@ -34,6 +31,15 @@ some 1e3 ulp of them."""
 FALLBACK_DAMPING = 1e-6
 """Damping of :func:`bounded_least_squares` [(m/s)^2 per (rad/s)^2]: selects a small step
 among the least-squares ones and keeps the problem well posed at singular configurations."""
+
+
+def load_fallback() -> None:
+    """Import what :func:`bounded_least_squares` needs (scipy.optimize, ~0.3 s on a first import).
+
+    Called when a solver is built (:class:`~dualarm_control.solvers.base.Solver`), so that a
+    first fallback inside the control loop never pays the import; processes that only read the
+    solvers' types (the simulator, the trajectory node, the ``dualarm`` verbs) never load it."""
+    import scipy.optimize  # noqa: F401
 
 
 def fallback(problem: ControlProblem, qd: FloatArray | None, status: Status, detail: str) -> tuple[FloatArray, Status, str]:
@@ -173,6 +179,9 @@ def bounded_least_squares(jacobian: FloatArray, reference: FloatArray, lower: Fl
         return qd
     a = np.vstack((jacobian[:, free], math.sqrt(damping) * np.eye(int(free.sum()))))
     b = np.concatenate((reference - jacobian[:, ~free] @ qd[~free], np.zeros(int(free.sum()))))
+    # loaded already by load_fallback(): a dict lookup here
+    from scipy.optimize import lsq_linear
+
     try:
         solution = lsq_linear(a, b, bounds=(lower[free], upper[free]), method="bvls")
     except (ValueError, np.linalg.LinAlgError):  # e.g. non-finite data

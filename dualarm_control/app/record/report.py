@@ -37,6 +37,7 @@ from dualarm_control.drive_monitor import (
 from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel, FloatArray, rotation_angle
 from dualarm_control.metrics import (
+    ACTIVITY_THRESHOLD,
     active_set_switches_per_s,
     joint_limit_metrics,
     limit_violations,
@@ -46,7 +47,6 @@ from dualarm_control.metrics import (
 )
 from dualarm_control.planning.plan_file import PLAN_FORMAT
 from dualarm_control.scenario import Scenario
-from dualarm_control.solvers.base import ACTIVITY_THRESHOLD
 from dualarm_control.status import FAILURE_STATUSES
 from dualarm_control.tasks import (
     INEQUALITY,

@@ -25,8 +25,7 @@ from typing import Any
 import numpy as np
 
 from dualarm_control.arrays import FloatArray
-from dualarm_control.metrics import l0_norms
-from dualarm_control.solvers.base import ACTIVITY_THRESHOLD
+from dualarm_control.metrics import ACTIVITY_THRESHOLD, l0_norms
 from dualarm_control.status import FAILURE_STATUSES
 
 APPLICATION_ID = "dualarm_control"
