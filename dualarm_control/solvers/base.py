@@ -166,12 +166,20 @@ class Solver:
     def _backend(self):
         return make_backend(self.params.qp_backend, self.params.qp)
 
+    _priority_qp = None
+    """The second priority's QP back-end, made on first use (:meth:`_priority_backend`)."""
+
     def _priority_backend(self):
         """The QP back-end of the second priority (its own warm start: its QP differs from the first's)."""
-        backend = getattr(self, "_priority_qp", None)
-        if backend is None:
-            backend = self._priority_qp = self._backend()
-        return backend
+        if self._priority_qp is None:
+            self._priority_qp = self._backend()
+        return self._priority_qp
+
+    def _forget(self) -> None:
+        """After a failure: :meth:`reset` and the second priority's warm start."""
+        self.reset()
+        if self._priority_qp is not None:
+            self._priority_qp.reset()
 
     def _second_priority(self, problem: ControlProblem, qd1: FloatArray, status: Status, iters: int,
                          detail: str) -> tuple[FloatArray | None, Status, int, str]:
@@ -248,15 +256,15 @@ class Solver:
         excess = math.nan if qd is None else bound_excess(qd, problem.lower, problem.upper)
         rows_excess = 0.0 if qd is None or not problem.has_limit_rows else problem.limit_excess(qd)
         if qd is None or status in FALLBACK_TRIGGERS or not math.isfinite(excess):
-            self.reset()
+            self._forget()
             velocities, status, detail = fallback(problem, qd, status, detail)
         elif excess > self.box_tolerance(problem):
-            self.reset()
+            self._forget()
             velocities, status, detail = fallback(problem, qd, Status.BOUNDS_VIOLATED,
                                                   violation_text(qd, problem.lower, problem.upper,
                                                                  self.box_tolerance(problem)))
         elif rows_excess > 0.0 and rows_excess > self.row_tolerance(problem):
-            self.reset()
+            self._forget()
             velocities, status, detail = fallback(problem, qd, Status.BOUNDS_VIOLATED,
                                                   row_violation_text(problem, qd, self.row_tolerance(problem)))
         else:

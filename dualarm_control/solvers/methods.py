@@ -337,6 +337,10 @@ class HierarchicalSparseQP(Solver):
         """QP1's proximal memory (QP2 has none: its optimum is unique)."""
         self._primary.seed(velocities)
 
+    def _forget(self) -> None:
+        super()._forget()
+        self._primary._forget()  # the second priority's QP is QP1's solver's
+
     def _identity_of(self, n: int) -> FloatArray:
         if self._identity.shape != (n, n):
             self._identity = np.eye(n)
