@@ -47,6 +47,7 @@ from dualarm_control.solvers import (
 from dualarm_control.solvers.policy import rest_command
 from dualarm_control.status import Status
 from dualarm_control.tasks import (
+    DEFAULT_EQUALITY_WEIGHT,
     INEQUALITY,
     AbsolutePoseTask,
     RelativePoseTask,
@@ -262,12 +263,13 @@ class RelativeController:
         return self
 
     def step(self, q: FloatArray, target: RelativeTarget, absolute: RelativeTarget | None = None,
-             grasp: pin.SE3 | None = None) -> Cycle:
+             grasp: pin.SE3 | None = None, weight: float | None = None) -> Cycle:
         """Compute the joint velocity command for measured positions q (n,) and a target.
 
         With ``absolute`` (issue 41: a pose and twist of the absolute frame in the world, the halfway frame or,
         with ``grasp``, the object frame fixed to the left tool's grasp) the absolute pose task is the second
-        priority, under the relative pose (:mod:`dualarm_control.solvers.priority`).
+        priority, under the relative pose (:mod:`dualarm_control.solvers.priority`), or with ``weight`` weighted
+        beside it in one least-squares problem (the relative pose's weight 1).
 
         Non-finite q or target never reach the solver (its input check rejects the problem
         they make): the safe command is returned with status "invalid_input" and the
@@ -281,8 +283,8 @@ class RelativeController:
         tracked: tuple[TaskRows, ...] = (rows,)
         if absolute is not None:
             try:
-                task = absolute_task(absolute, self.params.gain, grasp)
-                tracked = (rows, SecondPriority(task).evaluate(conf, 0.0))
+                task = absolute_task(absolute, self.params.gain, grasp, weight)
+                tracked = (rows, (SecondPriority(task) if weight is None else task).evaluate(conf, 0.0))
             except ValueError as exc:
                 return self._invalid(f"absolute target: {exc}", start, q)
         result = self._solve_rows(conf, tracked)
@@ -394,13 +396,15 @@ class RelativeController:
         return Cycle(velocities, result, time.perf_counter() - start)
 
 
-def absolute_task(target: RelativeTarget, gain: float, grasp: pin.SE3 | None) -> AbsolutePoseTask:
+def absolute_task(target: RelativeTarget, gain: float, grasp: pin.SE3 | None,
+                  weight: float | None = None) -> AbsolutePoseTask:
     """The absolute pose task toward ``target`` (pose and twist of the absolute frame, world), gain k
-    [1/s]; ValueError naming a non-finite target."""
+    [1/s], slack weight ``weight`` (None: the default); ValueError naming a non-finite target."""
     values = (target.position, target.rotation, target.linear_velocity, target.angular_velocity)
     if not all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in values):
         raise ValueError("non-finite absolute target")
     return AbsolutePoseTask(np.asarray(target.position, float), np.asarray(target.rotation, float), gain, grasp,
+                            weight=DEFAULT_EQUALITY_WEIGHT if weight is None else weight,
                             linear_velocity=np.asarray(target.linear_velocity, float),
                             angular_velocity=np.asarray(target.angular_velocity, float))
 

@@ -198,3 +198,27 @@ def test_relative_segments_are_refused_while_the_grasp_is_held(tmp_path: Path) -
                                 "      absolute_segments: [lift, carry, set_down]\n      segments: [carry]"))
     with pytest.raises(ScenarioError, match=r"scenario\.segments': refused, the relative pose is held"):
         load_scenario(str(bad))
+
+
+def test_the_absolute_frame_can_be_weighted_beside_the_relative_pose() -> None:
+    """``absolute_frame.weight``: the absolute target weighted beside the relative pose instead of under it. One cycle
+    with the object asked 60 cm up (the bounds make the two conflict): at priority 2 the relative pose's rows are met
+    (residual < 1e-6), weighted (1 and 100) they give way, more with the larger weight."""
+    frame = parse_absolute_frame({"scenario.absolute_frame.grasp_position": [0.0, 0.0, 0.15],
+                                  "scenario.absolute_frame.weight": 100}, False)
+    assert frame is not None and frame.weight == 100.0
+    with pytest.raises(ScenarioError, match="absolute_frame.weight': got -1, expected a number > 0"):
+        parse_absolute_frame({"scenario.absolute_frame.weight": -1}, False)
+    model = DualArmModel("baxter")
+    q = np.asarray(model.description.ready, float)
+    relative = FixedTarget(*model.relative_pose(q))
+    position, rotation = frame.pose(model, q)
+    far = FixedTarget(position + np.array([0.0, 0.0, 0.6]), rotation)
+    residual = {}
+    for weight in (None, 1.0, 100.0):
+        cycle = RelativeController(model, ControllerParams(solver="standard_qp")).step(q, relative, far, frame.grasp,
+                                                                                        weight)
+        assert cycle.result.status == Status.SOLVED, cycle.result.detail
+        jacobian = model.relative_state(q).jacobian
+        residual[weight] = float(np.linalg.norm(jacobian @ cycle.velocities))  # the relative target is at rest
+    assert residual[None] < 1e-6 < residual[1.0] < residual[100.0], residual

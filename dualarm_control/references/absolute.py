@@ -8,6 +8,8 @@ A goals scenario (:mod:`dualarm_control.references.goals`) may name the absolute
     absolute_frame:                           # or an object frame fixed to the left tool's grasp
       grasp_position: [0.0, 0.0, 0.15]        # [m], in the left tool frame
       grasp_rpy_deg: [0.0, 0.0, 0.0]
+      weight: 100.0                           # optional: weighted beside the relative pose (weight 1) in one
+                                              # least-squares problem instead of the second priority under it
     hold: true                                # the relative pose is held (an object in both hands)
 
 With an absolute frame (or an ``absolute: true`` item in ``goals``), a second online generator
@@ -49,10 +51,13 @@ class AbsoluteFrame:
     Attributes:
         grasp: the object frame in the left tool frame, or None (the halfway frame).
         hold: the relative pose is held: relative commands are refused (:data:`HOLD_REASON`).
+        weight: None (the absolute pose is the second priority, under the relative one) or the slack weight it
+            has beside the relative pose (weight 1) in one least-squares problem, > 0.
     """
 
     grasp: pin.SE3 | None = None
     hold: bool = False
+    weight: float | None = None
 
     def pose(self, model: DualArmModel, q: FloatArray) -> tuple[FloatArray, FloatArray]:
         """The frame's world position [m] (3,) and rotation (3, 3) at q (n,) [rad]; ValueError for the halfway
@@ -86,15 +91,20 @@ def parse_absolute_frame(flat: Mapping[str, Any], absolute_items: bool) -> Absol
         raise ScenarioError(f"scenario parameter '{PREFIX}absolute_frame': got {frame!r}, expected '{HALFWAY}' or "
                             "a mapping with grasp_position [m] and grasp_rpy_deg")
     unknown = sorted(k for k in flat if k.startswith(PREFIX + "absolute_frame.")
-                     and k[len(PREFIX):] not in (grasp_key, "absolute_frame.grasp_rpy_deg"))
+                     and k[len(PREFIX):] not in (grasp_key, "absolute_frame.grasp_rpy_deg", "absolute_frame.weight"))
     if unknown:
-        raise ScenarioError(f"scenario parameter '{unknown[0]}': unknown (absolute_frame takes grasp_position and "
-                            "grasp_rpy_deg)")
+        raise ScenarioError(f"scenario parameter '{unknown[0]}': unknown (absolute_frame takes grasp_position, "
+                            "grasp_rpy_deg and weight)")
+    weight = flat.get(PREFIX + "absolute_frame.weight")
+    if weight is not None and (isinstance(weight, bool) or not isinstance(weight, int | float)
+                               or not math.isfinite(weight) or weight <= 0):
+        raise ScenarioError(f"scenario parameter '{PREFIX}absolute_frame.weight': got {weight!r}, expected a number "
+                            "> 0 (or no weight: the second priority)")
     grasp = None
     if PREFIX + grasp_key in flat:
         position = _numbers(flat, grasp_key, None)
         rpy = [math.radians(v) for v in _numbers(flat, "absolute_frame.grasp_rpy_deg", [0.0, 0.0, 0.0])]
         grasp = pin.SE3(pin.rpy.rpyToMatrix(*rpy), np.array(position))
-    if frame is None and grasp is None and not hold and not absolute_items:
+    if frame is None and grasp is None and not hold and not absolute_items and weight is None:
         return None
-    return AbsoluteFrame(grasp, hold)
+    return AbsoluteFrame(grasp, hold, None if weight is None else float(weight))

@@ -40,11 +40,10 @@ from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.trajectory import MotionLimits
 
 if TYPE_CHECKING:
-    import pinocchio as pin
-
     from dualarm_control.collision import CollisionModel
     from dualarm_control.controller import ControllerParams, Cycle, RelativeController
     from dualarm_control.drive_monitor import SegmentJudge
+    from dualarm_control.references.absolute import AbsoluteFrame
 
 RELATIVE_TARGET = "/relative_target"
 JOINT_REFERENCE = "/joint_reference"
@@ -259,14 +258,16 @@ class RelativeTracker:
     uses_wrench = False
     steps: int | None = None
 
-    def __init__(self, controller: RelativeController, grasp: pin.SE3 | None = None) -> None:
+    def __init__(self, controller: RelativeController, frame: AbsoluteFrame | None = None) -> None:
         self.controller = controller
         self.label = controller.params.solver
-        self.grasp = grasp  # the absolute frame of a sample's absolute target: None the halfway frame
+        self.frame = frame  # the absolute frame of a sample's absolute target (None: the halfway one, priority 2)
 
     def track(self, q: FloatArray, sample: StreamSample | None, t: float, wrench: FloatArray | None) -> Cycle:
         assert sample is not None, "the relative pose task needs a relative target"
-        out = self.controller.step(q, sample.relative, sample.absolute, self.grasp)
+        frame = self.frame
+        out = self.controller.step(q, sample.relative, sample.absolute, frame.grasp if frame is not None else None,
+                                   frame.weight if frame is not None else None)
         out.stage = sample.stage
         return out
 

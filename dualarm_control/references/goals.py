@@ -158,7 +158,7 @@ class GoalsSource(SourceDefaults):
         return self.goals_stream(model, q0, options.limits, period, end)
 
     def tracker(self, model: DualArmModel, params: ControllerParams, options: RunOptions) -> RelativeTracker:
-        return RelativeTracker(RelativeController(model, params), self.frame.grasp if self.frame is not None else None)
+        return RelativeTracker(RelativeController(model, params), self.frame)
 
 
 def parse_goals_source(items: object, flat: Mapping[str, Any] | None = None) -> GoalsSource:

@@ -75,7 +75,7 @@ class SegmentsSource(SourceDefaults):
         return f"{len(self.segments)} segments" + (f", {len(self.absolute)} absolute" if self.absolute else "")
 
     def tracker(self, model: DualArmModel, params: ControllerParams, options: RunOptions) -> RelativeTracker:
-        return RelativeTracker(RelativeController(model, params), self.frame.grasp if self.frame is not None else None)
+        return RelativeTracker(RelativeController(model, params), self.frame)
 
     def stream(self, model: DualArmModel, q0: FloatArray, options: RunOptions, period: float) -> SegmentsStream:
         absolute = None
