@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import pinocchio as pin
 
 from dualarm_control.collision import CollisionModel, CollisionParams
 from dualarm_control.errors import ParameterError
@@ -46,9 +47,12 @@ from dualarm_control.solvers import (
 from dualarm_control.solvers.policy import rest_command
 from dualarm_control.status import Status
 from dualarm_control.tasks import (
+    DEFAULT_EQUALITY_WEIGHT,
     INEQUALITY,
+    AbsolutePoseTask,
     RelativePoseTask,
     RelativeTarget,
+    SecondPriority,
     Task,
     TaskRows,
     assemble_problem,
@@ -140,6 +144,8 @@ class Cycle:
         normal_offset: f_F of eq (9) of paper 001 [m] (0 without force feedback).
         stage: what is being followed (segment name, "circle", "execute"), for progress output.
         reports: what each limit saw, by limit name (the limits that had something to say).
+        absolute_position_error, absolute_orientation_error: the absolute frame's distance [m] and angle
+            [rad] to its target (issue 41: a relative cycle with an absolute target; NaN without).
     """
 
     velocities: FloatArray
@@ -154,6 +160,8 @@ class Cycle:
     normal_offset: float = 0.0
     stage: str = ""
     reports: dict[str, LimitReport] = field(default_factory=dict)
+    absolute_position_error: float = math.nan
+    absolute_orientation_error: float = math.nan
 
     @property
     def collision(self) -> CollisionReport | None:
@@ -254,23 +262,37 @@ class RelativeController:
             self.solver.seed(self._previous)
         return self
 
-    def step(self, q: FloatArray, target: RelativeTarget) -> Cycle:
+    def step(self, q: FloatArray, target: RelativeTarget, absolute: RelativeTarget | None = None,
+             grasp: pin.SE3 | None = None, weight: float | None = None) -> Cycle:
         """Compute the joint velocity command for measured positions q (n,) and a target.
+
+        With ``absolute`` (issue 41: a pose and twist of the absolute frame in the world, the halfway frame or,
+        with ``grasp``, the object frame fixed to the left tool's grasp) the absolute pose task is the second
+        priority, under the relative pose (:mod:`dualarm_control.solvers.priority`), or with ``weight`` weighted
+        beside it in one least-squares problem (the relative pose's weight 1).
 
         Non-finite q or target never reach the solver (its input check rejects the problem
         they make): the safe command is returned with status "invalid_input" and the
-        culprit in ``detail`` (see :meth:`_invalid`).
+        culprit in ``detail`` (see :meth:`_invalid`); so is an unusable absolute target (NaN, or the
+        halfway frame at a half turn), named.
         """
         start = time.perf_counter()
         q = self.model.check_q(q)
         conf = Configuration(self.model, q)
         rows = RelativePoseTask(target, self.params.gain).evaluate(conf, 0.0)
-        result = self._solve_rows(conf, (rows,))
+        tracked: tuple[TaskRows, ...] = (rows,)
+        if absolute is not None:
+            try:
+                task = absolute_task(absolute, self.params.gain, grasp, weight)
+                tracked = (rows, (SecondPriority(task) if weight is None else task).evaluate(conf, 0.0))
+            except ValueError as exc:
+                return self._invalid(f"absolute target: {exc}", start, q)
+        result = self._solve_rows(conf, tracked)
         if result.status == Status.INVALID_INPUT:
             return self._invalid(_culprit(q, target) or result.detail, start, q)
         state = conf.relative()
         ex, ey, ez = rows.value[:3].tolist()  # -e: the position rows are p - p*
-        return Cycle(
+        out = Cycle(
             velocities=result.velocities,
             result=result,
             position=state.position,
@@ -280,6 +302,10 @@ class RelativeController:
             cycle_time=time.perf_counter() - start,
             reports=self._reports(result.velocities),
         )
+        if len(tracked) == 2:
+            out.absolute_position_error = float(np.linalg.norm(tracked[1].value[:3]))
+            out.absolute_orientation_error = rotation_angle(task.state(conf).rotation, task.rotation)
+        return out
 
     def _reports(self, velocities: FloatArray) -> dict[str, LimitReport]:
         """What each limit saw in the cycle whose command is ``velocities`` [rad/s] (n,), by limit name."""
@@ -368,6 +394,19 @@ class RelativeController:
                               what)
         self._previous = velocities
         return Cycle(velocities, result, time.perf_counter() - start)
+
+
+def absolute_task(target: RelativeTarget, gain: float, grasp: pin.SE3 | None,
+                  weight: float | None = None) -> AbsolutePoseTask:
+    """The absolute pose task toward ``target`` (pose and twist of the absolute frame, world), gain k
+    [1/s], slack weight ``weight`` (None: the default); ValueError naming a non-finite target."""
+    values = (target.position, target.rotation, target.linear_velocity, target.angular_velocity)
+    if not all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in values):
+        raise ValueError("non-finite absolute target")
+    return AbsolutePoseTask(np.asarray(target.position, float), np.asarray(target.rotation, float), gain, grasp,
+                            weight=DEFAULT_EQUALITY_WEIGHT if weight is None else weight,
+                            linear_velocity=np.asarray(target.linear_velocity, float),
+                            angular_velocity=np.asarray(target.angular_velocity, float))
 
 
 def _culprit(q: FloatArray, target: RelativeTarget) -> str:

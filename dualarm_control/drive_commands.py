@@ -45,6 +45,9 @@ QUATERNION_NORM_TOLERANCE = 0.01
 
 ACCEPTED_FRAMES = (LEFT_TOOL, "")
 """Frame ids a command may carry: F1 (``left_tool``), or empty (read as ``left_tool``)."""
+ABSOLUTE_FRAMES = ("world", "")
+"""Frame ids an absolute command (the absolute frame's pose or twist, issue 41) may carry: the cell's ``world``,
+or empty (read as ``world``)."""
 
 
 class CommandError(DualArmError, ValueError):
@@ -81,10 +84,11 @@ class TwistCommand:
     stamp: float | None = None
 
 
-def check_frame(frame: str) -> None:
-    """Refuse any frame but ``left_tool`` (or the empty frame id, read as ``left_tool``)."""
-    if frame not in ACCEPTED_FRAMES:
-        raise CommandError(f"unknown frame {frame!r}: commands are expressed in {LEFT_TOOL!r} (F1)")
+def check_frame(frame: str, accepted: tuple[str, ...] = ACCEPTED_FRAMES) -> None:
+    """Refuse any frame but ``accepted``'s (by default ``left_tool``, or the empty frame id read as ``left_tool``)."""
+    if frame not in accepted:
+        where = f"{LEFT_TOOL!r} (F1)" if accepted == ACCEPTED_FRAMES else repr(accepted[0])
+        raise CommandError(f"unknown frame {frame!r}: commands are expressed in {where}")
 
 
 def finite_vector(values: object, size: int, what: str) -> FloatArray:
@@ -134,7 +138,8 @@ def check_stamp(stamp: float | None, last_accepted: float | None) -> None:
 
 
 def goal_command(position: object, orientation: object, *, frame: str = LEFT_TOOL, stamp: float | None = None,
-                 last_stamp: float | None = None, reach: float = math.inf) -> GoalCommand:
+                 last_stamp: float | None = None, reach: float = math.inf,
+                 accepted: tuple[str, ...] = ACCEPTED_FRAMES) -> GoalCommand:
     """Validate a goal pose.
 
     Args:
@@ -145,11 +150,12 @@ def goal_command(position: object, orientation: object, *, frame: str = LEFT_TOO
         stamp: its stamp [s] (None: not stamped).
         last_stamp: the last accepted command's stamp [s] (None: none yet).
         reach: largest accepted ``||p_g||`` [m] (``DualArmModel.relative_reach()``).
+        accepted: the frame ids accepted (:data:`ABSOLUTE_FRAMES` for the absolute frame's goals).
 
     Raises:
         CommandError: the reason (see the module docstring for the order of the checks).
     """
-    check_frame(frame)
+    check_frame(frame, accepted)
     p = finite_vector(position, 3, "goal position")
     arr = np.array(orientation, dtype=float) if not isinstance(orientation, str) else np.array([])
     if arr.shape == (3, 3):
@@ -170,13 +176,13 @@ def goal_command(position: object, orientation: object, *, frame: str = LEFT_TOO
 
 
 def twist_command(linear: object, angular: object, *, frame: str = LEFT_TOOL, stamp: float | None = None,
-                  last_stamp: float | None = None) -> TwistCommand:
+                  last_stamp: float | None = None, accepted: tuple[str, ...] = ACCEPTED_FRAMES) -> TwistCommand:
     """Validate a twist (v [m/s], w [rad/s], in F1); CommandError with the reason otherwise.
 
     A twist beyond the motion limits is not refused here: the generator follows it clipped
     to the limits (see :meth:`OnlineTrajectory.command_twist`).
     """
-    check_frame(frame)
+    check_frame(frame, accepted)
     v = finite_vector(linear, 3, "twist linear")
     w = finite_vector(angular, 3, "twist angular")
     check_stamp(stamp, last_stamp)

@@ -22,7 +22,7 @@ process or from a bag): each goal is judged where the arms are when the next com
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -89,8 +89,10 @@ class GoalMonitor:
 
     def __init__(self, model: DualArmModel, position_tolerance: float = POSITION_TOLERANCE,
                  angle_tolerance: float = ANGLE_TOLERANCE, stall_time: float = STALL_TIME,
-                 collision: CollisionModel | None = None, collision_near: float = COLLISION_NEAR) -> None:
+                 collision: CollisionModel | None = None, collision_near: float = COLLISION_NEAR,
+                 pose: Callable[[FloatArray], tuple[FloatArray, FloatArray]] | None = None) -> None:
         self.model = model
+        self.pose = pose if pose is not None else model.relative_pose  # what the goals are poses of (issue 41)
         self.collision = collision
         self.collision_near = collision_near
         self.position_tolerance = position_tolerance
@@ -109,7 +111,7 @@ class GoalMonitor:
         (None: no goal) and the measured joint positions q (n,) [rad]."""
         if goal is None:
             return Verdict(progress.state, 0.0, 0.0)
-        p, r = self.model.relative_pose(q)
+        p, r = self.pose(q)
         distance = float(np.linalg.norm(p - goal[0]))
         angle = float(np.linalg.norm(pin.log3(goal[1] @ r.T)))
         if self.final is not None:
@@ -149,10 +151,12 @@ class GoalOutcome:
         return head + (f": {self.reason}" if self.reason else f", error {self.distance * 1000:.3f} mm, {self.angle:.5f} rad")
 
 
-def pose_distance(model: DualArmModel, q: FloatArray, position: FloatArray, rotation: FloatArray) -> tuple[float, float]:
-    """Distance [m] and angle [rad] of the relative pose at q (n,) [rad] from ``(position (3,), rotation
-    (3, 3) or an (x, y, z, w) quaternion)``."""
-    p, r = model.relative_pose(q)
+def pose_distance(model: DualArmModel, q: FloatArray, position: FloatArray, rotation: FloatArray,
+                  frame: Callable[[DualArmModel, FloatArray], tuple[FloatArray, FloatArray]] | None = None
+                  ) -> tuple[float, float]:
+    """Distance [m] and angle [rad] of the relative pose at q (n,) [rad] (or of ``frame(model, q)``'s pose: the
+    absolute frame's, issue 41) from ``(position (3,), rotation (3, 3) or an (x, y, z, w) quaternion)``."""
+    p, r = model.relative_pose(q) if frame is None else frame(model, q)
     goal_r = np.asarray(rotation, dtype=float)
     if goal_r.shape == (4,):
         goal_r = pin.Quaternion(goal_r[3], *goal_r[:3]).normalized().toRotationMatrix()
@@ -172,8 +176,11 @@ def _outcome(model: DualArmModel, q: FloatArray, distance: float, angle: float, 
 def judge_goals(model: DualArmModel, commands: Sequence[TimedCommand], time: FloatArray, positions: FloatArray,
                 final_positions: FloatArray, collision: CollisionModel | None = None,
                 position_tolerance: float = POSITION_TOLERANCE, angle_tolerance: float = ANGLE_TOLERANCE,
-                near: float = COLLISION_NEAR) -> list[GoalOutcome]:
-    """The verdict of every goal of a script after the run (twists are not judged).
+                near: float = COLLISION_NEAR,
+                absolute: Callable[[DualArmModel, FloatArray], tuple[FloatArray, FloatArray]] | None = None
+                ) -> list[GoalOutcome]:
+    """The verdict of every goal of a script after the run (twists are not judged). An absolute goal (issue 41)
+    is judged on ``absolute``'s pose (the scenario's absolute frame: its world pose at q), not without it.
 
     A goal is judged at the last recorded cycle before the next command (the run's final
     positions for the last one): ``reached`` within the tolerances [m, rad], else ``stalled``
@@ -181,14 +188,15 @@ def judge_goals(model: DualArmModel, commands: Sequence[TimedCommand], time: Flo
     starts = [c.t for c in commands]
     out = []
     for i, command in enumerate(commands):
-        if not isinstance(command, TimedGoal):
+        if not isinstance(command, TimedGoal) or (command.absolute and absolute is None):
             continue
         if i + 1 < len(commands):
             k = int(np.searchsorted(time, starts[i + 1], side="left")) - 1
             q = positions[max(k, 0)]
         else:
             q = final_positions if np.all(np.isfinite(final_positions)) else positions[-1]
-        distance, angle = pose_distance(model, q, command.position, command.orientation)
+        distance, angle = pose_distance(model, q, command.position, command.orientation,
+                                        absolute if command.absolute else None)
         when = "when the next command came" if i + 1 < len(commands) else "at the end of the run"
         out.append(_outcome(model, q, distance, angle, i, command.t, when, "", collision, near, position_tolerance,
                             angle_tolerance))
@@ -209,13 +217,18 @@ class SegmentJudge:
     :func:`stall_reason` (the collision pair or joint limit that held the arms, and the error left). A segment
     with no sample in its window is judged at the latest sample before the window closed. ``kind`` names a
     part in the verdicts ("segment 1 'approach'"; a plan's one part: "plan 1 'corner_path'"). The batch form is
-    :func:`judge_segments`; the trajectory node feeds it live."""
+    :func:`judge_segments`; the trajectory node feeds it live. ``frame`` (issue 41) judges the poses of another
+    frame, ``frame(model, q)`` (the absolute frame's segments); ``others`` are judges fed alongside (their verdicts
+    come with this one's)."""
 
     def __init__(self, model: DualArmModel, names: Sequence[str], ends: Sequence[float],
                  poses: Sequence[tuple[FloatArray, FloatArray]], collision: CollisionModel | None = None,
                  position_tolerance: float = POSITION_TOLERANCE, angle_tolerance: float = ANGLE_TOLERANCE,
-                 near: float = COLLISION_NEAR, kind: str = "segment") -> None:
+                 near: float = COLLISION_NEAR, kind: str = "segment",
+                 frame: Callable[[DualArmModel, FloatArray], tuple[FloatArray, FloatArray]] | None = None) -> None:
         self.model, self.collision, self.near, self.kind = model, collision, near, kind
+        self.frame = frame  # the poses are of this frame (issue 41: the absolute frame's), None: the relative pose
+        self.others: list[SegmentJudge] = []  # judges fed alongside (the absolute segments' beside the relative ones)
         self.names, self.ends, self.poses = list(names), list(ends), list(poses)
         self.position_tolerance, self.angle_tolerance = position_tolerance, angle_tolerance
         self.k = 0  # the segment being judged
@@ -234,11 +247,13 @@ class SegmentJudge:
         out: list[GoalOutcome] = []
         if not np.all(np.isfinite(q)):
             return out
+        for other in self.others:
+            out += other.feed(t, q)
         while self.k + 1 < len(self.names) and t > self.ends[self.k] + SEGMENT_WINDOW[1]:
             out.append(self._close(self.k))
         self.latest = q
         if self.k + 1 < len(self.names) and t >= self.ends[self.k] - SEGMENT_WINDOW[0]:
-            distance, angle = pose_distance(self.model, q, *self.poses[self.k])
+            distance, angle = pose_distance(self.model, q, *self.poses[self.k], self.frame)
             score = self._score(distance, angle)
             if self.best is None or score < self.best[0]:
                 self.best = (score, distance, angle, q)
@@ -248,7 +263,7 @@ class SegmentJudge:
         """Segment k's verdict at its best sample (or the latest), then on to the next."""
         if self.best is None:
             q = self.latest if self.latest is not None else np.full(self.model.nq, np.nan)
-            distance, angle = pose_distance(self.model, q, *self.poses[k])
+            distance, angle = pose_distance(self.model, q, *self.poses[k], self.frame)
         else:
             _, distance, angle, q = self.best
         self.k, self.best = k + 1, None
@@ -271,9 +286,11 @@ class SegmentJudge:
         if self.k < len(self.names):
             q = final if final is not None and np.all(np.isfinite(final)) else self.latest
             if q is not None:
-                distance, angle = pose_distance(self.model, q, *self.poses[self.k])
+                distance, angle = pose_distance(self.model, q, *self.poses[self.k], self.frame)
                 out.append(self._judge(self.k, q, distance, angle, "at the end of the run"))
             self.k += 1
+        for other in self.others:
+            out += other.finish(final)
         return out
 
 

@@ -46,6 +46,8 @@ DRIVE_STATES = (*STATES, STALLED, REJECTED)
 
 STATUS_NAME = "trajectory_node"
 """``/diagnostics`` status name carrying the drive keys (the trajectory node's entry)."""
+ABSOLUTE_STATUS_NAME = "trajectory_node/absolute"
+"""``/diagnostics`` status name carrying the drive keys of the absolute frame's goals (issue 41)."""
 KEY_STATE = "drive_state"
 KEY_GOAL_STAMP = "goal_stamp"  # s, "%.9f" (the last goal received, accepted or not)
 KEY_DISTANCE = "distance_m"

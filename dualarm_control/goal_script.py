@@ -12,7 +12,9 @@ Schema (YAML list under ``goals:``; times [s] from the start of the run, m, rad)
 * a **goal** item has ``t``, ``xyz`` and exactly one of ``rpy`` / ``quat``;
 * a **twist** item has ``t``, ``twist`` (``linear`` and/or ``angular``, 3 numbers each, missing
   ones zero) and ``duration`` > 0 s: the driver sends it every cycle in ``[t, t + duration)``,
-  then the generator brakes after its ``jog_timeout``.
+  then the generator brakes after its ``jog_timeout``;
+* either may have ``absolute: true`` (issue 41): a goal pose or twist of the absolute frame in the world
+  (:mod:`dualarm_control.references.absolute`), given to the absolute frame's generator.
 
 Items are applied in time order (stable for equal times). A goal may come mid-motion: it
 preempts. Errors name the item and the key (``goals[2].rpy: expected 3 numbers``). Physical
@@ -44,6 +46,7 @@ class TimedGoal:
     t: float
     position: FloatArray
     orientation: FloatArray
+    absolute: bool = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -54,11 +57,12 @@ class TimedTwist:
     linear: FloatArray
     angular: FloatArray
     duration: float
+    absolute: bool = False
 
 
 TimedCommand = TimedGoal | TimedTwist
-_GOAL_KEYS = {"t", "xyz", "rpy", "quat"}
-_TWIST_KEYS = {"t", "twist", "duration"}
+_GOAL_KEYS = {"t", "xyz", "rpy", "quat", "absolute"}
+_TWIST_KEYS = {"t", "twist", "duration", "absolute"}
 
 
 def _number(value: object, where: str) -> float:
@@ -88,6 +92,9 @@ def parse_item(item: object, where: str) -> TimedCommand:
     t = _number(item["t"], f"{where}.t")
     if t < 0.0:
         raise ScriptError(f"{where}.t: expected a time >= 0 s, got {t!r}")
+    absolute = item.get("absolute", False)
+    if not isinstance(absolute, bool):
+        raise ScriptError(f"{where}.absolute: expected true or false, got {absolute!r}")
     if "twist" in keys:
         twist = item["twist"]
         if not isinstance(twist, Mapping) or not set(twist) <= {"linear", "angular"} or not twist:
@@ -99,9 +106,9 @@ def parse_item(item: object, where: str) -> TimedCommand:
             raise ScriptError(f"{where}.duration: expected a duration > 0 s, got {duration!r}")
         linear = _numbers(twist.get("linear", [0.0] * 3), 3, f"{where}.twist.linear")
         angular = _numbers(twist.get("angular", [0.0] * 3), 3, f"{where}.twist.angular")
-        return TimedTwist(t, linear, angular, duration)
+        return TimedTwist(t, linear, angular, duration, absolute)
     if "xyz" not in item:
-        raise ScriptError(f"{where}: missing key xyz (goal position [m] in left_tool)")
+        raise ScriptError(f"{where}: missing key xyz (goal position [m] in left_tool, or in world when absolute)")
     if ("rpy" in item) == ("quat" in item):
         raise ScriptError(f"{where}: give exactly one of rpy (roll pitch yaw [rad]) and quat (x y z w)")
     position = _numbers(item["xyz"], 3, f"{where}.xyz")
@@ -109,7 +116,7 @@ def parse_item(item: object, where: str) -> TimedCommand:
         orientation = rotation_from_rpy(_numbers(item["rpy"], 3, f"{where}.rpy"))
     else:
         orientation = _numbers(item["quat"], 4, f"{where}.quat")
-    return TimedGoal(t, position, orientation)
+    return TimedGoal(t, position, orientation, absolute)
 
 
 def parse_goals(items: object, where: str = "goals") -> tuple[TimedCommand, ...]:

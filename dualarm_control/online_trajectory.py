@@ -93,6 +93,7 @@ import pinocchio as pin
 import ruckig
 
 from dualarm_control.drive_commands import (
+    ACCEPTED_FRAMES,
     CommandError,
     GoalCommand,
     TwistCommand,
@@ -100,7 +101,6 @@ from dualarm_control.drive_commands import (
     twist_command,
 )
 from dualarm_control.drive_status import IDLE, JOGGING, MOVING, REACHED, GoalProgress
-from dualarm_control.kinematics import LEFT_TOOL
 from dualarm_control.online_rotation import (
     _IDLE,
     _MIN_SHARE,
@@ -142,6 +142,8 @@ class OnlineTrajectory:
         jog_timeout: seconds without a new twist after which a jog brakes to rest.
         reach: largest accepted ``||p_g||`` [m] of a goal (``DualArmModel.relative_reach()``:
             2.870 m for the cell).
+        frames: the frame ids a command may carry (the absolute frame's generator, issue 41:
+            :data:`~dualarm_control.drive_commands.ABSOLUTE_FRAMES`, its pose in the world).
 
     The generator is deterministic: its time is ``cycles * period``; commands apply from the
     next :meth:`step`.
@@ -149,7 +151,7 @@ class OnlineTrajectory:
 
     def __init__(self, position: FloatArray, rotation: FloatArray, limits: MotionLimits | None = None,
                  period: float = DEFAULT_PERIOD, jog_timeout: float = DEFAULT_JOG_TIMEOUT,
-                 reach: float = math.inf) -> None:
+                 reach: float = math.inf, frames: tuple[str, ...] = ACCEPTED_FRAMES) -> None:
         if not (math.isfinite(period) and period > 0.0):
             raise ValueError(f"period: expected a duration > 0 s, got {period!r}")
         if not (math.isfinite(jog_timeout) and jog_timeout > 0.0):
@@ -158,6 +160,7 @@ class OnlineTrajectory:
         self.period = float(period)
         self.jog_timeout = float(jog_timeout)
         self.reach = float(reach)
+        self.frames = frames
         self.cycles = 0
         self.p = np.array(_frozen_vector(position, "position"))
         self.r = np.array(_check_rotation(rotation, "rotation"))
@@ -195,7 +198,7 @@ class OnlineTrajectory:
         self._pin.max_acceleration = [limits.max_linear_acceleration] * 3
         self._pin.max_jerk = [limits.max_linear_jerk] * 3
 
-    def command_goal(self, position: object, orientation: object, *, frame: str = LEFT_TOOL,
+    def command_goal(self, position: object, orientation: object, *, frame: str | None = None,
                      stamp: float | None = None) -> CommandResult:
         """Go to the pose ``(position [m], orientation)`` in F1 and stop there.
 
@@ -203,8 +206,8 @@ class OnlineTrajectory:
         reason, motion unchanged) per :func:`dualarm_control.drive_commands.goal_command`.
         """
         try:
-            goal = goal_command(position, orientation, frame=frame, stamp=stamp, last_stamp=self.last_stamp,
-                                reach=self.reach)
+            goal = goal_command(position, orientation, frame=self.frames[0] if frame is None else frame, stamp=stamp,
+                                last_stamp=self.last_stamp, reach=self.reach, accepted=self.frames)
         except CommandError as exc:
             return CommandResult(False, str(exc))
         note = "preempts the current motion" if self.state in (MOVING, JOGGING) else ""
@@ -219,13 +222,14 @@ class OnlineTrajectory:
         self._pos_done = self._rot_done = False
         return CommandResult(True, note)
 
-    def command_twist(self, linear: object, angular: object, *, frame: str = LEFT_TOOL,
+    def command_twist(self, linear: object, angular: object, *, frame: str | None = None,
                       stamp: float | None = None) -> CommandResult:
         """Follow the twist ``(linear [m/s], angular [rad/s])`` in F1 until ``jog_timeout`` passes
         without a new one; then brake to rest. Clipped to the velocity limits (the result's
         reason says so); refused per :func:`dualarm_control.drive_commands.twist_command`."""
         try:
-            twist = twist_command(linear, angular, frame=frame, stamp=stamp, last_stamp=self.last_stamp)
+            twist = twist_command(linear, angular, frame=self.frames[0] if frame is None else frame, stamp=stamp,
+                                  last_stamp=self.last_stamp, accepted=self.frames)
         except CommandError as exc:
             return CommandResult(False, str(exc))
         lim = self.limits

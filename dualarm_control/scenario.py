@@ -210,7 +210,7 @@ def scenario_from_parameters(flat: Mapping[str, Any], source: Path,
     if PREFIX + "tasks" in flat:
         reference = parse_tasks(flat, Path(source).parent)
     elif PREFIX + "goals" in flat:
-        reference = parse_goals_source(flat[PREFIX + "goals"])
+        reference = parse_goals_source(flat[PREFIX + "goals"], flat)
     else:
         reference = parse_segments(flat)
     limits = _motion_limits(flat)

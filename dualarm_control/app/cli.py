@@ -65,11 +65,11 @@ def cmd_launch(args: argparse.Namespace) -> int:
     from dualarm_control.params import read_params_files
     from dualarm_control.scenario import load_scenario, scenario_file
 
-    interactive = args.scenario == INTERACTIVE
-    if interactive:  # the cell and limits of the interactive demo, driven live
-        args.scenario = INTERACTIVE_CELL
-        if args.lockstep or args.plan:
-            raise DualArmError("'dualarm launch interactive' runs in real time (no --lockstep, no --plan)")
+    interactive = args.scenario == INTERACTIVE or args.interactive
+    if interactive:  # the cell and limits of the interactive demo (or of the scenario given), driven live
+        args.scenario = INTERACTIVE_CELL if args.scenario == INTERACTIVE else args.scenario
+        if args.plan:
+            raise DualArmError("'dualarm launch interactive' and --interactive follow live goals (no --plan)")
     if args.processes != 3 and args.lockstep:
         raise DualArmError(f"--processes {args.processes} runs in real time: --lockstep runs the nodes in "
                            "separate processes (--processes 3)")
@@ -698,6 +698,9 @@ def build_parser() -> argparse.ArgumentParser:
     lau.add_argument("--duration", type=float, metavar="S",
                      help="task scenario: run S seconds of task time (-p duration:=S; default: the scenario's)")
     lau.add_argument("--timeout", type=float, default=None, metavar="S", help="stop after S seconds")
+    lau.add_argument("--interactive", action="store_true",
+                     help="drive the scenario's cell live instead of its script: /relative_goal, /relative_twist, "
+                     "and with its absolute_frame /absolute_goal, /absolute_twist (dualarm goal/jog [--absolute])")
     lau.add_argument("--processes", type=int, choices=(1, 2, 3), default=3, metavar="N",
                      help="3: each node its own process (default); 2: the simulator alone, the controller and the "
                      "trajectory node in one; 1: all in one. Nodes sharing a process run as cell_container (one "

@@ -141,4 +141,5 @@ def stream_sample(samples: Mapping[str, Any]) -> StreamSample | None:
     if RELATIVE_TARGET not in samples:
         return None
     ref = samples.get(JOINT_REFERENCE)
-    return StreamSample(samples[RELATIVE_TARGET], (ref[1], ref[2]) if ref is not None else None, "")
+    target = samples[RELATIVE_TARGET]
+    return StreamSample(target, (ref[1], ref[2]) if ref is not None else None, "", getattr(target, "absolute", None))

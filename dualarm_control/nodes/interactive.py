@@ -17,6 +17,7 @@ at the collision limit names the pair: "collision constraint: left_flange – ri
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import fields
 from typing import Any
 
@@ -28,25 +29,27 @@ from rcl_interfaces.msg import SetParametersResult
 from dualarm_control.collision import CollisionModel
 from dualarm_control.drive_monitor import GoalMonitor
 from dualarm_control.drive_status import (
+    ABSOLUTE_STATUS_NAME,
     JOGGING,
     MOVING,
-    REACHED,
-    REJECTED,
-    STALLED,
     STATUS_NAME,
-    status_values,
 )
 from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel, FloatArray
+from dualarm_control.nodes.drive_channel import DriveChannel
 from dualarm_control.online_trajectory import CommandResult, OnlineTrajectory
 from dualarm_control.params import ParamSpec, positive
-from dualarm_control.ros import convert
-from dualarm_control.ros.drive import GOAL_TOPIC, TWIST_TOPIC
+from dualarm_control.references.absolute import HOLD_REASON, AbsoluteFrame
+from dualarm_control.ros.drive import (
+    ABSOLUTE_GOAL_TOPIC,
+    ABSOLUTE_TWIST_TOPIC,
+    GOAL_TOPIC,
+    TWIST_TOPIC,
+)
 from dualarm_control.ros.inputs import Throttle
 from dualarm_control.trajectory import MotionLimits
 
 LIMIT_PREFIX = "limits."
-REJECTED_HOLD_S = 1.0  # s a rejection stays the reported state (unless a command is accepted)
 
 
 def limit_specs(limits: MotionLimits) -> list[ParamSpec]:
@@ -62,29 +65,82 @@ def _stamp_s(stamp: Any) -> float:
 class InteractiveDrive:
     """Commands in, drive status out, for the trajectory node (module docstring)."""
 
-    def __init__(self, node: Any, model: DualArmModel, limits: MotionLimits, qos: Any) -> None:
+    def __init__(self, node: Any, model: DualArmModel, limits: MotionLimits, qos: Any,
+                 frame: AbsoluteFrame | None = None) -> None:
         self.node = node
         self.log = node.get_logger()
         self.model = model
         self.limits = limits
         self.pending_limits: MotionLimits | None = None
-        self.generator: OnlineTrajectory | None = None
         # stalls are explained by the closest link pair (the controller's collision limit stops the arms at d_s)
-        self.monitor = GoalMonitor(model, collision=CollisionModel(model, allowed=model.description.collision_allowed))
+        collision = CollisionModel(model, allowed=model.description.collision_allowed)
+        self.relative = DriveChannel(STATUS_NAME, "goal", GoalMonitor(model, collision=collision), model.relative_pose)
         self.q: FloatArray | None = None
-        self.rejected: tuple[float | None, str, float] | None = None  # (goal stamp, reason, since t)
-        self.last_state = ""
         self.throttle = Throttle(1.0)
         node.create_subscription(PoseStamped, GOAL_TOPIC, self.on_goal, 10)
         node.create_subscription(TwistStamped, TWIST_TOPIC, self.on_twist, qos)
         node.add_on_set_parameters_callback(self.on_set_parameters)
+        self.frame = frame  # the scenario's absolute frame (issue 41): its goals and twists, under the relative pose
+        self.absolute: DriveChannel | None = None
+        if frame is not None:
+            pose = functools.partial(frame.pose, model)
+            self.absolute = DriveChannel(ABSOLUTE_STATUS_NAME, "absolute goal",
+                                         GoalMonitor(model, collision=collision, pose=pose), pose)
+            node.create_subscription(PoseStamped, ABSOLUTE_GOAL_TOPIC, self.on_absolute_goal, 10)
+            node.create_subscription(TwistStamped, ABSOLUTE_TWIST_TOPIC, self.on_absolute_twist, qos)
 
-    def start(self, generator: OnlineTrajectory) -> None:
-        """Hold the generator's (measured) pose; commands apply from now."""
-        self.generator = generator
+    @property
+    def generator(self) -> OnlineTrajectory | None:
+        """The relative pose's generator (None until the first joint state)."""
+        return self.relative.generator
+
+    def start(self, generator: OnlineTrajectory, absolute: OnlineTrajectory | None = None) -> None:
+        """Hold the generators' (measured) poses; commands apply from now."""
+        self.relative.generator = generator
         generator.set_limits(self.limits)
         self.log.info("interactive: holding the measured relative pose; goals on "
                       f"{GOAL_TOPIC}, twists on {TWIST_TOPIC} (frame left_tool)")
+        if absolute is not None and self.absolute is not None:
+            self.absolute.generator = absolute
+            absolute.set_limits(self.limits)
+            self.log.info(f"interactive: holding the measured absolute pose; absolute goals on {ABSOLUTE_GOAL_TOPIC}, "
+                          f"twists on {ABSOLUTE_TWIST_TOPIC} (frame world)"
+                          + ("; the relative pose is held (hold: relative commands refused)"
+                             if self.frame is not None and self.frame.hold else ""))
+
+    def _held(self, stamp: float | None, what: str) -> bool:
+        """True (and the command refused, naming why) when the relative pose is held (``hold``)."""
+        if self.frame is None or not self.frame.hold:
+            return False
+        self._reject(stamp, f"{what} rejected: {HOLD_REASON}")
+        return True
+
+    def on_absolute_goal(self, msg: Any) -> None:
+        self._absolute(msg, "absolute goal", lambda gen, stamp: gen.command_goal(
+            [msg.pose.position.x, msg.pose.position.y, msg.pose.position.z],
+            [msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z, msg.pose.orientation.w],
+            frame=msg.header.frame_id, stamp=stamp))
+
+    def on_absolute_twist(self, msg: Any) -> None:
+        lin, ang = msg.twist.linear, msg.twist.angular
+        self._absolute(msg, "absolute twist", lambda gen, stamp: gen.command_twist(
+            [lin.x, lin.y, lin.z], [ang.x, ang.y, ang.z], frame=msg.header.frame_id, stamp=stamp))
+
+    def _absolute(self, msg: Any, what: str, command: Any) -> None:
+        """An absolute command to the absolute frame's generator (its own stamps and status)."""
+        channel = self.absolute
+        assert channel is not None
+        stamp = _stamp_s(msg.header.stamp)
+        goal = what == "absolute goal"
+        if channel.generator is None:
+            self._reject(stamp if goal else None, f"{what} rejected: not started (no joint state yet)", channel)
+            return
+        if self._answer(command(channel.generator, stamp), stamp if goal else None, what, channel):
+            channel.monitor.reset()
+            if goal:
+                p = msg.pose.position
+                self.log.info(f"absolute goal accepted: xyz [{p.x:.4f}, {p.y:.4f}, {p.z:.4f}] m (world), "
+                              f"stamp {stamp:.9f}")
 
     # ---------------------------------------------------------------- commands
     def on_goal(self, msg: Any) -> None:
@@ -93,12 +149,14 @@ class InteractiveDrive:
         if gen is None:
             self._reject(stamp, "not started (no joint state yet)")
             return
+        if self._held(stamp, "goal"):
+            return
         p, o = msg.pose.position, msg.pose.orientation
         before = gen.state if gen.goal is not None else ""
         result = gen.command_goal([p.x, p.y, p.z], [o.x, o.y, o.z, o.w], frame=msg.header.frame_id, stamp=stamp)
         if not self._answer(result, stamp, "goal"):
             return
-        self.monitor.reset()
+        self.relative.monitor.reset()
         if before in (MOVING, JOGGING) or result.reason:
             self.log.info(f"goal preempted by the goal of stamp {stamp:.9f}")
         assert gen.goal is not None
@@ -109,27 +167,27 @@ class InteractiveDrive:
     def on_twist(self, msg: Any) -> None:
         gen = self.generator
         stamp = _stamp_s(msg.header.stamp)
-        if gen is None:
+        if gen is None or self._held(None, "twist"):
             return
         lin, ang = msg.twist.linear, msg.twist.angular
         had_goal = gen.goal is not None and gen.state == MOVING
         result = gen.command_twist([lin.x, lin.y, lin.z], [ang.x, ang.y, ang.z], frame=msg.header.frame_id,
                                    stamp=stamp)
         if self._answer(result, None, "twist"):
-            self.monitor.reset()
+            self.relative.monitor.reset()
             if had_goal:
                 self.log.info("goal preempted by a twist")
 
-    def _answer(self, result: CommandResult, stamp: float | None, what: str) -> bool:
+    def _answer(self, result: CommandResult, stamp: float | None, what: str,
+                channel: DriveChannel | None = None) -> bool:
         if result.accepted:
-            self.rejected = None
+            (channel or self.relative).rejected = None
             return True
-        self._reject(stamp, f"{what} rejected: {result.reason}")
+        self._reject(stamp, f"{what} rejected: {result.reason}", channel)
         return False
 
-    def _reject(self, stamp: float | None, reason: str) -> None:
-        gen = self.generator
-        self.rejected = (stamp, reason, gen.time if gen is not None else 0.0)
+    def _reject(self, stamp: float | None, reason: str, channel: DriveChannel | None = None) -> None:
+        (channel or self.relative).reject(stamp, reason)
         line = self.throttle.text(reason)
         if line is not None:
             self.log.warning(line)
@@ -154,41 +212,26 @@ class InteractiveDrive:
         assert gen is not None and self.q is not None
         self.log.error(f"online trajectory failed ({type(exc).__name__}: {str(exc).strip()[:200]}); "
                        "holding the measured relative pose")
-        gen.hold(*self.model.relative_pose(self.q))
-        gen.goal = None
-        self.monitor.reset()
-        self.rejected = (None, f"trajectory failed: {type(exc).__name__}", gen.time)
+        for channel in (self.relative, self.absolute):
+            if channel is not None and channel.generator is not None:
+                channel.generator.hold(*channel.pose(self.q))
+                channel.generator.goal = None
+                channel.monitor.reset()
+        self.relative.rejected = (None, f"trajectory failed: {type(exc).__name__}", gen.time)
 
     # ---------------------------------------------------------------- per cycle
-    def cycle(self, stamp_ns: int) -> bytes | None:
-        """After the cycle's step: apply new limits, judge the goal, the /diagnostics status (CDR)."""
+    def cycle(self, stamp_ns: int) -> list[bytes]:
+        """After the cycle's step: apply new limits, judge the goals, the /diagnostics statuses (CDR): the relative
+        pose's, and the absolute frame's when the scenario has one."""
         gen = self.generator
         if gen is None or self.q is None:
-            return None
+            return []
         if self.pending_limits is not None:
             self.limits, self.pending_limits = self.pending_limits, None
-            gen.set_limits(self.limits)
-        progress = gen.progress()
-        goal = (gen.goal.position, gen.goal.rotation) if gen.goal is not None else None
-        verdict = self.monitor.judge(progress, goal, self.q, gen.time)
-        state, reason, goal_stamp = verdict.state, verdict.reason, None
-        if verdict.state != self.last_state:
-            self._log_state(verdict.state, verdict.distance, verdict.angle, reason, progress.goal_stamp)
-            self.last_state = verdict.state
-            if verdict.state == STALLED:  # hold where the arms are: the controller stops pushing
-                gen.hold(*self.model.relative_pose(self.q))
-        if self.rejected is not None:
-            if gen.time - self.rejected[2] <= REJECTED_HOLD_S:
-                goal_stamp, reason, state = self.rejected[0], self.rejected[1], REJECTED
-            else:
-                self.rejected = None
-        values = status_values(dataclasses.replace(progress, distance=verdict.distance, angle=verdict.angle),
-                               state=state, reason=reason, goal_stamp=goal_stamp)
-        level = 1 if state in (STALLED, REJECTED) else 0
-        return convert.diagnostics(stamp_ns, STATUS_NAME, level, state, values)
-
-    def _log_state(self, state: str, distance: float, angle: float, reason: str, stamp: float | None) -> None:
-        if state == REACHED and stamp is not None:
-            self.log.info(f"goal reached (stamp {stamp:.9f}): error {distance * 1000:.3f} mm, {angle:.5f} rad")
-        elif state == STALLED:
-            self.log.warning(f"goal stalled (stamp {stamp:.9f}): {reason}")
+            for channel in (self.relative, self.absolute):
+                if channel is not None and channel.generator is not None:
+                    channel.generator.set_limits(self.limits)
+        out = [self.relative.status(stamp_ns, self.q, self.log)]
+        if self.absolute is not None:
+            out.append(self.absolute.status(stamp_ns, self.q, self.log))
+        return [status for status in out if status is not None]

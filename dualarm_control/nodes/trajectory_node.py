@@ -122,11 +122,12 @@ class TrajectoryNode:
         self.source: Any = self.scenario.reference
         if p["plan"]:
             self.source = PlanSource.from_file(self.model, p["plan"])
-        if p["mode"] == INTERACTIVE:
-            self.source = GoalsSource(None)
+        if p["mode"] == INTERACTIVE:  # live goals; the scenario's absolute frame (issue 41) with its own
+            frame = getattr(self.scenario.reference, "frame", None)
+            self.source = GoalsSource(None, frame)
             limits = declare(n, limit_specs(self.scenario.limits))
             self.drive = InteractiveDrive(n, self.model, MotionLimits(
-                **{k[len(LIMIT_PREFIX):]: v for k, v in limits.items()}), self.qos)
+                **{k[len(LIMIT_PREFIX):]: v for k, v in limits.items()}), self.qos, frame)
         depth = stream_qos(p["qos_reliability"], publisher_depth(self.lockstep))
         self.pub = local_publisher(bus, n.create_publisher(MultiDOFJointTrajectory, RELATIVE_TARGET, depth),
                                    RELATIVE_TARGET)
@@ -177,7 +178,7 @@ class TrajectoryNode:
             self.start_ns = stamp if self.lockstep else self.node.get_clock().now().nanoseconds
             self.held_since = time.monotonic()
             if self.drive is not None and isinstance(self.stream, GoalsStream):
-                self.drive.start(self.stream.generator)
+                self.drive.start(self.stream.generator, self.stream.absolute)
             if self.drive is None:
                 self.log.info(f"targets: {self.stream.end:.2f} s (with settle {self.scenario.settle_time:.2f} s)")
             if self.drive is None:  # segments, a plan: each part's verdict, live
@@ -276,13 +277,12 @@ class TrajectoryNode:
                 raise
             self.drive.recover(exc)
             sample = self.stream.sample(t)
-        self.pub.publish(convert.target_message(stamp, elapsed_ns, sample.relative))
+        self.pub.publish(convert.target_message(stamp, elapsed_ns, sample.relative, sample.absolute))
         if self.pub_joint is not None and sample.joints is not None:
             self.pub_joint.publish(convert.joint_reference_message(stamp, elapsed_ns, self.model.joint_names,
                                                                    *sample.joints))
         if self.drive is not None:
-            status = self.drive.cycle(stamp)
-            if status is not None:
+            for status in self.drive.cycle(stamp):
                 self.pub_diag.publish(status)
         elif sample.stage != self.stage:
             self.stage = sample.stage

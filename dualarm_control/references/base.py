@@ -43,6 +43,7 @@ if TYPE_CHECKING:
     from dualarm_control.collision import CollisionModel
     from dualarm_control.controller import ControllerParams, Cycle, RelativeController
     from dualarm_control.drive_monitor import SegmentJudge
+    from dualarm_control.references.absolute import AbsoluteFrame
 
 RELATIVE_TARGET = "/relative_target"
 JOINT_REFERENCE = "/joint_reference"
@@ -151,11 +152,14 @@ class StreamSample:
             ``angular_acceleration``) for /relative_target.
         joints: ``(q_ref, qd_ref)`` (n,) each [rad, rad/s] for /joint_reference, or None.
         stage: the stage's name (a segment's, "execute", "goal", "jog", "hold"): logged when it changes.
+        absolute: the absolute frame's target (pose and twist in the world, the same members as ``relative``;
+            issue 41), tracked under the relative pose, or None.
     """
 
     relative: Any
     joints: tuple[FloatArray, FloatArray] | None
     stage: str
+    absolute: Any = None
 
 
 class TargetStream(Protocol):
@@ -254,13 +258,16 @@ class RelativeTracker:
     uses_wrench = False
     steps: int | None = None
 
-    def __init__(self, controller: RelativeController) -> None:
+    def __init__(self, controller: RelativeController, frame: AbsoluteFrame | None = None) -> None:
         self.controller = controller
         self.label = controller.params.solver
+        self.frame = frame  # the absolute frame of a sample's absolute target (None: the halfway one, priority 2)
 
     def track(self, q: FloatArray, sample: StreamSample | None, t: float, wrench: FloatArray | None) -> Cycle:
         assert sample is not None, "the relative pose task needs a relative target"
-        out = self.controller.step(q, sample.relative)
+        frame = self.frame
+        out = self.controller.step(q, sample.relative, sample.absolute, frame.grasp if frame is not None else None,
+                                   frame.weight if frame is not None else None)
         out.stage = sample.stage
         return out
 
@@ -270,5 +277,9 @@ class RelativeTracker:
 
 def relative_report(cycle: Cycle) -> dict[str, Any]:
     """A relative cycle's /diagnostics values: cycle time [s] and tracking errors [m, rad]."""
-    return {"cycle_time_s": f"{cycle.cycle_time:.6e}", "position_error_m": f"{cycle.position_error:.6e}",
-            "orientation_error_rad": f"{cycle.orientation_error:.6e}"}
+    out = {"cycle_time_s": f"{cycle.cycle_time:.6e}", "position_error_m": f"{cycle.position_error:.6e}",
+           "orientation_error_rad": f"{cycle.orientation_error:.6e}"}
+    if math.isfinite(cycle.absolute_position_error):  # an absolute target (issue 41)
+        out["absolute_position_error_m"] = f"{cycle.absolute_position_error:.6e}"
+        out["absolute_orientation_error_rad"] = f"{cycle.absolute_orientation_error:.6e}"
+    return out

@@ -17,9 +17,9 @@ Keys of a scenario file: ``goals`` (the list) instead of ``segments`` or ``tasks
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Any, ClassVar
 
 from dualarm_control.controller import ControllerParams, RelativeController
 from dualarm_control.errors import ScenarioError
@@ -32,6 +32,11 @@ from dualarm_control.goal_script import (
 )
 from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.online_trajectory import OnlineTrajectory
+from dualarm_control.references.absolute import (
+    HOLD_REASON,
+    AbsoluteFrame,
+    parse_absolute_frame,
+)
 from dualarm_control.references.base import (
     RELATIVE_TARGET,
     RelativeTracker,
@@ -54,24 +59,46 @@ class GoalsStream:
         end: time [s] of the first cycle with no target (script end at rest + settle), inf when live.
     """
 
-    def __init__(self, generator: OnlineTrajectory, commands: Sequence[TimedCommand] | None, end: float) -> None:
+    def __init__(self, generator: OnlineTrajectory, commands: Sequence[TimedCommand] | None, end: float,
+                 absolute: OnlineTrajectory | None = None) -> None:
         self.generator = generator
-        self.driver = ScriptDriver(commands, generator) if commands is not None else None
+        self.absolute = absolute
+        self.driver = (ScriptDriver([c for c in commands if not c.absolute], generator)
+                       if commands is not None else None)
+        self.absolute_driver = (ScriptDriver([c for c in commands if c.absolute], absolute)
+                                if commands is not None and absolute is not None else None)
         self.end = end
 
+    @property
+    def given(self) -> bool:
+        """Every command of the script has been given (True when live)."""
+        return all(d.given for d in (self.driver, self.absolute_driver) if d is not None)
+
+    def at_rest(self) -> bool:
+        """Both generators' targets are at rest (done)."""
+        return self.generator.sample().done and (self.absolute is None or self.absolute.sample().done)
+
     def advance(self, t: float) -> None:
-        """Step the generator (feeding the script first) until its time is ``t`` [s] (to half a period)."""
+        """Step the generators (feeding the script first) until their time is ``t`` [s] (to half a period)."""
         gen = self.generator
         while gen.time < t - 0.5 * gen.period:
             if self.driver is not None:
                 self.driver.feed()
             gen.step()
+            if self.absolute is not None:
+                if self.absolute_driver is not None:
+                    self.absolute_driver.feed()
+                self.absolute.step()
 
     def sample(self, t: float) -> StreamSample:
         """The target at ``t`` [s] (times must not decrease)."""
         self.advance(t)
         target = self.generator.sample()
-        return StreamSample(target, None, f"{target.segment_name} {target.segment}")
+        stage = f"{target.segment_name} {target.segment}"
+        if self.absolute is None:
+            return StreamSample(target, None, stage)
+        absolute = self.absolute.sample()
+        return StreamSample(target, None, f"{stage}; absolute {absolute.segment_name} {absolute.segment}", absolute)
 
 
 @dataclass(frozen=True)
@@ -80,6 +107,7 @@ class GoalsSource(SourceDefaults):
     :class:`~dualarm_control.references.base.ReferenceSource` streaming /relative_target."""
 
     commands: tuple[TimedCommand, ...] | None
+    frame: AbsoluteFrame | None = None
     kind: ClassVar[str] = "goals"
     streams: ClassVar[tuple[str, ...]] = (RELATIVE_TARGET,)
 
@@ -93,16 +121,21 @@ class GoalsSource(SourceDefaults):
         """A new generator holding the relative pose of q0 (n,) [rad]."""
         return OnlineTrajectory(*model.relative_pose(q0), limits=limits, period=period, reach=model.relative_reach())
 
+    def goals_stream(self, model: DualArmModel, q0: FloatArray, limits: MotionLimits, period: float,
+                     end: float) -> GoalsStream:
+        """The generators from q0 (n,) [rad] (the absolute frame's too when the scenario has one) and the script."""
+        absolute = self.frame.generator(model, q0, limits, period) if self.frame is not None else None
+        return GoalsStream(self.generator(model, q0, limits, period), self.commands, end, absolute)
+
     def end_time(self, model: DualArmModel, q0: FloatArray, options: RunOptions, period: float) -> float:
         """Time [s] of the first cycle without target: a dry run of the script from q0's pose
         until its last command has ended and the generator is at rest, plus the settle time."""
         if self.commands is None:
             return math.inf
-        stream = GoalsStream(self.generator(model, q0, options.limits, period), self.commands, math.inf)
+        stream = self.goals_stream(model, q0, options.limits, period, math.inf)
         last = script_duration(self.commands)
         gen = stream.generator
-        assert stream.driver is not None
-        while not stream.driver.given or gen.time < last - 0.5 * period or not gen.sample().done:
+        while not stream.given or gen.time < last - 0.5 * period or not stream.at_rest():
             if gen.time > last + MAX_SCRIPT_TIME:
                 raise RuntimeError(f"goals script not at rest {MAX_SCRIPT_TIME} s after its last command")
             stream.advance(gen.time + period)
@@ -113,25 +146,33 @@ class GoalsSource(SourceDefaults):
     def end_pose(self, model: DualArmModel, q0: FloatArray, limits: MotionLimits,
                  period: float) -> tuple[FloatArray, FloatArray]:
         """Where the script leaves the target at rest (position [m] (3,), rotation (3, 3)), from q0's pose."""
-        gen = self.generator(model, q0, limits, period)
+        stream = self.goals_stream(model, q0, limits, period, math.inf)
         if self.commands is not None:
-            stream = GoalsStream(gen, self.commands, math.inf)
             end = self.end_time(model, q0, RunOptions(limits, 0.0), period)
             stream.advance(end)
-        return gen.p.copy(), gen.r.copy()
+        return stream.generator.p.copy(), stream.generator.r.copy()
 
     def stream(self, model: DualArmModel, q0: FloatArray, options: RunOptions, period: float) -> GoalsStream:
         """The targets of a run from the measured start configuration q0 (n,) [rad]."""
         end = self.end_time(model, q0, options, period)
-        return GoalsStream(self.generator(model, q0, options.limits, period), self.commands, end)
+        return self.goals_stream(model, q0, options.limits, period, end)
 
     def tracker(self, model: DualArmModel, params: ControllerParams, options: RunOptions) -> RelativeTracker:
-        return RelativeTracker(RelativeController(model, params))
+        return RelativeTracker(RelativeController(model, params), self.frame)
 
 
-def parse_goals_source(items: object) -> GoalsSource:
-    """The ``scenario.goals`` list as a source (ScenarioError naming the bad entry)."""
+def parse_goals_source(items: object, flat: Mapping[str, Any] | None = None) -> GoalsSource:
+    """The ``scenario.goals`` list as a source, with the absolute frame of the flattened parameters ``flat``
+    (:func:`~dualarm_control.references.absolute.parse_absolute_frame`); ScenarioError naming the bad entry, or a
+    relative command while the relative pose is held."""
     try:
-        return GoalsSource(parse_goals(items, "scenario.goals"))
+        commands = parse_goals(items, "scenario.goals")
     except ScriptError as exc:
         raise ScenarioError(str(exc)) from None
+    frame = parse_absolute_frame(flat or {}, any(c.absolute for c in commands))
+    if frame is not None and frame.hold:
+        relative = [i for i, c in enumerate(commands) if not c.absolute]
+        if relative:
+            raise ScenarioError(f"scenario.goals: item {relative[0]} (t = {commands[relative[0]].t:g} s) is refused: "
+                                f"{HOLD_REASON}")
+    return GoalsSource(commands, frame)

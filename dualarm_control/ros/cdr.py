@@ -269,16 +269,22 @@ def multi_dof_point(ns: int, frame_id: str, joint_name: str, transform: Sequence
     """trajectory_msgs/MultiDOFJointTrajectory with one joint and one point: transform
     (x, y, z, qx, qy, qz, qw) (7,), twist and acceleration (linear, angular) (6,) each, and
     time_from_start."""
+    return multi_dof_joints(ns, frame_id, [joint_name], [transform], [twist], [acceleration], elapsed_ns)
+
+
+def multi_dof_joints(ns: int, frame_id: str, joint_names: Sequence[str], transforms: Sequence[Sequence[float]],
+                     twists: Sequence[Sequence[float]], accelerations: Sequence[Sequence[float]],
+                     elapsed_ns: int) -> bytes:
+    """trajectory_msgs/MultiDOFJointTrajectory with one point of k joints: k transforms (7,), twists and
+    accelerations (6,) each, in the order of ``joint_names``, and time_from_start."""
     w = Writer()
     w.header(ns, frame_id)
-    w.strings([joint_name])
+    w.strings(list(joint_names))
     w.u32(1)  # points
-    w.u32(1)  # transforms
-    w.doubles(transform)
-    w.u32(1)  # velocities
-    w.doubles(twist)
-    w.u32(1)  # accelerations
-    w.doubles(acceleration)
+    for block in (transforms, twists, accelerations):
+        w.u32(len(block))
+        for values in block:
+            w.doubles(values)
     w.time(elapsed_ns)
     return w.bytes()
 

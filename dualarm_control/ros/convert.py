@@ -208,14 +208,24 @@ class TargetValue:
     linear_velocity: np.ndarray
     angular_velocity: np.ndarray
     speed: float
+    absolute: TargetValue | None = None
+    """The absolute frame's target riding the same message (its second joint, :data:`ABSOLUTE_JOINT`), or None."""
 
 
-def target_message(ns: int, elapsed_ns: int, sample: Any) -> bytes:
-    """trajectory_msgs/MultiDOFJointTrajectory (CDR) carrying one sample atomically: pose, twist, acceleration."""
-    return cdr.multi_dof_point(
-        ns, LEFT_FRAME, RIGHT_FRAME, [*sample.position, *quaternion_xyzw(sample.rotation)],
-        [*sample.linear_velocity, *sample.angular_velocity],
-        [*sample.linear_acceleration, *sample.angular_acceleration], elapsed_ns)
+ABSOLUTE_JOINT = "absolute"
+"""Name of /relative_target's second joint: the absolute frame's target (issue 41), pose and twist in the world."""
+
+
+def target_message(ns: int, elapsed_ns: int, sample: Any, absolute: Any = None) -> bytes:
+    """trajectory_msgs/MultiDOFJointTrajectory (CDR) carrying one sample atomically: pose, twist, acceleration;
+    with ``absolute`` (the absolute frame's sample, in the world: issue 41) a second joint :data:`ABSOLUTE_JOINT`
+    carries it in the same point."""
+    samples = (sample,) if absolute is None else (sample, absolute)
+    return cdr.multi_dof_joints(
+        ns, LEFT_FRAME, [RIGHT_FRAME, ABSOLUTE_JOINT][:len(samples)],
+        [[*s.position, *quaternion_xyzw(s.rotation)] for s in samples],
+        [[*s.linear_velocity, *s.angular_velocity] for s in samples],
+        [[*s.linear_acceleration, *s.angular_acceleration] for s in samples], elapsed_ns)
 
 
 class TargetInput:
@@ -249,22 +259,34 @@ class TargetInput:
     def value(self, stamp: int, points: int, transforms: np.ndarray, velocities: np.ndarray) -> TargetValue:
         """The checks on the first point's transforms (k, 7) [x y z qx qy qz qw] and velocities (m, 6);
         :class:`InputRejected` (at ``stamp`` [ns]) if they fail."""
-        if points != 1 or len(transforms) != 1 or len(velocities) != 1:
-            raise InputRejected("relative_target must carry exactly one point with one transform and one velocity",
-                                "points", (points, len(transforms), len(velocities)), stamp)
-        pose, twist = transforms[0], velocities[0]
-        rot = rotation_xyzw(pose[3:])
-        if not finite(pose[:3]) or not finite(twist) or not finite(rot):
-            raise InputRejected("relative_target contains NaN or inf (or a zero quaternion)", "points",
-                                np.concatenate((pose, twist)), stamp)
-        position = pose[:3].copy()
+        if points != 1 or len(transforms) not in (1, 2) or len(velocities) != len(transforms):
+            raise InputRejected("relative_target must carry exactly one point with one transform and one velocity "
+                                "(and the absolute frame's as a second)", "points",
+                                (points, len(transforms), len(velocities)), stamp)
+        position, rot, linear, angular = self._pose_twist(stamp, transforms[0], velocities[0])
+        absolute = None
+        if len(transforms) == 2:
+            absolute = TargetValue(stamp, *self._pose_twist(stamp, transforms[1], velocities[1]), 0.0)
         distance = float(np.linalg.norm(position))
         if distance > self.max_distance:
             raise InputRejected(f"relative_target position {distance:.3f} m from the left tool is beyond the "
                                 f"cell's reach {self.max_distance:.3f} m", "points", distance, stamp)
-        linear, angular = twist[:3].copy(), twist[3:].copy()
-        return TargetValue(stamp, position, rot, linear, angular,
-                           max(float(np.linalg.norm(linear)), float(np.linalg.norm(angular))))
+        speed = max(float(np.linalg.norm(linear)), float(np.linalg.norm(angular)))
+        if absolute is not None:
+            speed = max(speed, float(np.linalg.norm(absolute.linear_velocity)),
+                        float(np.linalg.norm(absolute.angular_velocity)))
+        return TargetValue(stamp, position, rot, linear, angular, speed, absolute)
+
+    @staticmethod
+    def _pose_twist(stamp: int, pose: np.ndarray, twist: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(position, rotation, linear, angular) of one joint's transform (7,) and velocity (6,); InputRejected
+        when a value is not finite (or the quaternion is zero)."""
+        rot = rotation_xyzw(pose[3:])
+        if not finite(pose[:3]) or not finite(twist) or not finite(rot):
+            raise InputRejected("relative_target contains NaN or inf (or a zero quaternion)", "points",
+                                np.concatenate((pose, twist)), stamp)
+        return pose[:3].copy(), rot, twist[:3].copy(), twist[3:].copy()
 
 
 def diagnostics(ns: int, name: str, level: int, message: str, values: Mapping[str, Any]) -> bytes:

@@ -13,6 +13,8 @@
   or rejected, stalled or timed out (exit 1).
 * ``jog`` streams geometry_msgs/TwistStamped on ``/relative_twist`` at ``--rate`` for
   ``--seconds``; the node brakes to rest ``jog_timeout`` after the last one.
+* ``--absolute`` (issue 41): the same on ``/absolute_goal`` and ``/absolute_twist``, frame ``world``: the absolute
+  frame's pose or twist (the scenario's ``absolute_frame``), tracked under the relative pose.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from dualarm_control.drive_commands import (
     rotation_from_rpy,
 )
 from dualarm_control.drive_status import (
+    ABSOLUTE_STATUS_NAME,
     REACHED,
     REJECTED,
     STALLED,
@@ -46,6 +49,9 @@ from dualarm_control.ros.node import tool_node
 
 GOAL_TOPIC = "/relative_goal"
 TWIST_TOPIC = "/relative_twist"
+ABSOLUTE_GOAL_TOPIC = "/absolute_goal"
+ABSOLUTE_TWIST_TOPIC = "/absolute_twist"
+WORLD = "world"
 KEEP_ALIVE_S = 0.1  # ros2 topic pub's default --keep-alive
 EXIT_OK, EXIT_FAIL = 0, 1
 
@@ -219,12 +225,12 @@ def goal_rotation(rpy: Sequence[float] | None, quat: Sequence[float] | None) -> 
     return np.eye(3)
 
 
-def pose_stamped(node: Any, xyz: Sequence[float], rotation: Any) -> Any:
-    """geometry_msgs/PoseStamped in ``left_tool`` stamped now."""
+def pose_stamped(node: Any, xyz: Sequence[float], rotation: Any, frame: str = LEFT_TOOL) -> Any:
+    """geometry_msgs/PoseStamped in ``frame`` (``left_tool``; ``world`` for an absolute goal) stamped now."""
     from geometry_msgs.msg import PoseStamped
 
     msg = PoseStamped()
-    msg.header.frame_id = LEFT_TOOL
+    msg.header.frame_id = frame
     msg.header.stamp = _now_stamp(node)
     p = finite_vector(xyz, 3, "--xyz")
     msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (float(v) for v in p)
@@ -237,10 +243,11 @@ def _stamp_s(stamp: Any) -> float:
     return float(stamp.sec) + 1e-9 * float(stamp.nanosec)
 
 
-def drive_status(msg: Any) -> dict[str, str] | None:
-    """The drive keys of the trajectory node's entry in a DiagnosticArray (None if absent)."""
+def drive_status(msg: Any, name: str = STATUS_NAME) -> dict[str, str] | None:
+    """The drive keys of the trajectory node's entry ``name`` in a DiagnosticArray (None if absent): the relative
+    goals' (default), or the absolute frame's (:data:`~dualarm_control.drive_status.ABSOLUTE_STATUS_NAME`)."""
     for status in msg.status:
-        if status.name == STATUS_NAME:
+        if status.name == name:
             values = {kv.key: kv.value for kv in status.values}
             if parse_status(values) is not None:
                 return values
@@ -249,8 +256,9 @@ def drive_status(msg: Any) -> dict[str, str] | None:
 
 def send_goal(xyz: Sequence[float], rpy: Sequence[float] | None = None, quat: Sequence[float] | None = None, *,
               wait: bool = False, timeout: float | None = None, subscriber_wait: float = 5.0,
-              out: TextIO = sys.stdout) -> int:
-    """Publish one goal on ``/relative_goal``; with ``wait``, follow ``/diagnostics`` to the end.
+              out: TextIO = sys.stdout, absolute: bool = False) -> int:
+    """Publish one goal on ``/relative_goal`` (``absolute``: on ``/absolute_goal``, frame ``world``); with ``wait``,
+    follow ``/diagnostics`` to the end (an absolute goal: the trajectory node's ``trajectory_node/absolute`` status).
 
     Exit codes: 0 published (without ``wait``) or reached; 1 no subscriber within
     ``subscriber_wait`` s, rejected, stalled, or ``timeout`` s passed.
@@ -259,20 +267,22 @@ def send_goal(xyz: Sequence[float], rpy: Sequence[float] | None = None, quat: Se
     from geometry_msgs.msg import PoseStamped
 
     rotation = goal_rotation(rpy, quat)
+    topic = ABSOLUTE_GOAL_TOPIC if absolute else GOAL_TOPIC
+    name = ABSOLUTE_STATUS_NAME if absolute else STATUS_NAME
     updates: list[dict[str, str]] = []
     with tool_node("_dualarm_goal") as (node, executor, stop):
-        pub = node.create_publisher(PoseStamped, GOAL_TOPIC, 10)
+        pub = node.create_publisher(PoseStamped, topic, 10)
         if wait:
             node.create_subscription(DiagnosticArray, "/diagnostics",
-                                     lambda m: updates.extend([v] if (v := drive_status(m)) else []), 10)
+                                     lambda m: updates.extend([v] if (v := drive_status(m, name)) else []), 10)
         if not wait_for_subscriptions(pub, executor, stop, 1, subscriber_wait, out):
-            print(f"dualarm goal: nobody subscribes {GOAL_TOPIC} (start the cell with 'dualarm launch "
+            print(f"dualarm goal: nobody subscribes {topic} (start the cell with 'dualarm launch "
                   "interactive')", file=sys.stderr)
             return EXIT_FAIL
-        msg = pose_stamped(node, xyz, rotation)
+        msg = pose_stamped(node, xyz, rotation, WORLD if absolute else LEFT_TOOL)
         pub.publish(msg)
         stamp = _stamp_s(msg.header.stamp)
-        print(f"goal sent: xyz {list(xyz)} m, quat (x y z w) {[round(v, 6) for v in quaternion_xyzw(rotation)]}, "
+        print(f"{'absolute ' if absolute else ''}goal sent: xyz {list(xyz)} m, quat (x y z w) {[round(v, 6) for v in quaternion_xyzw(rotation)]}, "
               f"stamp {stamp:.9f}", file=out)
         if not wait:
             time.sleep(KEEP_ALIVE_S)
@@ -310,19 +320,21 @@ def follow_goal(executor: Any, stop: Any, updates: list[dict[str, str]], stamp: 
 
 
 def jog(linear: Sequence[float], angular: Sequence[float], seconds: float, rate: float = 50.0, *,
-        subscriber_wait: float = 5.0, out: TextIO = sys.stdout) -> int:
-    """Stream geometry_msgs/TwistStamped (``left_tool``) on ``/relative_twist`` for ``seconds`` at ``rate`` Hz."""
+        subscriber_wait: float = 5.0, out: TextIO = sys.stdout, absolute: bool = False) -> int:
+    """Stream geometry_msgs/TwistStamped (``left_tool``) on ``/relative_twist`` for ``seconds`` at ``rate`` Hz
+    (``absolute``: ``world`` on ``/absolute_twist``, the absolute frame's twist)."""
     from geometry_msgs.msg import TwistStamped
 
     v = finite_vector(linear, 3, "--linear")
     w = finite_vector(angular, 3, "--angular")
+    topic = ABSOLUTE_TWIST_TOPIC if absolute else TWIST_TOPIC
     with tool_node("_dualarm_jog") as (node, executor, stop):
-        pub = node.create_publisher(TwistStamped, TWIST_TOPIC, 10)
+        pub = node.create_publisher(TwistStamped, topic, 10)
         if not wait_for_subscriptions(pub, executor, stop, 1, subscriber_wait, out):
-            print(f"dualarm jog: nobody subscribes {TWIST_TOPIC}", file=sys.stderr)
+            print(f"dualarm jog: nobody subscribes {topic}", file=sys.stderr)
             return EXIT_FAIL
         msg = TwistStamped()
-        msg.header.frame_id = LEFT_TOOL
+        msg.header.frame_id = WORLD if absolute else LEFT_TOOL
         msg.twist.linear.x, msg.twist.linear.y, msg.twist.linear.z = (float(x) for x in v)
         msg.twist.angular.x, msg.twist.angular.y, msg.twist.angular.z = (float(x) for x in w)
         start = time.monotonic()
@@ -412,8 +424,10 @@ def add_drive_parsers(sub: Any) -> None:
     rot.add_argument("--quat", nargs=4, type=float, metavar=("X", "Y", "Z", "W"), help="quaternion")
     goal.add_argument("--wait", action="store_true", help="follow the goal until reached, rejected or stalled")
     goal.add_argument("--timeout", type=_positive, default=None, metavar="S", help="with --wait: give up after S s")
-    goal.set_defaults(func=_verb(lambda a: send_goal(a.xyz, a.rpy, a.quat, wait=a.wait, timeout=a.timeout),
-                                EXIT_FAIL))
+    goal.add_argument("--absolute", action="store_true", help="the absolute frame's pose in the world on "
+                      "/absolute_goal (a scenario with absolute_frame: tracked under the relative pose)")
+    goal.set_defaults(func=_verb(lambda a: send_goal(a.xyz, a.rpy, a.quat, wait=a.wait, timeout=a.timeout,
+                                                     absolute=a.absolute), EXIT_FAIL))
     jg = sub.add_parser("jog", help="stream a relative twist to the cell (/relative_twist)",
                         description="Publish geometry_msgs/TwistStamped (frame left_tool) on /relative_twist at "
                         "--rate Hz for --seconds; the cell brakes to rest 0.1 s (jog_timeout) after the last one.")
@@ -421,4 +435,6 @@ def add_drive_parsers(sub: Any) -> None:
     jg.add_argument("--angular", nargs=3, type=float, default=[0.0] * 3, metavar=("X", "Y", "Z"), help="rad/s")
     jg.add_argument("--seconds", type=_positive, default=1.0, metavar="S", help="duration (default: %(default)s s)")
     jg.add_argument("--rate", type=_positive, default=50.0, metavar="HZ", help="twists per second (default: %(default)s)")
-    jg.set_defaults(func=_verb(lambda a: jog(a.linear, a.angular, a.seconds, a.rate)))
+    jg.add_argument("--absolute", action="store_true", help="the absolute frame's twist (world axes) on "
+                    "/absolute_twist")
+    jg.set_defaults(func=_verb(lambda a: jog(a.linear, a.angular, a.seconds, a.rate, absolute=a.absolute)))

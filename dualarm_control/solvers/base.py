@@ -19,10 +19,12 @@ import numpy as np
 
 from dualarm_control.metrics import ACTIVITY_THRESHOLD
 from dualarm_control.qp import DEFAULT_BACKEND, QPSettings, QPSolution, make_backend
+from dualarm_control.solvers import priority
 from dualarm_control.solvers.policy import (
     ROUND_OFF,
     bound_excess,
     fallback,
+    inside,
     load_fallback,
     row_violation_text,
     violation_text,
@@ -142,6 +144,9 @@ class Solver:
     """Whether ``_solve`` reads ``ControlProblem.repulsive`` (callers may pass zeros otherwise)."""
     uses_qp = False
     """Whether the solver solves QPs (and so depends on ``qp_backend``)."""
+    second_priority_in_solve = False
+    """Whether ``_solve`` itself realises the problem's second priority (the hierarchical solvers: as their
+    second level); otherwise :meth:`_second_priority` runs on ``_solve``'s result."""
 
     def __init__(self, params: SolverParams | None = None) -> None:
         self.params = params or SolverParams()
@@ -160,6 +165,47 @@ class Solver:
 
     def _backend(self):
         return make_backend(self.params.qp_backend, self.params.qp)
+
+    _priority_qp = None
+    """The second priority's QP back-end, made on first use (:meth:`_priority_backend`)."""
+
+    def _priority_backend(self):
+        """The QP back-end of the second priority (its own warm start: its QP differs from the first's)."""
+        if self._priority_qp is None:
+            self._priority_qp = self._backend()
+        return self._priority_qp
+
+    def _forget(self) -> None:
+        """After a failure: :meth:`reset` and the second priority's warm start."""
+        self.reset()
+        if self._priority_qp is not None:
+            self._priority_qp.reset()
+
+    def _second_priority(self, problem: ControlProblem, qd1: FloatArray, status: Status, iters: int,
+                         detail: str) -> tuple[FloatArray | None, Status, int, str]:
+        """The problem's second priority in the optimal set of the first (``qd1``, inside the bounds):
+        eq (P2) of :mod:`dualarm_control.solvers.priority` with eps = ``regularization``, its unbounded
+        minimiser when that meets the bounds and rows, else its QP; when that QP fails, ``qd1`` (the first
+        priority kept) and ``detail`` says so."""
+        eps = self.params.regularization
+        qd = priority.unbounded_second_level(problem, qd1, eps)
+        kept = priority.kept_inequalities(problem, qd1)
+        if inside(qd, problem.lower, problem.upper) and problem.limit_excess(qd) <= 0.0 \
+                and (kept is None or bool(np.all(kept[0] @ qd <= kept[1]))):
+            return qd, status, iters, detail
+        solution = self._priority_backend().solve(priority.least_squares_level(problem, qd1, eps))
+        return self._second_result(solution, qd1, status, iters, detail)
+
+    @staticmethod
+    def _second_result(solution: QPSolution, qd1: FloatArray, status: Status, iters: int, detail: str,
+                       transform=None) -> tuple[FloatArray | None, Status, int, str]:
+        """The second level's QP ``solution`` (x, or ``transform`` of x) as the ``_solve`` tuple; ``qd1`` with a
+        note when it failed."""
+        if not solution.ok or solution.x is None:
+            note = f"second priority QP {solution.status}; first priority only"
+            return qd1, status, iters + solution.iterations, (detail + "; " if detail else "") + note
+        x = solution.x if transform is None else transform(solution.x)
+        return x, status, iters + solution.iterations, detail
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, Status, int, str]:
         """Return (velocities or None, status, iterations, detail)."""
@@ -200,20 +246,25 @@ class Solver:
         """
         try:
             qd, status, iters, detail = self._solve(problem)
+            if problem.has_secondary and not self.second_priority_in_solve and qd is not None \
+                    and status not in FALLBACK_TRIGGERS and bound_excess(qd, problem.lower, problem.upper) \
+                    <= self.box_tolerance(problem):
+                qd1 = np.minimum(np.maximum(qd, problem.lower), problem.upper)  # absorbs the first level's tolerance
+                qd, status, iters, detail = self._second_priority(problem, qd1, status, iters, detail)
         except (ValueError, np.linalg.LinAlgError, RuntimeError) as exc:
             qd, status, iters, detail = None, Status.FAILED, 0, f"{type(exc).__name__}: {exc}"
         excess = math.nan if qd is None else bound_excess(qd, problem.lower, problem.upper)
         rows_excess = 0.0 if qd is None or not problem.has_limit_rows else problem.limit_excess(qd)
         if qd is None or status in FALLBACK_TRIGGERS or not math.isfinite(excess):
-            self.reset()
+            self._forget()
             velocities, status, detail = fallback(problem, qd, status, detail)
         elif excess > self.box_tolerance(problem):
-            self.reset()
+            self._forget()
             velocities, status, detail = fallback(problem, qd, Status.BOUNDS_VIOLATED,
                                                   violation_text(qd, problem.lower, problem.upper,
                                                                  self.box_tolerance(problem)))
         elif rows_excess > 0.0 and rows_excess > self.row_tolerance(problem):
-            self.reset()
+            self._forget()
             velocities, status, detail = fallback(problem, qd, Status.BOUNDS_VIOLATED,
                                                   row_violation_text(problem, qd, self.row_tolerance(problem)))
         else:

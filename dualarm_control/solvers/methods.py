@@ -10,13 +10,15 @@ import numpy as np
 import numpy.typing as npt
 from scipy.linalg import lapack
 
-from dualarm_control.qp import QPBackend, QPProblem, check_backend
+from dualarm_control.qp import QPProblem, check_backend
+from dualarm_control.solvers import priority
 from dualarm_control.solvers.base import Solver, SolverParams, from_qp
+from dualarm_control.solvers.lasso_dual import LassoDual
 from dualarm_control.solvers.policy import ROUND_OFF, bound_excess, inside
 from dualarm_control.solvers.problem import ControlProblem, FloatArray
 from dualarm_control.solvers.registry import register
 from dualarm_control.solvers.slack_qp import INFINITY
-from dualarm_control.status import Status
+from dualarm_control.status import FALLBACK_TRIGGERS, Status
 
 
 @register("pseudo_inverse")
@@ -76,6 +78,19 @@ class PseudoInverse(Solver):
         if notes:
             return qd, Status.SCALED, 0, "; ".join(notes)
         return qd, Status.SOLVED, 0, ""
+
+    def _second_priority(self, problem: ControlProblem, qd1: FloatArray, status: Status, iters: int,
+                         detail: str) -> tuple[FloatArray | None, Status, int, str]:
+        """The task-priority form (:mod:`~dualarm_control.solvers.priority`): qd_1 + s (J_2 N_1)^+ (r_2 - J_2 qd_1),
+        s the largest in [0, 1] that keeps the bounds and rows (status "scaled" when s < 1); nothing when the
+        first priority itself had to be shrunk."""
+        if status != Status.SOLVED:
+            return qd1, status, iters, detail + "; second priority dropped (the first was scaled)"
+        step = priority.task_priority_step(problem, qd1)
+        scale = priority.largest_step(qd1, step, problem)
+        if scale < 1.0:
+            return qd1 + scale * step, Status.SCALED, iters, f"second priority scaled by {scale:.3g} into the bounds"
+        return qd1 + step, status, iters, detail
 
 
 def _least_squares_terms(problem: ControlProblem) -> tuple[FloatArray, FloatArray]:
@@ -271,54 +286,14 @@ class SparseQP(_QPSolver):
         self._previous = qd if solution.ok else None
         return qd, status, iterations, detail
 
-
-class LassoDual:
-    """Exact minimiser of the lasso of eq (17) without its bounds, from its dual QP.
-
-    min_qd 1/2 ||J qd - r||^2 + lambda ||qd||_1 (n variables) has the Lagrange dual
-
-        min_w 1/2 ||w - r / lambda||^2   s.t.   -1 <= J^T w <= 1,
-
-    a strictly convex QP in m (= 6) variables with n two-sided rows, scaled by lambda so
-    that the back-end's tolerance is relative to the row bounds 1. Its stationarity
-    condition w - r/lambda + J z = 0, with z the row multipliers, is the lasso's residual
-    w = (r - J qd)/lambda for qd = lambda z, and complementarity (z_i != 0 only where
-    J_i^T w = sign(z_i)) is the lasso's optimality condition J_i^T (r - J qd) = lambda sign(qd_i):
-    so qd = lambda z is an exact minimiser, and an active-set back-end (daqp) returns a
-    basic one, with at most m non-zero joints. Eq (19)'s 2n-variable QP has a semi-definite
-    H, which daqp solves with a proximal-point outer loop: 48 us p50 (30 iterations) against
-    8.8 us for this dual on the random set of docs/bench.md. When qd lies inside the bounds of eq (23) it is also the minimiser of
-    eq (17) with the bounds (the optimum of a relaxation, and feasible).
-
-    Used with an active-set back-end that reports multipliers (daqp): the dual's w is of
-    order r/lambda (1e5 here), and a tolerance-based back-end's multipliers at eps 1e-9 are
-    neither exact nor sparse. The back-end is owned: the QP's dimensions differ
-    from eq (19)'s, so it keeps its own warm-start memory. H and the row bounds are built
-    once per size (the back-ends do not modify their inputs).
-    """
-
-    def __init__(self, backend: QPBackend) -> None:
-        self.backend = backend
-        self._shape = (-1, -1)
-        self._identity, self._upper, self._lower = np.eye(0), np.zeros(0), np.zeros(0)
-
-    def reset(self) -> None:
-        self.backend.reset()
-
-    def solve(self, jacobian: FloatArray, reference: FloatArray, l1_weight: float) -> tuple[FloatArray | None, int]:
-        """The minimiser for J (m, n), r (m,) [m/s; rad/s] and lambda > 0.
-
-        Returns:
-            (qd [rad/s] (n,), or None when the dual solve fails; back-end iterations).
-        """
-        if jacobian.shape != self._shape:
-            m, n = self._shape = jacobian.shape
-            self._identity, self._upper, self._lower = np.eye(m), np.ones(n), -np.ones(n)
-        solution = self.backend.solve(QPProblem(H=self._identity, g=reference / -l1_weight, C=jacobian.T,
-                                                l=self._lower, u=self._upper))
-        if not solution.ok or solution.multipliers is None:
-            return None, solution.iterations
-        return l1_weight * solution.multipliers, solution.iterations
+    def _second_priority(self, problem: ControlProblem, qd1: FloatArray, status: Status, iters: int,
+                         detail: str) -> tuple[FloatArray | None, Status, int, str]:
+        """Eq (P2s) of :mod:`~dualarm_control.solvers.priority`: the second priority as a lasso in the optimal
+        set of the first (its task velocity J_1 qd_1 kept), on the lasso box."""
+        n = qd1.shape[0]
+        qp = priority.sparse_level(problem, qd1, self.params.l1_weight, lasso_box(problem.lower, problem.upper))
+        return self._second_result(self._priority_backend().solve(qp), qd1, status, iters, detail,
+                                   lambda z: z[:n] - z[n:])
 
 
 @register("hierarchical_sparse_qp")
@@ -345,6 +320,7 @@ class HierarchicalSparseQP(Solver):
 
     uses_repulsive = True
     uses_qp = True
+    second_priority_in_solve = True  # the problem's second priority is the second level, the repulsion the third
 
     def __init__(self, params: SolverParams | None = None) -> None:
         super().__init__(params)
@@ -361,6 +337,10 @@ class HierarchicalSparseQP(Solver):
         """QP1's proximal memory (QP2 has none: its optimum is unique)."""
         self._primary.seed(velocities)
 
+    def _forget(self) -> None:
+        super()._forget()
+        self._primary._forget()  # the second priority's QP is QP1's solver's
+
     def _identity_of(self, n: int) -> FloatArray:
         if self._identity.shape != (n, n):
             self._identity = np.eye(n)
@@ -368,6 +348,11 @@ class HierarchicalSparseQP(Solver):
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, Status, int, str]:
         qd1, status, iters, detail = self._primary._solve(problem)
+        if problem.has_secondary and qd1 is not None and status not in FALLBACK_TRIGGERS \
+                and bound_excess(qd1, problem.lower, problem.upper) <= self.bound_tolerance:
+            qd1 = np.minimum(np.maximum(qd1, problem.lower), problem.upper)  # absorbs QP1's tolerance
+            qd1, status, iters, detail = self._primary._second_priority(problem, qd1, status, iters, detail)
+            problem = problem.stacked()  # the repulsive level keeps both priorities' task velocities
         if qd1 is None or not np.any(problem.repulsive) \
                 or not bound_excess(qd1, problem.lower, problem.upper) <= self.bound_tolerance:
             return qd1, status, iters, detail  # no secondary motion, or a failure for solve() to handle

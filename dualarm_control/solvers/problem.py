@@ -41,6 +41,11 @@ class ControlProblem:
         limit_deferred: the rows given instead as :class:`~dualarm_control.limits.DeferredRows`
             (limit_rows None): built only when a solver needs them (:meth:`limit_matrix`); where
             their speed bound vouches for a qd (:meth:`limit_excess`), they are not.
+        secondary_jacobian: J_2 of the second priority (the absolute pose under the relative one, issue 41),
+            (m_2, n), rows already scaled by the square root of their weight, or None (one priority).
+            Every solver realises it in the optimal set of the first priority
+            (:mod:`dualarm_control.solvers.priority`).
+        secondary_reference: its reference r_2 = k (b - f) - df/dt [m/s; rad/s], (m_2,).
     """
 
     jacobian: FloatArray
@@ -56,6 +61,26 @@ class ControlProblem:
     limit_bound: FloatArray | None = None
     limit_labels: tuple[str, ...] = ()
     limit_deferred: DeferredRows | None = None
+    secondary_jacobian: FloatArray | None = None
+    secondary_reference: FloatArray | None = None
+
+    @property
+    def has_secondary(self) -> bool:
+        """Whether the problem has a second priority (:attr:`secondary_jacobian`)."""
+        return self.secondary_jacobian is not None and self.secondary_reference is not None
+
+    def stacked(self) -> ControlProblem:
+        """Both priorities as one equality task [J; J_2], [r; r_2] (no second priority): what a level below
+        both (the hierarchical solvers' repulsive level) keeps. Itself without a second priority."""
+        if self.secondary_jacobian is None or self.secondary_reference is None:
+            return self
+        weights = None if self.equality_weights is None else np.concatenate(
+            (self.equality_weights, np.ones(self.secondary_reference.shape[0])))
+        return ControlProblem(np.vstack((self.jacobian, self.secondary_jacobian)),
+                              np.concatenate((self.reference, self.secondary_reference)), self.lower, self.upper,
+                              self.repulsive, self.inequality_jacobian, self.inequality_bound, weights,
+                              self.inequality_weights, self.limit_rows, self.limit_bound, self.limit_labels,
+                              self.limit_deferred)
 
     @property
     def has_limit_rows(self) -> bool:
@@ -84,7 +109,8 @@ class ControlProblem:
         rows solves the problem with them, as the QPs are convex)."""
         return ControlProblem(self.jacobian, self.reference, self.lower, self.upper, self.repulsive,
                               self.inequality_jacobian, self.inequality_bound, self.equality_weights,
-                              self.inequality_weights)
+                              self.inequality_weights, secondary_jacobian=self.secondary_jacobian,
+                              secondary_reference=self.secondary_reference)
 
     def problem_with_invalid_input(self) -> str:
         """Return a description of what is wrong with the inputs, or '' when they are usable.
@@ -109,7 +135,8 @@ class ControlProblem:
                     return f"non-finite values in {name}"
         if self.inequality_jacobian is not None or self.inequality_bound is not None \
                 or self.equality_weights is not None or self.inequality_weights is not None \
-                or self.limit_rows is not None or self.limit_bound is not None or self.limit_deferred is not None:
+                or self.limit_rows is not None or self.limit_bound is not None or self.limit_deferred is not None \
+                or self.secondary_jacobian is not None or self.secondary_reference is not None:
             optional = self._problem_with_optional_rows(m, n)
             if optional:
                 return optional
@@ -130,6 +157,15 @@ class ControlProblem:
                 return f"bad shapes: inequality_jacobian {a.shape}, inequality_bound {h.shape}"
             if not math.isfinite(a.sum() + h.sum()):
                 return "non-finite values in the inequality rows"
+        a, h = self.secondary_jacobian, self.secondary_reference
+        if (a is None) != (h is None):
+            return "secondary_jacobian and secondary_reference must be given together"
+        if a is not None and h is not None:
+            m_2 = a.shape[0] if a.ndim == 2 else -1
+            if m_2 < 1 or a.shape != (m_2, n) or h.shape != (m_2,):
+                return f"bad shapes: secondary_jacobian {a.shape}, secondary_reference {h.shape}"
+            if not math.isfinite(a.sum() + h.sum()):
+                return "non-finite values in the secondary task (second priority)"
         a, h = self.limit_rows, self.limit_bound
         if a is None and self.limit_deferred is not None:  # checked without building the rows: their speed bound
             a = self.limit_deferred.speed

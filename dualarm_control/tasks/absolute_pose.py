@@ -92,7 +92,8 @@ class AbsolutePoseTask:
 
     Attributes:
         position: p* [m] (3,), world. rotation: R* (3, 3), world. grasp: None (halfway) or the object in the
-        left tool frame. gain: k [1/s]. weight: slack weight.
+        left tool frame. gain: k [1/s]. weight: slack weight. linear_velocity, angular_velocity: the target's
+        twist v* [m/s], w* [rad/s] (3,) each, world axes (a moving target: df/dt = -[v*; w*]); None: at rest.
     """
 
     position: FloatArray
@@ -102,6 +103,8 @@ class AbsolutePoseTask:
     weight: float = DEFAULT_EQUALITY_WEIGHT
     name: str = "absolute_pose"
     kind: Kind = EQUALITY
+    linear_velocity: FloatArray | None = None
+    angular_velocity: FloatArray | None = None
 
     def __post_init__(self) -> None:
         check_gain_weight(self.name, self.gain, self.weight)
@@ -115,7 +118,12 @@ class AbsolutePoseTask:
         state = self.state(conf)
         ox, oy, oz = luh_components(state.rotation, np.asarray(self.rotation, float))
         value = np.concatenate((state.position - self.position, (-ox, -oy, -oz)))
-        return TaskRows(self.name, self.kind, value, np.zeros(6), state.jacobian, np.zeros(6), self.gain, self.weight)
+        twist = np.zeros(6)
+        if self.linear_velocity is not None:
+            twist[:3] = self.linear_velocity
+        if self.angular_velocity is not None:
+            twist[3:] = self.angular_velocity
+        return TaskRows(self.name, self.kind, value, np.zeros(6), state.jacobian, -twist, self.gain, self.weight)
 
 
 def _pose(spec: TaskSpec, prefix: str, required: bool) -> pin.SE3 | None:

@@ -57,6 +57,9 @@ class TaskRows:
         time_derivative: df/dt (explicit time dependence), (m,).
         gain: k [1/s], > 0.
         weight: slack weight of every row, > 0.
+        priority: 1 (the default: every task of priority 1 weighted beside the others in one QP) or 2 (an
+            equality task realised in the optimal set of the priority-1 tasks, in every solver:
+            :mod:`dualarm_control.solvers.priority`; issue 41's absolute pose under the relative one).
     """
 
     name: str
@@ -67,6 +70,7 @@ class TaskRows:
     time_derivative: FloatArray
     gain: float
     weight: float
+    priority: int = 1
 
     @property
     def reference(self) -> FloatArray:
@@ -91,6 +95,36 @@ class Task(Protocol):
     def evaluate(self, conf: Configuration, t: float) -> TaskRows: ...
 
 
+PRIORITIES = (1, 2)
+"""The priorities a task may have (:class:`TaskRows`)."""
+
+
+@dataclass(frozen=True)
+class SecondPriority:
+    """An equality task at priority 2 (``<task>.priority: 2`` in a task scenario): its rows, marked so that
+    :func:`assemble_problem` puts them under the priority-1 tasks."""
+
+    task: Task
+
+    def __post_init__(self) -> None:
+        if self.task.kind != EQUALITY:
+            raise ValueError(f"task {self.task.name!r}: only an equality task can have priority 2, this one is an "
+                             f"{self.task.kind}")
+
+    @property
+    def name(self) -> str:
+        return self.task.name
+
+    @property
+    def kind(self) -> Kind:
+        return self.task.kind
+
+    def evaluate(self, conf: Configuration, t: float) -> TaskRows:
+        rows = self.task.evaluate(conf, t)
+        rows.priority = 2
+        return rows
+
+
 def check_gain_weight(name: str, gain: float, weight: float) -> None:
     if not (math.isfinite(gain) and gain > 0):
         raise ValueError(f"task {name!r}: gain must be > 0 [1/s], got {gain}")
@@ -109,27 +143,43 @@ def assemble_problem(rows: Sequence[TaskRows], lower: FloatArray, upper: FloatAr
 
     Equality rows become ``jacobian``/``reference`` (A_e, k_e(b_e - f_e) - h_e), inequality
     rows ``inequality_jacobian``/``inequality_bound``; slack weights per row. A single
-    equality task and no inequality gives exactly paper 000's problem (J, xd* + K e).
+    equality task and no inequality gives exactly paper 000's problem (J, xd* + K e). Equality rows of
+    priority 2 become ``secondary_jacobian``/``secondary_reference``, scaled by the square root of their weight.
 
     Args:
         rows: evaluated tasks, at least one equality.
         lower, upper: joint velocity bounds of eq (23) [rad/s], (n,). repulsive: (n,).
     """
-    eq = [r for r in rows if r.kind == EQUALITY]
+    eq = [r for r in rows if r.kind == EQUALITY and r.priority == 1]
     ie = [r for r in rows if r.kind == INEQUALITY]
+    second = [r for r in rows if r.kind == EQUALITY and r.priority == 2]
     if not eq:
-        raise ValueError("at least one equality task is needed")
+        raise ValueError("at least one equality task of priority 1 is needed")
+    problem = _first_priority(eq, ie, lower, upper, repulsive)
+    if second:
+        scale = np.concatenate([np.full(r.value.shape[0], math.sqrt(r.weight)) for r in second])
+        problem.secondary_jacobian = np.vstack([r.jacobian for r in second]) * scale[:, None]
+        problem.secondary_reference = np.concatenate([r.reference for r in second]) * scale
+    return problem
+
+
+def _first_priority(eq: Sequence[TaskRows], ie: Sequence[TaskRows], lower: FloatArray, upper: FloatArray,
+                    repulsive: FloatArray) -> ControlProblem:
+    """The problem of the priority-1 equality rows ``eq`` (at least one) and the inequality rows ``ie``.
+
+    Several equality tasks are weighted beside each other in every solver: their rows are scaled by the square root
+    of their weight (1/2 w ||a qd - r||^2 = 1/2 ||sqrt(w) a qd - sqrt(w) r||^2, the constraint-based QP's term), so
+    the problem carries no ``equality_weights``."""
     if len(eq) == 1 and not ie:
         return ControlProblem(eq[0].jacobian, eq[0].reference, lower, upper, repulsive)
-    jac = np.vstack([r.jacobian for r in eq])
-    ref = np.concatenate([r.reference for r in eq])
-    w_eq = np.concatenate([np.full(r.value.shape[0], r.weight) for r in eq])
+    scale = np.concatenate([np.full(r.value.shape[0], math.sqrt(r.weight)) for r in eq])
+    jac = np.vstack([r.jacobian for r in eq]) * scale[:, None]
+    ref = np.concatenate([r.reference for r in eq]) * scale
     if not ie:
-        return ControlProblem(jac, ref, lower, upper, repulsive, equality_weights=w_eq)
+        return ControlProblem(jac, ref, lower, upper, repulsive)
     return ControlProblem(
         jac, ref, lower, upper, repulsive,
         inequality_jacobian=np.vstack([r.jacobian for r in ie]),
         inequality_bound=np.concatenate([r.reference for r in ie]),
-        equality_weights=w_eq,
         inequality_weights=np.concatenate([np.full(r.value.shape[0], r.weight) for r in ie]),
     )

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 from dualarm_control.errors import ScenarioError
 from dualarm_control.registry import Registry
 from dualarm_control.scenario_keys import PREFIX, get, number
+from dualarm_control.tasks.base import PRIORITIES, SecondPriority
 
 if TYPE_CHECKING:
     from dualarm_control.tasks.base import Task
@@ -88,8 +89,13 @@ def check_task_type(spec: TaskSpec) -> None:
 def build_task(spec: TaskSpec, context: TaskContext) -> Task:
     """The task ``spec`` describes; ScenarioError naming the task (and the key) on a bad value."""
     check_task_type(spec)
+    priority = spec.value("priority", float, 1.0)
+    if priority not in PRIORITIES:
+        raise ScenarioError(f"scenario parameter '{PREFIX}{spec.name}.priority': got {priority:g}, expected 1 "
+                            "(weighted beside the others) or 2 (under the priority-1 tasks)")
     try:
-        return TASK_TYPES.get(spec.type)(spec, context)
+        task = TASK_TYPES.get(spec.type)(spec, context)
+        return SecondPriority(task) if priority == 2 else task
     except ScenarioError:
         raise
     except ValueError as exc:

@@ -429,7 +429,11 @@ def _relative_records(bag: Bag) -> list[RunRecord]:
     Messages are attributed to the solver of the nearest controller status in receive time.
     The final error is the last /relative_pose against the last /relative_target of the solver.
     """
-    from dualarm_control.app.record.run_record import RunRecord, nan_column
+    from dualarm_control.app.record.run_record import (
+        RunRecord,
+        absolute_columns,
+        nan_column,
+    )
 
     joint_names = bag.robot.joint_names
     n = len(joint_names)
@@ -467,7 +471,9 @@ def _relative_records(bag: Bag) -> list[RunRecord]:
             final_positions=q[-1] if len(q) else nan_column(n), contact_force=nan_column(k),
             measured_force=nan_column(k), normal_offset=nan_column(k), table_contacts=nan_column(k),
             final_errors=pose_error(_last_in(series[POSE_TOPIC], mine[POSE_TOPIC]),
-                                    _last_in(series[TARGET_TOPIC], mine[TARGET_TOPIC]))))
+                                    _last_in(series[TARGET_TOPIC], mine[TARGET_TOPIC])),
+            absolute_error=absolute_columns(column("absolute_position_error_m"),
+                                            column("absolute_orientation_error_rad"))))
     return out
 
 

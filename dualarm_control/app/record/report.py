@@ -118,10 +118,17 @@ def summarize_run(record: RunRecord, scenario: Scenario | None, model: DualArmMo
     if pos.size and rot.size:
         out.update(max_tracking_error_m=float(pos.max()), rms_tracking_error_m=float(np.sqrt(np.mean(pos**2))),
                    max_tracking_error_rad=float(rot.max()))
+    if record.absolute_error is not None:  # an absolute target (issue 41): the absolute frame's tracking
+        error = record.absolute_error[np.all(np.isfinite(record.absolute_error), axis=1)]
+        out.update(absolute_max_error_m=float(error[:, 0].max()),
+                   absolute_rms_error_m=float(np.sqrt(np.mean(error[:, 0] ** 2))),
+                   absolute_max_error_rad=float(error[:, 1].max()))
     if scenario is not None:  # the verdicts of a run of goals or segments, on the controller's collision model
         commands_script = getattr(scenario.reference, "commands", None)
         if commands_script:
-            out.update(goal_metrics(record, commands_script, model, scenario.collision_model(model)))
+            frame = getattr(scenario.reference, "frame", None)  # absolute goals: judged on the absolute frame
+            out.update(goal_metrics(record, commands_script, model, scenario.collision_model(model),
+                                    frame.pose if frame is not None else None))
         judge = scenario.reference.judge(model, record.positions[0], scenario.limits, scenario.collision_model(model))
         if judge is not None:  # segments, a plan
             out.update(segment_metrics(record, judge))
@@ -191,11 +198,12 @@ def goal_lines(results: Mapping[str, Mapping[str, Any]]) -> str:
 
 
 def goal_metrics(record: RunRecord, commands: Sequence[Any], model: DualArmModel,
-                 collision: CollisionModel) -> dict[str, float | int | str]:
+                 collision: CollisionModel, absolute: Any = None) -> dict[str, float | int | str]:
     """How each goal of a script ended (:func:`~dualarm_control.drive_monitor.judge_goals`, stalls
-    explained by the robot's collision model) and the smallest link-pair distance over the run [m]
+    explained by the robot's collision model; absolute goals on ``absolute``'s pose) and the smallest link-pair distance over the run [m]
     (coal, on the recorded positions, the pairs ``collision`` allows excluded)."""
-    outcomes = judge_goals(model, commands, *timed_positions(record), record.final_positions, collision)
+    outcomes = judge_goals(model, commands, *timed_positions(record), record.final_positions, collision,
+                           absolute=absolute)
     closest = closest_pair(collision, record.positions)
     return {"goals_reached": sum(o.state == "reached" for o in outcomes),
             "goals_stalled": sum(o.state == "stalled" for o in outcomes),
@@ -448,6 +456,9 @@ TABLE_I_ROWS = (
     ("max tracking error [m]", "max_tracking_error_m", 1.0, "{:.2e}"),
     ("rms tracking error [m]", "rms_tracking_error_m", 1.0, "{:.2e}"),
     ("max tracking error [rad]", "max_tracking_error_rad", 1.0, "{:.2e}"),
+    ("absolute frame: max tracking error [m]", "absolute_max_error_m", 1.0, "{:.2e}"),
+    ("absolute frame: rms tracking error [m]", "absolute_rms_error_m", 1.0, "{:.2e}"),
+    ("absolute frame: max tracking error [rad]", "absolute_max_error_rad", 1.0, "{:.2e}"),
     ("position limit violations", "joint_position_limit_violations", 1.0, "{:.0f}"),
     ("velocity limit violations", "joint_velocity_limit_violations", 1.0, "{:.0f}"),
     ("solver failures", "solver_failures", 1.0, "{:.0f}"),

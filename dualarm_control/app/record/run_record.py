@@ -72,6 +72,8 @@ class RunRecord:
             the report computes it from ``final_positions`` and the scenario.
         obstacle_events: each stretch of cycles the live obstacle limit held the command, as text with the
             obstacle's name (``t = 16.20-17.35 s: yielding to obstacle:hand (closest 0.034 m, left_flange)``).
+        absolute_error: the absolute frame's tracking error (position [m], orientation [rad]) per cycle, (N, 2),
+            in a run with an absolute target (issue 41; a bag: the controller's /diagnostics values), else None.
     """
 
     label: str
@@ -94,6 +96,7 @@ class RunRecord:
     tasks: TaskValues | None = field(default=None)
     final_errors: tuple[float, float] | None = None
     obstacle_events: tuple[str, ...] = ()
+    absolute_error: FloatArray | None = None
 
 
 def with_task_values(record: RunRecord, scenario: Scenario, model: DualArmModel, gain: float | None,
@@ -134,6 +137,13 @@ def with_task_values(record: RunRecord, scenario: Scenario, model: DualArmModel,
                       bounds=bounds, kinds={t.name: t.kind for t in tasks}, tip_in_pan=tip,
                       set_point=spec.force.set_point if force else float("nan"))
     return dataclasses.replace(record, tasks=part)
+
+
+def absolute_columns(position: FloatArray, orientation: FloatArray) -> FloatArray | None:
+    """(N, 2) of the absolute frame's errors [m, rad] per cycle, None when no cycle had an absolute target."""
+    if not np.isfinite(position).any():
+        return None
+    return np.column_stack((position, orientation))
 
 
 def nan_column(n: int) -> FloatArray:

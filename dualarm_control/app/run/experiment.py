@@ -21,7 +21,11 @@ from collections.abc import Callable
 
 import numpy as np
 
-from dualarm_control.app.record.run_record import RunRecord, with_task_values
+from dualarm_control.app.record.run_record import (
+    RunRecord,
+    absolute_columns,
+    with_task_values,
+)
 from dualarm_control.controller import ControllerParams
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.moving_feed import MovingFeed
@@ -31,7 +35,7 @@ from dualarm_sim.cell import CellConfig, DualArmCell
 from dualarm_sim.moving import MovingBodies
 
 SCALARS = ("time", "solve_time", "cycle_time", "position_error", "orientation_error", "contact_force",
-           "measured_force", "normal_offset", "table_contacts")
+           "measured_force", "normal_offset", "table_contacts", "absolute_position_error", "absolute_orientation_error")
 
 
 def run_scenario(
@@ -78,7 +82,9 @@ def run_scenario(
             rec["positions"][k], rec["velocities"][k], rec["commands"][k] = state.positions, state.velocities, out.velocities
             for key, value in (("time", t), ("solve_time", out.result.solve_time), ("cycle_time", out.cycle_time),
                                ("position_error", out.position_error), ("orientation_error", out.orientation_error),
-                               ("normal_offset", out.normal_offset), ("measured_force", out.measured_force)):
+                               ("normal_offset", out.normal_offset), ("measured_force", out.measured_force),
+                               ("absolute_position_error", out.absolute_position_error),
+                               ("absolute_orientation_error", out.absolute_orientation_error)):
                 scal[key][k] = value
             status.append(out.result.status)
             state = cell.step()
@@ -94,5 +100,7 @@ def run_scenario(
                        final_positions=final_q, contact_force=scal["contact_force"],
                        measured_force=scal["measured_force"], normal_offset=scal["normal_offset"],
                        table_contacts=scal["table_contacts"],
-                       obstacle_events=moving.finish() if moving is not None else ())
+                       obstacle_events=moving.finish() if moving is not None else (),
+                       absolute_error=absolute_columns(scal["absolute_position_error"],
+                                                       scal["absolute_orientation_error"]))
     return with_task_values(record, scenario, model, gain, force)

@@ -239,7 +239,9 @@ def launch_scenario(
 
     ``interactive`` (issue 18): the trajectory node in ``mode:=interactive`` on the scenario's
     cell and limits: it holds the measured relative pose and follows /relative_goal and
-    /relative_twist, in real time, until Ctrl-C or ``timeout``.
+    /relative_twist (and, with the scenario's absolute frame, /absolute_goal and /absolute_twist: issue 41),
+    until Ctrl-C or ``timeout``; in real time, or with ``lockstep`` as fast as the nodes go (a command applies at
+    the cycle it arrives in).
 
     ``processes`` (:data:`LAYOUTS`): 3, each node its own process (the default); 2, the simulator
     alone and the controller with the trajectory node in one ``cell_container``; 1, every node in
@@ -255,8 +257,8 @@ def launch_scenario(
     loaded = load_scenario(scenario, robot)
     print(f"[launch] {robot_note(loaded, profile_robot, robot or '')}", flush=True)
     tasks = loaded.tasks is not None
-    if interactive and (tasks or lockstep or plan is not None):
-        raise ValueError("interactive runs in real time on a relative motion scenario (no lockstep, plan or tasks)")
+    if interactive and (tasks or plan is not None):
+        raise ValueError("interactive runs on a relative motion scenario (no plan or tasks)")
     if processes not in LAYOUTS:
         raise ValueError(f"processes must be one of {sorted(LAYOUTS)}, got {processes!r}")
     if processes != 3 and lockstep:
