@@ -140,6 +140,7 @@ class Cycle:
         normal_offset: f_F of eq (9) of paper 001 [m] (0 without force feedback).
         stage: what is being followed (segment name, "circle", "execute"), for progress output.
         reports: what each limit saw, by limit name (the limits that had something to say).
+        internal_wrench: a held object's internal wrench h_I [N, N m] in F1, (6,) (None without a held object).
     """
 
     velocities: FloatArray
@@ -154,6 +155,7 @@ class Cycle:
     normal_offset: float = 0.0
     stage: str = ""
     reports: dict[str, LimitReport] = field(default_factory=dict)
+    internal_wrench: FloatArray | None = None
 
     @property
     def collision(self) -> CollisionReport | None:
@@ -352,6 +354,11 @@ class RelativeController:
                      position_error=float(np.linalg.norm(p_des - p)),
                      orientation_error=rotation_angle(r, r_des), cycle_time=elapsed,
                      reports=self._reports(velocities))
+
+    def safe_command(self, q: FloatArray, reason: str) -> Cycle:
+        """The safe command at q (n,) [rad] for a reason outside the solver (a wrench limit, a lost sensor): as
+        for an invalid input (status "invalid_input"), the reason in the result's ``detail``."""
+        return self._invalid(reason, time.perf_counter(), np.asarray(q, float))
 
     def _invalid(self, what: str, start: float, q: FloatArray) -> Cycle:
         """The safe command for an invalid input, with the reason in ``detail`` (status "invalid_input").

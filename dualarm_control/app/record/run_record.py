@@ -70,6 +70,8 @@ class RunRecord:
         final_errors: final relative (position [m], orientation [rad]) error where the recording
             gives it (a bag: its last /relative_pose against its last /relative_target); None:
             the report computes it from ``final_positions`` and the scenario.
+        internal_wrench: a held object's internal wrench h_I [N, N m] in F1, (N, 6)
+            (:mod:`dualarm_control.references.held`); None without a held object.
     """
 
     label: str
@@ -91,6 +93,7 @@ class RunRecord:
     table_contacts: FloatArray
     tasks: TaskValues | None = field(default=None)
     final_errors: tuple[float, float] | None = None
+    internal_wrench: FloatArray | None = None
 
 
 def with_task_values(record: RunRecord, scenario: Scenario, model: DualArmModel, gain: float | None,

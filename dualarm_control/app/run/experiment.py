@@ -61,10 +61,13 @@ def run_scenario(
         rec = {k: np.zeros((steps, n)) for k in ("positions", "velocities", "commands")}
         scal = {k: np.zeros(steps) for k in SCALARS}
         status: list[str] = []
+        internal = np.full((steps, 6), np.nan) if cell.held_object is not None else None
         every = max(steps // 100, 1)
         for k in range(steps):
             t = k * period
-            out = follower.cycle(t, state.positions, cell.wrench() if follower.uses_wrench else None)
+            wrench = None if not follower.uses_wrench else (
+                cell.wrist_wrenches().ravel() if cell.held_object is not None else cell.wrench())
+            out = follower.cycle(t, state.positions, wrench)
             cell.apply_command(out.velocities)
             rec["positions"][k], rec["velocities"][k], rec["commands"][k] = state.positions, state.velocities, out.velocities
             for key, value in (("time", t), ("solve_time", out.result.solve_time), ("cycle_time", out.cycle_time),
@@ -72,6 +75,8 @@ def run_scenario(
                                ("normal_offset", out.normal_offset), ("measured_force", out.measured_force)):
                 scal[key][k] = value
             status.append(out.result.status)
+            if internal is not None and out.internal_wrench is not None:
+                internal[k] = out.internal_wrench
             state = cell.step()
             scal["contact_force"][k] = cell.contact_force(*pairs[0]) if pairs else 0.0
             scal["table_contacts"][k] = cell.table_contacts()
@@ -84,5 +89,5 @@ def run_scenario(
                        position_error=scal["position_error"], orientation_error=scal["orientation_error"],
                        final_positions=final_q, contact_force=scal["contact_force"],
                        measured_force=scal["measured_force"], normal_offset=scal["normal_offset"],
-                       table_contacts=scal["table_contacts"])
+                       table_contacts=scal["table_contacts"], internal_wrench=internal)
     return with_task_values(record, scenario, model, gain, force)
