@@ -1,17 +1,21 @@
 """The wrenches on an object held by two hands: external and internal (the cooperative task space, issue 41).
 
-Chiacchio, Chiaverini and Siciliano (1996) and Caccavale et al.: with h_1, h_2 the wrenches the two hands exert
-on the object, both about the object's centre p_o and in one frame (world axes), the **external** wrench is
-their sum, the one that moves the object (it balances the weight and the inertial load),
+Chiacchio, Chiaverini and Siciliano (1996), the kineto-static duality of the cooperative task space: with
+h_1, h_2 the wrenches the two hands exert on the object, each about its own tool origin p_i, in world axes,
+the **external** wrench (the one that moves the object: it balances the weight and the inertial load) is
+their sum, about the object's centre p_o,
 
-    h_E = h_1 + h_2                                                        (6,)
+    h_E = [f_1 + f_2;  m_1 + m_2 + (p_1 - p_o) x f_1 + (p_2 - p_o) x f_2]     (6,)
 
-and the **internal** wrench the part that produces no object motion (squeeze or pull, twist):
+and the **internal** wrench, dual to the relative pose (x_r = x_2 - x_1, x_a = (x_1 + x_2)/2 give
+h_a = h_1 + h_2, h_r = (h_2 - h_1)/2), the part that produces no object motion (squeeze or pull, twist):
 
-    h_I = (h_1 - h_2) / 2                                                  (6,)
+    h_I = (h_1 - h_2) / 2 = -h_r                                              (6,)
 
-(with the grasps symmetric about p_o, a rigid load splits evenly, h_i = h_E / 2 +- h_I). A wrench is
-[f; m] = [fx, fy, fz, mx, my, mz] [N, N m]. Moving a wrench from a point p to p_o: m_o = m + (p - p_o) x f.
+(each moment about its own grasp point: a load carried evenly, f_1 = f_2 = W/2 with no moment at the hands,
+gives h_I = 0 whatever the lever arms; taking both moments about p_o instead would leave -(r x W)/2 of the
+weight in h_I for grasps at p_o -+ r). A wrench is [f; m] = [fx, fy, fz, mx, my, mz] [N, N m]. Moving a
+wrench from a point p to p_o: m_o = m + (p - p_o) x f.
 
 Sensors (:mod:`dualarm_sim.held_object`): a wrist reading s_i is the wrench the flange exerts on the tool link,
 about the tool origin p_i, in the tool frame R_i; the tool link (mass m_t) passes it on to the object less its
@@ -43,14 +47,15 @@ def in_frame(wrench: FloatArray, rotation: FloatArray) -> FloatArray:
     return np.concatenate((r.T @ w[:3], r.T @ w[3:]))
 
 
-def hand_wrenches(readings: FloatArray, rotations: FloatArray, positions: FloatArray, centre: FloatArray,
-                  bias: FloatArray | None = None, tool_mass: float = 0.0) -> FloatArray:
-    """The wrenches h_1, h_2 the hands exert on the object, about its centre, world axes (module docstring).
+def hand_wrenches(readings: FloatArray, rotations: FloatArray, bias: FloatArray | None = None,
+                  tool_mass: float = 0.0) -> FloatArray:
+    """The wrenches h_1, h_2 the hands exert on the object, each about its tool origin, world axes (module
+    docstring).
 
     Args:
         readings: s_1, s_2 [N, N m], (2, 6), each in its tool frame about the tool origin.
-        rotations: R_1, R_2, the tool frames in the world, (2, 3, 3). positions: p_1, p_2 [m], (2, 3).
-        centre: p_o [m], (3,). bias: b_1, b_2 (2, 6) (None: zero). tool_mass: m_t [kg] of each tool link.
+        rotations: R_1, R_2, the tool frames in the world, (2, 3, 3).
+        bias: b_1, b_2 (2, 6) (None: zero). tool_mass: m_t [kg] of each tool link.
     Returns:
         (2, 6): [h_1; h_2].
     """
@@ -58,15 +63,15 @@ def hand_wrenches(readings: FloatArray, rotations: FloatArray, positions: FloatA
     out = np.empty((2, 6))
     for i in range(2):
         r = np.asarray(rotations[i], float)
-        world = np.concatenate((r @ s[i, :3] + tool_mass * GRAVITY, r @ s[i, 3:]))
-        out[i] = move_wrench(world, positions[i], centre)
+        out[i] = np.concatenate((r @ s[i, :3] + tool_mass * GRAVITY, r @ s[i, 3:]))
     return out
 
 
-def external_wrench(hands: FloatArray) -> FloatArray:
-    """h_E = h_1 + h_2 (6,) of the hands' wrenches (2, 6) (module docstring)."""
+def external_wrench(hands: FloatArray, positions: FloatArray, centre: FloatArray) -> FloatArray:
+    """h_E (6,) about the object's centre p_o (3,) [m] of the hands' wrenches (2, 6) about their tool origins
+    p_1, p_2 (2, 3) [m] (module docstring)."""
     h = np.asarray(hands, float)
-    return h[0] + h[1]
+    return move_wrench(h[0], positions[0], centre) + move_wrench(h[1], positions[1], centre)
 
 
 def internal_wrench(hands: FloatArray) -> FloatArray:

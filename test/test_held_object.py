@@ -56,8 +56,8 @@ def test_static_hand_wrenches_carry_the_box_weight(mass: float, robot: str) -> N
     with _held_cell(mass, robot) as cell:
         _still(cell, 400)
         rotations, positions, centre = _poses(cell)
-        hands = hand_wrenches(cell.wrist_wrenches(), rotations, positions, centre, tool_mass=TOOL_MASS)
-        total = external_wrench(hands)
+        hands = hand_wrenches(cell.wrist_wrenches(), rotations, tool_mass=TOOL_MASS)
+        total = external_wrench(hands, positions, centre)
         assert np.abs(total - (0.0, 0.0, mass * G, 0.0, 0.0, 0.0)).max() < 0.01, total
         held = cell.held_object
         assert held is not None
@@ -72,13 +72,13 @@ def test_box_hangs_from_the_fixture_until_the_grasp() -> None:
     with _held_cell(2.0, grasp_time=0.25) as cell:
         before = _still(cell, 49)[-1]
         rotations, positions, centre = _poses(cell)
-        empty = hand_wrenches(before, rotations, positions, centre, tool_mass=TOOL_MASS)
+        empty = hand_wrenches(before, rotations, tool_mass=TOOL_MASS)
         assert np.abs(empty).max() < 1e-3, empty  # measured 3e-5
         held = cell.held_object
         assert held is not None and held.waiting
         after = _still(cell, 300)[-1]
         assert held.grasped and not held.waiting
-        total = external_wrench(hand_wrenches(after, rotations, positions, centre, tool_mass=TOOL_MASS))
+        total = external_wrench(hand_wrenches(after, rotations, tool_mass=TOOL_MASS), positions, centre)
         assert abs(total[2] - 2.0 * G) < 0.01, total
 
 
@@ -106,9 +106,16 @@ def test_internal_and_external_wrench_by_hand() -> None:
     rotations = np.array([np.eye(3), np.eye(3)])
     positions = np.array([[0.0, 0.0, -0.1], [0.0, 0.0, 0.1]])
     readings = np.array([[0.0, 0.0, 10.0 + 9.81, 0.0, 0.0, 1.0], [0.0, 0.0, -10.0 + 9.81, 0.0, 0.0, -1.0]])
-    hands = hand_wrenches(readings, rotations, positions, np.zeros(3))
-    np.testing.assert_allclose(external_wrench(hands), (0.0, 0.0, 19.62, 0.0, 0.0, 0.0), atol=1e-12)
+    hands = hand_wrenches(readings, rotations)
+    np.testing.assert_allclose(external_wrench(hands, positions, np.zeros(3)), (0.0, 0.0, 19.62, 0.0, 0.0, 0.0),
+                               atol=1e-12)
     np.testing.assert_allclose(internal_wrench(hands), (0.0, 0.0, 10.0, 0.0, 0.0, 1.0), atol=1e-12)
+    # a bar held level at both ends, along x at -+0.3 m, its 2 kg weight shared: no internal wrench, and about
+    # the centre no external moment
+    bar = np.array([[0.0, 0.0, 9.81, 0.0, 0.0, 0.0]] * 2)
+    ends = np.array([[-0.3, 0.0, 0.0], [0.3, 0.0, 0.0]])
+    np.testing.assert_allclose(internal_wrench(bar), np.zeros(6), atol=1e-12)
+    np.testing.assert_allclose(external_wrench(bar, ends, np.zeros(3)), (0.0, 0.0, 19.62, 0.0, 0.0, 0.0), atol=1e-12)
     # a lateral force at a lever: 2 N along x at 0.1 m up gives 0.2 N m about y at the centre
     np.testing.assert_allclose(move_wrench((2.0, 0.0, 0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.1), np.zeros(3)),
                                (2.0, 0.0, 0.0, 0.0, 0.2, 0.0), atol=1e-12)

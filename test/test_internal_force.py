@@ -47,6 +47,9 @@ def test_admittance_step_by_hand() -> None:
     for _ in range(10000):
         admittance.step(np.array((-1e3, 0.0, 12.0, 0.0, 0.0, 1e3)), 0.005)
     np.testing.assert_allclose(admittance.offset, (-0.02, 0.0, 0.02, 0.0, 0.0, 0.1))
+    pi = RelativeAdmittance(dataclasses.replace(params, force_p_gain=1e-4))
+    np.testing.assert_allclose(pi.step(np.array((0.0, 0.0, 12.0, 0.0, 0.0, 0.0)), 0.005)[2], 1e-3 + 5e-4)
+    np.testing.assert_allclose(pi.step(np.array((0.0, 0.0, 2.0, 0.0, 0.0, 0.0)), 0.005)[2], 5e-4)  # P part gone
     position, rotation = offset_target(np.array((0.0, 0.0, 0.3)), np.eye(3), np.array((0.0, 0.0, 0.01, 0.0, 0.0,
                                                                                         0.1)))
     np.testing.assert_allclose(position, (0.0, 0.0, 0.31))
@@ -67,16 +70,16 @@ def _metrics(scenario: Scenario, on: bool) -> dict[str, float | int | str]:
     return task_metrics(record, record.tasks, scenario)
 
 
-def test_internal_force_control_keeps_the_squeeze_small() -> None:
-    """hold_box (Baxter, 2 kg, biased noisy sensors): with the control the internal force stays within 5 N and the
-    torque within 0.5 N m after convergence (measured 1.57 N, 0.144 N m; over the whole carry 5.07 N, 0.554 N m),
-    without it the squeeze grows past 20 N (measured 42.9 N, 4.07 N m); the box reaches its target either way.
-    With the admittance's sign flipped the control drives the squeeze up (tried: the wrench limit stops it)."""
-    scenario = load_scenario("hold_box")
+@pytest.mark.parametrize("name", ["hold_box", "hold_box_lwr4"])
+def test_internal_force_control_keeps_the_squeeze_small(name: str) -> None:
+    """A 2 kg box, biased noisy sensors, lifted 5 cm and turned 10 deg: with the control the internal force stays
+    within 5 N and the torque within 0.5 N m over the whole carry (measured: Baxter 1.63 N, 0.061 N m; LWR4 1.41 N,
+    0.133 N m); without it the squeeze grows past 10 N (Baxter 24.3 N, LWR4 17.0 N); the box reaches its target
+    either way. With the admittance's sign flipped the squeeze ran away (153 N, tried)."""
+    scenario = load_scenario(name)
     on, off = _metrics(scenario, True), _metrics(scenario, False)
-    assert on["internal_force_settled_max_n"] < 5.0 and on["internal_torque_settled_max_nm"] < 0.5, on
-    assert on["internal_force_max_n"] < 10.0, on
-    assert off["internal_force_max_n"] > 20.0 and off["internal_torque_max_nm"] > 2.0, off
+    assert on["internal_force_max_n"] < 5.0 and on["internal_torque_max_nm"] < 0.5, on
+    assert off["internal_force_max_n"] > 10.0, off
     for run in (on, off):
         assert run["absolute_error_final_m"] < 1e-3 and run["solver_failures"] == 0, run
 

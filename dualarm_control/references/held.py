@@ -12,7 +12,7 @@ Scenario keys (under ``scenario.``, besides the tasks' keys, :mod:`dualarm_contr
 
 The tracker (:class:`HoldController`) reads both wrist sensors every cycle ((12,): left then right, each as
 :mod:`dualarm_sim.held_object` gives it), identifies the bias and payload in the still steps, computes the
-internal wrench about the object's centre (the absolute task's grasp frame) in F1, and, with internal-force
+internal wrench (each hand's moment about its own grasp point) in F1, and, with internal-force
 control on (the run option ``force``: ``dualarm experiment --force``), moves the held relative pose's target by
 the admittance's offset. Until the identification is over the absolute tasks hold the start pose. A hand's
 force beyond ``wrench_limit`` stops the motion (the safe command, latched, the reason in the cycle's detail).
@@ -35,7 +35,9 @@ from dualarm_control.internal_force import (
     InternalForceParams,
     RelativeAdmittance,
     WrenchIdentification,
+    blend_pose,
     offset_target,
+    ramp_fraction,
 )
 from dualarm_control.kinematics import Configuration, FloatArray
 from dualarm_control.references.base import StreamSample
@@ -135,23 +137,15 @@ class HoldController:
         self.stopped = ""
         self._start: list[Task] | None = None
 
-    def _centre(self, conf: Configuration) -> FloatArray:
-        """The object's centre [m] (3,): the first absolute task's frame, else halfway between the tools."""
-        tasks = self.base.tasks
-        if self._absolute:
-            return tasks[self._absolute[0]].state(conf).position  # type: ignore[no-any-return]
-        return 0.5 * (conf.frame("left_tool").position + conf.frame("right_tool").position)
-
     def measure(self, q: FloatArray, t: float, wrench: FloatArray) -> FloatArray:
-        """The hands' wrenches on the object (2, 6) (world, about its centre) from the readings (12,) at q,
+        """The hands' wrenches on the object (2, 6) (world axes, each about its tool origin) from the readings (12,) at q,
         identification and internal wrench h_I in F1 (``self.internal``) updated."""
         readings = np.asarray(wrench, float).reshape(2, 6)
         conf = Configuration(self.base.model, q)
         left, right = conf.frame("left_tool"), conf.frame("right_tool")
         rotations = np.array((left.rotation, right.rotation))
         self.identification.add(t, readings, rotations)
-        hands = hand_wrenches(readings, rotations, np.array((left.position, right.position)), self._centre(conf),
-                              self.identification.bias, self.params.tool_mass)
+        hands = hand_wrenches(readings, rotations, self.identification.bias, self.params.tool_mass)
         self.internal = in_frame(internal_wrench(hands), left.rotation)
         if self._start is None:
             self._start = [dataclasses.replace(t_, position=(s := t_.state(conf)).position, rotation=s.rotation)
@@ -173,8 +167,7 @@ class HoldController:
                               f"{force:.1f} N > wrench_limit {self.params.wrench_limit:g} N; motion stopped")
         if self.enabled and t >= self.params.grasp_time:
             self.admittance.step(self.internal, self.period)
-        assert self._start is not None
-        tasks = list(self.base.tasks if t >= self.params.motion_start else self._start)
+        tasks = self._absolute_targets(t)
         held = tasks[self._held_index]
         assert isinstance(held, RelativePoseTask)
         position, rotation = offset_target(held.target.position, held.target.rotation, self.admittance.offset)
@@ -182,6 +175,21 @@ class HoldController:
         out = self.controller.solve_tasks(q, tasks, t)
         self._annotate(out, t)
         return out
+
+    def _absolute_targets(self, t: float) -> list[Task]:
+        """The tasks at t: the absolute ones at their start pose until ``motion_start``, then blended to their
+        targets over ``start_ramp`` (:func:`~dualarm_control.internal_force.ramp_fraction`)."""
+        assert self._start is not None
+        s = ramp_fraction(t, self.params.motion_start, self.params.start_ramp)
+        if s >= 1.0:
+            return list(self.base.tasks)
+        tasks = list(self._start)
+        for i in self._absolute:
+            start, end = tasks[i], self.base.tasks[i]
+            assert isinstance(start, AbsolutePoseTask) and isinstance(end, AbsolutePoseTask)
+            position, rotation = blend_pose((start.position, start.rotation), (end.position, end.rotation), s)
+            tasks[i] = dataclasses.replace(end, position=position, rotation=rotation)
+        return tasks
 
     def _stop(self, q: FloatArray, t: float, reason: str) -> Cycle:
         self.stopped = reason
