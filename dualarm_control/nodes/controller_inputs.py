@@ -22,13 +22,17 @@ from dualarm_control.errors import InputRejected
 from dualarm_control.hardware import StateAssembler
 from dualarm_control.references.base import (
     JOINT_REFERENCE,
+    LEFT_WRENCH,
     RELATIVE_TARGET,
+    RIGHT_WRENCH,
     WRENCH,
     StreamSample,
 )
 from dualarm_control.ros import convert
 from dualarm_control.ros.inputs import StampVerdict, StreamInputs
 
+WRENCH_STREAMS = (WRENCH, LEFT_WRENCH, RIGHT_WRENCH)
+"""The F/T streams: the force variant's one sensor, a held object's two wrist sensors."""
 MOVING = 1e-9
 """A target twist / reference velocity norm above this is motion [m/s, rad/s]."""
 
@@ -98,8 +102,8 @@ class ControllerInputs:
                 return None
             value, received = self.samples.latest[stream]
             age = time.monotonic_ns() - received
-            if stream == WRENCH and age > self.values()["stale_timeout"] * 1e9:
-                self.out.enter_safe_state(stamp, f"wrench stale by {age / 1e6:.1f} ms")
+            if stream in WRENCH_STREAMS and age > self.values()["stale_timeout"] * 1e9:
+                self.out.enter_safe_state(stamp, f"{stream.lstrip('/')} stale by {age / 1e6:.1f} ms")
                 return None
             sample[stream] = value
         reason = self.target_fault(time.monotonic_ns())
@@ -132,6 +136,14 @@ class ControllerInputs:
         if speed <= MOVING or age <= self.values()["target_timeout"] * 1e9:
             return ""
         return f"{self.streams[-1].lstrip('/')} stopped mid-motion: none for {age / 1e6:.1f} ms"
+
+
+def cycle_wrench(samples: Mapping[str, Any]) -> np.ndarray | None:
+    """The F/T reading a cycle gives its tracker: both wrist sensors (12,) (left, right) when the cycle has
+    them, else the one sensor's (6,), else None."""
+    if LEFT_WRENCH in samples:
+        return np.concatenate((samples[LEFT_WRENCH], samples[RIGHT_WRENCH]))
+    return samples.get(WRENCH)
 
 
 def stream_sample(samples: Mapping[str, Any]) -> StreamSample | None:

@@ -48,7 +48,12 @@ from dualarm_control import controller as core
 from dualarm_control.errors import DualArmError
 from dualarm_control.hardware import profile_from_values
 from dualarm_control.kinematics import DualArmModel
-from dualarm_control.nodes.controller_inputs import ControllerInputs, stream_sample
+from dualarm_control.nodes.controller_inputs import (
+    WRENCH_STREAMS,
+    ControllerInputs,
+    cycle_wrench,
+    stream_sample,
+)
 from dualarm_control.nodes.controller_setup import (
     ALL_PARAMETERS,
     DEFAULT_PRIORITY,
@@ -124,7 +129,8 @@ class ControllerNode:
         self.joint_states = JointStates(n, self.profile, m.joint_names, qos, self.on_joint_state, self.out.reject,
                                         self.on_malformed, bus)
         # What a cycle consumes besides the joint state: the reference source's streams.
-        self.inputs = ControllerInputs(source.streams + ((WRENCH,) if self.tracker.uses_wrench else ()),
+        wrenches = getattr(self.tracker, "wrench_streams", (WRENCH,)) if self.tracker.uses_wrench else ()
+        self.inputs = ControllerInputs(source.streams + tuple(wrenches),
                                        self.lockstep, self.out, self.log, lambda: self.values,
                                        self.joint_states.assembler, self.try_cycle)
         self.subscribe_streams(qos, bus)
@@ -154,8 +160,9 @@ class ControllerNode:
         if JOINT_REFERENCE in streams:
             subscribe(JointTrajectory, JOINT_REFERENCE,
                       self.inputs.message_input(JOINT_REFERENCE, lambda msg: convert.joint_reference(msg, order)), qos)
-        if WRENCH in streams:
-            subscribe(WrenchStamped, WRENCH, self.inputs.message_input(WRENCH, convert.wrench_vector), 10)
+        for wrench in WRENCH_STREAMS:
+            if wrench in streams:
+                subscribe(WrenchStamped, wrench, self.inputs.message_input(wrench, convert.wrench_vector), 10)
 
     def close(self) -> None:
         self.log.info(self.out.summary())
@@ -212,7 +219,7 @@ class ControllerNode:
         if not self.lockstep:
             self.out.leave_safe_state()
         self.apply_pending()
-        cycle = self.tracker.track(q, stream_sample(inputs), t, inputs.get(WRENCH))
+        cycle = self.tracker.track(q, stream_sample(inputs), t, cycle_wrench(inputs))
         self.out.cycle(cycle.velocities, cycle.result)
         self.last_commanded_stamp = stamp
         latency = self.timing.command(stamp, received, self.params.period)  # state-to-command [s]

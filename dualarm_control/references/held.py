@@ -40,7 +40,7 @@ from dualarm_control.internal_force import (
     ramp_fraction,
 )
 from dualarm_control.kinematics import Configuration, FloatArray
-from dualarm_control.references.base import StreamSample
+from dualarm_control.references.base import LEFT_WRENCH, RIGHT_WRENCH, StreamSample
 from dualarm_control.scenario_keys import PREFIX
 from dualarm_control.tasks import AbsolutePoseTask, FixedTarget, RelativePoseTask, Task
 
@@ -103,6 +103,7 @@ class HoldController:
     tasks, controller, label and cycle count); ``enabled``: internal-force control on."""
 
     uses_wrench = True
+    wrench_streams = (LEFT_WRENCH, RIGHT_WRENCH)
 
     def __init__(self, base: Any, params: InternalForceParams, enabled: bool) -> None:
         self.base = base
@@ -206,7 +207,7 @@ class HoldController:
     def report(self, cycle: Cycle, t: float) -> dict[str, Any]:
         """The task cycle's /diagnostics values and the internal wrench [N, N m] in F1, the offset, the mass."""
         out = dict(self.base.report(cycle, t))
-        out.update({"internal_wrench": " ".join(repr(float(v)) for v in self.internal),
+        out.update({"force": int(self.enabled),"internal_wrench": " ".join(repr(float(v)) for v in self.internal),
                     "relative_offset": " ".join(repr(float(v)) for v in self.admittance.offset),
                     "identified_mass_kg": repr(self.identification.mass), "wrench_stop": self.stopped})
         return out

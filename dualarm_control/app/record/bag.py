@@ -570,14 +570,16 @@ def _task_record(path: Path, bag: Bag) -> tuple[list[RunRecord], Scenario]:
             if i < len(contact_stamps):
                 contact[k] = bag.contact[int(contact_stamps[i])]
     n, gain, force = len(stamps), float(first["task_gain"]), first["force"] == "1"
-    label = f"k={gain:g}" + (" force" if force else "")
+    label = f"k={gain:g}" + ((" internal on" if force else " internal off") if "internal_wrench" in first
+                             else " force" if force else "")
     record = RunRecord(
         label=label, kind=scenario.reference.kind, period=float(first["control_period_s"]), time=column("task_time_s"),
         positions=positions, velocities=np.full(positions.shape, np.nan), commands=commands,
         status=[v["status"] for _, v in cycles], solve_time=nan_column(n), cycle_time=column("cycle_time_s"),
         position_error=nan_column(n), orientation_error=nan_column(n), final_positions=nan_column(model.nq),
         contact_force=contact, measured_force=column("measured_force_n"), normal_offset=column("normal_offset_m"),
-        table_contacts=table)
+        table_contacts=table, internal_wrench=(np.array([[float(x) for x in v["internal_wrench"].split()]
+                                                         for _, v in cycles]) if "internal_wrench" in first else None))
     return [with_task_values(record, scenario, model, gain, force)], scenario
 
 
