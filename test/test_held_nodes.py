@@ -1,0 +1,83 @@
+"""A held box over ROS (issue 41, items 2-3): sim_node's wrist sensors on /left/wrench and /right/wrench,
+controller_node's internal-force control on them (docs/cooperative.md).
+
+Lockstep: the bag's metrics equal the in-process experiment's exactly (the same physics, the same sensor noise
+drawn once per step, the same solver path; the internal wrench comes back from /diagnostics at full precision).
+A wrist stream that stops trips the stale-wrench watchdog as stale joint states do.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from launching import meanwhile
+
+from dualarm_control.app.record.bag import read_run
+from dualarm_control.app.record.report import summarize_run
+from dualarm_control.app.run.experiment import run_scenario
+from dualarm_control.app.run.launcher import launch_scenario
+from dualarm_control.controller_params import controller_params
+from dualarm_control.nodes.controller_inputs import ControllerInputs, cycle_wrench
+from dualarm_control.params import read_params_files
+from dualarm_control.references.base import LEFT_WRENCH, RIGHT_WRENCH, WRENCH
+from dualarm_control.scenario import load_scenario
+
+PARAMS = str(Path(__file__).parents[1] / "config" / "solvers" / "constraint_based.yaml")
+WALL_CLOCK = ("cycle_time_p50_s", "cycle_time_p99_s")
+
+
+def _in_process() -> dict[str, float | int | str]:
+    scenario = load_scenario("hold_box")
+    params = controller_params({**read_params_files([PARAMS], "controller_node"), "solver": "constraint_based"})
+    return summarize_run(run_scenario(scenario, params, force=True), scenario)
+
+
+def test_lockstep_hold_box_bag_metrics_equal_in_process(tmp_path: Path) -> None:
+    """`dualarm launch hold_box --lockstep --force --record BAG` then `dualarm report BAG`: every metric
+    (internal force and torque, drift, absolute error) equals the in-process run's, exactly (measured: equal to
+    the last bit; the issue asks 1e-6)."""
+    bag = tmp_path / "bag"
+    code, expected = meanwhile(
+        lambda: launch_scenario("hold_box", [PARAMS], [], True, bag, timeout=120.0, force=True),
+        _in_process)
+    assert code == 0
+    (log,), scenario = read_run(bag)
+    assert scenario is not None and log.internal_wrench is not None
+    from_bag = summarize_run(log, scenario)
+    assert set(from_bag) == set(expected)
+    for key, value in expected.items():
+        if key not in WALL_CLOCK and key != "label":
+            assert from_bag[key] == value or (value != value and from_bag[key] != from_bag[key]), key
+    assert float(from_bag["internal_force_max_n"]) < 5.0
+
+
+class _Out:
+    def __init__(self) -> None:
+        self.safe_states: list[str] = []
+
+    def enter_safe_state(self, stamp: int, reason: str) -> None:
+        self.safe_states.append(reason)
+
+    def safe(self, stamp: int, reason: str) -> None:
+        self.safe_states.append(reason)
+
+
+def test_a_stopped_wrist_stream_trips_the_watchdog() -> None:
+    """Real time: a wrist sensor's last sample older than stale_timeout gives the safe state, naming the stream;
+    fresh ones give the cycle both readings (12,), left then right."""
+    out = _Out()
+    values = {"stale_timeout": 0.05, "target_timeout": 0.1}
+    inputs = ControllerInputs((LEFT_WRENCH, RIGHT_WRENCH), False, out, None, lambda: values, Any, lambda: None)
+    left, right = np.arange(6.0), np.arange(6.0, 12.0)
+    inputs.samples.put(LEFT_WRENCH, 1, left)
+    inputs.samples.put(RIGHT_WRENCH, 1, right)
+    sample = inputs.fresh(1)
+    assert sample is not None and out.safe_states == []
+    np.testing.assert_array_equal(cycle_wrench(sample), np.arange(12.0))
+    value, received = inputs.samples.latest[LEFT_WRENCH]
+    inputs.samples.latest[LEFT_WRENCH] = (value, received - 80_000_000)  # its last sample 80 ms ago
+    assert inputs.fresh(2) is None
+    assert out.safe_states and out.safe_states[-1].startswith("left/wrench stale by"), out.safe_states
+    assert cycle_wrench({WRENCH: left}) is left and cycle_wrench({}) is None
