@@ -362,6 +362,9 @@ class DualArmCell:
         """The obstacles' pybullet body ids by name (``config.obstacles``)."""
         if self._table is None:
             self._table = self.obstacle_bodies.get("table")
+        self.grasp_on_motion = False
+        """A held object's ``grasp_time`` counts from the first non-zero command, not from the reset
+        (:meth:`count_grasp_from_motion`)."""
         self.held_object: HeldObject | None = None
         """The held box (``config.held_object``), grasped at every :meth:`reset`."""
         self._wrist = WristSensors(self.config.wrist_sensors)
@@ -571,6 +574,7 @@ class DualArmCell:
                 self.held_object.remove()
             self.held_object = HeldObject(self.config.held_object, self._client, self._body, self._link_index,
                                           p.getNumJoints(self._body, physicsClientId=self._client))
+        self._grasp_from: int | None = None if self.grasp_on_motion else 0  # the step the grasp clock starts at
         self._reference = q  # the integrated command the joint position controller holds [rad]
         self._target = np.zeros(len(self._idx))
         self._cmd_step: int | None = None
@@ -596,6 +600,8 @@ class DualArmCell:
         over = np.abs(qd) > self._qd_max
         self._target = np.clip(qd, -self._qd_max, self._qd_max)
         self._cmd_step = self._steps
+        if self._grasp_from is None and np.any(qd != 0.0):
+            self._grasp_from = self._steps
         if not over.any():
             return CommandReport(True)
         names = [n for n, o in zip(self.joint_names, over) if o]
@@ -635,7 +641,8 @@ class DualArmCell:
         self._steps += 1
         self._stepped = True
         held = self.held_object
-        if held is not None and held.waiting and self.time >= held.config.grasp_time - 1e-9:
+        if held is not None and held.waiting and self._grasp_from is not None and \
+                (self._steps - self._grasp_from) * self.config.control_period >= held.config.grasp_time - 1e-9:
             held.grasp()  # the hands close at the end of this period
         sample = self.state()
         self._reference = np.clip(reference, sample.positions - MAX_LAG, sample.positions + MAX_LAG)
@@ -667,6 +674,13 @@ class DualArmCell:
         if not self._stepped or self._sensor is None:
             return np.zeros(6)
         return np.array(p.getJointState(self._body, self._sensor, physicsClientId=self._client)[2], dtype=float)
+
+    def count_grasp_from_motion(self) -> None:
+        """Count a held object's ``grasp_time`` from the first non-zero command from now on (this run and every
+        reset): a real-time node, whose controller sends zero commands before its task starts."""
+        self.grasp_on_motion = True
+        if self._cmd_step is None:
+            self._grasp_from = None
 
     def wrist_wrenches(self) -> FloatArray:
         """Both wrist F/T sensors' readings with their bias and noise, (2, 6): left, right [N, N m], each the

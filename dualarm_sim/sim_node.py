@@ -150,6 +150,8 @@ class SimNode:
                                  **(held.cell() if held is not None else {})),
             initial_positions=plan_start(p["plan"], robot.joint_names) if p["plan"] else scenario.initial_positions,
         )
+        # a held object: the hands close grasp_time after the controller's first motion command (its task's start)
+        self.cell.count_grasp_from_motion()
         # joint states as joint_state_broadcaster gives them: the arms' joints, the held (locked) ones, the extra ones
         profile = profile_from_values(p, robot.joint_names, "sim_node")
         self.extra = [j for j in p["extra_joints"] if j]
