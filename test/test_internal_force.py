@@ -23,7 +23,7 @@ from dualarm_control.internal_force import (
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import read_params_file
 from dualarm_control.references.base import RunOptions
-from dualarm_control.references.held import HoldController
+from dualarm_control.references.held import HoldController, tuned
 from dualarm_control.scenario import (
     Scenario,
     load_scenario,
@@ -144,3 +144,25 @@ def test_bad_held_scenario_values_are_named(key: str, value: object, message: st
         scenario = scenario_from_parameters(flat, path)
         assert scenario.tasks is not None
         scenario.tasks.tracker(DualArmModel(scenario.robot), PARAMS, _options(scenario))
+
+
+def test_live_gains_and_setpoint_retune_the_admittance() -> None:
+    """controller_node's live parameters internal_force.force_gain / .torque_gain / .setpoint (docs/cooperative.md):
+    < 0 and a one-value setpoint keep the scenario's; a change keeps the admittance's offset; a non-finite
+    setpoint is refused naming it."""
+    scenario = load_scenario("hold_box")
+    assert scenario.tasks is not None
+    tracker = scenario.tasks.tracker(DualArmModel(scenario.robot), PARAMS, _options(scenario))
+    assert isinstance(tracker, HoldController)
+    defaults = {"internal_force.force_gain": -1.0, "internal_force.torque_gain": -1.0, "internal_force.setpoint": [0.0]}
+    tracker.retune(defaults)
+    assert tracker.params == tracker.scenario_params
+    tracker.admittance.step(np.array((0.0, 0.0, 10.0, 0.0, 0.0, 0.0)), 0.005)
+    offset = tracker.admittance.offset.copy()
+    tracker.retune({**defaults, "internal_force.force_gain": 0.002, "internal_force.setpoint": [0.0, 0.0, 5.0, 0, 0, 0]})
+    assert tracker.params.force_gain == 0.002 and tracker.params.setpoint == (0.0, 0.0, 5.0, 0.0, 0.0, 0.0)
+    np.testing.assert_array_equal(tracker.admittance.offset, offset)
+    after = tracker.admittance.step(np.array((0.0, 0.0, 10.0, 0.0, 0.0, 0.0)), 0.005)
+    np.testing.assert_allclose(after[2] - offset[2], 0.002 * 5.0 * 0.005)
+    with pytest.raises(ValueError, match=r"setpoint\[2\] must be a finite number"):
+        tuned(tracker.scenario_params, {**defaults, "internal_force.setpoint": [0.0, 0.0, math.nan, 0, 0, 0]})

@@ -74,6 +74,7 @@ from dualarm_control.references.base import (
     WRENCH,
     Tracker,
 )
+from dualarm_control.references.held import tuned
 from dualarm_control.references.plan import PlanSource
 from dualarm_control.ros import convert, inputs, local_bus
 from dualarm_control.ros import node as shell
@@ -134,9 +135,9 @@ class ControllerNode:
                                        self.lockstep, self.out, self.log, lambda: self.values,
                                        self.joint_states.assembler, self.try_cycle)
         self.subscribe_streams(qos, bus)
-        self.live = shell.LiveParameters(n, {s.name: s for s in ALL_PARAMETERS}, self.values, lambda merged: (
-            core.RelativeController(m, controller_params(self.scenario, merged, n.get_name()),
-                                    collision=self.tracker.controller.collision_model)))
+        self.live = shell.LiveParameters(n, {s.name: s for s in ALL_PARAMETERS}, self.values, self.build_live)
+        if hasattr(self.tracker, "retune"):  # a held object: the internal-force gains and setpoint, live
+            self.tracker.retune(self.values)
         self.ticks: list[shell.Tick] = ([] if self.lockstep else  # ros.node.Ticker, not an rclpy timer
                                         [(max(self.params.period, WATCHDOG_MIN_PERIOD_S), self.on_watchdog)])
         self.startup = StartupWait(float(self.values["hardware.startup_check"]))
@@ -167,6 +168,15 @@ class ControllerNode:
     def close(self) -> None:
         self.log.info(self.out.summary())
 
+    def build_live(self, merged: dict[str, Any]) -> core.RelativeController:
+        """What a live change needs: a new controller, and for a held object's tracker the check of its
+        internal-force values (ValueError refuses the change, naming the bad value)."""
+        held = getattr(self.tracker, "scenario_params", None)
+        if held is not None:
+            tuned(held, merged)
+        return core.RelativeController(self.model, controller_params(self.scenario, merged, self.node.get_name()),
+                                       collision=self.tracker.controller.collision_model)
+
     def apply_pending(self) -> None:
         """An accepted live parameter change takes effect at the cycle boundary: the controller
         built with the new values when they were set (off the cycle) continues from the running
@@ -180,6 +190,8 @@ class ControllerNode:
             self.params = self.tracker.controller.params
             self.out.solver = self.params.solver
             self.out.count["parameter_switches"] += 1
+            if hasattr(self.tracker, "retune"):
+                self.tracker.retune(self.values)
 
     def on_malformed(self, reason: str) -> None:
         """A sample that failed to deserialize (see :func:`subscribe_checked`): reported, dropped."""

@@ -98,6 +98,19 @@ def parse_held(flat: Mapping[str, Any]) -> HeldSetup | None:
     return HeldSetup(held, sensors, params)
 
 
+def tuned(params: InternalForceParams, values: Mapping[str, Any]) -> InternalForceParams:
+    """``params`` with a node's live ``internal_force.*`` values (:meth:`HoldController.retune`)."""
+    changes: dict[str, Any] = {}
+    for key in ("force_gain", "torque_gain"):
+        value = values.get(f"internal_force.{key}", -1.0)
+        if value >= 0:
+            changes[key] = float(value)
+    setpoint = list(values.get("internal_force.setpoint", [0.0]))
+    if len(setpoint) != 1:
+        changes["setpoint"] = tuple(float(v) for v in setpoint)
+    return dataclasses.replace(params, **changes) if changes else params
+
+
 class HoldController:
     """The tracker of a held-object scenario (module docstring) around a task scenario's tracker ``base`` (its
     tasks, controller, label and cycle count); ``enabled``: internal-force control on."""
@@ -107,7 +120,7 @@ class HoldController:
 
     def __init__(self, base: Any, params: InternalForceParams, enabled: bool) -> None:
         self.base = base
-        self.params = params
+        self.params = self.scenario_params = params
         self.enabled = enabled
         self.label = f"{base.label} internal {'on' if enabled else 'off'}"
         self.steps: int | None = base.steps
@@ -176,6 +189,13 @@ class HoldController:
         out = self.controller.solve_tasks(q, tasks, t)
         self._annotate(out, t)
         return out
+
+    def retune(self, values: Mapping[str, Any]) -> None:
+        """The live parameters ``internal_force.force_gain``, ``.torque_gain`` (< 0: the scenario's) and
+        ``.setpoint`` (6 values; one: the scenario's) from a node's ``values``; the admittance keeps its offset.
+        ValueError naming the bad value (the change is refused)."""
+        self.params = tuned(self.scenario_params, values)
+        self.admittance.params = self.params
 
     def _absolute_targets(self, t: float) -> list[Task]:
         """The tasks at t: the absolute ones at their start pose until ``motion_start``, then blended to their
