@@ -15,6 +15,9 @@ steps) to the end of the run. Keys (metrics.json):
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from pathlib import Path
+
 import numpy as np
 
 from dualarm_control.app.record.run_record import RunRecord, TaskValues
@@ -60,3 +63,30 @@ HOLD_ROWS = (
     ("absolute error at the end [mm]", "absolute_error_final_m", 1e3, "{:.3f}"),
 )
 """The held-object rows of the task table: (label, key, scale, format)."""
+
+
+def plot_internal_wrench(logs: Sequence[RunRecord], path: Path) -> None:
+    """The internal force |f_I - f_I*| [N] and torque |m_I - m_I*| [N m] over time, one line per run (runs with an
+    internal wrench column), the end of the still steps dashed."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.0, 4.5), sharex=True)
+    for log in logs:
+        if log.internal_wrench is None:
+            continue
+        top.plot(log.time, np.linalg.norm(log.internal_wrench[:, :3], axis=1), lw=0.8, label=log.label)
+        bottom.plot(log.time, np.linalg.norm(log.internal_wrench[:, 3:], axis=1), lw=0.8, label=log.label)
+    top.set_ylabel("internal force [N]")
+    bottom.set_ylabel("internal torque [N m]")
+    bottom.set_xlabel("time [s]")
+    for ax in (top, bottom):
+        ax.grid(alpha=0.3)
+    top.legend(fontsize=8)
+    fig.suptitle("internal wrench of the held object (about its setpoint)")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

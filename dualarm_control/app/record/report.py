@@ -26,7 +26,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from dualarm_control.app.record.hold_metrics import HOLD_ROWS, hold_metrics
+from dualarm_control.app.record.hold_metrics import (
+    HOLD_ROWS,
+    hold_metrics,
+    plot_internal_wrench,
+)
 from dualarm_control.app.record.run_record import RunRecord, TaskValues
 from dualarm_control.collision import CollisionModel
 from dualarm_control.drive_monitor import (
@@ -524,7 +528,10 @@ def write_figures(kind: str, out: Path, title: str, runs: Sequence[RunRecord] = 
     plot_task_values(runs, out / "task_values.png")
     plot_joint_velocities(runs[0], out / "joint_velocities.png")
     files += ["task_values.png", "joint_velocities.png"]
-    if _tasks(runs[0]).force and np.isfinite(runs[0].contact_force).any():
+    if runs[0].internal_wrench is not None:  # a held object: its internal wrench, no contact force
+        plot_internal_wrench(runs, out / "internal_wrench.png")
+        files.append("internal_wrench.png")
+    elif _tasks(runs[0]).force and np.isfinite(runs[0].contact_force).any():
         plot_contact_force(runs[0], out / "contact_force.png")
         files.append("contact_force.png")
     return files
