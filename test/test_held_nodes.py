@@ -115,3 +115,17 @@ def test_realtime_hold_box_keeps_the_squeeze_small(tmp_path: Path) -> None:
     metrics = summarize_run(log, scenario)
     assert metrics["solver_failures"] == 0, metrics
     assert float(metrics["internal_force_max_n"]) < 5.0 and float(metrics["internal_torque_max_nm"]) < 0.5, metrics
+
+
+def test_viewer_series_carry_the_internal_wrench() -> None:
+    """`dualarm view` of a held-object run plots its internal wrench, six components in F1."""
+    from dualarm_control.app.view.from_bag import record_arrays
+    from dualarm_control.kinematics import DualArmModel
+
+    scenario = load_scenario("hold_box")
+    params = controller_params({**read_params_files([PARAMS], "controller_node"), "solver": "constraint_based"})
+    record = run_scenario(scenario, params, force=True, duration=0.5)
+    arrays = record_arrays(record, DualArmModel(scenario.robot))
+    assert record.internal_wrench is not None
+    np.testing.assert_array_equal(arrays.series["internal/fz_n"], record.internal_wrench[:, 2])
+    assert {f"internal/{a}" for a in ("fx_n", "fy_n", "fz_n", "mx_nm", "my_nm", "mz_nm")} <= set(arrays.series)

@@ -81,7 +81,8 @@ def record_arrays(record: RunRecord, model: DualArmModel,
                   frames: dict[str, FloatArray] | None = None) -> RunArrays:
     """Any run's :class:`RunRecord` (in-process or from a bag): the norms of the commands, tracking
     errors, solve and cycle time, and where there are tasks the task values f_i with their bounds
-    b_i and the contact force [N]. Series that are all NaN (not produced by the source) are left out."""
+    b_i and the contact force [N], and a held object's internal wrench (``internal/*``, in F1 [N, N m]). Series
+    that are all NaN (not produced by the source) are left out."""
     n = len(record.time)
     series: dict[str, FloatArray] = {
         **rv.velocity_norm_series(record.commands), rv.TRACKING_POSITION: record.position_error,
@@ -97,6 +98,9 @@ def record_arrays(record: RunRecord, model: DualArmModel,
                 suffix = f"_{j}" if values.shape[1] > 1 else ""
                 series[f"task/{name}{suffix}"] = values[:, j]
                 series[f"task/{name}{suffix}_bound"] = np.full(n, bounds[j])
+    if record.internal_wrench is not None:  # a held object: its internal wrench in F1 [N, N m], per component
+        for j, axis in enumerate(("fx_n", "fy_n", "fz_n", "mx_nm", "my_nm", "mz_nm")):
+            series[f"internal/{axis}"] = record.internal_wrench[:, j]
     series = {k: np.asarray(v, dtype=float) for k, v in series.items() if not np.all(np.isnan(np.asarray(v, dtype=float)))}
     return RunArrays(model.urdf, record.time - record.time[0], record.positions, list(model.joint_names), series,
                      frames or {}, list(record.status), rv.closest_pairs(model, record.positions))
