@@ -166,3 +166,10 @@ def test_live_gains_and_setpoint_retune_the_admittance() -> None:
     np.testing.assert_allclose(after[2] - offset[2], 0.002 * 5.0 * 0.005)
     with pytest.raises(ValueError, match=r"setpoint\[2\] must be a finite number"):
         tuned(tracker.scenario_params, {**defaults, "internal_force.setpoint": [0.0, 0.0, math.nan, 0, 0, 0]})
+
+
+def test_internal_force_keys_need_a_held_object() -> None:
+    path = scenario_file("hold_box")
+    flat = {k: v for k, v in read_params_file(path, "trajectory_node").items() if ".held_object." not in k}
+    with pytest.raises(ScenarioError, match="need the object"):
+        scenario_from_parameters(flat, path)

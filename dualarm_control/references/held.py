@@ -81,6 +81,10 @@ def parse_held(flat: Mapping[str, Any]) -> HeldSetup | None:
     from dualarm_sim.held_object import HeldObjectConfig, WristSensorConfig
 
     held = _section(flat, "held_object", {f.name for f in fields(HeldObjectConfig)})
+    if not held:
+        given = [name for name in HELD_KEYS if any(k.startswith(f"{PREFIX}{name}.") for k in flat)]
+        raise ScenarioError(f"scenario parameters {', '.join(given)}: they need the object, '{PREFIX}held_object.*' "
+                            "(at least its mass)")
     sensors = _section(flat, "wrist_sensors", {f.name for f in fields(WristSensorConfig)})
     control = _section(flat, "internal_force", {f.name for f in fields(InternalForceParams)} - {"grasp_time"})
     try:
