@@ -54,6 +54,12 @@ def test_lockstep_hold_box_bag_metrics_equal_in_process(tmp_path: Path) -> None:
             same_nan = isinstance(value, float) and math.isnan(value) and math.isnan(float(from_bag[key]))
             assert from_bag[key] == value or same_nan, key
     assert float(from_bag["internal_force_max_n"]) < 5.0
+    # the viewer's arrays of the bag: the held object's frame, and the box among the closest pairs' links
+    from dualarm_control.app.view.from_bag import bag_run_arrays
+
+    arrays = bag_run_arrays(bag)
+    np.testing.assert_allclose(arrays.frames["held_object"][0, :3], (0.0, 0.0, 0.15))
+    assert arrays.closest is not None
 
 
 class _Out:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -20,6 +20,7 @@ from dualarm_control.kinematics import DualArmModel, FloatArray
 if TYPE_CHECKING:
     from dualarm_control.app.record.bag import Bag
     from dualarm_control.app.record.run_record import RunRecord
+    from dualarm_control.scenario import Scenario
 
 
 @dataclass
@@ -78,7 +79,7 @@ def relative_run_arrays(path: Path, model: DualArmModel, bag: Bag | None = None)
 
 
 def record_arrays(record: RunRecord, model: DualArmModel,
-                  frames: dict[str, FloatArray] | None = None) -> RunArrays:
+                  frames: dict[str, FloatArray] | None = None, collision: Any = None) -> RunArrays:
     """Any run's :class:`RunRecord` (in-process or from a bag): the norms of the commands, tracking
     errors, solve and cycle time, and where there are tasks the task values f_i with their bounds
     b_i and the contact force [N], and a held object's internal wrench (``internal/*``, in F1 [N, N m]). Series
@@ -103,7 +104,20 @@ def record_arrays(record: RunRecord, model: DualArmModel,
             series[f"internal/{axis}"] = record.internal_wrench[:, j]
     series = {k: np.asarray(v, dtype=float) for k, v in series.items() if not np.all(np.isnan(np.asarray(v, dtype=float)))}
     return RunArrays(model.urdf, record.time - record.time[0], record.positions, list(model.joint_names), series,
-                     frames or {}, list(record.status), rv.closest_pairs(model, record.positions))
+                     frames or {}, list(record.status), rv.closest_pairs(model, record.positions, collision))
+
+
+def held_frames(scenario: Scenario, n: int) -> dict[str, FloatArray]:
+    """A held object's centre in the left tool frame, (n, 7) [x y z qx qy qz qw], by its name (drawn as axes);
+    {} without one."""
+    import pinocchio as pin
+
+    out = {}
+    for body in scenario.held_bodies:
+        quaternion = pin.Quaternion(body.rotation)
+        pose = np.array([*body.position, quaternion.x, quaternion.y, quaternion.z, quaternion.w])
+        out[body.name] = np.tile(pose, (n, 1))
+    return out
 
 
 def bag_run_arrays(path: Path) -> RunArrays:
@@ -116,4 +130,8 @@ def bag_run_arrays(path: Path) -> RunArrays:
         return relative_run_arrays(path, DualArmModel(bag.robot), bag)
     (record,), scenario = read_run(Path(path), bag)
     assert scenario is not None
-    return record_arrays(record, DualArmModel(scenario.robot))
+    model = DualArmModel(scenario.robot)
+    if not scenario.held_bodies:
+        return record_arrays(record, model)
+    # a held object: its frame, and the closest pairs of the scenario's collision model (the box among them)
+    return record_arrays(record, model, held_frames(scenario, len(record.time)), scenario.collision_model(model))
