@@ -82,6 +82,7 @@ def test_internal_force_control_keeps_the_squeeze_small(name: str) -> None:
     assert off["internal_force_max_n"] > 10.0, off
     for run in (on, off):
         assert run["absolute_error_final_m"] < 1e-3 and run["solver_failures"] == 0, run
+        assert abs(float(run["identified_mass_kg"]) - 2.0) < 0.01, run  # measured 2.001 (Baxter), 2.002 (LWR4)
 
 
 def test_identified_payload_and_bias() -> None:

@@ -579,7 +579,8 @@ def _task_record(path: Path, bag: Bag) -> tuple[list[RunRecord], Scenario]:
         position_error=nan_column(n), orientation_error=nan_column(n), final_positions=nan_column(model.nq),
         contact_force=contact, measured_force=column("measured_force_n"), normal_offset=column("normal_offset_m"),
         table_contacts=table, internal_wrench=(np.array([[float(x) for x in v["internal_wrench"].split()]
-                                                         for _, v in cycles]) if "internal_wrench" in first else None))
+                                                         for _, v in cycles]) if "internal_wrench" in first else None),
+        identified_mass=float(cycles[-1][1].get("identified_mass_kg", "nan")))
     return [with_task_values(record, scenario, model, gain, force)], scenario
 
 

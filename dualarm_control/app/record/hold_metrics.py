@@ -10,7 +10,8 @@ steps) to the end of the run. Keys (metrics.json):
 * ``relative_drift_max_m``, ``relative_drift_max_rad``: the held relative pose's largest position and
   orientation error against its nominal target (the relative_pose task ``internal_force.task``; it includes
   the admittance's offset, which is how far the control let the grasp give);
-* ``absolute_error_final_m``, ``absolute_error_final_rad``: the absolute tasks' error at the end.
+* ``absolute_error_final_m``, ``absolute_error_final_rad``: the absolute tasks' error at the end;
+* ``identified_mass_kg``: the payload the still step identified (NaN: the run ended before it).
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ def hold_metrics(log: RunRecord, part: TaskValues, held: HeldSetup, convergence_
         "internal_torque_settled_max_nm": float(np.max(torque[settled])),
         "relative_drift_max_m": float(np.linalg.norm(hold[window, :3], axis=1).max()),
         "relative_drift_max_rad": float(np.linalg.norm(hold[window, 3:], axis=1).max()),
+        "identified_mass_kg": float(log.identified_mass),
     }
     if absolute:
         out["absolute_error_final_m"] = max(float(np.linalg.norm(part.values[a][-1, :3])) for a in absolute)
@@ -61,6 +63,7 @@ HOLD_ROWS = (
     ("relative drift max [mm]", "relative_drift_max_m", 1e3, "{:.3f}"),
     ("relative drift max [mrad]", "relative_drift_max_rad", 1e3, "{:.3f}"),
     ("absolute error at the end [mm]", "absolute_error_final_m", 1e3, "{:.3f}"),
+    ("identified payload [kg]", "identified_mass_kg", 1.0, "{:.4f}"),
 )
 """The held-object rows of the task table: (label, key, scale, format)."""
 

@@ -72,6 +72,7 @@ class RunRecord:
             the report computes it from ``final_positions`` and the scenario.
         internal_wrench: a held object's internal wrench h_I [N, N m] in F1, (N, 6)
             (:mod:`dualarm_control.references.held`); None without a held object.
+        identified_mass: the held object's mass the still step identified [kg] (NaN: none).
     """
 
     label: str
@@ -94,6 +95,7 @@ class RunRecord:
     tasks: TaskValues | None = field(default=None)
     final_errors: tuple[float, float] | None = None
     internal_wrench: FloatArray | None = None
+    identified_mass: float = math.nan
 
 
 def with_task_values(record: RunRecord, scenario: Scenario, model: DualArmModel, gain: float | None,

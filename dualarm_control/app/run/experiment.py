@@ -17,6 +17,7 @@ task's normal offset. The table is in the cell in both variants.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 
 import numpy as np
@@ -90,4 +91,7 @@ def run_scenario(
                        final_positions=final_q, contact_force=scal["contact_force"],
                        measured_force=scal["measured_force"], normal_offset=scal["normal_offset"],
                        table_contacts=scal["table_contacts"], internal_wrench=internal)
+    identification = getattr(getattr(follower, "tracker", None), "identification", None)
+    if identification is not None:  # a held object: the payload its still step identified
+        record = dataclasses.replace(record, identified_mass=identification.mass)
     return with_task_values(record, scenario, model, gain, force)
