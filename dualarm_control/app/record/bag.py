@@ -243,6 +243,7 @@ class Bag:
     statuses: list[Status] = field(default_factory=list)  # every node's, in receive order
     pose_stamps: list[int] = field(default_factory=list)  # /relative_pose header stamps
     contact: dict[int, float] = field(default_factory=dict)  # /contact_force by header stamp
+    wrists: dict[str, dict[int, FloatArray]] = field(default_factory=dict)  # a held object's wrist readings by stamp
     missing: list[str] = field(default_factory=list)  # the relative report's topics the bag lacks
     description: str | None = None  # the first /robot_description (the cell's URDF)
     recorded: frozenset[str] = frozenset()  # every topic of the bag
@@ -254,6 +255,10 @@ class Bag:
             self.description = self.description if self.description is not None else msg.data
         elif topic == CONTACT_TOPIC:
             self.contact.setdefault(stamp_ns(msg.header.stamp), float(msg.vector.z))
+        elif topic in WRIST_TOPICS:
+            f, m = msg.wrench.force, msg.wrench.torque
+            self.wrists.setdefault(topic, {}).setdefault(stamp_ns(msg.header.stamp),
+                                                         np.array((f.x, f.y, f.z, m.x, m.y, m.z)))
         elif topic == POSE_TOPIC:
             self.rows[topic].append((t, _pose_vector(msg.pose.position, msg.pose.orientation)))
             self.pose_stamps.append(stamp_ns(msg.header.stamp))
@@ -353,6 +358,10 @@ def _cell(reader: AnyReader, path: Path) -> dict[str, dict[str, Any]]:
     return cell_parameters((msg.data for _, _, msg in _decoded(reader, cells, path)), f"{path}: {CELL_TOPIC}")
 
 
+WRIST_TOPICS = ("/left/wrench", "/right/wrench")
+"""A held object's wrist F/T sensors (sim_node, issue 41): read for the viewer's wrench arrows."""
+
+
 def read_bag(path: Path) -> Bag:
     """Every message a report, a viewer or a fault analysis reads: the nodes' parameters first
     (``/dualarm/cell``: the hardware profile's topics), then the rest in one pass."""
@@ -365,7 +374,7 @@ def read_bag(path: Path) -> Bag:
             raise BagError(f"bag {path}: the controller's hardware profile on {CELL_TOPIC}: {exc}") from None
         bag = Bag(streams=ProfileStreams(topics), cell=cell, recorded=frozenset(reader.topics))
         bag.missing = missing_topics(reader, bag.needed)
-        wanted = (*bag.needed, CONTACT_TOPIC, DESCRIPTION_TOPIC)
+        wanted = (*bag.needed, CONTACT_TOPIC, DESCRIPTION_TOPIC, *WRIST_TOPICS)
         connections = [c for c in reader.connections if c.topic in wanted]
         for topic, t, msg in _decoded(reader, connections, path):
             bag.add(topic, t, msg)

@@ -8,6 +8,7 @@ gives its :class:`RunRecord` (``app.record.bag.read_run``), already per cycle.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -15,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from dualarm_control.app.view import rerun_view as rv
+from dualarm_control.app.view.held_view import HeldDrawing, wrist_forces
 from dualarm_control.kinematics import DualArmModel, FloatArray
 
 if TYPE_CHECKING:
@@ -35,10 +37,13 @@ class RunArrays:
     frames: dict[str, FloatArray] = field(default_factory=dict)
     statuses: list[str] | None = None
     closest: rv.ClosestPairs | None = None
+    held: HeldDrawing | None = None
 
     def log(self, recording: object = None) -> None:
         rv.log_run(self.urdf, self.stamps, self.q, self.joint_names, self.series, frames=self.frames,
                    statuses=self.statuses, recording=recording, closest=self.closest)
+        if self.held is not None:
+            self.held.log(self.stamps, recording)
 
 
 def relative_run_arrays(path: Path, model: DualArmModel, bag: Bag | None = None) -> RunArrays:
@@ -133,5 +138,8 @@ def bag_run_arrays(path: Path) -> RunArrays:
     model = DualArmModel(scenario.robot)
     if not scenario.held_bodies:
         return record_arrays(record, model)
-    # a held object: its frame, and the closest pairs of the scenario's collision model (the box among them)
-    return record_arrays(record, model, held_frames(scenario, len(record.time)), scenario.collision_model(model))
+    # a held object: its frame, box and wrist forces, and the closest pairs of the scenario's collision model
+    arrays = record_arrays(record, model, held_frames(scenario, len(record.time)), scenario.collision_model(model))
+    body = scenario.held_bodies[0]
+    stamps = sorted({int(v["stamp_ns"]) for _, v in bag.task_cycles})[-len(record.time):]  # read_run's cycles
+    return dataclasses.replace(arrays, held=HeldDrawing(body.name, body.size, wrist_forces(bag.wrists, stamps)))
