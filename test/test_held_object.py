@@ -134,3 +134,22 @@ def test_bad_held_object_values_are_named() -> None:
         WristSensorConfig(left_bias=(0.0, 1.0))
     with DualArmCell() as cell, pytest.raises(ValueError, match="no held object"):
         cell.wrist_wrenches()
+
+
+def test_video_draws_the_held_box() -> None:
+    """`dualarm view BAG --video` of a held-object run draws the box on its frame: blue pixels (the box's colour)
+    in a frame of hold_box_lwr4's start, none without the box."""
+    from dualarm_control.app.view.video import CellCamera
+
+    scenario = load_scenario("hold_box_lwr4")
+    robot = scenario.robot
+    counts = []
+    for held in (scenario.held_bodies[0], None):
+        camera = CellCamera(robot.urdf_xml, (160, 120), tuple(robot.joint_names), held)
+        try:
+            image = camera.render(scenario.initial_positions).astype(int)
+        finally:
+            camera.close()
+        blue = (image[:, :, 2] > 150) & (image[:, :, 0] < 90) & (image[:, :, 1] > 80) & (image[:, :, 1] < 160)
+        counts.append(int(blue.sum()))
+    assert counts[0] > 20 and counts[1] == 0, counts
