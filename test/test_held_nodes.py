@@ -145,3 +145,62 @@ def test_viewer_series_carry_the_internal_wrench() -> None:
     assert record.internal_wrench is not None
     np.testing.assert_array_equal(arrays.series["internal/fz_n"], record.internal_wrench[:, 2])
     assert {f"internal/{a}" for a in ("fx_n", "fy_n", "fz_n", "mx_nm", "my_nm", "mz_nm")} <= set(arrays.series)
+
+
+class _Node:
+    def add_on_set_parameters_callback(self, callback: Any) -> None:
+        self.callback = callback
+
+    def get_name(self) -> str:
+        return "controller_node"
+
+    def get_logger(self) -> Any:
+        class _Log:
+            def warning(self, text: str) -> None:
+                pass
+
+            def info(self, text: str) -> None:
+                pass
+        return _Log()
+
+
+class _Parameter:
+    def __init__(self, name: str, value: Any) -> None:
+        self.name, self.value = name, value
+
+
+def test_a_live_setpoint_arrives_as_an_array_and_is_taken() -> None:
+    """rclpy gives a double-array parameter as array.array('d'): the live setpoint is accepted (it was refused as
+    "expected a double array", tried with `dualarm param set`), a non-finite one refused naming it."""
+    import array
+
+    from dualarm_control.nodes.controller_setup import ALL_PARAMETERS
+    from dualarm_control.references.held import tuned
+    from dualarm_control.ros.node import LiveParameters
+
+    specs = {s.name: s for s in ALL_PARAMETERS}
+    values = {name: spec.default for name, spec in specs.items()}
+    scenario = load_scenario("hold_box")
+    assert scenario.tasks is not None and scenario.tasks.held is not None
+    live = LiveParameters(_Node(), specs, values, lambda merged: tuned(scenario.tasks.held.control, merged))
+    setpoint = array.array("d", [0.0, 0.0, 2.0, 0.0, 0.0, 0.1])
+    assert live.on_set([_Parameter("internal_force.setpoint", setpoint)]).successful
+    change = live.take()
+    assert change is not None and change[1].setpoint == (0.0, 0.0, 2.0, 0.0, 0.0, 0.1)
+    bad = live.on_set([_Parameter("internal_force.setpoint", array.array("d", [0.0, 0.0, math.nan, 0, 0, 0]))])
+    assert not bad.successful and "setpoint[2]" in bad.reason
+
+
+def test_a_live_array_is_recorded_as_a_list() -> None:
+    """After a live array change rclpy keeps the value as array.array: /dualarm/cell records it as a list (a YAML
+    dump of the array crashed controller_node, tried)."""
+    import array
+
+    from dualarm_control.ros.cell_topic import node_parameters
+
+    class _ParamNode:
+        def get_parameters_by_prefix(self, prefix: str) -> dict[str, Any]:
+            return {"internal_force.setpoint": _Parameter("internal_force.setpoint", array.array("d", [0.0, 1.0])),
+                    "task_gain": _Parameter("task_gain", 2.0)}
+
+    assert node_parameters(_ParamNode()) == {"internal_force.setpoint": [0.0, 1.0], "task_gain": 2.0}
