@@ -146,6 +146,7 @@ class Cycle:
         reports: what each limit saw, by limit name (the limits that had something to say).
         absolute_position_error, absolute_orientation_error: the absolute frame's distance [m] and angle
             [rad] to its target (issue 41: a relative cycle with an absolute target; NaN without).
+        internal_wrench: a held object's internal wrench h_I [N, N m] in F1, (6,) (None without a held object).
     """
 
     velocities: FloatArray
@@ -162,6 +163,7 @@ class Cycle:
     reports: dict[str, LimitReport] = field(default_factory=dict)
     absolute_position_error: float = math.nan
     absolute_orientation_error: float = math.nan
+    internal_wrench: FloatArray | None = None
 
     @property
     def collision(self) -> CollisionReport | None:
@@ -378,6 +380,11 @@ class RelativeController:
                      position_error=float(np.linalg.norm(p_des - p)),
                      orientation_error=rotation_angle(r, r_des), cycle_time=elapsed,
                      reports=self._reports(velocities))
+
+    def safe_command(self, q: FloatArray, reason: str) -> Cycle:
+        """The safe command at q (n,) [rad] for a reason outside the solver (a wrench limit, a lost sensor): as
+        for an invalid input (status "invalid_input"), the reason in the result's ``detail``."""
+        return self._invalid(reason, time.perf_counter(), np.asarray(q, float))
 
     def _invalid(self, what: str, start: float, q: FloatArray) -> Cycle:
         """The safe command for an invalid input, with the reason in ``detail`` (status "invalid_input").

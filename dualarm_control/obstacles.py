@@ -193,6 +193,26 @@ def _vector(key: str, value: Any, positive: bool = False) -> Vector3:
     return x, y, z
 
 
+HELD_PREFIX = "held:"
+"""A held object's name in the collision model: ``held:<name>``."""
+
+
+@dataclass(frozen=True)
+class AttachedBox(Box):
+    """A box fixed to a frame of the robot while it is held (issue 41, item 4): ``position`` [m] and ``rpy``
+    [rad] give its centre in ``frame`` (the left tool's), ``size`` [m] its sides. The collision model carries it
+    as a link of the arm that moves the frame (:mod:`dualarm_control.collision.obstacles`), not as world
+    geometry; the simulator's box is :mod:`dualarm_sim.held_object`'s."""
+
+    frame: str = "left_tool"
+    kind: ClassVar[str] = "attached_box"
+
+    @property
+    def label(self) -> str:
+        """``held:<name>``: its link name in the collision model's pairs."""
+        return HELD_PREFIX + self.name
+
+
 def parse_obstacles(flat: Mapping[str, Any], base: Path, prefix: str = "scenario.") -> tuple[Obstacle, ...]:
     """The obstacles of flattened scenario parameters (module docstring); () without ``obstacles``.
 

@@ -34,7 +34,7 @@ from dualarm_control.controller import ControllerParams
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.moving_obstacles import MovingObstacle, parse_moving_obstacles
-from dualarm_control.obstacles import Obstacle, parse_obstacles
+from dualarm_control.obstacles import AttachedBox, Obstacle, parse_obstacles
 from dualarm_control.params import (
     ParameterError,
     ParamSpec,
@@ -84,22 +84,45 @@ class Scenario:
     obstacles: tuple[Obstacle, ...] = ()
     moving_obstacles: tuple[MovingObstacle, ...] = ()
 
+    @property
+    def held_bodies(self) -> tuple[AttachedBox, ...]:
+        """The held object as a body of the collision model (issue 41, item 4): a box on the left tool's frame
+        at its grasp (``held_object``), or () without one."""
+        held = self.tasks.held if self.tasks is not None else None
+        if held is None:
+            return ()
+        from dualarm_sim.held_object import (
+            HeldObjectConfig,  # the simulator's box: one definition of its keys
+        )
+
+        box = HeldObjectConfig(**held.held_object)
+        roll, pitch, yaw = (math.radians(v) for v in box.grasp_rpy_deg)
+        return (AttachedBox(name="held_object", size=box.size, position=box.grasp_position, rpy=(roll, pitch, yaw)),)
+
+    @property
+    def collision_pairs_allowed(self) -> tuple[tuple[str, str], ...]:
+        """``collision_allowed`` and, with a held object, the held box against the right hand (which grasps
+        it; the left one is its own arm's, at joint distance 0)."""
+        return self.collision_allowed + tuple((body.label, "right_tool") for body in self.held_bodies)
+
     def controller_params(self, params: ControllerParams) -> ControllerParams:
         """``params`` with the scenario's allowed contacts added to the collision limit's
         (``scenario.collision_allowed``: e.g. the assembly's tools, which meet on purpose) and its
-        obstacles (``scenario.obstacles``) as the limit's."""
-        if not self.collision_allowed and not self.obstacles and not self.moving_obstacles:
+        obstacles (``scenario.obstacles``, and a held object fixed to the left tool) as the limit's."""
+        obstacles = self.obstacles + self.held_bodies
+        if not self.collision_allowed and not obstacles and not self.moving_obstacles:
             return params
-        collision = replace(params.collision, allowed=tuple(params.collision.allowed) + self.collision_allowed,
-                            obstacles=self.obstacles,
+        collision = replace(params.collision, allowed=tuple(params.collision.allowed) + self.collision_pairs_allowed,
+                            obstacles=obstacles,
                             live_obstacles=max(params.collision.live_obstacles, len(self.moving_obstacles)))
         return replace(params, collision=collision)
 
     def collision_model(self, model: DualArmModel) -> CollisionModel:
         """The collision model a controller runs this scenario with (the robot's allowed pairs and the
-        scenario's, its obstacles, default settings; shared on ``model``): what a stall's reason names."""
-        return CollisionModel.shared(model, (*model.description.collision_allowed, *self.collision_allowed),
-                                     self.obstacles)
+        scenario's, its obstacles and held object, default settings; shared on ``model``): what a stall's
+        reason names."""
+        return CollisionModel.shared(model, (*model.description.collision_allowed, *self.collision_pairs_allowed),
+                                     self.obstacles + self.held_bodies)
 
     @property
     def tasks(self) -> TasksSource | None:

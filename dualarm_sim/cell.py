@@ -87,6 +87,12 @@ from dualarm_control.errors import DimensionError
 from dualarm_control.obstacles import Obstacle
 from dualarm_control.robot import LEFT_TOOL, RIGHT_TOOL, TOOL_JOINTS, RobotDescription
 from dualarm_control.robot_params import load_robot
+from dualarm_sim.held_object import (
+    HeldObject,
+    HeldObjectConfig,
+    WristSensorConfig,
+    WristSensors,
+)
 from dualarm_sim.obstacles import add_obstacle_bodies
 
 if TYPE_CHECKING:  # typing.Self is 3.11+ but ROS Humble runs 3.10: type-checking only
@@ -164,6 +170,8 @@ class CellConfig:
             bit, tested) and loads a cell with meshes 20-100x faster (the Panda pair's: 1.2 s against
             0.011 s; a sweep builds one cell per run).
         obstacles: static obstacles (:mod:`dualarm_control.obstacles`), one pybullet body each.
+        held_object: a box held by both tools from the start (:mod:`dualarm_sim.held_object`), or None.
+        wrist_sensors: the wrist F/T sensors' bias and noise (:meth:`DualArmCell.wrist_wrenches`).
     """
 
     urdf: Path = field(default_factory=lambda: load_robot().urdf_path)
@@ -181,6 +189,8 @@ class CellConfig:
     held: tuple[tuple[str, float], ...] = ()
     visual_shapes: bool = False
     obstacles: tuple[Obstacle, ...] = ()
+    held_object: HeldObjectConfig | None = None
+    wrist_sensors: WristSensorConfig = field(default_factory=WristSensorConfig)
 
     @classmethod
     def for_robot(cls, robot: RobotDescription | str, allowed: tuple[tuple[str, str], ...] = (),
@@ -352,6 +362,12 @@ class DualArmCell:
         """The obstacles' pybullet body ids by name (``config.obstacles``)."""
         if self._table is None:
             self._table = self.obstacle_bodies.get("table")
+        self.grasp_on_motion = False
+        """A held object's ``grasp_time`` counts from the first non-zero command, not from the reset
+        (:meth:`count_grasp_from_motion`)."""
+        self.held_object: HeldObject | None = None
+        """The held box (``config.held_object``), grasped at every :meth:`reset`."""
+        self._wrist = WristSensors(self.config.wrist_sensors)
         self._sensor = self._joint_index.get(SENSOR_JOINT)
         if self._sensor is not None:
             p.enableJointForceTorqueSensor(self._body, self._sensor, True, physicsClientId=cid)
@@ -553,6 +569,12 @@ class DualArmCell:
             p.resetJointState(self._body, j, float(qj), 0.0, physicsClientId=self._client)
         for j, qj in zip(self._held_idx, self._held_q):
             p.resetJointState(self._body, j, qj, 0.0, physicsClientId=self._client)
+        if self.config.held_object is not None:
+            if self.held_object is not None:
+                self.held_object.remove()
+            self.held_object = HeldObject(self.config.held_object, self._client, self._body, self._link_index,
+                                          p.getNumJoints(self._body, physicsClientId=self._client))
+        self._grasp_from: int | None = None if self.grasp_on_motion else 0  # the step the grasp clock starts at
         self._reference = q  # the integrated command the joint position controller holds [rad]
         self._target = np.zeros(len(self._idx))
         self._cmd_step: int | None = None
@@ -578,6 +600,8 @@ class DualArmCell:
         over = np.abs(qd) > self._qd_max
         self._target = np.clip(qd, -self._qd_max, self._qd_max)
         self._cmd_step = self._steps
+        if self._grasp_from is None and np.any(qd != 0.0):
+            self._grasp_from = self._steps
         if not over.any():
             return CommandReport(True)
         names = [n for n, o in zip(self.joint_names, over) if o]
@@ -616,6 +640,10 @@ class DualArmCell:
             reference = np.minimum(np.maximum(reference + advance, self._q_min), self._q_max)
         self._steps += 1
         self._stepped = True
+        held = self.held_object
+        if held is not None and held.waiting and self._grasp_from is not None and \
+                (self._steps - self._grasp_from) * self.config.control_period >= held.config.grasp_time - 1e-9:
+            held.grasp()  # the hands close at the end of this period
         sample = self.state()
         self._reference = np.clip(reference, sample.positions - MAX_LAG, sample.positions + MAX_LAG)
         return sample
@@ -646,6 +674,23 @@ class DualArmCell:
         if not self._stepped or self._sensor is None:
             return np.zeros(6)
         return np.array(p.getJointState(self._body, self._sensor, physicsClientId=self._client)[2], dtype=float)
+
+    def count_grasp_from_motion(self) -> None:
+        """Count a held object's ``grasp_time`` from the first non-zero command from now on (this run and every
+        reset): a real-time node, whose controller sends zero commands before its task starts."""
+        self.grasp_on_motion = True
+        if self._cmd_step is None:
+            self._grasp_from = None
+
+    def wrist_wrenches(self) -> FloatArray:
+        """Both wrist F/T sensors' readings with their bias and noise, (2, 6): left, right [N, N m], each the
+        wrench the flange exerts on the tool link about the tool frame's origin in the tool frame
+        (:mod:`dualarm_sim.held_object`). Zeros (and the bias) until the first step; ValueError without a
+        held object (the sensors are those of a held object's cell)."""
+        if self.held_object is None:
+            raise ValueError("the cell has no held object, so no wrist sensors (CellConfig.held_object)")
+        raw = self.held_object.readings() if self._stepped else np.zeros((2, 6))
+        return self._wrist.measure(raw)
 
     def link_pose(self, link: str) -> tuple[FloatArray, FloatArray]:
         """World pose of a URDF link frame from pybullet's forward kinematics.

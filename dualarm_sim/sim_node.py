@@ -1,6 +1,8 @@
 """sim_node: the pybullet cell as a velocity-controlled robot (FRI / ros2_control stand-in).
 
-Publishes ``/joint_states`` every control period, and ``/wrench`` and ``/clock`` (simulation
+Publishes ``/joint_states`` every control period (and, with a scenario's held object, the wrist F/T sensors'
+``/left/wrench`` and ``/right/wrench``, geometry_msgs/WrenchStamped in each tool frame, as an F/T driver does:
+:mod:`dualarm_sim.held_object`), and ``/wrench`` and ``/clock`` (simulation
 time, steps x period) every period while a subscription reads them (lazy, as image pipelines
 publish); applies
 ``/velocity_controller/commands`` (Float64MultiArray, 14 values, controller joint order). Those are the
@@ -59,6 +61,8 @@ from dualarm_control.cell_robot import node_scenario
 from dualarm_control.errors import InputRejected
 from dualarm_control.hardware import HARDWARE_PARAMETERS, profile_from_values
 from dualarm_control.params import ParamSpec, non_negative, positive
+from dualarm_control.references.base import LEFT_WRENCH, RIGHT_WRENCH
+from dualarm_control.robot import LEFT_TOOL, RIGHT_TOOL
 from dualarm_control.ros import convert
 from dualarm_control.ros.cell_topic import CellPublisher
 from dualarm_control.ros.hardware_io import declare_with_profile
@@ -135,17 +139,22 @@ class SimNode:
         p = declare_with_profile(self.node, PARAMETERS)
         scenario, robot_note = node_scenario(p, "sim_node")
         tasks = scenario.tasks  # a task scenario: its cell (pan and brush), table and contact pair
+        held = tasks.held if tasks is not None else None  # or its held object and wrist sensors
+        pan = tasks is not None and held is None  # a task scenario's contact links: those of pan cleaning
         robot = scenario.robot
         self.cell = DualArmCell(
-            CellConfig.for_robot(robot, allowed=(tasks.contact_links,) if tasks is not None else (),
+            CellConfig.for_robot(robot, allowed=(tasks.contact_links,) if pan and tasks is not None else (),
                                  collisions=p["collisions"],
                                  control_period=p["control_period"],
                                  physics_rate_hz=p["physics_rate_hz"], command_timeout=p["command_timeout"],
                                  table_height=tasks.cell_table if tasks is not None else None,
                                  obstacles=scenario.obstacles,
-                                 contact_pairs=(tasks.contact_links,) if tasks is not None and p["force"] else ()),
+                                 contact_pairs=(tasks.contact_links,) if pan and tasks is not None and p["force"] else (),
+                                 **(held.cell() if held is not None else {})),
             initial_positions=plan_start(p["plan"], robot.joint_names) if p["plan"] else scenario.initial_positions,
         )
+        # a held object: the hands close grasp_time after the controller's first motion command (its task's start)
+        self.cell.count_grasp_from_motion()
         # joint states as joint_state_broadcaster gives them: the arms' joints, the held (locked) ones, the extra ones
         profile = profile_from_values(p, robot.joint_names, "sim_node")
         self.extra = [j for j in p["extra_joints"] if j]
@@ -153,7 +162,7 @@ class SimNode:
         self.merger = CommandMerger(profile, self.cell.joint_names, p["control_period"])
         self.holds = bool(self.merger.position_mask.any())
         self.table = tasks is not None
-        self.contact = tasks.contact_links if tasks is not None and p["force"] else None
+        self.contact = tasks.contact_links if pan and tasks is not None and p["force"] else None
         self.table_contacts = 0  # contact points with the table, summed over steps (as the in-process runner)
         self.contacts = ContactCounter()  # contact-steps per link pair of the robot (module docstring)
         self.period_ns = round(p["control_period"] * 1e9)
@@ -169,6 +178,9 @@ class SimNode:
         self.pub_js = [local_publisher(bus, n.create_publisher(JointState, s.topic, stream_qos(
             p["qos_reliability"], depth)), s.topic) for s in self.layout]
         self.pub_wrench = local_publisher(bus, n.create_publisher(WrenchStamped, "/wrench", depth), "/wrench")
+        self.pub_wrists = [local_publisher(bus, n.create_publisher(WrenchStamped, topic, depth), topic)
+                           for topic in (LEFT_WRENCH, RIGHT_WRENCH)] if self.cell.held_object is not None else []
+        self.wrists = self.cell.wrist_wrenches() if self.pub_wrists else None  # read once per step (noise)
         self.pub_clock = n.create_publisher(Clock, "/clock", depth)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.pub_description = n.create_publisher(String, "/robot_description", latched_qos())
@@ -230,6 +242,10 @@ class SimNode:
         for pub, state in zip(self.pub_js, self.layout):
             pub.publish(convert.joint_state(state.names, ns, positions[state.indices], velocities[state.indices]))
         publish_if_subscribed(self.pub_wrench, lambda: convert.wrench_stamped(ns, self.cell.wrench()))
+        if self.wrists is not None:
+            wrists = self.wrists
+            for pub, frame, reading in zip(self.pub_wrists, (LEFT_TOOL, RIGHT_TOOL), wrists, strict=True):
+                pub.publish(convert.wrench_stamped(ns, reading, frame))
         if self.pub_contact is not None and self.contact is not None:
             contact = self.contact
             publish_if_subscribed(self.pub_contact, lambda: convert.contact_force(ns, self.cell.contact_force(*contact)))
@@ -280,6 +296,8 @@ class SimNode:
         self.timed_out = timed_out
         self.moving.place(self.steps * self.period_s)
         self.stepped = self.cell.step()
+        if self.wrists is not None:
+            self.wrists = self.cell.wrist_wrenches()
         if self.holds:  # a position command moves its joints once, then they hold it
             self.cell.hold(self.merger.position_mask)
         self.steps += 1

@@ -16,7 +16,15 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from dualarm_control.obstacles import Box, Cylinder, Mesh, Obstacle, Plane, Sphere
+from dualarm_control.obstacles import (
+    AttachedBox,
+    Box,
+    Cylinder,
+    Mesh,
+    Obstacle,
+    Plane,
+    Sphere,
+)
 
 
 def obstacle_shape(obstacle: Obstacle) -> coal.CollisionGeometry:
@@ -45,17 +53,26 @@ def obstacle_placement(obstacle: Obstacle) -> pin.SE3:
 
 def add_obstacles(model: pin.Model, geometry: pin.GeometryModel, obstacles: Sequence[Obstacle]) -> list[str]:
     """Add each obstacle to ``model`` (a frame on the universe joint) and ``geometry`` (its shape on
-    that frame); returns their names in the model (``obstacle:<name>``). ValueError for a name the
-    model already has."""
+    that frame); returns the world obstacles' names in the model (``obstacle:<name>``). An
+    :class:`~dualarm_control.obstacles.AttachedBox` (a held object) is added on its frame's joint instead,
+    at the frame's placement times its own: a link of that arm (``held:<name>``, not returned). ValueError
+    for a name the model already has, or an attached box's unknown frame."""
     names = []
     for obstacle in obstacles:
         name = obstacle.label
         if model.existFrame(name):
             raise ValueError(f"obstacle {obstacle.name!r}: the model already has a frame {name!r}")
-        placement = obstacle_placement(obstacle)
-        frame = model.addFrame(pin.Frame(name, 0, 0, placement, pin.FrameType.BODY))
-        geometry.addGeometryObject(pin.GeometryObject(name, 0, frame, placement, obstacle_shape(obstacle)))
-        names.append(name)
+        joint, parent, placement = 0, 0, obstacle_placement(obstacle)
+        if isinstance(obstacle, AttachedBox):
+            if not model.existFrame(obstacle.frame):
+                raise ValueError(f"held object {obstacle.name!r}: the model has no frame {obstacle.frame!r}")
+            parent = model.getFrameId(obstacle.frame)
+            joint = model.frames[parent].parentJoint
+            placement = model.frames[parent].placement * placement
+        frame = model.addFrame(pin.Frame(name, joint, parent, placement, pin.FrameType.BODY))
+        geometry.addGeometryObject(pin.GeometryObject(name, joint, frame, placement, obstacle_shape(obstacle)))
+        if not isinstance(obstacle, AttachedBox):
+            names.append(name)
     return names
 
 

@@ -49,7 +49,12 @@ from dualarm_control.cell_robot import node_scenario
 from dualarm_control.errors import DualArmError
 from dualarm_control.hardware import profile_from_values
 from dualarm_control.kinematics import DualArmModel
-from dualarm_control.nodes.controller_inputs import ControllerInputs, stream_sample
+from dualarm_control.nodes.controller_inputs import (
+    WRENCH_STREAMS,
+    ControllerInputs,
+    cycle_wrench,
+    stream_sample,
+)
 from dualarm_control.nodes.controller_setup import (
     ALL_PARAMETERS,
     DEFAULT_PRIORITY,
@@ -70,6 +75,7 @@ from dualarm_control.references.base import (
     WRENCH,
     Tracker,
 )
+from dualarm_control.references.held import tuned
 from dualarm_control.references.plan import PlanSource
 from dualarm_control.ros import convert, inputs, local_bus
 from dualarm_control.ros import node as shell
@@ -127,13 +133,14 @@ class ControllerNode:
         self.joint_states = JointStates(n, self.profile, m.joint_names, qos, self.on_joint_state, self.out.reject,
                                         self.on_malformed, bus)
         # What a cycle consumes besides the joint state: the reference source's streams.
-        self.inputs = ControllerInputs(source.streams + ((WRENCH,) if self.tracker.uses_wrench else ()),
+        wrenches = getattr(self.tracker, "wrench_streams", (WRENCH,)) if self.tracker.uses_wrench else ()
+        self.inputs = ControllerInputs(source.streams + tuple(wrenches),
                                        self.lockstep, self.out, self.log, lambda: self.values,
                                        self.joint_states.assembler, self.try_cycle)
         self.subscribe_streams(qos, bus)
-        self.live = shell.LiveParameters(n, {s.name: s for s in ALL_PARAMETERS}, self.values, lambda merged: (
-            core.RelativeController(m, controller_params(self.scenario, merged, n.get_name()),
-                                    collision=self.tracker.controller.collision_model)))
+        self.live = shell.LiveParameters(n, {s.name: s for s in ALL_PARAMETERS}, self.values, self.build_live)
+        if hasattr(self.tracker, "retune"):  # a held object: the internal-force gains and setpoint, live
+            self.tracker.retune(self.values)
         self.ticks: list[shell.Tick] = ([] if self.lockstep else  # ros.node.Ticker, not an rclpy timer
                                         [(max(self.params.period, WATCHDOG_MIN_PERIOD_S), self.on_watchdog)])
         self.startup = StartupWait(float(self.values["hardware.startup_check"]))
@@ -159,13 +166,23 @@ class ControllerNode:
         if JOINT_REFERENCE in streams:
             subscribe(JointTrajectory, JOINT_REFERENCE,
                       self.inputs.message_input(JOINT_REFERENCE, lambda msg: convert.joint_reference(msg, order)), qos)
-        if WRENCH in streams:
-            subscribe(WrenchStamped, WRENCH, self.inputs.message_input(WRENCH, convert.wrench_vector), 10)
+        for wrench in WRENCH_STREAMS:
+            if wrench in streams:
+                subscribe(WrenchStamped, wrench, self.inputs.message_input(wrench, convert.wrench_vector), 10)
 
     def close(self) -> None:
         if self.obstacles is not None:
             self.obstacles.stop()
         self.log.info(self.out.summary())
+
+    def build_live(self, merged: dict[str, Any]) -> core.RelativeController:
+        """What a live change needs: a new controller, and for a held object's tracker the check of its
+        internal-force values (ValueError refuses the change, naming the bad value)."""
+        held = getattr(self.tracker, "scenario_params", None)
+        if held is not None:
+            tuned(held, merged)
+        return core.RelativeController(self.model, controller_params(self.scenario, merged, self.node.get_name()),
+                                       collision=self.tracker.controller.collision_model)
 
     def apply_pending(self) -> None:
         """An accepted live parameter change takes effect at the cycle boundary: the controller
@@ -181,6 +198,8 @@ class ControllerNode:
             self.params = self.tracker.controller.params
             self.out.solver = self.params.solver
             self.out.count["parameter_switches"] += 1
+            if hasattr(self.tracker, "retune"):
+                self.tracker.retune(self.values)
 
     def on_malformed(self, reason: str) -> None:
         """A sample that failed to deserialize (see :func:`subscribe_checked`): reported, dropped."""
@@ -220,7 +239,7 @@ class ControllerNode:
         if not self.lockstep:
             self.out.leave_safe_state()
         self.apply_pending()
-        cycle = self.tracker.track(q, stream_sample(inputs), t, inputs.get(WRENCH))
+        cycle = self.tracker.track(q, stream_sample(inputs), t, cycle_wrench(inputs))
         self.out.cycle(cycle.velocities, cycle.result)
         self.last_commanded_stamp = stamp
         latency = self.timing.command(stamp, received, self.params.period)  # state-to-command [s]

@@ -47,6 +47,12 @@ NODE_PARAMETERS = (
     ParamSpec("task_start_readers", 0, "task mode, real time: zero commands until /diagnostics has this many "
               "readers (the launcher sets 1 when recording: the bag then holds the run from t = 0)",
               check=non_negative, read_only=True),
+    ParamSpec("internal_force.force_gain", -1.0, "held object: k_f of the internal-force admittance [m/(N s)] "
+              "(< 0: the scenario's; live)"),
+    ParamSpec("internal_force.torque_gain", -1.0, "held object: k_m of the internal-force admittance "
+              "[rad/(N m s)] (< 0: the scenario's; live)"),
+    ParamSpec("internal_force.setpoint", [0.0], "held object: the internal wrench's setpoint in F1, 6 values "
+              "[N, N m] (one value: the scenario's; live)"),
     ROBOT_PARAMETER,
     *HARDWARE_PARAMETERS,
     *OBSTACLE_PARAMETERS,

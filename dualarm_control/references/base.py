@@ -48,6 +48,9 @@ if TYPE_CHECKING:
 RELATIVE_TARGET = "/relative_target"
 JOINT_REFERENCE = "/joint_reference"
 WRENCH = "/wrench"
+LEFT_WRENCH = "/left/wrench"
+RIGHT_WRENCH = "/right/wrench"
+"""The wrist F/T sensors of a held object's run (geometry_msgs/WrenchStamped in each tool frame)."""
 
 
 @dataclass(frozen=True)

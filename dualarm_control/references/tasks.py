@@ -47,6 +47,7 @@ from dualarm_control.references.base import (
     StreamSample,
     cycle_count,
 )
+from dualarm_control.references.held import HeldSetup, HoldController, parse_held
 from dualarm_control.scenario_keys import PREFIX, get, number
 from dualarm_control.tasks import (
     CircleTask,
@@ -72,6 +73,8 @@ class TasksSource(SourceDefaults):
         contact_links: the two links that make contact in the force variant.
         table_obstacle: the table is the scenario's obstacle ``table`` (its top is ``table_height``):
             the cell has it as an obstacle body, not as :class:`~dualarm_sim.cell.CellConfig`'s table.
+        held: an object held by both hands and its internal-force control (:mod:`.held`; the run option
+            ``force`` switches the control on), or None.
     """
 
     duration: float
@@ -82,6 +85,7 @@ class TasksSource(SourceDefaults):
     force: ForceParams
     contact_links: tuple[str, str] = ("left_flange", "right_tool")
     table_obstacle: bool = False
+    held: HeldSetup | None = None
     kind: ClassVar[str] = "tasks"
     streams: ClassVar[tuple[str, ...]] = ()
 
@@ -99,10 +103,15 @@ class TasksSource(SourceDefaults):
         return None if self.table_obstacle else self.table_height
 
     def cell(self, options: RunOptions) -> dict[str, Any]:
+        if self.held is not None:
+            return {"table_height": self.cell_table, **self.held.cell()}
         return {"table_height": self.cell_table, "contact_pairs": (self.contact_links,) if options.force else ()}
 
-    def tracker(self, model: DualArmModel, params: ControllerParams, options: RunOptions) -> TasksController:
+    def tracker(self, model: DualArmModel, params: ControllerParams, options: RunOptions) -> Any:
         duration = options.duration if options.duration is not None else self.duration
+        if self.held is not None:
+            base = TasksController(model, params, self, self.gain(options), False, duration)
+            return HoldController(base, self.held.control, options.force)
         return TasksController(model, params, self, self.gain(options), options.force, duration)
 
     def stream(self, model: DualArmModel, q0: FloatArray, options: RunOptions, period: float) -> Any:
@@ -277,7 +286,7 @@ def parse_tasks(flat: Mapping[str, Any], base: Path | None = None) -> TasksSourc
     table, from_obstacle = _table_height(flat, base)
     out = TasksSource(duration=number(flat, "duration"), table_height=table, table_obstacle=from_obstacle,
                       convergence_time=number(flat, "convergence_time", 5.0), gains=tuple(float(g) for g in gains),
-                      tasks=tuple(specs), force=force, contact_links=(links[0], links[1]))
+                      tasks=tuple(specs), force=force, contact_links=(links[0], links[1]), held=parse_held(flat))
     if out.duration <= out.convergence_time:
         raise ScenarioError(f"scenario parameter '{PREFIX}duration' must exceed convergence_time "
                             f"({out.convergence_time} s), got {out.duration}")

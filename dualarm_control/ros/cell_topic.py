@@ -12,6 +12,7 @@ profile (:mod:`dualarm_control.app.record.cell`). The file can be given back to 
 
 from __future__ import annotations
 
+import array
 from typing import Any, Final
 
 from dualarm_control.params import params_document
@@ -23,9 +24,10 @@ NOT_RECORDED: Final = ("start_type_description_service",)
 
 
 def node_parameters(node: Any) -> dict[str, Any]:
-    """Every parameter of ``node`` but :data:`NOT_RECORDED`, by name, with its current value."""
-    return {name: param.value for name, param in sorted(node.get_parameters_by_prefix("").items())
-            if name not in NOT_RECORDED}
+    """Every parameter of ``node`` but :data:`NOT_RECORDED`, by name, with its current value (an array set live,
+    which rclpy keeps as array.array, as a list)."""
+    return {name: list(param.value) if isinstance(param.value, array.array) else param.value
+            for name, param in sorted(node.get_parameters_by_prefix("").items()) if name not in NOT_RECORDED}
 
 
 class CellPublisher:

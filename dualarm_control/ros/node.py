@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import array
 import signal
 import sys
 import threading
@@ -98,7 +99,9 @@ class LiveParameters(Generic[T]):
     def on_set(self, parameters: list[Any]) -> Any:
         from rcl_interfaces.msg import SetParametersResult
 
-        changes = {p.name: p.value for p in parameters if p.name in self.specs}
+        # rclpy gives an array parameter as array.array ('d', 'q'): the specs' and the values' type is a list
+        changes = {p.name: list(p.value) if isinstance(p.value, array.array) else p.value
+                   for p in parameters if p.name in self.specs}
         if not changes:
             return SetParametersResult(successful=True)
         try:

@@ -243,6 +243,7 @@ class Bag:
     statuses: list[Status] = field(default_factory=list)  # every node's, in receive order
     pose_stamps: list[int] = field(default_factory=list)  # /relative_pose header stamps
     contact: dict[int, float] = field(default_factory=dict)  # /contact_force by header stamp
+    wrists: dict[str, dict[int, FloatArray]] = field(default_factory=dict)  # a held object's wrist readings by stamp
     missing: list[str] = field(default_factory=list)  # the relative report's topics the bag lacks
     description: str | None = None  # the first /robot_description (the cell's URDF)
     recorded: frozenset[str] = frozenset()  # every topic of the bag
@@ -254,6 +255,10 @@ class Bag:
             self.description = self.description if self.description is not None else msg.data
         elif topic == CONTACT_TOPIC:
             self.contact.setdefault(stamp_ns(msg.header.stamp), float(msg.vector.z))
+        elif topic in WRIST_TOPICS:
+            f, m = msg.wrench.force, msg.wrench.torque
+            self.wrists.setdefault(topic, {}).setdefault(stamp_ns(msg.header.stamp),
+                                                         np.array((f.x, f.y, f.z, m.x, m.y, m.z)))
         elif topic == POSE_TOPIC:
             self.rows[topic].append((t, _pose_vector(msg.pose.position, msg.pose.orientation)))
             self.pose_stamps.append(stamp_ns(msg.header.stamp))
@@ -353,6 +358,10 @@ def _cell(reader: AnyReader, path: Path) -> dict[str, dict[str, Any]]:
     return cell_parameters((msg.data for _, _, msg in _decoded(reader, cells, path)), f"{path}: {CELL_TOPIC}")
 
 
+WRIST_TOPICS = ("/left/wrench", "/right/wrench")
+"""A held object's wrist F/T sensors (sim_node, issue 41): read for the viewer's wrench arrows."""
+
+
 def read_bag(path: Path) -> Bag:
     """Every message a report, a viewer or a fault analysis reads: the nodes' parameters first
     (``/dualarm/cell``: the hardware profile's topics), then the rest in one pass."""
@@ -365,7 +374,7 @@ def read_bag(path: Path) -> Bag:
             raise BagError(f"bag {path}: the controller's hardware profile on {CELL_TOPIC}: {exc}") from None
         bag = Bag(streams=ProfileStreams(topics), cell=cell, recorded=frozenset(reader.topics))
         bag.missing = missing_topics(reader, bag.needed)
-        wanted = (*bag.needed, CONTACT_TOPIC, DESCRIPTION_TOPIC)
+        wanted = (*bag.needed, CONTACT_TOPIC, DESCRIPTION_TOPIC, *WRIST_TOPICS)
         connections = [c for c in reader.connections if c.topic in wanted]
         for topic, t, msg in _decoded(reader, connections, path):
             bag.add(topic, t, msg)
@@ -576,14 +585,17 @@ def _task_record(path: Path, bag: Bag) -> tuple[list[RunRecord], Scenario]:
             if i < len(contact_stamps):
                 contact[k] = bag.contact[int(contact_stamps[i])]
     n, gain, force = len(stamps), float(first["task_gain"]), first["force"] == "1"
-    label = f"k={gain:g}" + (" force" if force else "")
+    label = f"k={gain:g}" + ((" internal on" if force else " internal off") if "internal_wrench" in first
+                             else " force" if force else "")
     record = RunRecord(
         label=label, kind=scenario.reference.kind, period=float(first["control_period_s"]), time=column("task_time_s"),
         positions=positions, velocities=np.full(positions.shape, np.nan), commands=commands,
         status=[v["status"] for _, v in cycles], solve_time=nan_column(n), cycle_time=column("cycle_time_s"),
         position_error=nan_column(n), orientation_error=nan_column(n), final_positions=nan_column(model.nq),
         contact_force=contact, measured_force=column("measured_force_n"), normal_offset=column("normal_offset_m"),
-        table_contacts=table)
+        table_contacts=table, internal_wrench=(np.array([[float(x) for x in v["internal_wrench"].split()]
+                                                         for _, v in cycles]) if "internal_wrench" in first else None),
+        identified_mass=float(cycles[-1][1].get("identified_mass_kg", "nan")))
     return [with_task_values(record, scenario, model, gain, force)], scenario
 
 

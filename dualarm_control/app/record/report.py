@@ -26,6 +26,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from dualarm_control.app.record.hold_metrics import (
+    HOLD_ROWS,
+    hold_metrics,
+    plot_internal_wrench,
+)
 from dualarm_control.app.record.run_record import RunRecord, TaskValues
 from dualarm_control.collision import CollisionModel
 from dualarm_control.drive_monitor import (
@@ -266,7 +271,10 @@ def task_metrics(log: RunRecord, part: TaskValues, scenario: Scenario) -> dict[s
         "cycle_time_p50_s": p50,
         "cycle_time_p99_s": p99,
     }
-    if part.force:
+    if log.internal_wrench is not None and spec.held is not None:
+        absolute = [s.name for s in spec.tasks if s.type == "absolute_pose"]
+        record.update(hold_metrics(log, part, spec.held, spec.convergence_time, absolute))
+    elif part.force:
         record.update(force_metrics(log, part.set_point, spec.convergence_time, spec.force.contact_threshold))
     return record
 
@@ -491,6 +499,7 @@ TASK_ROWS = (
     ("force RMS error from first touch [N]", "force_rms_error_from_first_touch_n", 1.0, "{:.3f}"),
     ("peak contact force [N]", "contact_force_peak_n", 1.0, "{:.2f}"),
     ("measured force RMS error [N]", "measured_force_rms_error_n", 1.0, "{:.3f}"),
+    *HOLD_ROWS,
 )
 """Paper 001's metrics (task runs): (label, key, scale, format)."""
 
@@ -534,7 +543,10 @@ def write_figures(kind: str, out: Path, title: str, runs: Sequence[RunRecord] = 
     plot_task_values(runs, out / "task_values.png")
     plot_joint_velocities(runs[0], out / "joint_velocities.png")
     files += ["task_values.png", "joint_velocities.png"]
-    if _tasks(runs[0]).force and np.isfinite(runs[0].contact_force).any():
+    if runs[0].internal_wrench is not None:  # a held object: its internal wrench, no contact force
+        plot_internal_wrench(runs, out / "internal_wrench.png")
+        files.append("internal_wrench.png")
+    elif _tasks(runs[0]).force and np.isfinite(runs[0].contact_force).any():
         plot_contact_force(runs[0], out / "contact_force.png")
         files.append("contact_force.png")
     return files

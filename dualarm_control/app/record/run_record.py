@@ -74,6 +74,9 @@ class RunRecord:
             obstacle's name (``t = 16.20-17.35 s: yielding to obstacle:hand (closest 0.034 m, left_flange)``).
         absolute_error: the absolute frame's tracking error (position [m], orientation [rad]) per cycle, (N, 2),
             in a run with an absolute target (issue 41; a bag: the controller's /diagnostics values), else None.
+        internal_wrench: a held object's internal wrench h_I [N, N m] in F1, (N, 6)
+            (:mod:`dualarm_control.references.held`); None without a held object.
+        identified_mass: the held object's mass the still step identified [kg] (NaN: none).
     """
 
     label: str
@@ -97,6 +100,8 @@ class RunRecord:
     final_errors: tuple[float, float] | None = None
     obstacle_events: tuple[str, ...] = ()
     absolute_error: FloatArray | None = None
+    internal_wrench: FloatArray | None = None
+    identified_mass: float = math.nan
 
 
 def with_task_values(record: RunRecord, scenario: Scenario, model: DualArmModel, gain: float | None,

@@ -17,6 +17,7 @@ task's normal offset. The table is in the cell in both variants.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 
 import numpy as np
@@ -67,6 +68,7 @@ def run_scenario(
         rec = {k: np.zeros((steps, n)) for k in ("positions", "velocities", "commands")}
         scal = {k: np.zeros(steps) for k in SCALARS}
         status: list[str] = []
+        internal = np.full((steps, 6), np.nan) if cell.held_object is not None else None
         every = max(steps // 100, 1)
         moving = MovingFeed(scenario.moving_obstacles, follower) if scenario.moving_obstacles else None
         bodies = MovingBodies(scenario.moving_obstacles, cell.client_id)
@@ -75,7 +77,9 @@ def run_scenario(
             if moving is not None:  # the hand where it is at t, for the controller and the physics
                 moving.publish(t)
                 bodies.place(t)
-            out = follower.cycle(t, state.positions, cell.wrench() if follower.uses_wrench else None)
+            wrench = None if not follower.uses_wrench else (
+                cell.wrist_wrenches().ravel() if cell.held_object is not None else cell.wrench())
+            out = follower.cycle(t, state.positions, wrench)
             if moving is not None:
                 moving.observe(out.reports.get("live_obstacles"), t)
             cell.apply_command(out.velocities)
@@ -87,6 +91,8 @@ def run_scenario(
                                ("absolute_orientation_error", out.absolute_orientation_error)):
                 scal[key][k] = value
             status.append(out.result.status)
+            if internal is not None and out.internal_wrench is not None:
+                internal[k] = out.internal_wrench
             state = cell.step()
             scal["contact_force"][k] = cell.contact_force(*pairs[0]) if pairs else 0.0
             scal["table_contacts"][k] = cell.table_contacts()
@@ -102,5 +108,9 @@ def run_scenario(
                        table_contacts=scal["table_contacts"],
                        obstacle_events=moving.finish() if moving is not None else (),
                        absolute_error=absolute_columns(scal["absolute_position_error"],
-                                                       scal["absolute_orientation_error"]))
+                                                       scal["absolute_orientation_error"]),
+                       internal_wrench=internal)
+    identification = getattr(getattr(follower, "tracker", None), "identification", None)
+    if identification is not None:  # a held object: the payload its still step identified
+        record = dataclasses.replace(record, identified_mass=identification.mass)
     return with_task_values(record, scenario, model, gain, force)

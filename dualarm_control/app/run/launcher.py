@@ -284,7 +284,9 @@ def launch_scenario(
         if record is not None:  # real time: the task starts once the recorder reads /diagnostics
             controller_args += ["-p", "task_start_readers:=1"]
         if record_topics == GRAPH_TOPICS:
-            record_topics = (*TASK_TOPICS, "/contact_force") if force else TASK_TOPICS
+            held = loaded.tasks is not None and loaded.tasks.held is not None  # its wrist sensors instead
+            record_topics = ((*TASK_TOPICS, "/left/wrench", "/right/wrench") if held
+                             else (*TASK_TOPICS, "/contact_force") if force else TASK_TOPICS)
     finisher = "controller_node" if tasks else "trajectory_node"
     launch = Launch()
     interrupted = False

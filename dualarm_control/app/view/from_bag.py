@@ -8,9 +8,10 @@ gives its :class:`RunRecord` (``app.record.bag.read_run``), already per cycle.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -20,11 +21,13 @@ from dualarm_control.app.view.obstacles_view import (
     log_obstacles,
     read_obstacles,
 )
+from dualarm_control.app.view.held_view import HeldDrawing, wrist_forces
 from dualarm_control.kinematics import DualArmModel, FloatArray
 
 if TYPE_CHECKING:
     from dualarm_control.app.record.bag import Bag
     from dualarm_control.app.record.run_record import RunRecord
+    from dualarm_control.scenario import Scenario
 
 
 @dataclass
@@ -42,11 +45,14 @@ class RunArrays:
     obstacles: dict[str, ObstacleTrack] = field(default_factory=dict)
     start_ns: int = 0
     """The stamp [ns] of the first cycle (time 0 of :attr:`stamps`): moving obstacles' stamps are on its clock."""
+    held: HeldDrawing | None = None
 
     def log(self, recording: object = None) -> None:
         rv.log_run(self.urdf, self.stamps, self.q, self.joint_names, self.series, frames=self.frames,
                    statuses=self.statuses, recording=recording, closest=self.closest)
         log_obstacles(self.obstacles, self.start_ns, recording, rv.root_link(Path(self.urdf)))
+        if self.held is not None:
+            self.held.log(self.stamps, recording)
 
 
 def relative_run_arrays(path: Path, model: DualArmModel, bag: Bag | None = None) -> RunArrays:
@@ -88,10 +94,11 @@ def relative_run_arrays(path: Path, model: DualArmModel, bag: Bag | None = None)
 
 
 def record_arrays(record: RunRecord, model: DualArmModel,
-                  frames: dict[str, FloatArray] | None = None) -> RunArrays:
+                  frames: dict[str, FloatArray] | None = None, collision: Any = None) -> RunArrays:
     """Any run's :class:`RunRecord` (in-process or from a bag): the norms of the commands, tracking
     errors, solve and cycle time, and where there are tasks the task values f_i with their bounds
-    b_i and the contact force [N]. Series that are all NaN (not produced by the source) are left out."""
+    b_i and the contact force [N], and a held object's internal wrench (``internal/*``, in F1 [N, N m]). Series
+    that are all NaN (not produced by the source) are left out."""
     n = len(record.time)
     series: dict[str, FloatArray] = {
         **rv.velocity_norm_series(record.commands), rv.TRACKING_POSITION: record.position_error,
@@ -107,9 +114,25 @@ def record_arrays(record: RunRecord, model: DualArmModel,
                 suffix = f"_{j}" if values.shape[1] > 1 else ""
                 series[f"task/{name}{suffix}"] = values[:, j]
                 series[f"task/{name}{suffix}_bound"] = np.full(n, bounds[j])
+    if record.internal_wrench is not None:  # a held object: its internal wrench in F1 [N, N m], per component
+        for j, axis in enumerate(("fx_n", "fy_n", "fz_n", "mx_nm", "my_nm", "mz_nm")):
+            series[f"internal/{axis}"] = record.internal_wrench[:, j]
     series = {k: np.asarray(v, dtype=float) for k, v in series.items() if not np.all(np.isnan(np.asarray(v, dtype=float)))}
     return RunArrays(model.urdf, record.time - record.time[0], record.positions, list(model.joint_names), series,
-                     frames or {}, list(record.status), rv.closest_pairs(model, record.positions))
+                     frames or {}, list(record.status), rv.closest_pairs(model, record.positions, collision))
+
+
+def held_frames(scenario: Scenario, n: int) -> dict[str, FloatArray]:
+    """A held object's centre in the left tool frame, (n, 7) [x y z qx qy qz qw], by its name (drawn as axes);
+    {} without one."""
+    import pinocchio as pin
+
+    out = {}
+    for body in scenario.held_bodies:
+        quaternion = pin.Quaternion(body.rotation)
+        pose = np.array([*body.position, quaternion.x, quaternion.y, quaternion.z, quaternion.w])
+        out[body.name] = np.tile(pose, (n, 1))
+    return out
 
 
 def bag_run_arrays(path: Path) -> RunArrays:
@@ -122,6 +145,14 @@ def bag_run_arrays(path: Path) -> RunArrays:
         return relative_run_arrays(path, DualArmModel(bag.robot), bag)
     (record,), scenario = read_run(Path(path), bag)
     assert scenario is not None
-    arrays = record_arrays(record, DualArmModel(scenario.robot))
-    arrays.obstacles = read_obstacles(Path(path))  # a task scenario's: its table (no moving ones)
-    return arrays
+    model = DualArmModel(scenario.robot)
+    if not scenario.held_bodies:
+        arrays = record_arrays(record, model)
+        arrays.obstacles = read_obstacles(Path(path))  # a task scenario's: its table (no moving ones)
+        return arrays
+    # a held object: its frame, box and wrist forces, and the closest pairs of the scenario's collision model
+    arrays = record_arrays(record, model, held_frames(scenario, len(record.time)), scenario.collision_model(model))
+    body = scenario.held_bodies[0]
+    stamps = sorted({int(v["stamp_ns"]) for _, v in bag.task_cycles})[-len(record.time):]  # read_run's cycles
+    return dataclasses.replace(arrays, held=HeldDrawing(body.name, body.size, wrist_forces(bag.wrists, stamps)),
+                               obstacles=read_obstacles(Path(path)))

@@ -27,6 +27,7 @@ import numpy.typing as npt
 from dualarm_control.app.view.obstacles_view import CameraObstacles, ObstacleTrack
 from dualarm_control.app.view.recording import JointRecording, read_joint_recording
 from dualarm_control.errors import DualArmError
+from dualarm_control.obstacles import AttachedBox
 
 DEFAULT_FPS: Final = 25.0
 DEFAULT_SIZE: Final = (640, 480)
@@ -79,7 +80,7 @@ class CellCamera:
     """The cell in a DIRECT pybullet client and a fixed camera looking at both arms."""
 
     def __init__(self, urdf_text: str, size: tuple[int, int], joint_names: tuple[str, ...] = (),
-                 obstacles: dict[str, ObstacleTrack] | None = None) -> None:
+                 obstacles: dict[str, ObstacleTrack] | None = None, held: AttachedBox | None = None) -> None:
         import pybullet as p
 
         from dualarm_sim.cell import CellConfig, DualArmCell
@@ -97,6 +98,11 @@ class CellCamera:
         self.obstacles = CameraObstacles(obstacles or {}, self.cell.client_id)  # the bag's scene, drawn
         self._view = p.computeViewMatrix(CAMERA_EYE, CAMERA_TARGET, (0.0, 0.0, 1.0))
         self._projection = p.computeProjectionMatrixFOV(FIELD_OF_VIEW_DEG, width / height, 0.05, 20.0)
+        self.held, self._box = held, None
+        if held is not None:  # a held object: a box drawn on its frame (no collision shape: it is only drawn)
+            visual = p.createVisualShape(p.GEOM_BOX, halfExtents=[0.5 * s for s in held.size],
+                                         rgbaColor=(0.2, 0.5, 0.9, 1), physicsClientId=self.cell.client_id)
+            self._box = p.createMultiBody(0.0, -1, visual, physicsClientId=self.cell.client_id)
 
     def render(self, q: npt.NDArray[np.float64], stamp_ns: int | None = None) -> npt.NDArray[np.uint8]:
         """The cell at joint positions q [rad] (clipped to the URDF limits) as RGB, (height, width, 3); the
@@ -105,6 +111,15 @@ class CellCamera:
         self.cell.reset(np.clip(q, self.lower, self.upper))
         if stamp_ns is not None:
             self.obstacles.place(stamp_ns)
+        if self.held is not None and self._box is not None:
+            position, rotation = self.cell.link_pose(self.held.frame)
+            centre = position + rotation @ np.asarray(self.held.position, dtype=float)
+            import pinocchio as pin
+
+            quaternion = pin.Quaternion(rotation @ self.held.rotation)
+            p.resetBasePositionAndOrientation(self._box, centre.tolist(), (quaternion.x, quaternion.y, quaternion.z,
+                                                                           quaternion.w),
+                                              physicsClientId=self.cell.client_id)
         width, height = self.size
         _, _, rgba, _, _ = p.getCameraImage(width, height, self._view, self._projection, shadow=0,
                                             renderer=p.ER_TINY_RENDERER, physicsClientId=self.cell.client_id)
@@ -115,8 +130,10 @@ class CellCamera:
 
 
 def render_recording(recording: JointRecording, out_path: Path, fps: float = DEFAULT_FPS,
-                     size: tuple[int, int] = DEFAULT_SIZE, log: TextIO | None = sys.stderr) -> VideoInfo:
-    """Encode ``recording`` as an H.264 MP4 at ``out_path`` (module docstring); progress on ``log``."""
+                     size: tuple[int, int] = DEFAULT_SIZE, log: TextIO | None = sys.stderr,
+                     held: AttachedBox | None = None) -> VideoInfo:
+    """Encode ``recording`` as an H.264 MP4 at ``out_path`` (module docstring); progress on ``log``; ``held``: a
+    held object's box, drawn on its frame."""
     try:
         import imageio_ffmpeg
     except ImportError as exc:
@@ -127,7 +144,7 @@ def render_recording(recording: JointRecording, out_path: Path, fps: float = DEF
     positions = recording.at(times)
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    camera = CellCamera(recording.urdf_text, size, recording.joint_names, recording.obstacles)
+    camera = CellCamera(recording.urdf_text, size, recording.joint_names, recording.obstacles, held)
     writer = imageio_ffmpeg.write_frames(str(out_path), size, fps=fps, codec="libx264", macro_block_size=2,
                                          ffmpeg_log_level="error")
     render_s = encode_s = 0.0
@@ -172,7 +189,23 @@ def render_video(bag_path: Path, out_path: Path, fps: float = DEFAULT_FPS, size:
         :class:`VideoInfo` (frames, render and encode times). Raises BagError (no joint states)
         or VideoError.
     """
-    return render_recording(read_joint_recording(Path(bag_path)), Path(out_path), fps, size, log)
+    return render_recording(read_joint_recording(Path(bag_path)), Path(out_path), fps, size, log,
+                            held_box(Path(bag_path)))
+
+
+def held_box(bag_path: Path) -> AttachedBox | None:
+    """The held object of the task scenario a bag ran (its controller's /diagnostics name it), None without one
+    or when that scenario cannot be loaded here."""
+    from dualarm_control.app.record.bag import SCENARIO_KEY, read_bag
+    from dualarm_control.scenario import load_scenario
+
+    try:
+        bag = read_bag(bag_path)
+        name = next((v[SCENARIO_KEY] for _, v in bag.task_cycles if v.get(SCENARIO_KEY)), "")
+        bodies = load_scenario(name).held_bodies if name else ()
+    except DualArmError:
+        return None
+    return bodies[0] if bodies else None
 
 
 def parse_size(text: str) -> tuple[int, int]:
