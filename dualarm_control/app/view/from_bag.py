@@ -16,12 +16,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from dualarm_control.app.view import rerun_view as rv
+from dualarm_control.app.view.held_view import HeldDrawing, wrist_forces
 from dualarm_control.app.view.obstacles_view import (
     ObstacleTrack,
     log_obstacles,
     read_obstacles,
 )
-from dualarm_control.app.view.held_view import HeldDrawing, wrist_forces
 from dualarm_control.kinematics import DualArmModel, FloatArray
 
 if TYPE_CHECKING:
