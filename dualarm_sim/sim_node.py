@@ -134,7 +134,7 @@ class SimNode:
         tasks = scenario.tasks  # a task scenario: its cell (pan and brush), table and contact pair
         robot = scenario.robot
         self.cell = DualArmCell(
-            CellConfig.for_robot(robot, allowed=(tasks.contact_links,) if tasks is not None else (),
+            CellConfig.for_robot(robot, allowed=scenario.collision_allowed + ((tasks.contact_links,) if tasks else ()),
                                  collisions=p["collisions"],
                                  control_period=p["control_period"],
                                  physics_rate_hz=p["physics_rate_hz"], command_timeout=p["command_timeout"],

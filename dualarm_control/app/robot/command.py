@@ -52,6 +52,7 @@ def ready_command(name: str, distance: float, center: list[float] | None, starts
     found = find_ready(model, distance, None if center is None else np.array(center), starts, seed)
     print(f"# {model.description.name}: tools {distance} m apart, facing (F2 in F1: [0, 0, {distance}], rpy 180 0 0),"
           f" midpoint {np.round(found.center, 3).tolist()} m; pose error {found.pose_error:.1e}; smallest singular"
-          f" value of J {found.sigma_min:.3f}; nearest limit at {100 * found.limit_margin:.1f} % of its range")
+          f" value of J {found.sigma_min:.3f}; nearest limit at {100 * found.limit_margin:.1f} % of its range;"
+          f" closest pair {found.clearance[1]} at {found.clearance[0]:.3f} m")
     print("ready_positions_deg: [" + ", ".join(f"{v:.2f}" for v in np.degrees(found.q)) + "]")
     return 0
