@@ -148,3 +148,24 @@ def test_a_goal_into_the_hole_blocks_wall_stops_at_the_safety_distance() -> None
     assert "right_peg" in pair and any(link in pair for link in HOLE), outcome
     distance = float(outcome.split(" at ")[1].split(" m")[0])
     assert SAFETY - 1e-3 <= distance < SAFETY + 5e-3, outcome
+
+
+def test_the_assembly_says_which_allowed_contacts_it_used() -> None:
+    """The assembly allows the two end effectors (scenario.collision_allowed: left_tool right_tool): the
+    run reports, per segment, the closest allowed pair and whether it came under d_s: the approach ends
+    5 cm above the hole (not used), the insertion and the screw hold the peg 5 mm from the walls (used)."""
+    from dualarm_control.app.record.report import summarize_run
+    from dualarm_control.app.run.experiment import run_scenario
+    from dualarm_control.controller_params import controller_params
+    from dualarm_control.scenario import load_scenario
+
+    scenario = load_scenario("assembly")
+    model = DualArmModel(scenario.robot)
+    summary = summarize_run(run_scenario(scenario, controller_params({"solver": "sparse_qp"}), model), scenario, model)
+    assert summary["allowances_used"] == "left_tool right_tool"
+    parts = str(summary["allowance_outcomes"]).split(" | ")
+    assert [p.split(": ")[1] for p in parts] == ["not used", "used", "used"], parts
+    for part in parts[1:]:
+        pair, at = part.split("closest ")[1].split(" at ")
+        assert pair.startswith("left_hole_wall_") and pair.endswith(" – right_peg"), part
+        assert float(at.split(" m")[0]) == pytest.approx(0.005, abs=5e-4), part  # centred in the hole
