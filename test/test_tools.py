@@ -169,3 +169,22 @@ def test_the_assembly_says_which_allowed_contacts_it_used() -> None:
         pair, at = part.split("closest ")[1].split(" at ")
         assert pair.startswith("left_hole_wall_") and pair.endswith(" – right_peg"), part
         assert float(at.split(" m")[0]) == pytest.approx(0.005, abs=5e-4), part  # centred in the hole
+
+
+def test_robot_show_lists_the_tools_and_ready_refuses_a_pair_under_its_clearance(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """`dualarm robot show` names the tool set's links; `dualarm robot ready` keeps only configurations whose
+    checked pairs (tools included) are clear by 5 cm, and says which pair was the clearest one refused."""
+    from dualarm_control.app.robot.command import show_command
+    from dualarm_control.app.robot.ready import CLEARANCE, find_ready
+    from dualarm_control.errors import DualArmError
+
+    assert show_command("lwr4_cell") == 0
+    out = capsys.readouterr().out
+    assert "tool set 'peg_and_hole' on right_tool: right_peg" in out and "robot-wide, overlapping by construction): none" \
+        in out, out
+    model = DualArmModel("panda_pair")
+    found = find_ready(model, 0.3, np.array([0.5, 0.0, 0.4]), starts=3)
+    assert found.clearance[0] >= CLEARANCE and " – " in found.clearance[1], found.clearance
+    with pytest.raises(DualArmError, match=r"was the clearest refused: under 5\.0 m"):
+        find_ready(model, 0.3, np.array([0.5, 0.0, 0.4]), starts=3, clearance=5.0)

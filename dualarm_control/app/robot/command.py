@@ -30,6 +30,11 @@ def show_command(name: str) -> int:
     print(f"robot {robot.name!r}: {robot.description}")
     print(f"  source: {robot.source}\n  urdf: {robot.urdf}\n  resolved urdf: {robot.urdf_path}")
     print(f"  tools: F1 = {robot.left_tool} (link left_tool), F2 = {robot.right_tool} (link right_tool)")
+    if robot.tools is not None:
+        for side in ("left", "right"):
+            print(f"  tool set {robot.tools.name!r} on {side}_tool: {', '.join(robot.tools.links(side)) or 'nothing'}")
+    allowed = ", ".join(f"{a} {b}" for a, b in robot.collision_allowed) or "none"
+    print(f"  allowed pairs (robot-wide, overlapping by construction): {allowed}")
     print(f"  reach bound ||p_r|| <= {model.relative_reach():.3f} m")
     print("  joints (left then right): name, limits [deg], velocity limit [rad/s], ready [deg]")
     for i, joint in enumerate(model.joint_names):
