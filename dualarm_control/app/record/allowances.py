@@ -7,8 +7,8 @@ relative trajectory, else the whole run), the closest of the pairs the scenario'
 (those the robot's own collision model checks), its distance [m], and ``used`` when it came under the
 safety distance d_s (where the collision limit would have held the arms), else ``not used``.
 
-The distances are coal's, on the robot's collision model (its own allowed pairs only), at every
-:data:`STRIDE`-th recorded cycle and the final positions.
+The distances are coal's, on a collision model of exactly those pairs (the robot's model minus the
+scenario's), at every :data:`STRIDE`-th recorded cycle and the final positions.
 """
 
 from __future__ import annotations
@@ -28,11 +28,14 @@ STRIDE = 4
 ALLOWANCE_KEYS = ("allowances_used", "allowance_outcomes")
 
 
-def allowed_by_scenario(scenario: Scenario, model: DualArmModel) -> list[tuple[str, str]]:
-    """The link pairs the robot's collision model checks and the scenario's allowance removes."""
+def allowed_by_scenario(scenario: Scenario, model: DualArmModel) -> CollisionModel | None:
+    """A collision model whose pairs are exactly those the robot's own model checks and the scenario's
+    allowance removes (None when it removes none); shared per robot model, built once."""
     robot = CollisionModel.shared(model, model.description.collision_allowed)
     kept = set(scenario.collision_model(model).pairs)
-    return [pair for pair in robot.pairs if pair not in kept]
+    if kept >= set(robot.pairs):
+        return None
+    return CollisionModel.shared(model, (*model.description.collision_allowed, *kept))
 
 
 def allowance_outcomes(scenario: Scenario, model: DualArmModel, time: FloatArray, positions: FloatArray,
@@ -42,10 +45,9 @@ def allowance_outcomes(scenario: Scenario, model: DualArmModel, time: FloatArray
     (``"link_a – link_b"``), its distance [m] and whether it came under ``safety`` [m]: (label, pair,
     distance, used). Empty when the scenario allows nothing. ``time`` (N,) [s], ``positions`` (N, n) [rad],
     ``final`` (n,) [rad]."""
-    pairs = set(allowed_by_scenario(scenario, model))
-    if not pairs:
+    allowed = allowed_by_scenario(scenario, model)
+    if allowed is None:
         return []
-    robot = CollisionModel.shared(model, model.description.collision_allowed)
     samples = [(float(t), q) for t, q in zip(time[::STRIDE], positions[::STRIDE], strict=True)]
     samples.append((math.inf, np.asarray(final, dtype=float)))
     out = []
@@ -57,9 +59,11 @@ def allowance_outcomes(scenario: Scenario, model: DualArmModel, time: FloatArray
             k, best = k + 1, (math.inf, "")
         if not np.all(np.isfinite(q)):
             continue
-        for d in robot.distances(q, within=robot.margin):
-            if (d.link_a, d.link_b) in pairs and d.distance < best[0]:
-                best = (d.distance, f"{d.link_a} – {d.link_b}")
+        near = allowed.near(q, within=allowed.margin, rows=False)
+        if len(near.distance):
+            i = int(np.argmin(near.distance))
+            if near.distance[i] < best[0]:
+                best = (float(near.distance[i]), " – ".join(near.links[i]))
     out.append((parts[k][0], best[1], best[0], best[0] < safety))
     while len(out) < len(parts):  # parts after the last sample
         out.append((parts[len(out)][0], "", math.inf, False))
