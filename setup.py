@@ -59,6 +59,7 @@ setup(
         (f"share/{PACKAGE}/config/robots", glob("config/robots/*.yaml")),
         (f"share/{PACKAGE}/config/sweeps", glob("config/sweeps/*.yaml")),
         (f"share/{PACKAGE}/config/hardware", glob("config/hardware/*.yaml")),
+        (f"share/{PACKAGE}/config/tools", glob("config/tools/*.yaml")),
         (f"share/{PACKAGE}/urdf", glob("urdf/*.urdf")),
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
     ],

@@ -40,6 +40,7 @@ from dualarm_control.robot_files import (
     _key,
     mesh_path,
 )
+from dualarm_control.tool_bodies import ToolSet, body_elements
 
 LEFT_TOOL = "left_tool"
 """The link of F1 in every resolved URDF (and the frame_id of relative poses and goals)."""
@@ -72,6 +73,8 @@ class RobotDescription:
         ready_positions: the arms' start configuration [rad or m], (n,), left then right.
         acceleration_limit: the robot's default joint acceleration bound [rad/s^2] (empty: none).
         collision_allowed: link pairs (resolved URDF names) the collision limit never checks.
+        tools: the tool set whose bodies become links fixed to the tool frames (None: none;
+            :mod:`dualarm_control.tool_bodies`).
         source: the file the description came from (None: built in code).
     """
 
@@ -90,6 +93,7 @@ class RobotDescription:
     locked: tuple[tuple[str, float], ...] = ()
     acceleration_limit: tuple[float, ...] = ()
     collision_allowed: tuple[tuple[str, str], ...] = ()
+    tools: ToolSet | None = None
     description: str = ""
     source: Path | None = field(default=None, compare=False)
 
@@ -261,6 +265,9 @@ def resolve(robot: RobotDescription) -> ResolvedURDF:
         root.append(_fixed(TOOL_JOINTS[frame], link, frame, offset))
         links.add(frame)
         changed = True
+    if robot.tools is not None:
+        _add_tool_bodies(robot.tools, root, links)
+        changed = True
     movable, locked = _check_joints(robot, root)
     xml = ET.tostring(root, encoding="unicode")
     path = robot.urdf if not changed else _cached_file(robot.name, xml)
@@ -268,6 +275,16 @@ def resolve(robot: RobotDescription) -> ResolvedURDF:
         xml = robot.urdf.read_text()
     _check_tools(robot, {_link_of(el, "child"): el for el in root.findall("joint")})
     return ResolvedURDF(xml=xml, path=path, locked=tuple(locked), movable=tuple(movable))
+
+
+def _add_tool_bodies(tools: ToolSet, root: ET.Element, links: set[str | None]) -> None:
+    """The tool set's bodies as links fixed to the tool frames (RobotError for a name the URDF has)."""
+    for body in tools.bodies:
+        if body.link in links:
+            raise RobotError(f"robot parameter {_key('tools')}: tool set {tools.name!r}: body {body.name!r} would be "
+                             f"link {body.link!r}, which the URDF already has: rename the body")
+        root.extend(body_elements(body, LEFT_TOOL if body.side == "left" else RIGHT_TOOL))
+        links.add(body.link)
 
 
 def _link_of(joint: ET.Element, tag: str) -> str:

@@ -20,7 +20,10 @@ Keys (flattened, under ``robot.``):
   the tools face each other; optional ``acceleration_limit`` [rad/s^2] (one value or one per joint);
   optional ``collision_allowed``: link pairs whose shapes may touch (``"link_a link_b"`` strings, as
   the resolved URDF names the links: the cell's peg and hole, shapes that overlap by design), never
-  checked by the collision limit (:mod:`dualarm_control.collision`).
+  checked by the collision limit (:mod:`dualarm_control.collision`): only shapes that overlap by
+  construction (an SRDF's disable_collisions), never the two arms' ends (the task allows those);
+  optional ``tools``: a tool set (``config/tools/<name>.yaml`` or a YAML path): bodies fixed to the
+  tool frames, links of the resolved URDF (:mod:`dualarm_control.tool_bodies`).
 """
 
 from __future__ import annotations
@@ -34,11 +37,12 @@ from dualarm_control.params import ParameterError, link_pairs, read_params_file
 from dualarm_control.paths import registry_file, registry_names
 from dualarm_control.robot import IDENTITY, Pose6, RobotDescription
 from dualarm_control.robot_files import PREFIX, RobotError, _key, urdf_file
+from dualarm_control.tool_bodies import ToolSet, load_tool_set, tool_set_names
 
 DEFAULT_ROBOT = "lwr4_cell"
 KEYS = ("name", "description", "urdf", "left_joints", "right_joints", "left_tool", "right_tool",
         "left_tool_offset", "right_tool_offset", "pair", "left_base", "right_base", "ready_positions_deg",
-        "acceleration_limit", "collision_allowed")
+        "acceleration_limit", "collision_allowed", "tools")
 
 
 def robot_defaults(robot: RobotDescription) -> dict[str, Any]:
@@ -154,7 +158,19 @@ def robot_from_parameters(flat: Mapping[str, Any], source: Path | None = None) -
         left_tool_offset=_pose(flat, "left_tool_offset"), right_tool_offset=_pose(flat, "right_tool_offset"),
         pair=pair, left_base=_pose(flat, "left_base"), right_base=_pose(flat, "right_base"),
         locked=tuple(locked), ready_positions=tuple(math.radians(v) for v in ready),
-        acceleration_limit=acc, collision_allowed=_link_pairs(flat, "collision_allowed"), source=source)
+        acceleration_limit=acc, collision_allowed=_link_pairs(flat, "collision_allowed"),
+        tools=_tools(flat, base), source=source)
+
+
+def _tools(flat: Mapping[str, Any], base: Path) -> ToolSet | None:
+    """``robot.tools``: a tool set's name or YAML path (relative to the description's folder), or none."""
+    value = flat.get(PREFIX + "tools", "")
+    if value == "":
+        return None
+    if not isinstance(value, str):
+        raise RobotError(f"robot parameter {_key('tools')}: got {value!r}, expected a tool set's name "
+                         f"({', '.join(tool_set_names())}) or a YAML path")
+    return load_tool_set(value, base)
 
 
 def _link_pairs(flat: Mapping[str, Any], key: str) -> tuple[tuple[str, str], ...]:

@@ -42,13 +42,11 @@ Physics choices (all measured on ``urdf/dualarm_cell.urdf``):
   and every link pair is filtered out (``setCollisionFilterPair``) but ``CellConfig.collision_pairs``:
   the link pairs the controller's collision model checks (:func:`robot_collision_pairs`: left arm
   against right arm, an arm against the fixed parts and against its own links at joint distance
-  >= 3, minus the robot's ``collision_allowed`` pairs and the broadphase's far pairs), so that
-  adjacent links and shapes that overlap by design never touch. The two end effectors are always
-  filtered against each other, left against right: from each tool link's parent up through fixed
-  joints to the first link with collision shapes (the LWR4's flange, Baxter's gripper base), and every link
-  fixed or held below it (the tool link, Baxter's locked fingers). The assembly's hole block and
-  peg meet on purpose (the peg enters the hole kinematically), Baxter's fingers interpenetrate by
-  12 mm at the assembly's end. :meth:`DualArmCell.contacts` reads the link pairs in contact after
+  >= 3, minus the robot's ``collision_allowed`` pairs, the scenario's allowed pairs (``allowed`` of
+  :meth:`CellConfig.for_robot`: the assembly's tools, which meet on purpose) and the broadphase's far
+  pairs), so that adjacent links and shapes that overlap by design never touch. The two end effectors
+  (the tools' bodies, config/tools/) collide like any other links unless the scenario allows them
+  (issue 40: no robot-wide allowance between the arms). :meth:`DualArmCell.contacts` reads the link pairs in contact after
   a step (one ``getContactPoints`` call). When nothing touches, the physics is the same as
   without self-collision, bit for bit: contact points farther apart than 0 (within pybullet's
   contact threshold) give zero impulses (test_sim_contacts.py; the shipped robots' assemblies and
@@ -85,7 +83,7 @@ import pybullet as p
 from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import DimensionError
 from dualarm_control.obstacles import Obstacle
-from dualarm_control.robot import LEFT_TOOL, RIGHT_TOOL, TOOL_JOINTS, RobotDescription
+from dualarm_control.robot import RIGHT_TOOL, TOOL_JOINTS, RobotDescription
 from dualarm_control.robot_params import load_robot
 from dualarm_sim.held_object import (
     HeldObject,
@@ -352,10 +350,9 @@ class DualArmCell:
         self._table: int | None = None
         self._pair_names: dict[tuple[int, int], tuple[str, str]] = {}  # counted pairs, both index orders
         self.collision_pairs: list[tuple[str, str]] = []
-        """The link pairs that collide and are counted (``config.collision_pairs`` but the tools')."""
+        """The link pairs that collide and are counted (``config.collision_pairs``)."""
         if contacts:
             self._keep_only_pairs(len(infos))
-        self._filter_tool_collisions(infos)
         if self.config.table_height is not None:
             self._table = self._add_table(self.config.table_height)
         self.obstacle_bodies: dict[str, int] = add_obstacle_bodies(self.config.obstacles, cid)
@@ -387,38 +384,6 @@ class DualArmCell:
         p.setJointMotorControlArray(self._body, self._held_idx, p.POSITION_CONTROL, targetPositions=self._held_q,
                                     forces=forces, physicsClientId=self._client)
 
-    def _filter_tool_collisions(self, infos: list[tuple[object, ...]]) -> None:
-        """Disable contacts between the two end effectors (module docstring), left against right:
-        from each tool link's parent up through fixed joints to the first link with collision
-        shapes (the LWR4's flange, Baxter's gripper base), and every link fixed or held below it."""
-        cid = self._client
-        rigid = {j for j, info in enumerate(infos) if info[2] == p.JOINT_FIXED} | set(self._held_idx)
-
-        def tool_links(tool: str) -> list[int]:
-            if tool not in self._link_index:
-                return []
-            top = int(infos[self._link_index[tool]][16])  # type: ignore[call-overload]  # the tool's parent
-            while top in rigid and not p.getCollisionShapeData(self._body, top, physicsClientId=cid):
-                top = int(infos[top][16])  # type: ignore[call-overload]
-            links = [top]
-            grown = True
-            while grown:  # the links hanging from it by fixed or held joints, recursively
-                below = {j for j in rigid if infos[j][16] in links and j not in links}
-                links += sorted(below)
-                grown = bool(below)
-            return links
-
-        left, right = tool_links(LEFT_TOOL), tool_links(RIGHT_TOOL)
-        intended = {self._pair_indices(pair, "contact_pairs") for pair in self.config.contact_pairs}
-        for a in left:
-            for b in right:
-                ab = (min(a, b), max(a, b))
-                if ab in intended:  # the pan and the brush touch on purpose
-                    continue
-                p.setCollisionFilterPair(self._body, self._body, a, b, 0, physicsClientId=self._client)
-                self._pair_names.pop(ab, None)
-        self.collision_pairs = list(dict.fromkeys(self._pair_names.values()))
-
     def _pair_indices(self, pair: tuple[str, str], what: str) -> tuple[int, int]:
         """The pybullet link indices of a link pair, smaller first (ValueError naming an unknown link)."""
         for name in pair:
@@ -435,6 +400,7 @@ class DualArmCell:
             ab = self._pair_indices(pair, "collision_pairs")
             if ab not in intended:
                 self._pair_names[ab] = (pair[0], pair[1])
+        self.collision_pairs = list(dict.fromkeys(self._pair_names.values()))
         keep = intended | set(self._pair_names)
         # only links with collision shapes: a link without has no collider, so no filter of its pairs
         # is ever consulted (Baxter: 666 of 1711 pairs; each call costs ~0.1 ms)

@@ -310,8 +310,8 @@ def _rounding(c: CollisionModel, shape: str, point: np.ndarray, margin: float) -
 # ---- the pairs ----------------------------------------------------------------------------------
 
 COUNTS = {  # pairs: (world-arm, same arm, left-right), pruned, shape pairs
-    "lwr4_cell": ((40, 28, 63), 3, 131),
-    "baxter": ((188, 102, 225), 8, 631),
+    "lwr4_cell": ((58, 52, 116), 3, 226),  # with the peg and hole's 6 bodies (before: (40, 28, 63), 3, 131)
+    "baxter": ((230, 138, 320), 8, 816),  # (before: (188, 102, 225), 8, 631)
 }
 
 
@@ -384,7 +384,8 @@ def test_allowed_pairs_and_self_collision() -> None:
     c = CollisionModel(m, allowed=[("right_flange", "left_flange"), ("left_tool", "right_tool")])
     assert ("left_flange", "right_flange") in full.pairs
     assert ("left_flange", "right_flange") not in c.pairs and ("right_flange", "left_flange") not in c.pairs
-    assert len(c.pairs) == len(full.pairs) - 1  # the tools carry no shape on the LWR4 cell
+    # the end effectors: the left flange and the hole block's 5 bodies against the right flange and the peg
+    assert len(c.pairs) == len(full.pairs) - 6 * 2
     with pytest.raises(ValueError, match="'left_peg' is not a link of"):
         CollisionModel(m, allowed=[("left_peg", "right_flange")])
     alone = CollisionModel(m, self_collision=False)

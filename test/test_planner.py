@@ -335,7 +335,7 @@ def test_plan_record_is_self_describing(small_plan: PlanResult, model: DualArmMo
 
 COLLISION_FREE_SEED = 5
 """small_config's seed whose plan keeps every link pair 6.7 cm apart (seeds 0-4 pass a link through another:
-paper 003's planner does not avoid collisions; seed 0: right_flange 6.8 cm into left_link_2)."""
+paper 003's planner does not avoid collisions; seed 0: right_peg (the peg, before issue 40 right_flange) 6.8 cm into left_link_2)."""
 
 
 def test_executed_plan_stays_on_the_path(model: DualArmModel) -> None:
@@ -354,7 +354,7 @@ def test_executed_plan_stays_on_the_path(model: DualArmModel) -> None:
 
 
 def test_a_plan_through_the_other_arm_stops_at_the_safety_distance(small_plan: PlanResult, model: DualArmModel) -> None:
-    """Issue 39: small_config's seed-0 plan passes right_flange through left_link_2 (the plan record says so);
+    """Issue 39: small_config's seed-0 plan passes right_peg through left_link_2 (the plan record says so);
     executed, the tracking runs under the collision limit in a simulator with contacts, so the links stay
     at the safety distance (coal, and pybullet's closest points on the URDF's shapes, independently), and
     the path is left rather than the arm pierced. Before, the plan ran inside the eq (23) box alone, with
@@ -372,7 +372,7 @@ def test_a_plan_through_the_other_arm_stops_at_the_safety_distance(small_plan: P
     from dualarm_sim.contacts import min_distances
 
     doc = plan_record(small_plan, model, None)
-    assert doc["closest_pair_m"] < -0.05 and doc["closest_pair"] == "left_link_2 – right_flange", doc["closest_pair"]
+    assert doc["closest_pair_m"] < -0.05 and doc["closest_pair"] == "left_link_2 – right_peg", doc["closest_pair"]
     result = execute_plan(small_config(), small_plan.configurations, model)
     assert result.max_error_m > 0.01  # held off the path by the limit
     # and said: the plan's verdict names the pair that held the arms (issue 39)
@@ -387,7 +387,7 @@ def test_a_plan_through_the_other_arm_stops_at_the_safety_distance(small_plan: P
                         reference=source, limits=MotionLimits(), settle_time=config.execution_settle,
                         source=Path(config.name), robot=config.robot)
     record = run_scenario(scenario, ControllerParams(period=0.005), model)
-    # the plan starts with right_flange 5.8 cm inside left_link_1: the limit separates them within 0.5 s
+    # the plan starts with right_peg 5.8 cm inside left_link_1: the limit separates them within 0.5 s
     # (the damper's bound asks the pair to move apart), then holds the safety distance for the rest of the run
     after = record.time >= 0.5
     collision = CollisionModel.shared(model, model.description.collision_allowed)

@@ -66,12 +66,15 @@ def test_pair_prefixes_names_and_places_the_bases() -> None:
 
 
 def test_tool_offset_moves_the_frame(tmp_path: Path) -> None:
-    text = BAXTER.read_text().replace("      right_tool: right_gripper\n",
-                                      "      right_tool: right_gripper\n      right_tool_offset: [0.0, 0.0, 0.1, 0.0, 0.0, 90.0]\n")
+    text = re.sub(r"      right_tool_offset: .*\n", "", BAXTER.read_text())  # F2 at right_gripper itself
+    (tmp_path / "baxter_base.yaml").write_text(text)
+    text = text.replace("      right_tool: right_gripper\n",
+                        "      right_tool: right_gripper\n      right_tool_offset: [0.0, 0.0, 0.1, 0.0, 0.0, 90.0]\n")
     path = tmp_path / "baxter_offset.yaml"
     path.write_text(text)
     q = load_robot("baxter").ready
-    base, shifted = DualArmModel("baxter").tool_poses(q)[1], DualArmModel(str(path)).tool_poses(q)[1]
+    base = DualArmModel(str(tmp_path / "baxter_base.yaml")).tool_poses(q)[1]
+    shifted = DualArmModel(str(path)).tool_poses(q)[1]
     expected = base * pin.SE3(pin.rpy.rpyToMatrix(0, 0, np.pi / 2), np.array([0, 0, 0.1]))
     np.testing.assert_allclose(shifted.homogeneous, expected.homogeneous, atol=1e-12)
 
@@ -106,12 +109,12 @@ def bad(tmp_path: Path, old: str, new: str, base: Path = BAXTER) -> str:
     ("right_joints: [right_s0,", "right_joints: [left_s0,", "left_s0 in both arms"),
     ("urdf: example-robot-data:baxter_description/urdf/baxter.urdf", "urdf: nowhere/baxter.urdf",
      "'robot.urdf': got 'nowhere/baxter.urdf': no such file"),
-    ("88.83, 0.00]", "88.83]", "'robot.ready_positions_deg': got 13 values, expected 14"),
+    ("98.46, 0.06]", "98.46]", "'robot.ready_positions_deg': got 13 values, expected 14"),
     ("left_tool: left_gripper", "left_tool: no_such_link", "'robot.left_tool': got 'no_such_link', expected a link"),
     ("left_tool: left_gripper", "left_tool: left_gripper\n      locked.left_s0: 0.0",
      "'robot.locked.left_s0': left_s0 is an arm joint"),
     ("left_tool: left_gripper", "left_tool: left_gripper\n      frobnicate: 1", "'robot.frobnicate': unknown key"),
-    ("ready_positions_deg: [3.17,", "ready_positions_deg: [300.0,", "left_s0 = 300 deg is outside its range"),
+    ("ready_positions_deg: [6.85,", "ready_positions_deg: [300.0,", "left_s0 = 300 deg is outside its range"),
 ])
 def test_bad_descriptions_name_the_key_and_the_value(tmp_path: Path, old: str, new: str, message: str) -> None:
     with pytest.raises(RobotError, match=re.escape(message)):
@@ -143,8 +146,9 @@ def test_cli_exits_2_naming_the_key(tmp_path: Path) -> None:
 def test_scenario_start_belongs_to_its_robot() -> None:
     own = load_scenario("assembly")
     assert own.robot.name == "lwr4_cell" and own.initial_positions[0] == pytest.approx(np.radians(19.0))
-    baxter = load_scenario("assembly", "baxter")
-    np.testing.assert_array_equal(baxter.initial_positions, load_robot("baxter").ready)
+    baxter = load_scenario("assembly", "baxter")  # its ready positions with left_w2 at 90 deg
+    np.testing.assert_array_equal(np.delete(baxter.initial_positions, 6), np.delete(load_robot("baxter").ready, 6))
+    assert baxter.initial_positions[6] == pytest.approx(np.radians(90.0))
     panda = load_scenario("assembly", "panda_pair")  # the scenario's per-robot start
     assert panda.initial_positions[6] == pytest.approx(np.radians(150.0))
 
@@ -169,8 +173,6 @@ def test_table_one_on_every_robot(tmp_path: Path, robot: str) -> None:
     solver failure, l0(sparse) < l0(hierarchical) < l0(standard)."""
     scenario = str(DATA / "xarm_assembly.yaml") if robot.endswith(".yaml") else "assembly"
     args = [] if robot.endswith(".yaml") else ["--robot", robot]
-    if robot == "ur5_pair":  # no tool beyond the flanges: the insertion brings the wrists 5.3 mm apart (< d_s)
-        args += ["--params", str(DATA / "collision_off.yaml")]
     out = subprocess.run([sys.executable, "-m", "dualarm_control.app.cli", "experiment", scenario, *args,
                           "--output", str(tmp_path)], capture_output=True, text=True, timeout=1800, check=False)
     assert out.returncode == 0, out.stderr[-3000:]

@@ -170,15 +170,18 @@ def test_baxter_allowed_pairs_are_not_counted() -> None:
     """Baxter's right_s0 turned 0.8 rad from ready swings the upper elbow into the torso's hull
     (min_distances: contact from +0.68 rad). torso - right_upper_elbow is one of Baxter's
     collision_allowed pairs (the torso's hull covers the elbows in 62 % of configurations,
-    docs/collision.md "Allowed pairs"): not counted, as no pair of collision_allowed and no pair of its
-    two grippers (end effectors) is a collision pair of the cell. (Counting: the LWR4 test above.)"""
+    docs/collision.md "Allowed pairs"): not counted, as no pair of collision_allowed is a collision pair
+    of the cell. The two grippers (end effectors, with the peg and hole) collide like any links (issue
+    40: nothing between the arms is allowed robot-wide) unless the scenario allows them, as the assembly
+    does. (Counting: the LWR4 test above.)"""
     robot = load_robot("baxter")
     allowed = set(robot.collision_allowed)
     assert ("torso", "left_lower_shoulder") in allowed
     counter = ContactCounter()
     with DualArmCell(CellConfig.for_robot(robot), initial_positions=robot.ready) as cell:
         pairs = set(cell.collision_pairs)
-        assert not pairs & allowed and not any("gripper" in a and "gripper" in b for a, b in pairs)
+        assert not pairs & allowed and ("left_hole_wall_xp", "right_peg") in pairs
+        assert any("gripper" in a and "gripper" in b for a, b in pairs)
         velocity = np.zeros(robot.nq)
         velocity[robot.joint_names.index("right_s0")] = 0.8
         for _ in range(200):  # 1 s
@@ -187,6 +190,9 @@ def test_baxter_allowed_pairs_are_not_counted() -> None:
             counter.update(cell.contacts())
     assert ("torso", "right_upper_elbow") in allowed
     assert list(counter.per_pair) == [], counter.per_pair
+    assembly = CellConfig.for_robot(robot, allowed=(("left_tool", "right_tool"),))  # the scenario's allowance
+    assert not any("gripper" in a and "gripper" in b for a, b in assembly.collision_pairs)
+    assert ("left_hole_wall_xp", "right_peg") not in assembly.collision_pairs
 
 
 def test_contact_counter_events_and_diagnostics() -> None:

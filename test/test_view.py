@@ -94,7 +94,7 @@ def test_saved_rrd_holds_every_link_and_one_value_per_cycle(short_run: RunArrays
     n = len(short_run.stamps)
     robot = rv.robot_name(short_run.urdf)
     links = visual_links(short_run.urdf)
-    assert len(links) == 19  # torso, and per arm link_0..7 and the flange
+    assert len(links) == 25  # torso, per arm link_0..7 and the flange, the peg and hole's 6 bodies
     for link in links:
         assert rows[f"/{robot}/visual_geometries/{link}/visual_0"] > 0, link
     for joint in short_run.joint_names:
@@ -277,7 +277,8 @@ def test_web_viewer_shows_the_arms_in_chromium(short_run: RunArrays, tmp_path: P
 
 NEAR_Q = [1.1261, -1.6987, -1.1776, 0.8174, 2.7065, -1.2329, 2.6597, 0.246, 0.1941, 0.1538, -1.3768, -1.7228, -1.8484,
           2.4161]
-"""An LWR4 cell configuration with left_flange 2.1 cm from right_link_3 (found by a seeded search)."""
+"""An LWR4 cell configuration with the hole block (left_hole_wall_xn) 2.1 cm from right_link_3 (found by a
+seeded search, when the block was a solid box on left_flange)."""
 
 
 def red_pixels(img: np.ndarray) -> int:
@@ -297,7 +298,7 @@ def test_the_closest_pair_is_in_the_recording(tmp_path: Path) -> None:
     with the pair and the distance, and its distance is plotted."""
     run = near_contact_run(True)
     assert run.closest is not None
-    assert run.closest.labels[0].startswith("left_flange – right_link_3 0.021"), run.closest.labels
+    assert run.closest.labels[0].startswith("left_hole_wall_xn – right_link_3 0.021"), run.closest.labels
     save(run, tmp_path / "near.rrd")
     rows, scalars = read_rrd(tmp_path / "near.rrd")
     # one row per cycle, and the static coordinate frame of the witness points

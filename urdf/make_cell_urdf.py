@@ -3,8 +3,9 @@
 Run ``python urdf/make_cell_urdf.py`` after editing; the generated URDFs are committed so
 pinocchio and pybullet load the very same file. Two tool sets, same arms:
 
-* ``dualarm_cell.urdf`` (tools ``assembly``, paper 000): a hole block on the left flange, a
-  peg on the right one.
+* ``dualarm_cell.urdf`` (tools ``assembly``, paper 000): flanges with mounting plates and the
+  tool frames of the hole's entrance (left) and the peg's tip (right); the hole block and the peg
+  are the tool set config/tools/peg_and_hole.yaml, added by the robot description.
 * ``dualarm_cell_pan.urdf`` (tools ``pan_cleaning``, paper 001): a pan on the left flange,
   tool frame ``left_tool`` at the centre of its top surface with z the pan normal; a brush
   on the right flange, tool frame ``right_tool`` at the brush tip with z the brush axis
@@ -139,33 +140,29 @@ def _pan_tool(side: str) -> str:
     )
 
 
+FLANGE_PLATE = (0.035, 0.01, 0.05)
+"""The assembly cell's flanges: a mounting plate, radius [m], thickness [m], mass [kg]."""
+TOOL_FRAME_OFFSET = {"left": 0.08, "right": 0.12}
+"""Tool frame above the flange [m]: the hole's entrance (left), the peg's tip (right)."""
+
+
 def _tool(side: str, tools: str = "assembly") -> str:
-    """Left: a block with a hole, tool frame at the hole entrance, z out of the hole.
-    Right: a peg, tool frame at the peg tip, z along the peg pointing out of the tip.
-    ``tools="pan_cleaning"``: the pan and the brush of :func:`_pan_tool` instead."""
+    """Left: tool frame at the hole entrance, z out of the hole. Right: tool frame at the peg tip,
+    z along the peg pointing out of the tip. The hole block and the peg themselves are a tool set
+    (config/tools/peg_and_hole.yaml, which config/robots/lwr4_cell.yaml names): the flanges carry
+    only their mounting plates here. ``tools="pan_cleaning"``: the pan and the brush of
+    :func:`_pan_tool` instead."""
     if tools == "pan_cleaning":
         return _pan_tool(side)
-    if side == "left":
-        body = (
-            '  <link name="left_flange"><inertial><origin xyz="0 0 0.04"/><mass value="0.6"/>'
-            f'{_inertia(0.6, 0.08, 0.05)}</inertial>'
-            '<visual><origin xyz="0 0 0.04"/><geometry><box size="0.1 0.1 0.08"/></geometry>'
-            '<material name="hole_block"><color rgba="0.2 0.3 0.8 1"/></material></visual>'
-            '<collision><origin xyz="0 0 0.04"/><geometry><box size="0.1 0.1 0.08"/></geometry></collision></link>\n'
-        )
-        tool_xyz = "0 0 0.08"
-    else:
-        body = (
-            '  <link name="right_flange"><inertial><origin xyz="0 0 0.06"/><mass value="0.3"/>'
-            f'{_inertia(0.3, 0.12, 0.015)}</inertial>'
-            '<visual><origin xyz="0 0 0.06"/><geometry><cylinder radius="0.015" length="0.12"/></geometry>'
-            '<material name="peg"><color rgba="0.3 0.8 0.3 1"/></material></visual>'
-            '<collision><origin xyz="0 0 0.06"/><geometry><cylinder radius="0.015" length="0.12"/></geometry></collision></link>\n'
-        )
-        tool_xyz = "0 0 0.12"
-    return body + (
+    radius, thick, mass = FLANGE_PLATE
+    plate = f'<origin xyz="0 0 {thick / 2}"/><geometry><cylinder radius="{radius}" length="{thick}"/></geometry>'
+    return (
+        f'  <link name="{side}_flange"><inertial><origin xyz="0 0 {thick / 2}"/><mass value="{mass}"/>'
+        f'{_inertia(mass, thick, radius)}</inertial>'
+        f'<visual>{plate}<material name="flange"><color rgba="0.3 0.3 0.3 1"/></material></visual>'
+        f'<collision>{plate}</collision></link>\n'
         f'  <joint name="{side}_tool_joint" type="fixed"><parent link="{side}_flange"/><child link="{side}_tool"/>'
-        f'<origin xyz="{tool_xyz}"/></joint>\n'
+        f'<origin xyz="0 0 {TOOL_FRAME_OFFSET[side]}"/></joint>\n'
         f'  <link name="{side}_tool"><inertial><mass value="0.001"/>'
         '<inertia ixx="1e-7" ixy="0" ixz="0" iyy="1e-7" iyz="0" izz="1e-7"/></inertial></link>\n'
     )

@@ -58,6 +58,7 @@ from dualarm_control.collision.params import (
 )
 from dualarm_control.collision.shapes import (
     bounding_sphere,
+    end_effector_links,
     farthest,
     reduced_geometry,
     shape_distance,
@@ -254,24 +255,13 @@ class CollisionModel:
         """``link`` itself, or for a tool frame (``left_tool``, ``right_tool``: F1, F2) its end effector:
         from the tool up through fixed joints to the first link with collision shapes (the LWR4's
         flange, Baxter's gripper base) and every link fixed below it (Baxter's locked fingers, the
-        tool), as the simulator groups them (``dualarm_sim.cell``). An allowed pair naming a tool
+        tool frame, a tool set's bodies: :func:`~dualarm_control.collision.shapes.end_effector_links`),
+        as the simulator groups them (``dualarm_sim.cell``). An allowed pair naming a tool
         frame allows the whole end effector (``left_tool right_tool``: the tools meet on purpose)."""
         if link not in TOOL_FRAMES:
             return [link]
-        shaped = {b.name for b in self._bodies}
         parent_of, rigid = urdf_tree(self.kinematics.urdf, self.kinematics.joint_names)
-        top: str | None = link
-        while top is not None and top not in shaped:
-            top = parent_of[top] if top in rigid else None  # up through fixed (or locked) joints only
-        if top is None:
-            return [link]
-        group = [top]
-        grown = True
-        while grown:  # the links hanging from the group by fixed or locked joints, recursively
-            below = sorted(child for child in rigid if parent_of.get(child) in group and child not in group)
-            group += below
-            grown = bool(below)
-        return group
+        return end_effector_links(link, parent_of, rigid, {b.name for b in self._bodies})
 
     def _body(self, link: str) -> _Body:
         index = self._body_index.get(link)

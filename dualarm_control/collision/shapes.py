@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
-from collections.abc import Collection, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 
 import coal
@@ -136,3 +136,24 @@ def urdf_tree(urdf: Path, moving: Collection[str]) -> tuple[dict[str, str], set[
         if joint.get("name") not in moving:
             rigid.add(child.get("link", ""))
     return parent_of, rigid
+
+
+def end_effector_links(link: str, parent_of: Mapping[str, str], rigid: Collection[str],
+                       shaped: Collection[str]) -> list[str]:
+    """The end effector of tool frame ``link``: from ``link`` up through fixed (or locked) joints to
+    the first link with collision shapes (``shaped``: the LWR4's flange, Baxter's gripper base), then
+    every link hanging from it by fixed or locked joints, recursively (the tool frame, a tool set's
+    bodies, locked fingers), that link first. ``[link]`` when no shaped link is rigidly above it.
+    ``parent_of``, ``rigid``: the URDF's tree (:func:`urdf_tree`)."""
+    top: str | None = link
+    while top is not None and top not in shaped:
+        top = parent_of[top] if top in rigid else None
+    if top is None:
+        return [link]
+    group = [top]
+    grown = True
+    while grown:
+        below = sorted(child for child in rigid if parent_of.get(child) in group and child not in group)
+        group += below
+        grown = bool(below)
+    return group

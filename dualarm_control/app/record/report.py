@@ -18,6 +18,7 @@ order of ``joint_names``.
 from __future__ import annotations
 
 import json
+import math
 import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict
@@ -26,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from dualarm_control.app.record.allowances import allowance_lines, allowance_metrics
 from dualarm_control.app.record.hold_metrics import (
     HOLD_ROWS,
     hold_metrics,
@@ -137,6 +139,9 @@ def summarize_run(record: RunRecord, scenario: Scenario | None, model: DualArmMo
         judge = scenario.reference.judge(model, record.positions[0], scenario.limits, scenario.collision_model(model))
         if judge is not None:  # segments, a plan
             out.update(segment_metrics(record, judge))
+        parts = [(f"{judge.kind} {k + 1} '{name}'", end) for k, (name, end) in enumerate(zip(judge.names, judge.ends,
+                 strict=True))] if judge is not None else [("the run", math.inf)]
+        out.update(allowance_metrics(scenario, model, *timed_positions(record), record.final_positions, parts))
     if record.obstacle_events:  # the live obstacles the arms yielded to (in one process: moving_feed.py)
         out["obstacle_events"] = " | ".join(record.obstacle_events)
     return out
@@ -199,6 +204,7 @@ def goal_lines(results: Mapping[str, Mapping[str, Any]]) -> str:
             out.append(f"\n{label}: closest pair {summary['collision_min_pair']} at "
                        f"{summary['collision_min_distance_m']:.4f} m")
             out += [f"  {line}" for line in str(summary["goal_outcomes"]).split(" | ")]
+        out += allowance_lines(label, summary)
     return "\n".join(out) + "\n" if out else ""
 
 

@@ -30,6 +30,11 @@ def show_command(name: str) -> int:
     print(f"robot {robot.name!r}: {robot.description}")
     print(f"  source: {robot.source}\n  urdf: {robot.urdf}\n  resolved urdf: {robot.urdf_path}")
     print(f"  tools: F1 = {robot.left_tool} (link left_tool), F2 = {robot.right_tool} (link right_tool)")
+    if robot.tools is not None:
+        for side in ("left", "right"):
+            print(f"  tool set {robot.tools.name!r} on {side}_tool: {', '.join(robot.tools.links(side)) or 'nothing'}")
+    allowed = ", ".join(f"{a} {b}" for a, b in robot.collision_allowed) or "none"
+    print(f"  allowed pairs (robot-wide, overlapping by construction): {allowed}")
     print(f"  reach bound ||p_r|| <= {model.relative_reach():.3f} m")
     print("  joints (left then right): name, limits [deg], velocity limit [rad/s], ready [deg]")
     for i, joint in enumerate(model.joint_names):
@@ -52,6 +57,7 @@ def ready_command(name: str, distance: float, center: list[float] | None, starts
     found = find_ready(model, distance, None if center is None else np.array(center), starts, seed)
     print(f"# {model.description.name}: tools {distance} m apart, facing (F2 in F1: [0, 0, {distance}], rpy 180 0 0),"
           f" midpoint {np.round(found.center, 3).tolist()} m; pose error {found.pose_error:.1e}; smallest singular"
-          f" value of J {found.sigma_min:.3f}; nearest limit at {100 * found.limit_margin:.1f} % of its range")
+          f" value of J {found.sigma_min:.3f}; nearest limit at {100 * found.limit_margin:.1f} % of its range;"
+          f" closest pair {found.clearance[1]} at {found.clearance[0]:.3f} m")
     print("ready_positions_deg: [" + ", ".join(f"{v:.2f}" for v in np.degrees(found.q)) + "]")
     return 0

@@ -16,7 +16,10 @@ in the redundancy the solution lies). Joints are bounded to their range shrunk b
 (10 % of each side). Among the starts the
 solution with a relative pose error below 1e-6 that lies farthest from the joint limits is kept,
 among those whose smallest singular value of the relative Jacobian (eq 5) is at least half the
-best one (away from singularities). Deterministic for a seed.
+best one (away from singularities), and whose shapes keep at least ``clearance`` (5 cm) apart: every
+pair the collision limit checks, tools included, with only the robot's own allowed pairs (those
+that overlap by construction) left out: a start that needs the collision limit at once is no ready
+configuration. Deterministic for a seed.
 """
 
 from __future__ import annotations
@@ -34,6 +37,8 @@ from dualarm_control.kinematics import DualArmModel, FloatArray
 FACING = pin.rpy.rpyToMatrix(math.pi, 0.0, 0.0)
 POSE_WEIGHT, CENTER_WEIGHT, LINE_WEIGHT, MIDDLE_WEIGHT = 10.0, 1.0, 1.0, 0.2
 SOLVED = 1e-6  # relative pose error [m, rad] below which a start counts as solved
+CLEARANCE = 0.05
+"""[m] the smallest distance of any checked pair of shapes at a ready configuration."""
 
 
 @dataclass(frozen=True)
@@ -45,6 +50,7 @@ class Ready:
         sigma_min: smallest singular value of the relative Jacobian at q.
         limit_margin: smallest distance of a joint from its limits, relative to its range.
         center: the tools' midpoint [m], (3,).
+        clearance: the closest checked pair's distance [m] and its links ("link_a – link_b").
     """
 
     q: FloatArray
@@ -52,6 +58,7 @@ class Ready:
     sigma_min: float
     limit_margin: float
     center: FloatArray
+    clearance: tuple[float, str] = (math.inf, "")
 
 
 def default_center(model: DualArmModel) -> FloatArray:
@@ -74,7 +81,7 @@ def default_center(model: DualArmModel) -> FloatArray:
 
 
 def find_ready(model: DualArmModel, distance: float = 0.3, center: FloatArray | None = None, starts: int = 24,
-               seed: int = 0, margin: float = 0.1) -> Ready:
+               seed: int = 0, margin: float = 0.1, clearance: float = CLEARANCE) -> Ready:
     """The ready configuration (module docstring); DualArmError when no start reaches the pose."""
     if not (math.isfinite(distance) and distance > 0):
         raise DualArmError(f"--distance {distance!r}: expected a distance > 0 [m]")
@@ -95,8 +102,12 @@ def find_ready(model: DualArmModel, distance: float = 0.3, center: FloatArray | 
         return np.concatenate((POSE_WEIGHT * error, CENTER_WEIGHT * (mid - c),
                                LINE_WEIGHT * np.array([line[0], line[2]]), MIDDLE_WEIGHT * (q - middle) / span))
 
+    from dualarm_control.collision import CollisionModel
+
+    collision = CollisionModel.shared(model, model.description.collision_allowed)
     rng = np.random.default_rng(seed)
     found_all: list[Ready] = []
+    closest_refused: tuple[float, str] = (math.inf, "")
     for k in range(starts):
         q0 = middle if k == 0 else rng.uniform(lo, hi)
         rough = least_squares(residuals, q0, bounds=(lo, hi), xtol=1e-10, ftol=1e-10, max_nfev=300).x
@@ -109,9 +120,16 @@ def find_ready(model: DualArmModel, distance: float = 0.3, center: FloatArray | 
         sigma = float(np.linalg.svd(model.relative_state(q).jacobian, compute_uv=False)[-1])
         margin_q = float(np.min(np.minimum(q - model.q_min, model.q_max - q)[finite] / span[finite])) \
             if finite.any() else 1.0
-        found_all.append(Ready(q, error, sigma, margin_q, 0.5 * (o1.translation + o2.translation)))
+        pair = collision.closest(q) if collision.pairs else None
+        near = (math.inf, "") if pair is None else (pair.distance, f"{pair.link_a} – {pair.link_b}")
+        if near[0] < clearance:
+            closest_refused = min(closest_refused, near)
+            continue
+        found_all.append(Ready(q, error, sigma, margin_q, 0.5 * (o1.translation + o2.translation), near))
     if not found_all:
+        refused = (f" ({closest_refused[1]} at {closest_refused[0]:.3f} m was the clearest refused: under "
+                   f"{clearance} m)" if math.isfinite(closest_refused[0]) else "")
         raise DualArmError(f"no ready configuration found with the tools {distance} m apart around {c.round(3)} "
-                           f"in {starts} starts: try another --center or --distance")
+                           f"in {starts} starts{refused}: try another --center or --distance")
     floor = 0.5 * max(r.sigma_min for r in found_all)
     return max((r for r in found_all if r.sigma_min >= floor), key=lambda r: r.limit_margin)
