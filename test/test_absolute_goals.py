@@ -87,7 +87,7 @@ def test_an_absolute_command_in_another_frame_is_refused() -> None:
 
 def test_an_unusable_absolute_target_gives_the_safe_command() -> None:
     """NaN in the absolute target, or the halfway frame at Baxter's half turn: status invalid_input, named."""
-    model = DualArmModel("baxter")
+    model = DualArmModel("baxter_grippers")
     q = np.asarray(model.description.ready, float)
     controller = RelativeController(model, ControllerParams(solver="sparse_qp"))
     relative = FixedTarget(*model.relative_pose(q))
@@ -209,7 +209,7 @@ def test_the_absolute_frame_can_be_weighted_beside_the_relative_pose() -> None:
     assert frame is not None and frame.weight == 100.0
     with pytest.raises(ScenarioError, match="absolute_frame.weight': got -1, expected a number > 0"):
         parse_absolute_frame({"scenario.absolute_frame.weight": -1}, False)
-    model = DualArmModel("baxter")
+    model = DualArmModel("baxter_grippers")
     q = np.asarray(model.description.ready, float)
     relative = FixedTarget(*model.relative_pose(q))
     position, rotation = frame.pose(model, q)

@@ -55,7 +55,7 @@ def test_the_halfway_frame_is_halfway() -> None:
 
 def test_a_half_turn_is_refused_naming_the_alternative() -> None:
     """Baxter's tools face each other (a half turn): the halfway frame is undefined, said with what to use."""
-    model = DualArmModel("baxter")
+    model = DualArmModel("baxter_grippers")
     with pytest.raises(ValueError, match="half turn.*object frame fixed to the grasp"):
         halfway_state(Configuration(model, np.asarray(model.description.ready, float)))
 
@@ -65,7 +65,7 @@ def test_an_object_is_lifted_while_the_tools_hold_their_relative_pose(solver: st
     """lift_together on Baxter, k = 2: the object's frame ends within 0.5 mm / 1 mrad of its target (5 cm up,
     10 deg about z; measured 0.12 mm after 3 s) while the relative pose stays within 0.2 mm (measured 0.08 mm)."""
     scenario = load_scenario("lift_together")
-    model = DualArmModel("baxter")
+    model = DualArmModel("baxter_grippers")
     tasks = scenario.reference.build(2.0)
     controller = RelativeController(model, ControllerParams(solver=solver))
     q = scenario.initial_positions.copy()

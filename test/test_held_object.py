@@ -24,7 +24,7 @@ G = 9.81
 TOOLS = ("left_tool", "right_tool")
 
 
-def _held_cell(mass: float, robot: str = "baxter", **settings: object) -> DualArmCell:
+def _held_cell(mass: float, robot: str = "baxter_grippers", **settings: object) -> DualArmCell:
     scenario = load_scenario("lift_together", robot=robot)
     held = HeldObjectConfig(mass=mass, size=(0.1, 0.1, 0.2), grasp_position=(0.0, 0.0, 0.15),
                             grasp_time=float(settings.pop("grasp_time", 0.0)))  # type: ignore[arg-type]
@@ -48,7 +48,7 @@ def _poses(cell: DualArmCell) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.array([m[:3, :3] for m in tools]), np.array([m[:3, 3] for m in tools]), held.object_matrix()[:3, 3]
 
 
-@pytest.mark.parametrize(("mass", "robot"), [(2.0, "baxter"), (5.0, "baxter"), (2.0, "lwr4_cell")])
+@pytest.mark.parametrize(("mass", "robot"), [(2.0, "baxter_grippers"), (5.0, "baxter_grippers"), (2.0, "lwr4_cell")])
 def test_static_hand_wrenches_carry_the_box_weight(mass: float, robot: str) -> None:
     """At rest the hands' wrenches about the box centre sum to its weight, (0, 0, m g) and no moment:
     measured 6e-5 N (Baxter) and 2e-7 N (LWR4) off, bound 0.01 N and 0.01 N m; the sensors agree with the
