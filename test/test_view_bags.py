@@ -27,11 +27,16 @@ from dualarm_control.app.run.launcher import Launch, Process, launch_scenario
 from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.link_frames import urdf_joints
-from dualarm_control.paths import urdf_path
+from dualarm_control.robot_params import DEFAULT_ROBOT, load_robot
 from dualarm_control.ros.computed_tf import NOTE
 
 SHORT = Path(__file__).parent / "data" / "short.yaml"
 TOLERANCE = 1e-9
+
+
+def cell_urdf() -> str:
+    """The URDF sim_node publishes for the default robot: the resolved one (the cell's file, its tool bodies added)."""
+    return load_robot(DEFAULT_ROBOT).urdf_xml
 
 
 def read_bag(bag: Path) -> dict[str, list[tuple[int, object]]]:
@@ -66,7 +71,7 @@ def test_demo_bag_holds_robot_description_and_tf_of_pinocchio(demo_bag: Path) ->
     and every link's world pose, composed along the chain from /tf_static and /tf, equals
     pinocchio's oMf of the recorded joint state to 1e-9."""
     topics = read_bag(demo_bag)
-    urdf_text = urdf_path().read_text()
+    urdf_text = cell_urdf()
     assert [m.data for _, m in topics["/robot_description"]] == [urdf_text]  # type: ignore[attr-defined]
     joints = urdf_joints(urdf_text)
     moving = {(j.parent, j.child) for j in joints if not j.fixed}
@@ -152,7 +157,7 @@ def late_description(wait_s: float) -> str:
 def test_late_subscriber_gets_robot_description(sim_node: Process) -> None:
     """A subscriber created after sim_node published /robot_description (once, before it logged its
     scenario: the fixture waits for that line) gets it."""
-    assert late_description(DEADLINE_S) == urdf_path().read_text()
+    assert late_description(DEADLINE_S) == cell_urdf()
 
 
 STATES = 10
@@ -195,7 +200,7 @@ def test_late_recorder_keeps_description_and_no_tf_turns_tf_off(sim_node: Proces
     with_tf, without = tmp_path / "with_tf", tmp_path / "no_tf"
     _record((with_tf, ()), (without, ("--no-tf",)))
     topics = read_bag(with_tf)
-    assert [m.data for _, m in topics["/robot_description"]] == [urdf_path().read_text()]  # type: ignore[attr-defined]
+    assert [m.data for _, m in topics["/robot_description"]] == [cell_urdf()]  # type: ignore[attr-defined]
     assert len(topics["/tf"]) == len(topics["/joint_states"]) > STATES
     topics = read_bag(without)
     assert "/robot_description" in topics and len(topics["/joint_states"]) > STATES
@@ -317,7 +322,7 @@ def _check_description_and_tf(description: bytes, tf_payload: bytes) -> None:
     from rosbags.typesys import Stores, get_typestore
 
     store = get_typestore(Stores.ROS2_JAZZY)
-    urdf_text = urdf_path().read_text()
+    urdf_text = cell_urdf()
     assert store.deserialize_cdr(description, "std_msgs/msg/String").data == urdf_text
     tf = store.deserialize_cdr(tf_payload, "tf2_msgs/msg/TFMessage")
     assert {(t.header.frame_id, t.child_frame_id) for t in tf.transforms} == {
