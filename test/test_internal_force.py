@@ -73,8 +73,8 @@ def _metrics(scenario: Scenario, on: bool) -> dict[str, float | int | str]:
 @pytest.mark.parametrize("name", ["hold_box", "hold_box_lwr4"])
 def test_internal_force_control_keeps_the_squeeze_small(name: str) -> None:
     """A 2 kg box, biased noisy sensors, lifted 5 cm and turned 10 deg: with the control the internal force stays
-    within 5 N and the torque within 0.5 N m over the whole carry (measured: Baxter 1.63 N, 0.061 N m; LWR4 1.41 N,
-    0.133 N m); without it the squeeze grows past 10 N (Baxter 24.3 N, LWR4 17.0 N); the box reaches its target
+    within 5 N and the torque within 0.5 N m over the whole carry (measured: Baxter 1.63 N, 0.061 N m; LWR4 1.39 N,
+    0.139 N m); without it the squeeze grows past 10 N (Baxter 24.3 N, LWR4 17.3 N); the box reaches its target
     either way. With the admittance's sign flipped the squeeze ran away (153 N, tried)."""
     scenario = load_scenario(name)
     on, off = _metrics(scenario, True), _metrics(scenario, False)
