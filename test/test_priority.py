@@ -167,7 +167,7 @@ def test_the_relative_pose_holds_while_the_absolute_frame_is_pushed_too_far(solv
     its target (measured 1.39-1.49 mm, the step's discretization at up to 1.2 m/s), weighted beside it it
     drifts by more than 5 mm (measured 9.1-9.3 mm; the pseudo-inverse, scaled down, 2.2 mm)."""
     scenario = load_scenario("lift_together")
-    model = DualArmModel("baxter")
+    model = DualArmModel("baxter_grippers")
     drift = {}
     for mode in ("weighted", "priority"):
         hold, lift = scenario.reference.build(2.0)
