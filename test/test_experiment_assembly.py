@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from dualarm_control.app.cli import main
+from dualarm_control.app.record.allowances import ALLOWANCE_KEYS
 from dualarm_control.app.record.report import (
     JOINT_LIMIT_KEYS,
     METRIC_KEYS,
@@ -73,10 +74,11 @@ def metrics(bounded_process: tuple[subprocess.Popen[bytes], Path] | None,
 
 
 def test_metrics_file_has_every_key(metrics: dict[str, dict[str, float]]) -> None:
-    """metrics.json lists each solver with exactly the documented keys."""
+    """metrics.json lists each solver with exactly the documented keys (the assembly allows its tools' contacts:
+    the allowance keys too)."""
     assert list(metrics) == list(SOLVERS)
     for record in metrics.values():
-        assert tuple(record) == METRIC_KEYS + JOINT_LIMIT_KEYS + TRACKING_KEYS + SEGMENT_KEYS
+        assert tuple(record) == METRIC_KEYS + JOINT_LIMIT_KEYS + TRACKING_KEYS + SEGMENT_KEYS + ALLOWANCE_KEYS
 
 
 @pytest.mark.parametrize("solver", SOLVERS)
