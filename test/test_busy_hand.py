@@ -1,11 +1,11 @@
 """busy_cell's moving hand (issue 42, part 4; docs/obstacles.md), in one process: a 5 cm sphere reaching
-down onto the left tool's hole block at 0.4 m/s during the segment `apart` (t = 15-18.5 s), and out again.
+down onto the left tool's hole block at 0.4 m/s during the segment `approach` (t = 5.3-8.75 s), and out again.
 
 Checked on the simulator's own shapes (pybullet's closest points, the hand's body placed where it was at
 every recorded cycle): no (arm link, obstacle) pair closer than d_s = 3 cm less 2 mm for the shapes'
 margins, the hand and the static obstacles alike; the arms yield to the hand (the run's events name it);
 the segment `apart` is reached after the hand has gone. With the hand's velocity withheld from the
-damper the hand comes closer than d_s (measured: into the left hole block's wall, -4.6 mm).
+damper the hand comes closer than d_s (measured: into the left hole block, -5.3 mm).
 """
 
 from __future__ import annotations
@@ -108,7 +108,7 @@ def test_the_hands_path() -> None:
     hand = load_scenario("busy_cell").moving_obstacles[0]
     assert hand.travel == pytest.approx(0.59 / 0.4)
     p, v = hand.state(hand.start_time + 0.5)
-    assert np.allclose(v, [0.0, 0.0, -0.4]) and p[2] == pytest.approx(2.035 - 0.2)
+    assert np.allclose(v, [0.0, 0.0, -0.4]) and p[2] == pytest.approx(2.055 - 0.2)
     assert np.allclose(hand.state(hand.start_time + hand.travel + 0.25)[1], 0.0)  # dwelling
     assert np.allclose(hand.state(hand.end_time - 0.1)[1], [0.0, 0.0, 0.4])  # going out
     assert np.allclose(hand.state(hand.end_time + 1.0)[0], hand.start)
