@@ -25,6 +25,7 @@ import pytest
 
 from dualarm_control.app.faults import matrix as faults
 from dualarm_control.app.faults.episodes import SafeEpisode
+from dualarm_control.app.faults.run_all import run_matrix
 
 # real time against 15-100 ms watchdogs: run after the parallel tests, alone (a full parallel run made a
 # row miss its "complete" and another trip 2 s late)
@@ -45,7 +46,7 @@ def run_rows(runs: Runs, tmp_path_factory: pytest.TempPathFactory, group: str, s
     if group not in runs:
         out = tmp_path_factory.mktemp(group)
         lines: list[str] = []
-        rows = faults.run_matrix(out, scenario, names, lines.append)
+        rows = run_matrix(out, scenario, names, lines.append)
         faults.write_results(out, rows, 0.0)
         runs[group] = (out, {r.name: r for r in rows}, lines)
     return runs[group]

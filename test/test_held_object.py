@@ -145,7 +145,7 @@ def test_video_draws_the_held_box() -> None:
     robot = scenario.robot
     counts = []
     for held in (scenario.held_bodies[0], None):
-        camera = CellCamera(robot.urdf_xml, (160, 120), tuple(robot.joint_names), held)
+        camera = CellCamera(robot.urdf_xml, (160, 120), tuple(robot.joint_names), held=held)
         try:
             image = camera.render(scenario.initial_positions).astype(int)
         finally:

@@ -262,12 +262,8 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 def cmd_faults(args: argparse.Namespace) -> int:
     """The fault matrix against real processes: DIR/faults.md and faults.json; exit 1 if a row failed."""
-    from dualarm_control.app.faults.matrix import (
-        ROWS,
-        format_table,
-        run_matrix,
-        write_results,
-    )
+    from dualarm_control.app.faults.matrix import ROWS, format_table, write_results
+    from dualarm_control.app.faults.run_all import run_matrix
     from dualarm_control.scenario import scenario_file
 
     scenario_file(args.scenario)

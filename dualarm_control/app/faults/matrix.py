@@ -465,26 +465,6 @@ def collision_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[
 # ------------------------------------------------------------------------------------------ matrix
 
 
-def run_matrix(out: Path, scenario: str = "assembly", only: Sequence[str] = ROWS,
-               say: Callable[[str], None] = print) -> list[Row]:
-    """Run the selected rows; each row's outcome as soon as it is known."""
-    unknown = [n for n in only if n not in ROWS]
-    if unknown:
-        raise ValueError(f"unknown fault rows {', '.join(unknown)}; valid: {', '.join(ROWS)}")
-    from dualarm_control.app.faults.profile_kills import profile_kill_rows
-
-    rows: list[Row] = []
-    for group in (loopback_rows, profile_kill_rows, loss_rows, link_rows, collision_rows):
-        t = time.monotonic()
-        got = group(out, scenario, only, say)
-        for row in got:
-            say(f"[{row.status}] {row.name}: {row.observed}")
-        if got:
-            say(f"({time.monotonic() - t:.0f} s)")
-        rows += got
-    return sorted(rows, key=lambda r: ROWS.index(r.name))
-
-
 def format_table(rows: Sequence[Row]) -> str:
     lines = ["| fault | expected behaviour | observed | pass |", "|---|---|---|---|"]
     for r in rows:
