@@ -104,6 +104,7 @@ class GoalMonitor:
         """A new goal (or none): forget when the target arrived."""
         self.arrived: float | None = None  # time [s] the target reached the goal
         self.final: str | None = None  # reached / stalled: kept until the next goal
+        self.final_reason = ""  # a stall's reason, repeated with every later verdict (a client may miss the first)
 
     def judge(self, progress: GoalProgress, goal: tuple[FloatArray, FloatArray] | None, q: FloatArray,
               t: float) -> Verdict:
@@ -115,7 +116,7 @@ class GoalMonitor:
         distance = float(np.linalg.norm(p - goal[0]))
         angle = float(np.linalg.norm(pin.log3(goal[1] @ r.T)))
         if self.final is not None:
-            return Verdict(self.final, distance, angle)
+            return Verdict(self.final, distance, angle, self.final_reason)
         if progress.state != REACHED:
             self.arrived = None
             return Verdict(progress.state, distance, angle)
@@ -127,9 +128,10 @@ class GoalMonitor:
         if t - self.arrived < self.stall_time:
             return Verdict(MOVING, distance, angle)
         self.final = STALLED
-        reason = stall_reason(self.model, q, distance, angle, f"{self.stall_time:g} s after the target arrived",
-                              self.collision, self.collision_near)
-        return Verdict(STALLED, distance, angle, reason)
+        self.final_reason = stall_reason(self.model, q, distance, angle,
+                                         f"{self.stall_time:g} s after the target arrived", self.collision,
+                                         self.collision_near)
+        return Verdict(STALLED, distance, angle, self.final_reason)
 
 
 @dataclass(frozen=True)

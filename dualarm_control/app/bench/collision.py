@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from dualarm_control.app.run.experiment import run_scenario
+from dualarm_control.arrays import FloatArray
 from dualarm_control.collision import CollisionParams
 from dualarm_control.controller import ControllerParams, RelativeController
 from dualarm_control.kinematics import DualArmModel
@@ -26,6 +27,25 @@ from dualarm_control.scenario import load_scenario
 
 OFF = CollisionParams(enabled=False)
 
+
+
+def interleaved_cycles(on: RelativeController, off: RelativeController, cases: Sequence[tuple[Any, Any]],
+                       limit: str) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Each case (q, target) cycled through ``on`` and ``off``, the order alternating case by case (a drift of the
+    machine's speed falls on both alike): the cycle times [s] with and without, (N,) each, and the rows the limit
+    named ``limit`` gave each cycle of ``on``, (N,)."""
+    times = {True: np.empty(len(cases)), False: np.empty(len(cases))}
+    rows = np.zeros(len(cases))
+    for k, (q, target) in enumerate(cases):
+        for enabled in ((True, False) if k % 2 == 0 else (False, True)):
+            controller = on if enabled else off
+            start = time.perf_counter()
+            cycle = controller.step(q, target)
+            times[enabled][k] = time.perf_counter() - start
+            report: Any = cycle.reports.get(limit) if enabled else None
+            if report is not None:
+                rows[k] = report.rows
+    return times[True], times[False], rows
 
 def bench_collision(robots: Sequence[str], solvers: Sequence[str], progress: Callable[[str], None] | None = None,
                     scenario_name: str = "assembly") -> dict[str, dict[str, Any]]:
@@ -46,17 +66,8 @@ def bench_collision(robots: Sequence[str], solvers: Sequence[str], progress: Cal
             on = RelativeController(model, params)
             off = RelativeController(model, replace(params, collision=OFF))
             assert on.collision_model is not None
-            times = {True: np.empty(len(cases)), False: np.empty(len(cases))}
-            near = np.empty(len(cases))
-            for k, (q, target) in enumerate(cases):
-                for enabled in ((True, False) if k % 2 == 0 else (False, True)):
-                    controller = on if enabled else off
-                    start = time.perf_counter()
-                    cycle = controller.step(q, target)
-                    times[enabled][k] = time.perf_counter() - start
-                    if enabled:
-                        near[k] = cycle.collision.rows if cycle.collision is not None else 0
-            (on50, on99), (off50, off99) = percentiles(times[True]), percentiles(times[False])
+            with_limit, without, near = interleaved_cycles(on, off, cases, "collision")
+            (on50, on99), (off50, off99) = percentiles(with_limit), percentiles(without)
             rows[f"{robot} | {solver}"] = {
                 "pairs": len(on.collision_model.pairs), "cycles": len(cases),
                 "rows_p50": float(np.percentile(near, 50)), "rows_max": int(near.max()),

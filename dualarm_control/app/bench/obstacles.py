@@ -23,6 +23,7 @@ from typing import Any
 import coal
 import numpy as np
 
+from dualarm_control.app.bench.collision import interleaved_cycles
 from dualarm_control.app.run.experiment import run_scenario
 from dualarm_control.collision.live import LiveDistances, LiveObstacle
 from dualarm_control.controller import ControllerParams, RelativeController
@@ -61,18 +62,8 @@ def scattered_obstacles(count: int, distances: LiveDistances, path: np.ndarray, 
 def interleaved(on: RelativeController, off: RelativeController, cases: Sequence[tuple[Any, Any]]) -> dict[str, Any]:
     """Each case's cycle through ``on`` (with live obstacles) and ``off``, the order alternating: p50/p99 [ms],
     their ratios, the live obstacle rows per cycle."""
-    times = {True: np.empty(len(cases)), False: np.empty(len(cases))}
-    near = np.empty(len(cases))
-    for k, (q, target) in enumerate(cases):
-        for with_obstacles in ((True, False) if k % 2 == 0 else (False, True)):
-            controller = on if with_obstacles else off
-            start = time.perf_counter()
-            cycle = controller.step(q, target)
-            times[with_obstacles][k] = time.perf_counter() - start
-            if with_obstacles:
-                report: Any = cycle.reports.get("live_obstacles")
-                near[k] = report.rows if report is not None else 0
-    (on50, on99), (off50, off99) = percentiles(times[True]), percentiles(times[False])
+    with_obstacles, without, near = interleaved_cycles(on, off, cases, "live_obstacles")
+    (on50, on99), (off50, off99) = percentiles(with_obstacles), percentiles(without)
     return {"cycles": len(cases), "rows_mean": float(near.mean()), "cycles_with_rows": int(np.count_nonzero(near)),
             "with_p50_ms": on50 * 1e3, "with_p99_ms": on99 * 1e3, "without_p50_ms": off50 * 1e3,
             "without_p99_ms": off99 * 1e3, "ratio_p50": on50 / off50, "ratio_p99": on99 / off99}
