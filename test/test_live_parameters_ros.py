@@ -71,8 +71,8 @@ current = {"gain": "10.0", "solver": "standard_qp"}
 
 def set_parameter(name, text):
     global last
-    # mid-motion: a command faster than 0.1 rad/s, at least 300 cycles after the last change
-    spin_until(lambda: seen["fast"] > 0.1 and seen["count"] - last >= 300, "a command faster than 0.1 rad/s")
+    # mid-motion: a command faster than 0.15 rad/s, at least 300 cycles after the last change
+    spin_until(lambda: seen["fast"] > 0.15 and seen["count"] - last >= 300, "a command faster than 0.15 rad/s")
     value = (ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=float(text)) if name == "gain"
              else ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=text))
     future = client.call_async(SetParameters.Request(parameters=[Parameter(name=name, value=value)]))
@@ -84,7 +84,9 @@ def set_parameter(name, text):
         before = seen["count"]
         spin_until(lambda before=before: seen["count"] > before, "the next command")
         fast.append(seen["fast"])
-    return result, min(fast) > 0.15
+    # still faster than 0.1 rad/s: the change landed while the arms moved (a change answered at once, in lockstep,
+    # can land just as the speed crosses the trigger: judging it against the trigger itself failed 20 of 20 here)
+    return result, min(fast) > 0.1
 
 for line in sys.stdin:
     name, text = line.split()
