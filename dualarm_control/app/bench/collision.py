@@ -23,7 +23,7 @@ from dualarm_control.collision import CollisionParams
 from dualarm_control.controller import ControllerParams, RelativeController
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.metrics import percentiles
-from dualarm_control.scenario import load_scenario
+from dualarm_control.scenario import Scenario, load_scenario
 
 OFF = CollisionParams(enabled=False)
 
@@ -47,6 +47,15 @@ def interleaved_cycles(on: RelativeController, off: RelativeController, cases: S
                 rows[k] = report.rows
     return times[True], times[False], rows
 
+
+def replay_cases(scenario: Scenario, model: DualArmModel) -> list[tuple[Any, Any]]:
+    """The scenario run once in process (default controller): each cycle's joint positions q [rad] (n,) with the
+    target sampled at its time, the cases a bench replays through two controllers."""
+    log = run_scenario(scenario, ControllerParams(), model)
+    trajectory = scenario.trajectory(*model.relative_pose(log.positions[0]))
+    return [(q, trajectory.sample(t)) for q, t in zip(log.positions, log.time, strict=True)]
+
+
 def bench_collision(robots: Sequence[str], solvers: Sequence[str], progress: Callable[[str], None] | None = None,
                     scenario_name: str = "assembly") -> dict[str, dict[str, Any]]:
     """Rows "robot | solver": cycle times [ms] with and without the collision limit (module docstring)."""
@@ -56,9 +65,7 @@ def bench_collision(robots: Sequence[str], solvers: Sequence[str], progress: Cal
         model = DualArmModel(scenario.robot)
         if progress:
             progress(f"collision: {scenario_name} on {robot} (recording the states to replay)")
-        log = run_scenario(scenario, ControllerParams(), model)
-        trajectory = scenario.trajectory(*model.relative_pose(log.positions[0]))
-        cases = [(q, trajectory.sample(t)) for q, t in zip(log.positions, log.time, strict=True)]
+        cases = replay_cases(scenario, model)
         for solver in solvers:
             if progress:
                 progress(f"collision: {robot} | {solver}, {len(cases)} cycles with and without the limit")

@@ -23,8 +23,7 @@ from typing import Any
 import coal
 import numpy as np
 
-from dualarm_control.app.bench.collision import interleaved_cycles
-from dualarm_control.app.run.experiment import run_scenario
+from dualarm_control.app.bench.collision import interleaved_cycles, replay_cases
 from dualarm_control.collision.live import LiveDistances, LiveObstacle
 from dualarm_control.controller import ControllerParams, RelativeController
 from dualarm_control.errors import DualArmError
@@ -76,9 +75,7 @@ def bench_live_obstacles(count: int, solvers: Sequence[str], progress: Callable[
     model = DualArmModel(scenario.robot)
     if progress:
         progress(f"obstacles: {scenario_name} (recording the states to replay)")
-    log = run_scenario(scenario, ControllerParams(), model)
-    trajectory = scenario.trajectory(*model.relative_pose(log.positions[0]))
-    cases = [(q, trajectory.sample(t)) for q, t in zip(log.positions, log.time, strict=True)]
+    cases = replay_cases(scenario, model)
     rows: dict[str, dict[str, Any]] = {}
     for solver in solvers:
         for clearance in (NEAR, FAR):
@@ -86,7 +83,7 @@ def bench_live_obstacles(count: int, solvers: Sequence[str], progress: Callable[
             on = RelativeController(model, replace(params, collision=replace(params.collision, live_obstacles=count)))
             off = RelativeController(model, params)
             limit: Any = on.limit("live_obstacles")
-            obstacles = scattered_obstacles(count, limit.distances, log.positions, clearance=clearance)
+            obstacles = scattered_obstacles(count, limit.distances, np.array([q for q, _ in cases]), clearance=clearance)
             limit.feed.publish(tuple(obstacles))
             if progress:
                 progress(f"obstacles: {solver}, {len(cases)} cycles with {count} live obstacles >= {clearance * 100:g} cm "
