@@ -15,6 +15,7 @@ import sys
 import time
 import xml.etree.ElementTree as ET
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -218,24 +219,28 @@ def changed_pixels(a: np.ndarray, b: np.ndarray) -> int:
     return int(np.count_nonzero(np.abs(a[VIEW_REGION] - b[VIEW_REGION]).max(axis=-1) > 0.1))
 
 
-def load(browser: Chromium, url: str, deadline: float, keep: Path) -> tuple[bytes, np.ndarray]:
-    """Open ``url``; poll screenshots until the 3D view shows the arms: the PNG (also written to
-    ``keep``) and its image. Fails with the pixel counts of the last screenshot at ``deadline``."""
+def load(browser: Chromium, url: str, deadline: float, keep: Path,
+         also: Callable[[np.ndarray], bool] | None = None, what: str = "") -> tuple[bytes, np.ndarray]:
+    """Open ``url``; poll screenshots until the 3D view shows the arms (and ``also`` holds of the
+    image, when given: a part of the recording that the page may draw after the arms): the PNG (also
+    written to ``keep``) and its image. Fails with the pixel counts of the last screenshot at
+    ``deadline``."""
     browser.navigate(url)
     browser.screenshot()  # warm-up: blocks while the page first draws (tens of seconds)
     shots: list[bytes] = []
 
-    def arms() -> tuple[bytes, np.ndarray] | None:
+    def drawn() -> tuple[bytes, np.ndarray] | None:
         shots.append(browser.screenshot())
         keep.write_bytes(shots[-1])
         img = image(shots[-1])
-        return (shots[-1], img) if shows_arms(img) else None
+        return (shots[-1], img) if shows_arms(img) and (also is None or also(img)) else None
 
     def last() -> str:
         img = image(shots[-1])
-        return f"{drawn_pixels(img)} drawn and {orange_pixels(img)} orange pixels in the 3D view; screenshot: {keep}"
+        return (f"{drawn_pixels(img)} drawn, {orange_pixels(img)} orange and {red_pixels(img)} red pixels in "
+                f"the 3D view; screenshot: {keep}")
 
-    return wait_until(arms, last, what=f"the arms in the 3D view of {url}", interval=POLL_S,
+    return wait_until(drawn, last, what=f"the arms{what} in the 3D view of {url}", interval=POLL_S,
                       timeout=max(0.0, deadline - time.monotonic()))
 
 
@@ -322,8 +327,14 @@ def test_web_viewer_draws_the_closest_pair_in_red(tmp_path: Path) -> None:
             run.log(rec)
             rec.flush()
             rec.disconnect()
-        _, with_pair = load(browser, drawn.url, deadline, tmp_path / "pair.png")
+        # The run without the pair first: its red pixels are the baseline. The page draws the pair's
+        # line after the arms' meshes (under load, seconds later: a screenshot at the arms alone had
+        # 0 red pixels), so the run with the pair is polled until its line is there, with a deadline.
         _, without = load(browser, plain.url, deadline, tmp_path / "plain.png")
-    red, base = red_pixels(with_pair), red_pixels(without)
+        base = red_pixels(without)
+        _, with_pair = load(browser, drawn.url, deadline, tmp_path / "pair.png",
+                            also=lambda img: red_pixels(img) >= base + 20,
+                            what=f" and at least {base + 20} red pixels (the closest pair's line)")
+    red = red_pixels(with_pair)
     print(f"red pixels: {red} with the closest pair, {base} without; screenshots in {tmp_path}")
     assert red >= base + 20, f"{red} red pixels with the pair, {base} without"
