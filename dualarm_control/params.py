@@ -9,7 +9,7 @@ nodes (declaring them through the middleware), so both validate identically.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -260,3 +260,17 @@ def link_pairs(value: Any, key: str) -> tuple[tuple[str, str], ...]:
             raise ParameterError(key, value, f"entry {item!r}, expected {LINK_PAIR_RULE}")
         pairs.append((parts[0], parts[1]))
     return tuple(pairs)
+
+
+def params_files(argv: Sequence[str]) -> list[str]:
+    """The ``--params-file`` arguments of a ``--ros-args`` command line, in order."""
+    files: list[str] = []
+    in_ros = False
+    for i, arg in enumerate(argv):
+        if arg == "--ros-args":
+            in_ros = True
+        elif arg == "--":
+            in_ros = False
+        elif in_ros and arg == "--params-file" and i + 1 < len(argv):
+            files.append(argv[i + 1])
+    return files

@@ -72,15 +72,13 @@ from dualarm_control.ros.local_bus import (
     local_publisher,
     publish_if_subscribed,
 )
-from dualarm_control.ros.node import (
-    Tick,
+from dualarm_control.ros.node import Tick, run, usage
+from dualarm_control.ros.obstacle_markers import ObstacleTopics
+from dualarm_control.ros.priority import (
     priority_from_args,
     request_realtime_priority,
-    run,
     thread_priority_spec,
-    usage,
 )
-from dualarm_control.ros.obstacle_markers import ObstacleTopics
 from dualarm_control.ros.qos import (
     QOS_PARAMETER,
     latched_qos,

@@ -2,7 +2,7 @@
 
 A lockstep launch spends much of its time waiting, not computing: its nodes hand each cycle
 from one process to the next, and at the end each node waits for its readers to acknowledge
-what it published (``ros.node.flush_publishers``, seconds with Fast DDS's default heartbeat).
+what it published (``ros.node_exit.flush_publishers``, seconds with Fast DDS's default heartbeat).
 Four launches of the short scenario side by side took 16-17 s on the 2-core machine, one after
 the other 29 s. Lockstep runs do not depend on timing (the same commands and states however the
 processes are scheduled), so what the tests assert is the same either way.

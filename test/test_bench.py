@@ -67,7 +67,7 @@ def test_realtime_bench_refuses_a_missing_params_file(tmp_path: Path) -> None:
 
 def test_the_1khz_realtime_params_file_sets_only_the_trajectory_nodes_scheduling() -> None:
     from dualarm_control.paths import config_path
-    from dualarm_control.ros.node import priority_from_args
+    from dualarm_control.ros.priority import priority_from_args
 
     path = str(config_path("realtime_1khz.yaml"))
     args = ["x", "--ros-args", "--params-file", path]
@@ -295,7 +295,7 @@ def test_normal_scheduling_wins_over_a_users_node_priority(tmp_path: Path) -> No
     from rclpy.node import Node
 
     from dualarm_control.app.bench.realtime import NORMAL_SCHEDULING
-    from dualarm_control.ros.node import priority_from_args
+    from dualarm_control.ros.priority import priority_from_args
 
     user = tmp_path / "user.yaml"
     user.write_text("/**:\n  ros__parameters:\n    thread_priority: 30\n"

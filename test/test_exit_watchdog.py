@@ -1,4 +1,4 @@
-"""ros.node.ExitWatchdog: a node whose way out is stuck ends with the stage named and every stack."""
+"""ros.node_exit.ExitWatchdog: a node whose way out is stuck ends with the stage named and every stack."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from dualarm_control.ros.node import EXIT_STUCK_S, ExitWatchdog
+from dualarm_control.ros.node_exit import EXIT_STUCK_S, ExitWatchdog
 
 
 def fired(stage: str | None, capsys: pytest.CaptureFixture[str]) -> tuple[list[int], str]:
@@ -44,7 +44,7 @@ def test_a_way_out_that_ends_cancels_it(capsys: pytest.CaptureFixture[str]) -> N
 
 def test_it_fires_before_the_launchers_sigterm() -> None:
     from dualarm_control.app.run.launcher import STOP_GRACE_S
-    from dualarm_control.ros.node import ACK_TIMEOUT_S
+    from dualarm_control.ros.node_exit import ACK_TIMEOUT_S
 
     assert ACK_TIMEOUT_S < EXIT_STUCK_S < STOP_GRACE_S
 

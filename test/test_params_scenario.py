@@ -281,7 +281,7 @@ def test_malformed_scenario_yaml_is_a_scenario_error(tmp_path: Path) -> None:
 
 def test_thread_priority_comes_from_a_params_file_and_minus_p_wins(tmp_path: Path) -> None:
     """The scheduling is chosen before rclpy starts: the node's params-file entry counts, -p overrides it."""
-    from dualarm_control.ros.node import priority_from_args
+    from dualarm_control.ros.priority import priority_from_args
 
     f = tmp_path / "p.yaml"
     f.write_text("trajectory_node:\n  ros__parameters:\n    thread_priority: 0\n")

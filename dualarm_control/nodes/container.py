@@ -26,7 +26,8 @@ from typing import Any
 from dualarm_control.errors import DualArmError
 from dualarm_control.references.base import JOINT_REFERENCE, RELATIVE_TARGET, WRENCH
 from dualarm_control.ros.local_bus import LocalBus
-from dualarm_control.ros.node import priority_from_args, request_realtime_priority, run
+from dualarm_control.ros.node import run
+from dualarm_control.ros.priority import priority_from_args, request_realtime_priority
 
 NODE_TOPICS = {
     "sim_node": ("/joint_states", WRENCH),

@@ -77,7 +77,7 @@ from dualarm_control.references.base import (
 )
 from dualarm_control.references.held import tuned
 from dualarm_control.references.plan import PlanSource
-from dualarm_control.ros import convert, inputs, local_bus
+from dualarm_control.ros import convert, inputs, local_bus, priority
 from dualarm_control.ros import node as shell
 from dualarm_control.ros.cell_topic import CellPublisher
 from dualarm_control.ros.hardware_check import check_graph
@@ -147,7 +147,7 @@ class ControllerNode:
         if self.startup.checking:
             self.ticks.append((CHECK_PERIOD_S, self.on_startup_check))
         self.log.info(start_text(self.tracker, self.scenario.name, source.describe(), m, self.params, self.lockstep))
-        shell.log_priority(self.log, priority_note, self.values["thread_priority"])
+        priority.log_priority(self.log, priority_note, self.values["thread_priority"])
         self.cell_topic = CellPublisher(n)  # /dualarm/cell: what this run runs with, latched (for its bag)
         self.obstacles = obstacle_intake(n, self.tracker.controller, self.values)  # off the control thread
         self.scene_topic = ObstacleTopics(n, self.scenario.obstacles, self.scenario.moving_obstacles)  # latched
@@ -308,8 +308,8 @@ class ControllerNode:
 
 def main(args: list[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
-    # Applied to every thread (the middleware's too) once the node is built (ros/node.py).
-    request = shell.request_realtime_priority(shell.priority_from_args(argv, DEFAULT_PRIORITY, "controller_node"))
+    # Applied to every thread (the middleware's too) once the node is built (ros/priority.py apply_priority, called by ros/node.py run).
+    request = priority.request_realtime_priority(priority.priority_from_args(argv, DEFAULT_PRIORITY, "controller_node"))
     help_text = shell.usage("controller_node", __doc__ or "", ALL_PARAMETERS)
     return shell.run(lambda context: ControllerNode(context, request.note), argv, help_text, request.granted)
 

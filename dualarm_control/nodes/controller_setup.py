@@ -18,8 +18,8 @@ from dualarm_control.hardware import HARDWARE_PARAMETERS
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import ParamSpec, non_negative, positive
 from dualarm_control.references.base import RunOptions, Tracker
-from dualarm_control.ros.node import thread_priority_spec
 from dualarm_control.ros.obstacle_io import OBSTACLE_PARAMETERS
+from dualarm_control.ros.priority import thread_priority_spec
 from dualarm_control.ros.qos import QOS_PARAMETER
 from dualarm_control.scenario import ROBOT_PARAMETER, Scenario
 

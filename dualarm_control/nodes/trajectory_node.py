@@ -55,14 +55,11 @@ from dualarm_control.ros.cell_topic import CellPublisher
 from dualarm_control.ros.hardware_io import JointStates, declare_with_profile
 from dualarm_control.ros.inputs import StampGate, Throttle
 from dualarm_control.ros.local_bus import LocalBus, local_publisher
-from dualarm_control.ros.node import (
-    Tick,
-    declare,
+from dualarm_control.ros.node import Tick, declare, run, usage
+from dualarm_control.ros.priority import (
     priority_from_args,
     request_realtime_priority,
-    run,
     thread_priority_spec,
-    usage,
 )
 from dualarm_control.ros.qos import QOS_PARAMETER, publisher_depth, stream_qos
 from dualarm_control.scenario import ROBOT_PARAMETER

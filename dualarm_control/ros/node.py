@@ -21,21 +21,27 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager, nullcontext
-from dataclasses import dataclass
 from types import FrameType
 from typing import Any, Generic, Self, TypeVar
 
 from dualarm_control.errors import DualArmError, ParameterError
-from dualarm_control.params import ParamSpec, read_params_files
+from dualarm_control.params import ParamSpec, params_files, read_params_files
 from dualarm_control.ros.env import (
     apply_discovery_profile,
     apply_localhost_default,
     stop_with_launcher,
 )
+from dualarm_control.ros.node_exit import (
+    ACK_TIMEOUT_S,
+    EXIT_OK,
+    EXIT_PARAMS,
+    EXIT_STUCK_S,
+    FINISHED_ACK_TIMEOUT_S,
+    ExitWatchdog,
+    flush_publishers,
+)
+from dualarm_control.ros.priority import apply_priority
 
-EXIT_OK = 0
-EXIT_ERROR = 1
-EXIT_PARAMS = 2
 SPIN_TIMEOUT_S = 0.1
 T = TypeVar("T")
 
@@ -126,20 +132,6 @@ class LiveParameters(Generic[T]):
         self.node.get_logger().info(f"parameters changed{where}: "
                                     + ", ".join(f"{k}={v!r}" for k, v in changed.items()))
         return merged, built
-
-
-def params_files(argv: Sequence[str]) -> list[str]:
-    """The ``--params-file`` arguments of a ``--ros-args`` command line, in order."""
-    files: list[str] = []
-    in_ros = False
-    for i, arg in enumerate(argv):
-        if arg == "--ros-args":
-            in_ros = True
-        elif arg == "--":
-            in_ros = False
-        elif in_ros and arg == "--params-file" and i + 1 < len(argv):
-            files.append(argv[i + 1])
-    return files
 
 
 class StopOnSignal:
@@ -340,112 +332,6 @@ def run(make: Callable[[Any], Any], args: Sequence[str] | None = None, help_text
     return EXIT_OK
 
 
-ACK_TIMEOUT_S = 15.0
-"""How long, in all, a stopping lockstep node waits for its readers to acknowledge what it published:
-a deadline for a recorder starved on a busy machine (a trajectory node's flush took 5.4 s under
-``stress-ng --cpu 1``, its recorder 2800 samples behind), below the launcher's grace before SIGTERM
-(``app.run.launcher.STOP_GRACE_S``, 5 s more than this)."""
-
-FINISHED_ACK_TIMEOUT_S = 2.0
-"""How long, in all, a real-time node that ended by itself waits for its readers to acknowledge what it
-published last: the trajectory node's "complete" status reaches a loaded recorder instead of dying with
-the node's writer (a fault-matrix run under a parallel test load recorded no "complete" though the
-node logged it); short, because a reader that died with its process is never acknowledged."""
-
-
-EXIT_STUCK_S = ACK_TIMEOUT_S + 3.0
-"""How long a node's way out (``close``, the lockstep flush, destroying the nodes, rclpy's shutdown) may take
-before :class:`ExitWatchdog` ends the process: below the launcher's grace before SIGTERM
-(``app.run.launcher.STOP_GRACE_S``)."""
-
-
-class ExitWatchdog:
-    """Ends a node process whose way out is stuck (started as that begins, :meth:`cancel` at its end).
-
-    Under ``stress-ng --cpu 1`` a lockstep sim_node logged its last line ("stopping after ..."), its bag
-    complete, and was still alive 20 s later, when the launcher's SIGTERM ended it (exit -15, the launch
-    failed). After ``seconds`` this prints which stage was stuck and every thread's stack to stderr,
-    then exits: 0 when the stage is ``teardown`` (everything published was delivered or its
-    wait timed out; what is left is the middleware's own teardown), 1 otherwise.
-
-    Attributes:
-        stage: ``close``, ``flush`` or ``teardown`` (set by the caller as it goes).
-    """
-
-    def __init__(self, seconds: float, exit: Callable[[int], None] | None = None) -> None:
-        import os
-
-        self.stage = "close"
-        self.seconds = seconds
-        self._exit = exit or os._exit
-        self._timer = threading.Timer(seconds, self._fire)
-        self._timer.daemon = True
-        self._timer.start()
-        self._c_dump = _dump_stacks_later(seconds + C_DUMP_DELAY_S)
-
-    def _fire(self) -> None:
-        import traceback
-
-        self._cancel_c_dump()
-        try:
-            stacks = "".join(f"Thread {ident:#x}:\n" + "".join(traceback.format_stack(frame))
-                             for ident, frame in sys._current_frames().items())
-            print(f"exit watchdog: the way out is stuck in '{self.stage}' after {self.seconds:.0f} s; every "
-                  f"thread's stack:\n{stacks}", file=sys.stderr, flush=True)
-        finally:
-            self._exit(EXIT_OK if self.stage == "teardown" else EXIT_ERROR)
-
-    def cancel(self) -> None:
-        self._timer.cancel()
-        self._cancel_c_dump()
-
-    def _cancel_c_dump(self) -> None:
-        if self._c_dump:
-            import faulthandler
-
-            faulthandler.cancel_dump_traceback_later()
-            self._c_dump = False
-
-
-C_DUMP_DELAY_S = 1.0
-"""After the watchdog's own time, Python's faulthandler dumps every thread's stack from C: it needs no GIL,
-so it also shows a way out stuck in a C call that holds it (then the watchdog's thread cannot run: under
-stress a real-time controller_node logged its summary and was SIGTERMed 20 s later, no watchdog line)."""
-
-
-def _dump_stacks_later(seconds: float) -> bool:
-    """faulthandler's C-level dump of every stack to the process's stderr (fd 2) after ``seconds``; False
-    when there is no such stream."""
-    import faulthandler
-
-    stream = sys.__stderr__
-    if stream is None:
-        return False
-    try:
-        faulthandler.dump_traceback_later(seconds, exit=False, file=stream)
-    except (AttributeError, ValueError, OSError):  # no real stderr (closed, or no fileno)
-        return False
-    return True
-
-
-def flush_publishers(nodes: Sequence[Any], timeout_s: float) -> bool:
-    """Wait (at most ``timeout_s`` in all) until every reliable reader acknowledged every sample of the
-    ``nodes``' publishers (rclpy ``Publisher.wait_for_all_acked``): a recorder lagging behind a fast
-    lockstep run still receives what was queued at a node's exit, instead of losing it with the node's
-    writer history. True when all were acknowledged in time."""
-    from rclpy.duration import Duration
-
-    end = time.monotonic() + timeout_s
-    acked = True
-    for publisher in [p for node in nodes for p in node.publishers]:
-        left = max(0.0, end - time.monotonic())
-        try:
-            acked = publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))) and acked
-        except RuntimeError:  # rclpy's RCLError / InvalidHandle: the context is gone, nothing to deliver
-            acked = False
-    return acked
-
-
 def shell_nodes(shell: Any) -> list[Any]:
     """The rclpy nodes of a shell given to :func:`run`: its ``nodes``, else its ``node``."""
     return list(getattr(shell, "nodes", None) or [shell.node])
@@ -481,92 +367,3 @@ def tool_node(name: str, signals: bool = True) -> Iterator[tuple[Any, Any, StopO
         if node is not None:
             node.destroy_node()
         context.try_shutdown()
-
-
-def thread_priority_spec(default: int, what: str) -> ParamSpec:
-    """The ``thread_priority`` parameter of a node whose ``what`` runs every control period."""
-    return ParamSpec("thread_priority", default, f"SCHED_FIFO priority of {what} (0: normal scheduling)",
-                     check=lambda v: "" if 0 <= v <= 99 else "an integer in [0, 99]", read_only=True, bounds=(0, 99))
-
-
-def log_priority(log: Any, note: str, priority: int) -> None:
-    """Log the outcome of :func:`request_realtime_priority` (``note``: '' granted, "disabled", or why not)."""
-    if note and note != "disabled":
-        log.warning(note)
-    elif not note:
-        log.info(f"running under SCHED_FIFO priority {priority}")
-
-
-def priority_from_args(argv: Sequence[str], default: int, node_name: str) -> int:
-    """``thread_priority`` as the node will declare it, read before rclpy exists (its permission is
-    checked before the node starts): ``-p thread_priority:=N`` in ``argv`` wins
-    over the node's entry in ``--params-file`` files (later files win), as in ROS 2 (also
-    ``-p NODE:thread_priority:=N``, rcl's node-scoped form, which the container's command uses); ``default``
-    when absent or malformed (:func:`declare` then reports a malformed value with exit 2)."""
-    priority = default
-    try:
-        value = read_params_files(params_files(argv), node_name).get("thread_priority", default)
-    except (DualArmError, OSError, ValueError):  # a bad file is reported by run() with exit 2
-        value = default
-    if isinstance(value, int) and not isinstance(value, bool):
-        priority = value
-    for i, arg in enumerate(argv[:-1]):
-        if arg == "-p" and argv[i + 1].startswith(("thread_priority:=", f"{node_name}:thread_priority:=")):
-            try:
-                priority = int(argv[i + 1].split(":=", 1)[1])
-            except ValueError:
-                pass
-    return priority
-
-
-@dataclass(frozen=True)
-class PriorityRequest:
-    """The outcome of :func:`request_realtime_priority`.
-
-    Attributes:
-        granted: the SCHED_FIFO priority :func:`run` gives every thread before spinning (0: none).
-        note: '' when granted, "disabled" (``thread_priority`` 0), else why not (the node warns).
-    """
-
-    granted: int
-    note: str
-
-
-def request_realtime_priority(priority: int) -> PriorityRequest:
-    """Ask for SCHED_FIFO ``priority`` (1-99) for this process, like ros2_control's ``thread_priority``.
-
-    The permission is checked now (on this thread, then restored); :func:`run` applies the
-    priority to every thread of the process, the middleware's included, once the node is built
-    and right before it spins. Start-up (imports, participant, node) runs under normal
-    scheduling: a node starting under SCHED_FIFO while another one still started took its
-    first /joint_states 0.05-0.5 s after being up instead of 3-30 ms (docs/bench.md, "Start-up").
-    """
-    import os
-
-    if priority <= 0:
-        return PriorityRequest(0, "disabled")
-    try:
-        policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(min(priority, 99)))
-        os.sched_setscheduler(0, policy, param)
-    except (AttributeError, PermissionError, OSError) as exc:
-        return PriorityRequest(0, f"SCHED_FIFO {priority} not permitted ({exc}); running with normal priority")
-    return PriorityRequest(min(priority, 99), "")
-
-
-def apply_priority(priority: int) -> None:
-    """Put every thread of this process under SCHED_FIFO ``priority`` (threads created later inherit
-    it); nothing for 0."""
-    import os
-
-    if priority <= 0:
-        return
-    try:
-        threads = [int(tid) for tid in os.listdir("/proc/self/task")]
-    except OSError:
-        threads = [0]
-    for tid in threads:
-        try:
-            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
-        except (ProcessLookupError, PermissionError, OSError):
-            pass  # a thread that ended meanwhile

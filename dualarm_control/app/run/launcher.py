@@ -24,7 +24,8 @@ from dualarm_control.ros.env import (
     RECORDER_NODE,
     localhost_environment,
 )
-from dualarm_control.ros.node import ACK_TIMEOUT_S, StopOnSignal
+from dualarm_control.ros.node import StopOnSignal
+from dualarm_control.ros.node_exit import ACK_TIMEOUT_S
 
 if TYPE_CHECKING:
     from dualarm_control.hardware import HardwareProfile
@@ -43,7 +44,7 @@ LAYOUTS = {
 """Processes of ``dualarm launch --processes N``: which nodes share a process (started in this order)."""
 STOP_GRACE_S = ACK_TIMEOUT_S + 5.0
 """The grace of a node before SIGTERM: longer than a stopping lockstep node's wait for its readers'
-acknowledgements (``ros.node.ACK_TIMEOUT_S``, 15 s), so that the node ends that wait itself and exits 0.
+acknowledgements (``ros.node_exit.ACK_TIMEOUT_S``, 15 s), so that the node ends that wait itself and exits 0.
 Under ``stress-ng --cpu 1`` a lockstep sim_node's wait for a starved recorder outlasted the former 10 s
 grace: SIGTERM then ended it (exit -15) and the launch failed. A node that exits at once costs nothing."""
 STOPPED_LAST = ("bag",)
@@ -192,7 +193,7 @@ class Launch:
 
     def stop(self) -> None:
         """Stop the nodes, then the recorders (:data:`STOPPED_LAST`): a lockstep node waits at its exit
-        until its samples are acknowledged (``ros.node.flush_publishers``), which needs the recorder
+        until its samples are acknowledged (``ros.node_exit.flush_publishers``), which needs the recorder
         alive, so a recorder lagging behind a fast lockstep run still gets the run's end."""
         self._stop([p for p in self.procs if p.name not in STOPPED_LAST], STOP_GRACE_S)
         self._stop(self.procs, RECORDER_STOP_GRACE_S)
