@@ -16,9 +16,8 @@ from dualarm_control.errors import DualArmError
 
 ProgressFactory = Callable[[str], Callable[[float, str], None]]
 
-def add_plan_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser],
-                    func: Callable[[argparse.Namespace], int]) -> None:
-    """The ``plan`` verb's arguments (the cli's parser hook)."""
+def add_plan_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The ``plan`` verb's arguments (the cli's parser hook); it runs :func:`run_plan_command`."""
     pl = sub.add_parser("plan", help="global manipulability plan of a relative path (paper 003) vs the baseline",
                         description="Optimise the joint configurations along the scenario's relative path "
                         "(key points then inner points, multi-start on a process pool), run the pseudo-inverse "
@@ -37,7 +36,7 @@ def add_plan_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser],
     pl.add_argument("--robot", default=None, metavar="NAME|PATH",
                     help="plan for this robot (config/robots/ name or YAML) instead of the scenario's; the path must "
                     "be within its reach")
-    pl.set_defaults(func=func)
+    pl.set_defaults(func=run_plan_command)
 
 
 def run_plan_command(args: argparse.Namespace, progress: ProgressFactory = progress_bar) -> int:
