@@ -40,9 +40,8 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped, WrenchStamped
+from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
-from trajectory_msgs.msg import JointTrajectory, MultiDOFJointTrajectory
 
 from dualarm_control import controller as core
 from dualarm_control.cell_robot import node_scenario
@@ -50,7 +49,6 @@ from dualarm_control.errors import DualArmError
 from dualarm_control.hardware import profile_from_values
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.nodes.controller_inputs import (
-    WRENCH_STREAMS,
     ControllerInputs,
     cycle_wrench,
     stream_sample,
@@ -67,11 +65,10 @@ from dualarm_control.nodes.controller_status import (
     cycle_status,
     cycle_values,
 )
+from dualarm_control.nodes.controller_streams import subscribe_streams
 from dualarm_control.nodes.startup_wait import CHECK_PERIOD_S, StartupWait
 from dualarm_control.nodes.task_clock import TaskClock
 from dualarm_control.references.base import (
-    JOINT_REFERENCE,
-    RELATIVE_TARGET,
     WRENCH,
     Tracker,
 )
@@ -137,7 +134,7 @@ class ControllerNode:
         self.inputs = ControllerInputs(source.streams + tuple(wrenches),
                                        self.lockstep, self.out, self.log, lambda: self.values,
                                        self.joint_states.assembler, self.try_cycle)
-        self.subscribe_streams(qos, bus)
+        subscribe_streams(n, self.inputs, m, qos, bus, self.on_malformed)
         self.live = shell.LiveParameters(n, {s.name: s for s in ALL_PARAMETERS}, self.values, self.build_live)
         if hasattr(self.tracker, "retune"):  # a held object: the internal-force gains and setpoint, live
             self.tracker.retune(self.values)
@@ -151,24 +148,6 @@ class ControllerNode:
         self.cell_topic = CellPublisher(n)  # /dualarm/cell: what this run runs with, latched (for its bag)
         self.obstacles = obstacle_intake(n, self.tracker.controller, self.values)  # off the control thread
         self.scene_topic = ObstacleTopics(n, self.scenario.obstacles, self.scenario.moving_obstacles)  # latched
-
-    def subscribe_streams(self, qos: Any, bus: local_bus.LocalBus | None) -> None:
-        """The streams of :attr:`inputs`: each sample (or its rejection) to :class:`ControllerInputs`."""
-        streams, order = self.inputs.streams, {name: i for i, name in enumerate(self.model.joint_names)}
-
-        def subscribe(msg_type: Any, topic: str, callback: Any, depth: Any, decoder: Any = None) -> None:
-            inputs.subscribe_checked(self.node, msg_type, topic, callback, depth, self.on_malformed, decoder, bus,
-                                     lambda exc: self.inputs.rejected(topic, exc))
-
-        if RELATIVE_TARGET in streams:
-            subscribe(MultiDOFJointTrajectory, RELATIVE_TARGET, lambda s: self.inputs.put(RELATIVE_TARGET, *s),
-                      qos, convert.TargetInput(self.model.relative_reach()))
-        if JOINT_REFERENCE in streams:
-            subscribe(JointTrajectory, JOINT_REFERENCE,
-                      self.inputs.message_input(JOINT_REFERENCE, lambda msg: convert.joint_reference(msg, order)), qos)
-        for wrench in WRENCH_STREAMS:
-            if wrench in streams:
-                subscribe(WrenchStamped, wrench, self.inputs.message_input(wrench, convert.wrench_vector), 10)
 
     def close(self) -> None:
         if self.obstacles is not None:
