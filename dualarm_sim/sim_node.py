@@ -75,8 +75,8 @@ from dualarm_control.ros.local_bus import (
 from dualarm_control.ros.node import Tick, run, usage
 from dualarm_control.ros.obstacle_markers import ObstacleTopics
 from dualarm_control.ros.priority import (
-    priority_from_args,
-    request_realtime_priority,
+    log_priority,
+    node_scheduling,
     thread_priority_spec,
 )
 from dualarm_control.ros.qos import (
@@ -208,8 +208,7 @@ class SimNode:
                       f"{'lockstep' if self.lockstep else 'real-time'} at "
                       f"{1.0 / p['control_period']:.0f} Hz, physics {p['physics_rate_hz']:.0f} Hz "
                       f"(known scenarios: {', '.join(scenario_names())})")
-        if priority_note and priority_note != "disabled":
-            self.log.warning(priority_note)
+        log_priority(self.log, priority_note, p["thread_priority"])
         self.cell_topic = CellPublisher(n)  # /dualarm/cell: what this run runs with, latched (for its bag)
         self.period_s = float(p["control_period"])
         self.moving = MovingBodies(scenario.moving_obstacles, self.cell.client_id)  # a hand: moved every step
@@ -339,7 +338,7 @@ class SimNode:
 
 def main(args: list[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
-    request = request_realtime_priority(priority_from_args(argv, DEFAULT_PRIORITY, "sim_node"))
+    request = node_scheduling(argv, DEFAULT_PRIORITY, "sim_node")
     help_text = usage("sim_node", __doc__ or "", PARAMETERS)
     return run(lambda context: SimNode(context, request.note), argv, help_text, request.granted)
 

@@ -292,3 +292,22 @@ def test_thread_priority_comes_from_a_params_file_and_minus_p_wins(tmp_path: Pat
     bad = tmp_path / "bad.yaml"
     bad.write_text("trajectory_node: [")
     assert priority_from_args(["x", "--ros-args", "--params-file", str(bad)], 40, "trajectory_node") == 40
+
+
+def test_a_lockstep_node_asks_for_normal_scheduling(tmp_path: Path) -> None:
+    """A lockstep run keeps no deadline: its nodes run under normal scheduling whatever thread_priority says
+    (-p or the node's params-file entry); in real time thread_priority 0 is "disabled" and a positive one is
+    requested (granted or refused with the reason, as this machine allows)."""
+    from dualarm_control.ros.priority import LOCKSTEP_NOTE, node_scheduling
+
+    f = tmp_path / "p.yaml"
+    f.write_text("sim_node:\n  ros__parameters:\n    lockstep: true\n    thread_priority: 60\n")
+    for args in (["sim_node", "--ros-args", "-p", "lockstep:=true", "-p", "thread_priority:=60"],
+                 ["sim_node", "--ros-args", "--params-file", str(f)],
+                 ["sim_node", "--ros-args", "-p", "sim_node:lockstep:=true"]):
+        request = node_scheduling(args, 50, "sim_node")
+        assert (request.granted, request.note) == (0, LOCKSTEP_NOTE), args
+    assert node_scheduling(["sim_node", "--ros-args", "--params-file", str(f), "-p", "lockstep:=false",
+                            "-p", "thread_priority:=0"], 50, "sim_node").note == "disabled"
+    real_time = node_scheduling(["sim_node", "--ros-args", "-p", "lockstep:=false"], 50, "sim_node")
+    assert real_time.note != LOCKSTEP_NOTE and (real_time.granted == 50) == (real_time.note == "")

@@ -27,7 +27,7 @@ from dualarm_control.errors import DualArmError
 from dualarm_control.references.base import JOINT_REFERENCE, RELATIVE_TARGET, WRENCH
 from dualarm_control.ros.local_bus import LocalBus
 from dualarm_control.ros.node import run
-from dualarm_control.ros.priority import priority_from_args, request_realtime_priority
+from dualarm_control.ros.priority import node_scheduling
 
 NODE_TOPICS = {
     "sim_node": ("/joint_states", WRENCH),
@@ -98,7 +98,7 @@ def main(args: list[str] | None = None) -> int:
         return 2
     from dualarm_control.nodes.controller_node import DEFAULT_PRIORITY
 
-    request = request_realtime_priority(priority_from_args(argv, DEFAULT_PRIORITY, "controller_node"))
+    request = node_scheduling(argv, DEFAULT_PRIORITY, "controller_node")
     help_text = (f"{USAGE}\n\n{(__doc__ or '').strip()}\n\nparameters: each node's own (sim_node --help, "
                  "controller_node --help, trajectory_node --help), given as -p NODE:NAME:=VALUE or in a params file")
     return run(lambda context: Container(context, names, request.note), argv, help_text, request.granted)

@@ -288,7 +288,7 @@ class ControllerNode:
 def main(args: list[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
     # Applied to every thread (the middleware's too) once the node is built (ros/priority.py apply_priority, called by ros/node.py run).
-    request = priority.request_realtime_priority(priority.priority_from_args(argv, DEFAULT_PRIORITY, "controller_node"))
+    request = priority.node_scheduling(argv, DEFAULT_PRIORITY, "controller_node")
     help_text = shell.usage("controller_node", __doc__ or "", ALL_PARAMETERS)
     return shell.run(lambda context: ControllerNode(context, request.note), argv, help_text, request.granted)
 

@@ -57,8 +57,8 @@ from dualarm_control.ros.inputs import StampGate, Throttle
 from dualarm_control.ros.local_bus import LocalBus, local_publisher
 from dualarm_control.ros.node import Tick, declare, run, usage
 from dualarm_control.ros.priority import (
-    priority_from_args,
-    request_realtime_priority,
+    log_priority,
+    node_scheduling,
     thread_priority_spec,
 )
 from dualarm_control.ros.qos import QOS_PARAMETER, publisher_depth, stream_qos
@@ -150,8 +150,7 @@ class TrajectoryNode:
         self.awaited_reader = "" if self.lockstep else str(p["start_after_reader"])
         self.log.info(f"scenario '{self.scenario.name}': {self.source.describe()}, "
                       f"{'lockstep' if self.lockstep else 'real-time'}; waiting for /joint_states")
-        if priority_note and priority_note != "disabled":
-            self.log.warning(priority_note)
+        log_priority(self.log, priority_note, p["thread_priority"])
         self.cell_topic = CellPublisher(n)  # /dualarm/cell: what this run runs with, latched (for its bag)
 
     def subscribe_states(self) -> None:
@@ -300,7 +299,7 @@ def main(args: list[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
     # Applied to every thread (the middleware's too) once the node is built: a starved target stream
     # stops the controller (target_timeout), as `dualarm soak` showed on a loaded machine.
-    request = request_realtime_priority(priority_from_args(argv, DEFAULT_PRIORITY, "trajectory_node"))
+    request = node_scheduling(argv, DEFAULT_PRIORITY, "trajectory_node")
     return run(lambda context: TrajectoryNode(context, request.note), argv,
                usage("trajectory_node", __doc__ or "", PARAMETERS), request.granted)
 

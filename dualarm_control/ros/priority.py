@@ -8,6 +8,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import yaml
+
 from dualarm_control.errors import DualArmError
 from dualarm_control.params import ParamSpec, params_files, read_params_files
 
@@ -20,32 +22,51 @@ def thread_priority_spec(default: int, what: str) -> ParamSpec:
 
 def log_priority(log: Any, note: str, priority: int) -> None:
     """Log the outcome of :func:`request_realtime_priority` (``note``: '' granted, "disabled", or why not)."""
-    if note and note != "disabled":
+    if note == LOCKSTEP_NOTE:
+        log.info(note)
+    elif note and note != "disabled":
         log.warning(note)
     elif not note:
         log.info(f"running under SCHED_FIFO priority {priority}")
 
 
-def priority_from_args(argv: Sequence[str], default: int, node_name: str) -> int:
-    """``thread_priority`` as the node will declare it, read before rclpy exists (its permission is
-    checked before the node starts): ``-p thread_priority:=N`` in ``argv`` wins
-    over the node's entry in ``--params-file`` files (later files win), as in ROS 2 (also
-    ``-p NODE:thread_priority:=N``, rcl's node-scoped form, which the container's command uses); ``default``
-    when absent or malformed (:func:`declare` then reports a malformed value with exit 2)."""
-    priority = default
+def early_parameter(argv: Sequence[str], name: str, default: Any, node_name: str) -> Any:
+    """Parameter ``name`` as the node will declare it, read before rclpy exists: ``-p name:=V`` in ``argv``
+    (also ``-p NODE:name:=V``, rcl's node-scoped form, which the container's command uses) wins over the
+    node's entry in ``--params-file`` files (later files win), as in ROS 2; the value read as YAML.
+    ``default`` when absent or malformed (:func:`~dualarm_control.ros.node.declare` then reports a
+    malformed value with exit 2)."""
     try:
-        value = read_params_files(params_files(argv), node_name).get("thread_priority", default)
+        value = read_params_files(params_files(argv), node_name).get(name, default)
     except (DualArmError, OSError, ValueError):  # a bad file is reported by run() with exit 2
         value = default
-    if isinstance(value, int) and not isinstance(value, bool):
-        priority = value
     for i, arg in enumerate(argv[:-1]):
-        if arg == "-p" and argv[i + 1].startswith(("thread_priority:=", f"{node_name}:thread_priority:=")):
+        if arg == "-p" and argv[i + 1].startswith((f"{name}:=", f"{node_name}:{name}:=")):
             try:
-                priority = int(argv[i + 1].split(":=", 1)[1])
-            except ValueError:
+                value = yaml.safe_load(argv[i + 1].split(":=", 1)[1])
+            except yaml.YAMLError:
                 pass
-    return priority
+    return value
+
+
+def priority_from_args(argv: Sequence[str], default: int, node_name: str) -> int:
+    """``thread_priority`` as the node will declare it (:func:`early_parameter`: its permission is checked
+    before the node starts); ``default`` when absent or not an integer."""
+    value = early_parameter(argv, "thread_priority", default, node_name)
+    return value if isinstance(value, int) and not isinstance(value, bool) else default
+
+
+LOCKSTEP_NOTE = "lockstep: normal scheduling (a lockstep run keeps no deadline; under SCHED_FIFO it would take the cores)"
+
+
+def node_scheduling(argv: Sequence[str], default: int, node_name: str) -> PriorityRequest:
+    """The scheduling a node process asks for at start: SCHED_FIFO ``thread_priority`` in real time
+    (:func:`request_realtime_priority`); normal scheduling in lockstep (``lockstep:=true``), whatever
+    ``thread_priority`` says: a lockstep run waits for no clock and runs as fast as the cores go, so
+    under SCHED_FIFO its busy processes take the cores from every other process of the machine."""
+    if early_parameter(argv, "lockstep", False, node_name) is True:
+        return PriorityRequest(0, LOCKSTEP_NOTE)
+    return request_realtime_priority(priority_from_args(argv, default, node_name))
 
 
 @dataclass(frozen=True)
