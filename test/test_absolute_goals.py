@@ -135,7 +135,7 @@ def test_carry_goals_lockstep_bag_metrics_equal_in_process(tmp_path: Path) -> No
     """carry_goals over ROS in lockstep (three processes, a bag) and in one process give the same metrics: the
     velocity norms to 1e-8, the relative and absolute tracking errors to 1e-6 (the bag's /diagnostics carry 7
     significant digits; measured 1.0e-7 relative at most), the three absolute goals reached in both."""
-    from dualarm_control.app.record.bag import report
+    from dualarm_control.app.record.bag_runs import report
     from dualarm_control.app.record.report import summarize_run
     from dualarm_control.app.run.experiment import run_scenario
     from dualarm_control.app.run.launcher import launch_scenario

@@ -28,7 +28,11 @@ from rosbags.typesys import Stores, get_typestore
 from waiting import DEADLINE_S, exited, node_env, tail, wait_until
 
 from dualarm_control.app import cli
-from dualarm_control.app.record.bag import nearest_labels, pose_error, quaternion_angle
+from dualarm_control.app.record.bag_runs import (
+    nearest_labels,
+    pose_error,
+    quaternion_angle,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 N_MSGS = 40

@@ -123,7 +123,8 @@ def test_over_ros_recorded(tmp_path: Path) -> None:
     'apart' reached after the hand left."""
     from rosbags.highlevel import AnyReader
 
-    from dualarm_control.app.record.bag import read_bag, read_run
+    from dualarm_control.app.record.bag import read_bag
+    from dualarm_control.app.record.bag_runs import read_run
     from dualarm_control.app.run.launcher import launch_scenario
 
     bag = tmp_path / "bag"

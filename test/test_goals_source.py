@@ -82,7 +82,7 @@ def test_goal_monitor_reports_reached_and_stalled_with_the_joints_at_a_limit(dem
 def test_interactive_demo_lockstep_bag_metrics_equal_in_process(demo: tuple, tmp_path: Path) -> None:
     """The scripted goals over ROS in lockstep (three processes, a bag) give the in-process metrics, and a
     max joint acceleration of the same order as the assembly scenario's (<= 10x with the same solver)."""
-    from dualarm_control.app.record.bag import report
+    from dualarm_control.app.record.bag_runs import report
     from dualarm_control.app.record.report import summarize_run
     from dualarm_control.app.run.experiment import run_scenario
     from dualarm_control.app.run.launcher import launch_scenario

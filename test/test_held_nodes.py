@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from launching import meanwhile
 
-from dualarm_control.app.record.bag import read_run
+from dualarm_control.app.record.bag_runs import read_run
 from dualarm_control.app.record.report import summarize_run
 from dualarm_control.app.run.experiment import run_scenario
 from dualarm_control.app.run.launcher import launch_scenario

@@ -185,7 +185,7 @@ def test_bag_has_the_graph_with_standard_types(lockstep_bags: dict[str, Path]) -
 def test_table_one_means_from_the_bag_equal_in_process(lockstep_bags: dict[str, Path], solver: str,
                                                        tmp_path: Path) -> None:
     """``dualarm report`` on the lockstep bag gives the in-process experiment's Table I means."""
-    from dualarm_control.app.record.bag import report
+    from dualarm_control.app.record.bag_runs import report
     from dualarm_control.app.record.report import summarize_run
 
     scenario = load_scenario(str(SHORT))
@@ -202,7 +202,7 @@ def test_plan_run_by_the_nodes(launches: dict[str, Path], tmp_path: Path) -> Non
     the controller tracks it; the executed relative pose stays within 1 mm / 5 mrad of the reference.
     The plan's quality is test_planner.py's: 2 key-point starts and no execution in one process
     (``--no-execute``) are enough for a plan to track (``launches`` plans and runs it)."""
-    from dualarm_control.app.record.bag import report
+    from dualarm_control.app.record.bag_runs import report
 
     bag = launches["plan"]
     metrics = report(bag, tmp_path / "report")[0]["joint_tracking"]

@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
-from dualarm_control.app.record.bag import read_bag, read_run
+from dualarm_control.app.record.bag import read_bag
+from dualarm_control.app.record.bag_runs import read_run
 from dualarm_control.app.run.launcher import (
     GRAPH_TOPICS,
     container_command,

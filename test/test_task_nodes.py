@@ -21,10 +21,7 @@ import pytest
 from launching import meanwhile, selected_tests, side_by_side
 from waiting import exited, tail, wait_until
 
-from dualarm_control.app.record.bag import (
-    read_run,
-    report,
-)
+from dualarm_control.app.record.bag_runs import read_run, report
 from dualarm_control.app.record.report import summarize_run
 from dualarm_control.app.run.experiment import run_scenario
 from dualarm_control.app.run.launcher import Launch, launch_scenario, node_command

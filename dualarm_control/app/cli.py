@@ -267,7 +267,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Metrics of a recorded run: DIR/metrics.json, the figures of its kind and the table."""
-    from dualarm_control.app.record.bag import report
+    from dualarm_control.app.record.bag_runs import report
     from dualarm_control.app.record.report import format_table, goal_lines
 
     out = Path(args.output)

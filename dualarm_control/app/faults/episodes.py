@@ -16,12 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from dualarm_control.app.record.bag import (
-    BagError,
-    Status,
-    open_reader,
-    read_bag,
-)
+from dualarm_control.app.record.bag import BagError, Status, open_reader, read_bag
 from dualarm_control.metrics import percentiles
 from dualarm_control.ros.convert import stamp_ns
 

@@ -1,7 +1,7 @@
 """The run record: what one run of any scenario gives, per control cycle, whoever produced it.
 
 The in-process runner (:func:`dualarm_control.app.run.experiment.run_scenario`) and the bag reader
-(:func:`dualarm_control.app.record.bag.read_run`) both give :class:`RunRecord`; the report
+(:func:`dualarm_control.app.record.bag_runs.read_run`) both give :class:`RunRecord`; the report
 (:mod:`dualarm_control.app.record.report`) and the viewer (:mod:`dualarm_control.app.view.from_bag`)
 read it. Its task part (:class:`TaskValues`) is computed from the recorded joint positions by
 :func:`with_task_values`, the one piece of code for both producers.

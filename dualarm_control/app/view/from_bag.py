@@ -3,7 +3,7 @@
 Both kinds of bag are read by the one bag reader (``app.record.bag.read_bag``). A relative-pose
 bag is cut into controller cycles, one per controller status on ``/diagnostics``; each cycle
 takes the joint state, command and target received nearest to its status. A task-scenario bag
-gives its :class:`RunRecord` (``app.record.bag.read_run``), already per cycle.
+gives its :class:`RunRecord` (``app.record.bag_runs.read_run``), already per cycle.
 """
 
 from __future__ import annotations
@@ -60,11 +60,11 @@ def relative_run_arrays(path: Path, model: DualArmModel, bag: Bag | None = None)
     from dualarm_control.app.record.bag import (
         COMMANDS_TOPIC,
         TARGET_TOPIC,
-        nearest_index,
         parse_float,
         parse_int,
         read_bag,
     )
+    from dualarm_control.app.record.bag_runs import nearest_index
 
     bag = bag or read_bag(Path(path))
     bag.require_report_topics(path)
@@ -138,7 +138,8 @@ def held_frames(scenario: Scenario, n: int) -> dict[str, FloatArray]:
 def bag_run_arrays(path: Path) -> RunArrays:
     """Either kind of bag the cell records: a task scenario's through the same :class:`RunRecord`
     the report reads, a relative-pose run's per controller cycle."""
-    from dualarm_control.app.record.bag import read_bag, read_run
+    from dualarm_control.app.record.bag import read_bag
+    from dualarm_control.app.record.bag_runs import read_run
 
     bag = read_bag(Path(path))
     if not bag.task_cycles:
