@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from dualarm_control.app.plan.optimise import PlanResult, distinct_best, optimise, plan
-from dualarm_control.app.record.report import plan_record
+from dualarm_control.app.plan.record import plan_record
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.planning.baseline import BaselineParams, run_baseline
@@ -360,7 +360,7 @@ def test_a_plan_through_the_other_arm_stops_at_the_safety_distance(small_plan: P
     the path is left rather than the arm pierced. Before, the plan ran inside the eq (23) box alone, with
     the simulator's contacts off."""
     from dualarm_control.app.plan.execute import execute_plan
-    from dualarm_control.app.record.report import plan_record
+    from dualarm_control.app.plan.record import plan_record
     from dualarm_control.app.run.experiment import run_scenario
     from dualarm_control.collision import CollisionModel
     from dualarm_control.controller import ControllerParams

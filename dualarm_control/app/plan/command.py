@@ -42,7 +42,9 @@ def add_plan_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 def run_plan_command(args: argparse.Namespace, progress: ProgressFactory = progress_bar) -> int:
     """Body of ``dualarm plan`` (see :func:`add_plan_parser`)."""
     from dualarm_control.app.plan.optimise import default_workers, plan
-    from dualarm_control.app.record.report import plan_record, write_figures, write_json
+    from dualarm_control.app.plan.record import plan_record
+    from dualarm_control.app.record.figures import write_figures
+    from dualarm_control.app.record.report import write_json
     from dualarm_control.collision import CollisionParams
     from dualarm_control.kinematics import DualArmModel
     from dualarm_control.planning.config import load_plan_config

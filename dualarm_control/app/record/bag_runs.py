@@ -244,11 +244,11 @@ def report(path: Path, output: Path) -> tuple[dict[str, dict[str, Any]], str, li
     experiment``) and the figures of the run's kind. Returns the records, the kind and the
     figures' file names; BagError when the bag lacks what the report needs.
     """
+    from dualarm_control.app.record.figures import write_figures
     from dualarm_control.app.record.report import (
         DEFAULT_ALPHA,
         prepare_output,
         summarize_run,
-        write_figures,
         write_json,
     )
     from dualarm_control.kinematics import DualArmModel

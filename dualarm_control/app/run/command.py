@@ -12,12 +12,12 @@ import time
 from pathlib import Path
 from typing import Any
 
+from dualarm_control.app.record.figures import write_figures
 from dualarm_control.app.record.report import (
     format_table,
     goal_lines,
     prepare_output,
     summarize_run,
-    write_figures,
     write_json,
 )
 from dualarm_control.app.record.run_record import RunRecord
