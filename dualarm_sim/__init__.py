@@ -4,6 +4,8 @@ The package root is ROS-free (numpy + pybullet only); ``dualarm_sim.cell`` holds
 step-driven simulator. The ROS shell around it lives in ``dualarm_sim.sim_node``.
 """
 
-from dualarm_sim.cell import CellConfig, CommandReport, DualArmCell, JointSample
+from dualarm_sim.cell import DualArmCell
+from dualarm_sim.cell_config import CellConfig
+from dualarm_sim.samples import CommandReport, JointSample
 
 __all__ = ["CellConfig", "CommandReport", "DualArmCell", "JointSample"]

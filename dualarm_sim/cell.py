@@ -37,26 +37,9 @@ Physics choices (all measured on ``urdf/dualarm_cell.urdf``):
 * Link linear/angular damping (pybullet defaults 0.04) is set to 0; the URDF joint damping
   (0.5 N m s/rad) is kept, the motors overcome it.
 * Inertias come from the URDF (``URDF_USE_INERTIA_FROM_FILE``), as in pinocchio.
-* Contacts between the arms (issue 27, docs/collision.md "The simulator's contacts"): a robot's
-  cell (:meth:`CellConfig.for_robot`) is loaded with self-collision (``URDF_USE_SELF_COLLISION``)
-  and every link pair is filtered out (``setCollisionFilterPair``) but ``CellConfig.collision_pairs``:
-  the link pairs the controller's collision model checks (:func:`robot_collision_pairs`: left arm
-  against right arm, an arm against the fixed parts and against its own links at joint distance
-  >= 3, minus the robot's ``collision_allowed`` pairs, the scenario's allowed pairs (``allowed`` of
-  :meth:`CellConfig.for_robot`: the assembly's tools, which meet on purpose) and the broadphase's far
-  pairs), so that adjacent links and shapes that overlap by design never touch. The two end effectors
-  (the tools' bodies, config/tools/) collide like any other links unless the scenario allows them
-  (issue 40: no robot-wide allowance between the arms). :meth:`DualArmCell.contacts` reads the link pairs in contact after
-  a step (one ``getContactPoints`` call). When nothing touches, the physics is the same as
-  without self-collision, bit for bit: contact points farther apart than 0 (within pybullet's
-  contact threshold) give zero impulses (test_sim_contacts.py; the shipped robots' assemblies and
-  pan cleaning compared so: docs/collision.md).
-  ``CellConfig()`` alone (a URDF, no robot description) has no collision pairs.
-* Contacts between links of the cell can be switched on pair by pair
-  (``CellConfig.contact_pairs``, e.g. the brush on the pan of the pan-cleaning cell): the
-  URDF is then loaded with self-collision and every other link pair (but the collision pairs) is
-  filtered out. These intended contacts are not counted by :meth:`DualArmCell.contacts`.
-  Contact stiffness/damping/friction come from the URDF's ``<contact>`` tags.
+* Contacts between the arms and intended contacts (the brush on the pan): only the link pairs the
+  controller's collision model checks, and the scenario's contact pairs, collide
+  (:mod:`dualarm_sim.collision_filter` says how and why).
 * ``CellConfig.table_height`` adds a table: a static 1.2 x 1.6 x 0.05 m box in front of the
   torso (centre at x = 0.7 m, clear of the torso) whose top is at that world height; it collides with every link.
 * ``CellConfig.obstacles`` (a scenario's ``obstacles``, :mod:`dualarm_control.obstacles`; docs/obstacles.md):
@@ -72,7 +55,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING
@@ -82,16 +64,15 @@ import pybullet as p
 
 from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import DimensionError
-from dualarm_control.obstacles import Obstacle
-from dualarm_control.robot import RIGHT_TOOL, TOOL_JOINTS, RobotDescription
-from dualarm_control.robot_params import load_robot
+from dualarm_control.robot import RIGHT_TOOL, TOOL_JOINTS
+from dualarm_sim.cell_config import CellConfig
+from dualarm_sim.collision_filter import filter_link_pairs
 from dualarm_sim.held_object import (
     HeldObject,
-    HeldObjectConfig,
-    WristSensorConfig,
     WristSensors,
 )
-from dualarm_sim.obstacles import add_obstacle_bodies
+from dualarm_sim.obstacles import add_obstacle_bodies, add_table
+from dualarm_sim.samples import CommandReport, JointSample
 
 if TYPE_CHECKING:  # typing.Self is 3.11+ but ROS Humble runs 3.10: type-checking only
     from typing import Self
@@ -99,177 +80,12 @@ if TYPE_CHECKING:  # typing.Self is 3.11+ but ROS Humble runs 3.10: type-checkin
 
 SENSOR_JOINT = TOOL_JOINTS[RIGHT_TOOL]
 """The F/T sensor: the fixed joint of F2 (every resolved URDF has it, :mod:`dualarm_control.robot`)."""
-MIN_PHYSICS_RATE_HZ = 1000.0
 MAX_LAG = 0.01
 """Largest distance [rad] the position reference may run ahead of (or behind) a joint that does not
 follow it (an obstacle, a saturated motor); about 5x a joint's motion in one substep at 2 rad/s."""
-_RATE_TOL = 1e-9  # relative tolerance of the "integer multiple" check
 CONTACT_DISTANCE = 0.0
 """A contact point counts as a contact at a distance <= this [m] (pybullet also keeps points up to
 its contact threshold apart, which the solver gives zero impulse)."""
-
-
-_PAIRS_CACHE: dict[tuple[object, ...], tuple[tuple[str, str], ...]] = {}
-
-
-def robot_collision_pairs(robot: RobotDescription | str,
-                          allowed: tuple[tuple[str, str], ...] = ()) -> tuple[tuple[str, str], ...]:
-    """The link pairs the controller's collision model checks on ``robot``: the pairs of
-    :class:`~dualarm_control.collision.CollisionModel` with the robot's ``collision_allowed``
-    and ``allowed`` (link names of the resolved URDF; ValueError for an unknown one) left out.
-    Cached per robot description and ``allowed`` (building the model takes 0.01-0.1 s)."""
-    r = load_robot(robot)
-    key = (r.name, r.urdf_xml, tuple(r.joint_names), r.collision_allowed, tuple(map(tuple, allowed)))
-    if key not in _PAIRS_CACHE:
-        # coal and pinocchio: imported for a robot's cell only
-        from dualarm_control.collision import CollisionModel
-        from dualarm_control.kinematics import DualArmModel
-
-        model = CollisionModel(DualArmModel(r), allowed=tuple(r.collision_allowed) + tuple(allowed))
-        _PAIRS_CACHE[key] = tuple(model.pairs)
-    return _PAIRS_CACHE[key]
-
-
-def _check_positive(name: str, value: float) -> None:
-    if not (math.isfinite(value) and value > 0.0):
-        raise ValueError(f"{name}={value!r} must be a finite positive number")
-
-
-@dataclass(frozen=True)
-class CellConfig:
-    """Simulation settings.
-
-    Attributes:
-        urdf: cell URDF, the same file pinocchio loads.
-        control_period: duration of one :meth:`DualArmCell.step` [s]; one command per period.
-        physics_rate_hz: physics substep rate [Hz]; >= 1000 and an integer multiple of
-            ``1 / control_period``.
-        command_timeout: sim time [s] a command stays in force; afterwards the arms are
-            brought to rest (zero velocity command: they hold their position), like FRI / ros2_control.
-        gravity: gravity along world z [m/s^2].
-        motor_force_scale: joint-motor force limit as a multiple of the URDF effort
-            limits [-]; see the module docstring for why it is 10.
-        position_gain: gain of the joint position controller, in (0, 1] [-]: the fraction
-            of the integrated command's position error corrected per physics substep.
-        table_height: world z of a table top [m], or None (no table).
-        contact_pairs: pairs of link names that make contact with each other on purpose (the
-            pan and the brush; not counted as contacts).
-        collision_pairs: pairs of link names that collide and whose contacts are counted
-            (:meth:`DualArmCell.contacts`); the robot's collision model's pairs in
-            :meth:`for_robot`. Every other link pair (but ``contact_pairs``) never makes contact.
-        solver_iterations: iterations of pybullet's constraint solver per substep
-            (``numSolverIterations``; pybullet's default is 50). See the module docstring.
-        joints: the commanded joints, in command order (the robot's arms); empty: every movable
-            joint of the URDF, in file order (a viewer's cell).
-        held: (joint, position) of the joints held still (the robot's locked joints), by
-            pybullet's joint position control at ``motor_force_scale`` times their effort.
-        visual_shapes: load the URDF's visual meshes too (``getCameraImage``: the video); off,
-            pybullet skips them (``URDF_IGNORE_VISUAL_SHAPES``), which changes no physics (bit for
-            bit, tested) and loads a cell with meshes 20-100x faster (the Panda pair's: 1.2 s against
-            0.011 s; a sweep builds one cell per run).
-        obstacles: static obstacles (:mod:`dualarm_control.obstacles`), one pybullet body each.
-        held_object: a box held by both tools from the start (:mod:`dualarm_sim.held_object`), or None.
-        wrist_sensors: the wrist F/T sensors' bias and noise (:meth:`DualArmCell.wrist_wrenches`).
-    """
-
-    urdf: Path = field(default_factory=lambda: load_robot().urdf_path)
-    control_period: float = 0.005
-    physics_rate_hz: float = 1000.0
-    command_timeout: float = 0.05
-    gravity: float = -9.81
-    motor_force_scale: float = 10.0
-    position_gain: float = 1.0
-    table_height: float | None = None
-    contact_pairs: tuple[tuple[str, str], ...] = ()
-    collision_pairs: tuple[tuple[str, str], ...] = ()
-    solver_iterations: int = 20
-    joints: tuple[str, ...] = ()
-    held: tuple[tuple[str, float], ...] = ()
-    visual_shapes: bool = False
-    obstacles: tuple[Obstacle, ...] = ()
-    held_object: HeldObjectConfig | None = None
-    wrist_sensors: WristSensorConfig = field(default_factory=WristSensorConfig)
-
-    @classmethod
-    def for_robot(cls, robot: RobotDescription | str, allowed: tuple[tuple[str, str], ...] = (),
-                  collisions: bool = True, **settings: object) -> CellConfig:
-        """The cell of a robot description: its resolved URDF, its arms' joints commanded, its
-        locked joints held, and with ``collisions`` the collision model's link pairs colliding
-        (:func:`robot_collision_pairs`; ``allowed``: more link pairs that never collide, besides
-        the robot's ``collision_allowed`` and the ``contact_pairs`` setting). ``settings``: the
-        other fields."""
-        r = load_robot(robot)
-        contact = settings.get("contact_pairs", ())
-        pairs = robot_collision_pairs(r, tuple(allowed) + tuple(contact)) if collisions else ()  # type: ignore[arg-type]
-        return cls(urdf=r.urdf_path, joints=tuple(r.joint_names), held=tuple(r.locked_positions().items()),
-                   collision_pairs=pairs, **settings)  # type: ignore[arg-type]
-
-    def __post_init__(self) -> None:
-        if self.table_height is not None and not math.isfinite(self.table_height):
-            raise ValueError(f"table_height={self.table_height!r} must be finite or None")
-        _check_positive("control_period", self.control_period)
-        _check_positive("command_timeout", self.command_timeout)
-        _check_positive("motor_force_scale", self.motor_force_scale)
-        if not (isinstance(self.solver_iterations, int) and self.solver_iterations >= 1):
-            raise ValueError(f"solver_iterations={self.solver_iterations!r} must be an integer >= 1")
-        if not 0.0 < self.position_gain <= 1.0:
-            raise ValueError(f"position_gain={self.position_gain!r} must be in (0, 1]")
-        if not math.isfinite(self.gravity):
-            raise ValueError(f"gravity={self.gravity!r} must be finite")
-        rate = self.physics_rate_hz
-        if not (math.isfinite(rate) and rate >= MIN_PHYSICS_RATE_HZ):
-            raise ValueError(f"physics_rate_hz={rate!r} must be >= {MIN_PHYSICS_RATE_HZ:g} Hz")
-        ratio = rate * self.control_period
-        if abs(ratio - round(ratio)) > _RATE_TOL * max(1.0, ratio):
-            raise ValueError(
-                f"physics_rate_hz={rate!r} must be an integer multiple of 1/control_period = "
-                f"{1.0 / self.control_period:g} Hz"
-            )
-
-    @property
-    def substeps(self) -> int:
-        """Physics substeps per control period [-]."""
-        return round(self.physics_rate_hz * self.control_period)
-
-    @property
-    def physics_dt(self) -> float:
-        """Physics substep duration [s]."""
-        return self.control_period / self.substeps
-
-    @property
-    def timeout_periods(self) -> int:
-        """Number of control periods a command stays in force after the one it was sent for [-]."""
-        return math.floor(self.command_timeout / self.control_period + 1e-9)
-
-
-@dataclass(frozen=True)
-class JointSample:
-    """Joint state read from the physics.
-
-    Attributes:
-        time: sim time [s] since the last reset.
-        positions: joint positions [rad], (14,), left 1..7 then right 1..7 (read-only array).
-        velocities: joint velocities [rad/s], (14,), same order (read-only array).
-    """
-
-    time: float
-    positions: FloatArray
-    velocities: FloatArray
-
-
-@dataclass(frozen=True)
-class CommandReport:
-    """Outcome of :meth:`DualArmCell.apply_command`.
-
-    Attributes:
-        accepted: False if the command was rejected (the arms are then commanded to rest).
-        clipped: number of joints whose velocity was clipped to the URDF limit [-].
-        reason: human-readable explanation naming the joints; empty if nothing happened.
-    """
-
-    accepted: bool
-    clipped: int = 0
-    reason: str = ""
 
 
 def _readonly(a: FloatArray) -> FloatArray:
@@ -352,9 +168,10 @@ class DualArmCell:
         self.collision_pairs: list[tuple[str, str]] = []
         """The link pairs that collide and are counted (``config.collision_pairs``)."""
         if contacts:
-            self._keep_only_pairs(len(infos))
+            self._pair_names = filter_link_pairs(self._body, cid, self._link_index, self.config, len(infos))
+            self.collision_pairs = list(dict.fromkeys(self._pair_names.values()))
         if self.config.table_height is not None:
-            self._table = self._add_table(self.config.table_height)
+            self._table = add_table(self.config.table_height, cid)
         self.obstacle_bodies: dict[str, int] = add_obstacle_bodies(self.config.obstacles, cid)
         """The obstacles' pybullet body ids by name (``config.obstacles``)."""
         if self._table is None:
@@ -383,41 +200,6 @@ class DualArmCell:
         forces = [max(self.config.motor_force_scale * float(infos[j][10]), 1.0) for j in self._held_idx]  # type: ignore[arg-type]
         p.setJointMotorControlArray(self._body, self._held_idx, p.POSITION_CONTROL, targetPositions=self._held_q,
                                     forces=forces, physicsClientId=self._client)
-
-    def _pair_indices(self, pair: tuple[str, str], what: str) -> tuple[int, int]:
-        """The pybullet link indices of a link pair, smaller first (ValueError naming an unknown link)."""
-        for name in pair:
-            if name not in self._link_index:
-                raise ValueError(f"{what}: unknown link {name!r} in {self.config.urdf.name}")
-        a, b = self._link_index[pair[0]], self._link_index[pair[1]]
-        return min(a, b), max(a, b)
-
-    def _keep_only_pairs(self, n_links: int) -> None:
-        """Filter out every link pair of the cell but ``contact_pairs`` and ``collision_pairs``
-        (self-collision is on); the collision pairs are the ones counted (:meth:`contacts`)."""
-        intended = {self._pair_indices(pair, "contact_pairs") for pair in self.config.contact_pairs}
-        for pair in self.config.collision_pairs:
-            ab = self._pair_indices(pair, "collision_pairs")
-            if ab not in intended:
-                self._pair_names[ab] = (pair[0], pair[1])
-        self.collision_pairs = list(dict.fromkeys(self._pair_names.values()))
-        keep = intended | set(self._pair_names)
-        # only links with collision shapes: a link without has no collider, so no filter of its pairs
-        # is ever consulted (Baxter: 666 of 1711 pairs; each call costs ~0.1 ms)
-        shaped = [i for i in range(-1, n_links)
-                  if p.getCollisionShapeData(self._body, i, physicsClientId=self._client)]
-        for k, i in enumerate(shaped):
-            for j in shaped[k + 1:]:
-                p.setCollisionFilterPair(self._body, self._body, i, j, int((i, j) in keep),
-                                         physicsClientId=self._client)
-
-    def _add_table(self, height: float) -> int:
-        """A static box whose top is at world z = ``height`` [m] (module docstring)."""
-        cid = self._client
-        half = (0.6, 0.8, 0.025)
-        shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=cid)
-        visual = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=(0.6, 0.45, 0.3, 1), physicsClientId=cid)
-        return int(p.createMultiBody(0.0, shape, visual, basePosition=(0.7, 0.0, height - half[2]), physicsClientId=cid))
 
     def contact_force(self, link_a: str, link_b: str) -> float:
         """Sum of the normal contact forces between two links of the cell [N] (last substep)."""

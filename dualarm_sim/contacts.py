@@ -7,7 +7,7 @@ Two things, both on pybullet's collision shapes of the robot's resolved URDF as 
 * :func:`min_distances`: the independent check of a run (issue 27): for recorded joint positions,
   the smallest distance between the given link pairs at every row (``p.getClosestPoints`` per pair)
   and over the run. Only WHICH pairs to check comes from the controller's side: the caller passes
-  them, usually :func:`~dualarm_sim.cell.robot_collision_pairs` (the pairs of
+  them, usually :func:`~dualarm_sim.cell_config.robot_collision_pairs` (the pairs of
   :class:`~dualarm_control.collision.CollisionModel`, the robot's ``collision_allowed`` left out).
 * :func:`obstacle_min_distances`: the same for the links an arm joint moves against a scenario's
   obstacles (issue 42, docs/obstacles.md), on the obstacles' pybullet bodies.
@@ -34,7 +34,8 @@ from dualarm_control.errors import DimensionError
 from dualarm_control.obstacles import Obstacle
 from dualarm_control.robot import RobotDescription
 from dualarm_control.robot_params import load_robot
-from dualarm_sim.cell import CellConfig, DualArmCell
+from dualarm_sim.cell import DualArmCell
+from dualarm_sim.cell_config import CellConfig
 
 IntArray = npt.NDArray[np.intp]
 Pair = tuple[str, str]

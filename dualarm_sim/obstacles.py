@@ -83,3 +83,12 @@ def add_obstacle_bodies(obstacles: Sequence[Obstacle], client: int) -> dict[str,
         out[obstacle.name] = int(p.createMultiBody(0.0, shape, visual if visual >= 0 else -1, basePosition=position,
                                                    baseOrientation=orientation, physicsClientId=client))
     return out
+
+
+def add_table(height: float, client: int) -> int:
+    """A static 1.2 x 1.6 x 0.05 m box in front of the torso (centre at x = 0.7 m) whose top is at world
+    z = ``height`` [m] (``CellConfig.table_height``); its body id."""
+    half = (0.6, 0.8, 0.025)
+    shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
+    visual = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=(0.6, 0.45, 0.3, 1), physicsClientId=client)
+    return int(p.createMultiBody(0.0, shape, visual, basePosition=(0.7, 0.0, height - half[2]), physicsClientId=client))

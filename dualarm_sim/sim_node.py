@@ -86,10 +86,12 @@ from dualarm_control.ros.qos import (
     stream_qos,
 )
 from dualarm_control.scenario import ROBOT_PARAMETER, scenario_names
-from dualarm_sim.cell import CellConfig, DualArmCell, JointSample
+from dualarm_sim.cell import DualArmCell
+from dualarm_sim.cell_config import CellConfig
 from dualarm_sim.contacts import ContactCounter
 from dualarm_sim.moving import MovingBodies
 from dualarm_sim.ports import STATE_ORDERS, CommandMerger, state_layout
+from dualarm_sim.samples import JointSample
 
 PARAMETERS = (
     ParamSpec("scenario", "assembly", "scenario name or YAML path (initial configuration)", read_only=True),

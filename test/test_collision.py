@@ -31,7 +31,8 @@ from dualarm_control.errors import ParameterError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.qp import QPProblem, make_backend
 from dualarm_control.robot_files import RobotError
-from dualarm_sim.cell import CellConfig, DualArmCell
+from dualarm_sim.cell import DualArmCell
+from dualarm_sim.cell_config import CellConfig
 
 ROBOTS = ("lwr4_cell", "baxter")
 NEAR = 0.15

@@ -30,7 +30,7 @@ from dualarm_control.app.run.experiment import run_scenario
 from dualarm_control.controller_params import controller_params
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.scenario import load_scenario
-from dualarm_sim.cell import robot_collision_pairs
+from dualarm_sim.cell_config import robot_collision_pairs
 from dualarm_sim.contacts import min_distances
 
 SAFETY = 0.03

@@ -15,7 +15,8 @@ from dualarm_control.kinematics import DualArmModel, rotation_angle
 from dualarm_control.scenario import load_scenario
 from dualarm_control.solvers import solver_names
 from dualarm_control.trajectory import RelativeTrajectory, Segment
-from dualarm_sim.cell import CellConfig, DualArmCell
+from dualarm_sim.cell import DualArmCell
+from dualarm_sim.cell_config import CellConfig
 
 PERIOD = 0.005
 SETTLE = 0.5  # s after the trajectory ends

@@ -17,7 +17,8 @@ from dualarm_control.cooperative_wrench import (
 )
 from dualarm_control.robot import TOOL_MASS, RobotDescription
 from dualarm_control.scenario import load_scenario
-from dualarm_sim.cell import CellConfig, DualArmCell
+from dualarm_sim.cell import DualArmCell
+from dualarm_sim.cell_config import CellConfig
 from dualarm_sim.held_object import HeldObjectConfig, WristSensorConfig
 
 G = 9.81

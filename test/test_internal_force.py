@@ -31,7 +31,8 @@ from dualarm_control.scenario import (
     scenario_from_parameters,
 )
 from dualarm_control.status import Status
-from dualarm_sim.cell import CellConfig, DualArmCell
+from dualarm_sim.cell import DualArmCell
+from dualarm_sim.cell_config import CellConfig
 
 PARAMS = ControllerParams(solver="constraint_based")
 

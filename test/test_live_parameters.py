@@ -22,7 +22,8 @@ from dualarm_control.controller_params import controller_params
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.references.base import RunOptions
 from dualarm_control.scenario import load_scenario
-from dualarm_sim.cell import CellConfig, DualArmCell
+from dualarm_sim.cell import DualArmCell
+from dualarm_sim.cell_config import CellConfig
 
 A_MAX = 10.0  # rad/s^2, config/acceleration_limit.yaml
 ROUNDING = 1e-6  # rad/s^2: the QP back-end's bound tolerance (1e-9 rad/s) over T = 5 ms is 2e-7

@@ -37,7 +37,8 @@ from dualarm_control.obstacles import (
 )
 from dualarm_control.params import parse_params_text
 from dualarm_control.scenario import load_scenario, scenario_from_parameters
-from dualarm_sim.cell import CellConfig, DualArmCell
+from dualarm_sim.cell import DualArmCell
+from dualarm_sim.cell_config import CellConfig
 
 OCTAHEDRON = """\
 v 1 0 0

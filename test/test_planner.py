@@ -368,7 +368,7 @@ def test_a_plan_through_the_other_arm_stops_at_the_safety_distance(small_plan: P
     from dualarm_control.references.plan import PlanSource
     from dualarm_control.scenario import Scenario
     from dualarm_control.trajectory import MotionLimits
-    from dualarm_sim.cell import robot_collision_pairs
+    from dualarm_sim.cell_config import robot_collision_pairs
     from dualarm_sim.contacts import min_distances
 
     doc = plan_record(small_plan, model, None)

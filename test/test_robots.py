@@ -19,7 +19,8 @@ from dualarm_control.robot import LEFT_TOOL, RIGHT_TOOL
 from dualarm_control.robot_files import RobotError
 from dualarm_control.robot_params import load_robot, robot_names
 from dualarm_control.scenario import load_scenario
-from dualarm_sim.cell import CellConfig, DualArmCell
+from dualarm_sim.cell import DualArmCell
+from dualarm_sim.cell_config import CellConfig
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = Path(__file__).parent / "data"

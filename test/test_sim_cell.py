@@ -19,7 +19,9 @@ from dualarm_control.kinematics import (
     rotation_angle,
 )
 from dualarm_control.robot_params import load_robot
-from dualarm_sim.cell import CellConfig, CommandReport, DualArmCell, JointSample
+from dualarm_sim.cell import DualArmCell
+from dualarm_sim.cell_config import CellConfig
+from dualarm_sim.samples import CommandReport, JointSample
 
 ARM_Q0 = [0.3, 0.5, -0.2, -1.0, 0.4, 0.6, 0.1]
 Q0 = np.array(ARM_Q0 + [-a for a in ARM_Q0])

@@ -1,6 +1,6 @@
 """The simulator sees contacts, and an independent check of distances from pybullet (issue 27).
 
-dualarm_sim/contacts.py and the contact part of dualarm_sim/cell.py; docs/collision.md ("The
+dualarm_sim/contacts.py and dualarm_sim/collision_filter.py; docs/collision.md ("The
 simulator's contacts", "Independent check with pybullet") has the figures these tests print.
 """
 
@@ -23,7 +23,8 @@ from dualarm_control.errors import DimensionError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.robot_params import load_robot
 from dualarm_control.scenario import load_scenario
-from dualarm_sim.cell import CellConfig, DualArmCell, robot_collision_pairs
+from dualarm_sim.cell import DualArmCell
+from dualarm_sim.cell_config import CellConfig, robot_collision_pairs
 from dualarm_sim.contacts import ContactCounter, min_distances
 
 ROBOTS = ("lwr4_cell", "baxter")

@@ -19,7 +19,8 @@ from dualarm_control.kinematics import DualArmModel
 from dualarm_control.robot_files import RobotError
 from dualarm_control.robot_params import load_robot, robot_names
 from dualarm_control.tool_bodies import ToolBody, load_tool_set
-from dualarm_sim.cell import CellConfig, DualArmCell
+from dualarm_sim.cell import DualArmCell
+from dualarm_sim.cell_config import CellConfig
 
 DATA = Path(__file__).parent / "data"
 HOLE = ("left_hole_floor", "left_hole_wall_xp", "left_hole_wall_xn", "left_hole_wall_yp", "left_hole_wall_yn")
@@ -133,7 +134,7 @@ def test_a_goal_into_the_hole_blocks_wall_stops_at_the_safety_distance() -> None
     from dualarm_control.app.run.experiment import run_scenario
     from dualarm_control.controller_params import controller_params
     from dualarm_control.scenario import load_scenario
-    from dualarm_sim.cell import robot_collision_pairs
+    from dualarm_sim.cell_config import robot_collision_pairs
     from dualarm_sim.contacts import min_distances
 
     scenario = load_scenario(str(DATA / "peg_into_wall.yaml"))

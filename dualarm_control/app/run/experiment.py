@@ -32,7 +32,8 @@ from dualarm_control.kinematics import DualArmModel
 from dualarm_control.moving_feed import MovingFeed
 from dualarm_control.references.base import RunOptions
 from dualarm_control.scenario import Scenario
-from dualarm_sim.cell import CellConfig, DualArmCell
+from dualarm_sim.cell import DualArmCell
+from dualarm_sim.cell_config import CellConfig
 from dualarm_sim.moving import MovingBodies
 
 SCALARS = ("time", "solve_time", "cycle_time", "position_error", "orientation_error", "contact_force",

@@ -83,7 +83,8 @@ class CellCamera:
                  obstacles: dict[str, ObstacleTrack] | None = None, held: AttachedBox | None = None) -> None:
         import pybullet as p
 
-        from dualarm_sim.cell import CellConfig, DualArmCell
+        from dualarm_sim.cell import DualArmCell
+        from dualarm_sim.cell_config import CellConfig
 
         width, height = size
         if width <= 0 or height <= 0 or width % 2 or height % 2:
