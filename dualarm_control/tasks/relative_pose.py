@@ -62,8 +62,9 @@ class RelativePoseTask:
         tx, ty, tz = np.asarray(target.position, float).tolist()
         ox, oy, oz = luh_components(state.rotation, np.asarray(target.rotation, float))
         value = np.array((px - tx, py - ty, pz - tz, -ox, -oy, -oz))  # f = -e = [p - p*; -e_o]
-        time_derivative = np.concatenate((target.linear_velocity, target.angular_velocity))
-        np.negative(time_derivative, out=time_derivative)
+        vx, vy, vz = np.asarray(target.linear_velocity, float).tolist()
+        wx, wy, wz = np.asarray(target.angular_velocity, float).tolist()
+        time_derivative = np.array((-vx, -vy, -vz, -wx, -wy, -wz))  # df/dt = -[v*; w*]
         return TaskRows(self.name, self.kind, value, np.zeros(6), state.jacobian, time_derivative, self.gain,
                         self.weight)
 
