@@ -10,6 +10,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.linalg import lapack
 
+from dualarm_control.arrays import add_diagonal, split_columns
 from dualarm_control.qp import QPProblem, check_backend
 from dualarm_control.solvers import priority
 from dualarm_control.solvers.base import Solver, SolverParams, from_qp
@@ -145,9 +146,8 @@ class StandardQP(_QPSolver):
         if qd is not None and inside(qd, problem.lower, problem.upper) and problem.limit_excess(qd) <= 0.0:
             return qd, Status.SOLVED, 0, ""  # eq (14)'s optimum: no bound and no row is active
         jtj, jtr = _least_squares_terms(problem)
-        n = jtj.shape[0]
         h = jtj  # a fresh array: add eps to its diagonal in place
-        h.flat[:: n + 1] += self.params.regularization
+        add_diagonal(h, self.params.regularization)
         box = QPProblem(H=h, g=-jtr, lb=problem.lower, ub=problem.upper)
         if problem.has_limit_rows:  # the relaxation first: rows that its optimum meets are not active
             relaxed = from_qp(self._qp.solve(box))
@@ -166,7 +166,7 @@ def limit_rows_of(problem: ControlProblem, columns: int = 1) -> dict[str, FloatA
         return {}
     rows = problem.limit_matrix()
     assert rows is not None and problem.limit_bound is not None
-    a = rows if columns == 1 else np.hstack((rows, -rows))
+    a = rows if columns == 1 else split_columns(rows)
     return {"C": a, "l": np.full(a.shape[0], -INFINITY), "u": problem.limit_bound}
 
 
@@ -184,7 +184,7 @@ def damped_least_squares(jacobian: FloatArray, reference: FloatArray, eps: float
         qd [rad/s], (n,), or None when J J^T + eps I is singular.
     """
     gram = jacobian @ jacobian.T
-    gram.flat[:: gram.shape[0] + 1] += eps
+    add_diagonal(gram, eps)
     y = spd_solve(gram, reference)
     return None if y is None else jacobian.T @ y
 
@@ -206,8 +206,7 @@ def lasso_box(lower: FloatArray, upper: FloatArray) -> tuple[FloatArray, FloatAr
     Returns:
         (lb, ub) [rad/s], (2n,).
     """
-    return (np.concatenate((np.maximum(lower, 0.0), np.maximum(-upper, 0.0))),
-            np.concatenate((np.maximum(upper, 0.0), np.maximum(-lower, 0.0))))
+    return np.maximum(np.concatenate((lower, -upper)), 0.0), np.maximum(np.concatenate((upper, -lower)), 0.0)
 
 
 @register("sparse_qp")
@@ -279,12 +278,12 @@ class SparseQP(_QPSolver):
                 self._previous = qd
                 self.inside_last = True
                 return qd, Status.SOLVED, iterations, ""  # eq (17)'s optimum lies inside the bounds
-        b = np.hstack((j, -j))  # J [I, -I], (6, 2n)
+        b = split_columns(j)  # J [I, -I], (6, 2n)
         h = b.T @ b
         g = self.params.l1_weight - b.T @ problem.reference
         if prev is not None:  # z_prev = [max(qd, 0); max(-qd, 0)]: the split of an optimum (no overlap)
-            h.flat[:: 2 * n + 1] += mu
-            g -= mu * np.concatenate((np.maximum(prev, 0.0), np.maximum(-prev, 0.0)))
+            add_diagonal(h, mu)
+            g -= mu * np.maximum(np.concatenate((prev, -prev)), 0.0)
         lb, ub = lasso_box(problem.lower, problem.upper)
         solution = self._qp.solve(QPProblem(H=h, g=g, lb=lb, ub=ub, **limit_rows_of(problem, 2)))
         qd, status, iterations, detail = from_qp(solution, lambda z: z[:n] - z[n:])
@@ -432,7 +431,7 @@ class HierarchicalSparseL1QP(HierarchicalSparseQP):
             self._zone, self._hessian = key, secondary_l1_hessian(zone)
         h, g = self._hessian, secondary_l1_gradient(problem.repulsive, self.params.secondary_l1_weight)
         j = problem.jacobian
-        split = np.hstack((j, -j))
+        split = split_columns(j)
         lb, ub = lasso_box(problem.lower, problem.upper)
         n = qd1.shape[0]
         sol = self._secondary.solve(QPProblem(H=h, g=g, A=split, b=j @ qd1, lb=lb, ub=ub))

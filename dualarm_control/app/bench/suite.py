@@ -6,13 +6,16 @@ measured in the same run, never a single absolute figure on its own. Parts:
 - random set (:mod:`dualarm_control.app.bench.random_set`): RelativeController.step per solver
   and QP back-end on seeded random configurations and targets, interleaved with pink's
   ``solve_ik`` on the same cases (:mod:`dualarm_control.app.bench.pink`), ratios of each
-  p50 to pink's fastest and default set-ups, active joints per cycle;
+  p50 to pink's fastest and default set-ups, active joints per cycle; the daqp QP solvers run
+  twice, on paper 000's problem as pink solves it and with the collision limit on as by default
+  ("solver | daqp, collision limit": pink has no collision checks);
 - the scenario (assembly) run in-process per solver and back-end, and pink replaying the
   recorded states and targets of one run;
 - exactness of the lasso solve against a reference (proxsuite at eps 1e-12);
 - scaling with the number of joints (3- and 4-arm chains of the LWR4);
 - the collision limit (:mod:`dualarm_control.app.bench.collision`): the assembly's cycles with and
-  without it, per robot (the other parts run without it: the solvers on paper 000's problem).
+  without it, per robot (the other parts run without it, but for the random set's and the scenario's
+  "collision limit" rows: the solvers on paper 000's problem).
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ import json
 import platform
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -77,6 +81,17 @@ def solver_configs(
                 continue
             configs[f"{s} | {b}"] = candidate
     return configs, refused
+
+
+COLLISION_SUFFIX = ", collision limit"
+"""What the back-end column of a configuration with the collision limit on ends with."""
+
+
+def collision_configs(configs: dict[str, ControllerParams]) -> dict[str, ControllerParams]:
+    """The daqp QP configurations of ``configs`` again with the collision limit on (its default parameters), as
+    ``"solver | daqp, collision limit"``."""
+    return {f"{name}{COLLISION_SUFFIX}": replace(params, collision=CollisionParams())
+            for name, params in configs.items() if name.endswith(" | daqp")}
 
 
 def _pink_calls(model: DualArmModel) -> dict[str, Callable[[Case], None]]:
@@ -169,9 +184,11 @@ def run_bench(
 ) -> dict[str, Any]:
     """The whole benchmark as one JSON-able record (see the module docstring)."""
     model = DualArmModel()
-    # the solvers on paper 000's problem (as pink solves it): the collision limit has its own part
+    # the solvers on paper 000's problem (as pink solves it); then, beside pink without collision checks, the QP
+    # solvers with the collision limit on, as by default (issue 39's target); the collision part compares both
     params = ControllerParams(collision=CollisionParams(enabled=False))
     configs, refused = solver_configs(params, solvers, backends)
+    configs.update(collision_configs(configs))
     say = progress or (lambda _msg: None)
     say(f"random set: {count} cases x {len(configs)} configurations")
     record: dict[str, Any] = {
@@ -187,7 +204,8 @@ def run_bench(
     record["scaling"] = time_scaling(model, params, qp_solvers, backends, scaling_arms, count=max(count // 4, 20),
                                      seed=seed + 1)
     if scenario is not None:
-        scenario_configs = {k: v for k, v in configs.items() if k.split(" | ")[1] in ("daqp", "proxsuite", "-")}
+        scenario_configs = {k: v for k, v in configs.items()
+                            if k.split(" | ")[1].split(",")[0] in ("daqp", "proxsuite", "-")}
         record["scenario"] = bench_scenario(scenario, model, scenario_configs, progress)
     if collision_robots:
         record["collision"] = bench_collision(collision_robots, ["hierarchical_sparse_qp", "sparse_qp", "standard_qp"],
