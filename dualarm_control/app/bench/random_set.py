@@ -89,6 +89,7 @@ def time_random_set(
     configs: dict[str, ControllerParams],
     extra: dict[str, Callable[[Case], None]] | None = None,
     repeats: int = 1,
+    reset: bool = True,
 ) -> dict[str, dict[str, Any]]:
     """Cycle and solve times of ``RelativeController.step`` per configuration on ``cases``.
 
@@ -97,7 +98,9 @@ def time_random_set(
     always ran right after pseudo_inverse's SVD measured 30 % slower than the same
     computation elsewhere), and each controller is reset before each case: the cases are independent, so
     no warm start or proximal tie-break carries over from an unrelated problem. ``extra``
-    adds other timed callables (e.g. pink) to the same interleaving.
+    adds other timed callables (e.g. pink) to the same interleaving. ``reset`` False keeps each
+    controller's memory from case to case (a run's consecutive states replayed: warm starts and the
+    proximal tie-break on, as in the run).
 
     Returns:
         {name: {cycle_p50_ms, cycle_p99_ms, solve_p50_ms, solve_p99_ms, active_joints_p50,
@@ -119,7 +122,8 @@ def time_random_set(
                 name = names[int(index)]
                 if name in controllers:
                     ctrl = controllers[name]
-                    ctrl.reset()
+                    if reset:
+                        ctrl.reset()
                     out = ctrl.step(case.q, case.target)
                     cycle[name].append(out.cycle_time)
                     solve[name].append(out.result.solve_time)

@@ -168,6 +168,11 @@ def bench_scenario(
         fastest = min(PINK_SETUPS, key=lambda name: rows[name]["cycle_p50_ms"])
         out["pink_fastest"] = fastest
         add_ratio(rows, fastest, "p50_ratio_to_pink_fastest")
+        if progress:
+            progress(f"scenario {scenario.name}: its states replayed through every configuration and pink, interleaved")
+        out["replay"] = replayed = time_random_set(model, replay, configs, extra=pink, reset=False)
+        out["replay_pink_fastest"] = fastest = min(PINK_SETUPS, key=lambda name: replayed[name]["cycle_p50_ms"])
+        add_ratio(replayed, fastest, "p50_ratio_to_pink_fastest")
     return out
 
 
@@ -261,6 +266,13 @@ def format_bench(record: dict[str, Any]) -> str:
         lines += _table(sc["rows"], [("cycles", "cycles", "{:d}"), *timing,
                                      ("p50_ratio_to_pink_fastest", "cycle p50 / pink fastest", "{:.2f}")],
                         "solver | QP back-end")
+        if sc.get("replay"):
+            title = (f"## Scenario {sc['scenario']}: its recorded states replayed through every configuration "
+                     "and pink, interleaved case by case (warm: no reset)")
+            lines += ["", title, ""]
+            lines += _table(sc["replay"], [("samples", "cycles", "{:d}"), *timing,
+                                           ("p50_ratio_to_pink_fastest", "cycle p50 / pink fastest", "{:.2f}")],
+                            "solver | QP back-end")
     if record.get("collision"):
         lines += ["", "## Collision limit: the assembly's recorded cycles with and without it, interleaved", ""]
         lines += _table(record["collision"], [("pairs", "pairs", "{:d}"), ("rows_p50", "rows p50", "{:.0f}"),
