@@ -170,7 +170,8 @@ def bench_scenario(
         add_ratio(rows, fastest, "p50_ratio_to_pink_fastest")
         if progress:
             progress(f"scenario {scenario.name}: its states replayed through every configuration and pink, interleaved")
-        out["replay"] = replayed = time_random_set(model, replay, configs, extra=pink, reset=False)
+        scenario_params = {name: scenario.controller_params(params) for name, params in configs.items()}  # its pairs
+        out["replay"] = replayed = time_random_set(model, replay, scenario_params, extra=pink, reset=False)
         out["replay_pink_fastest"] = fastest = min(PINK_SETUPS, key=lambda name: replayed[name]["cycle_p50_ms"])
         add_ratio(replayed, fastest, "p50_ratio_to_pink_fastest")
     return out
