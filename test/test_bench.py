@@ -29,6 +29,7 @@ def test_bench_writes_every_part(tmp_path: Path) -> None:
         assert row["failures"] == 0 and row["samples"] == 6
         assert 0 <= row["max_bound_excess"] <= make_solver(name.split(" | ")[0]).bound_tolerance
         assert 0 < row["cycle_p50_ms"] <= row["cycle_p99_ms"]
+        assert 0 < row["cpu_p50_ms"] <= row["cpu_p99_ms"]  # the thread's CPU time: no preemption in it
         assert row[record["random"]["ratio_columns"][0]] > 0
     assert rows["sparse_qp | daqp"]["active_joints_max"] <= 6
     # the daqp QP solvers again with the collision limit on (issue 39's target), none for the other back-ends

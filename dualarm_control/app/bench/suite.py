@@ -100,11 +100,18 @@ def _pink_calls(model: DualArmModel) -> dict[str, Callable[[Case], None]]:
     return {name: pink_cycle(model, solver, update) for name, (solver, update) in PINK_SETUPS.items()}
 
 
-def add_ratio(rows: dict[str, dict[str, Any]], reference: str, column: str) -> None:
-    """Set ``row[column]`` = row's cycle p50 / the ``reference`` row's cycle p50, for every row."""
-    base = rows[reference]["cycle_p50_ms"]
+def add_ratio(rows: dict[str, dict[str, Any]], reference: str, column: str, key: str = "cycle_p50_ms") -> None:
+    """Set ``row[column]`` = row's ``key`` (cycle p50) / the ``reference`` row's, for every row."""
+    base = rows[reference][key]
     for row in rows.values():
-        row[column] = row["cycle_p50_ms"] / base
+        row[column] = row[key] / base
+
+
+def add_cpu_ratio(rows: dict[str, dict[str, Any]]) -> None:
+    """``cpu_p50_ratio_to_pink_fastest``: each row's CPU-time p50 / pink's fastest set-up's in CPU time (the
+    ratio that holds on a loaded machine: :func:`~dualarm_control.app.bench.random_set.time_random_set`)."""
+    fastest = min(PINK_SETUPS, key=lambda name: rows[name]["cpu_p50_ms"])
+    add_ratio(rows, fastest, "cpu_p50_ratio_to_pink_fastest", "cpu_p50_ms")
 
 
 def bench_random(
@@ -123,6 +130,7 @@ def bench_random(
         out["pink_fastest"] = fastest
         add_ratio(rows, fastest, "p50_ratio_to_pink_fastest")
         add_ratio(rows, PINK_DEFAULT, "p50_ratio_to_pink_default")
+        add_cpu_ratio(rows)
         out["ratio_columns"] = ["p50_ratio_to_pink_fastest", "p50_ratio_to_pink_default"]
     elif fallback_reference in rows:
         add_ratio(rows, fallback_reference, "p50_ratio_to_reference")
@@ -174,6 +182,7 @@ def bench_scenario(
         out["replay"] = replayed = time_random_set(model, replay, scenario_params, extra=pink, reset=False)
         out["replay_pink_fastest"] = fastest = min(PINK_SETUPS, key=lambda name: replayed[name]["cycle_p50_ms"])
         add_ratio(replayed, fastest, "p50_ratio_to_pink_fastest")
+        add_cpu_ratio(replayed)
     return out
 
 
@@ -241,7 +250,9 @@ def format_bench(record: dict[str, Any]) -> str:
               ("solve_p50_ms", "solve p50 [ms]", "{:.3f}"), ("solve_p99_ms", "solve p99 [ms]", "{:.3f}")]
     lines = [f"# Solver benchmark (python {record['machine']['python']}, pink {record['machine']['pink']})", "",
              f"## Random set: {rnd['cases']} configurations and targets (seed {rnd['seed']}), one run, interleaved", ""]
-    lines += _table(rnd["rows"], [*timing, *ratio_cols,
+    cpu = [("cpu_p50_ms", "CPU p50 [ms]", "{:.3f}"), ("cpu_p99_ms", "CPU p99 [ms]", "{:.3f}"),
+           ("cpu_p50_ratio_to_pink_fastest", "CPU p50 / pink fastest", "{:.2f}")]
+    lines += _table(rnd["rows"], [*timing, *ratio_cols, *cpu,
                                   ("active_joints_p50", "active joints p50", "{:.0f}"),
                                   ("active_joints_max", "max", "{:d}"),
                                   ("share_at_most_6_active", "share <= 6", "{:.3f}"),
@@ -272,7 +283,7 @@ def format_bench(record: dict[str, Any]) -> str:
                      "and pink, interleaved case by case (warm: no reset)")
             lines += ["", title, ""]
             lines += _table(sc["replay"], [("samples", "cycles", "{:d}"), *timing,
-                                           ("p50_ratio_to_pink_fastest", "cycle p50 / pink fastest", "{:.2f}")],
+                                           ("p50_ratio_to_pink_fastest", "cycle p50 / pink fastest", "{:.2f}"), *cpu],
                             "solver | QP back-end")
     if record.get("collision"):
         lines += ["", "## Collision limit: the assembly's recorded cycles with and without it, interleaved", ""]
