@@ -50,13 +50,13 @@ from dualarm_control.tasks import (
     DEFAULT_EQUALITY_WEIGHT,
     INEQUALITY,
     AbsolutePoseTask,
-    RelativePoseTask,
     RelativeTarget,
     SecondPriority,
     Task,
     TaskRows,
     assemble_problem,
     evaluate_tasks,
+    relative_pose_rows,
 )
 
 
@@ -281,7 +281,7 @@ class RelativeController:
         start = time.perf_counter()
         q = self.model.check_q(q)
         conf = Configuration(self.model, q)
-        rows = RelativePoseTask(target, self.params.gain).evaluate(conf, 0.0)
+        rows = relative_pose_rows(conf, target, self.params.gain)  # RelativePoseTask's rows (gain validated)
         tracked: tuple[TaskRows, ...] = (rows,)
         if absolute is not None:
             try:

@@ -29,12 +29,19 @@ def test_bench_writes_every_part(tmp_path: Path) -> None:
         assert row["failures"] == 0 and row["samples"] == 6
         assert 0 <= row["max_bound_excess"] <= make_solver(name.split(" | ")[0]).bound_tolerance
         assert 0 < row["cycle_p50_ms"] <= row["cycle_p99_ms"]
+        assert 0 < row["cpu_p50_ms"] <= row["cpu_p99_ms"]  # the thread's CPU time: no preemption in it
         assert row[record["random"]["ratio_columns"][0]] > 0
     assert rows["sparse_qp | daqp"]["active_joints_max"] <= 6
+    # the daqp QP solvers again with the collision limit on (issue 39's target), none for the other back-ends
+    with_limit = {name for name in rows if name.endswith(", collision limit")}
+    assert with_limit == {"standard_qp | daqp, collision limit", "sparse_qp | daqp, collision limit"}
+    for name in with_limit:
+        assert rows[name]["samples"] == 6 and rows[name]["failures"] == 0 and rows[name]["cycle_p50_ms"] > 0
     assert record["exactness"]["cases"] == 6
     assert {r["arms"] for r in record["scaling"].values()} == {2, 3, 4}
     text = (tmp_path / "bench.md").read_text()
-    assert "| sparse_qp | daqp |" in text and "Exactness" in text and "Scaling" in text
+    assert "| sparse_qp | daqp |" in text and "| sparse_qp | daqp, collision limit |" in text
+    assert "Exactness" in text and "Scaling" in text
 
 
 def test_pseudo_inverse_is_listed_once() -> None:

@@ -489,7 +489,8 @@ class CollisionModel:
         joints = self._joints[self._shape_joint]
         centres = (joints[:, :3, :3] @ self._centres_joint[:, :, None])[:, :, 0] + joints[:, :3, 3]
         a, b = self._shape_a[shape_pairs], self._shape_b[shape_pairs]
-        return np.linalg.norm(centres[a] - centres[b], axis=1) - self._radii[a] - self._radii[b]
+        gap = centres[a] - centres[b]  # its rows' norms as np.linalg.norm(gap, axis=1) sums them, without its checks
+        return np.sqrt(np.add.reduce(gap * gap, axis=1)) - self._radii[a] - self._radii[b]
 
     def closest(self, q: FloatArray) -> PairDistance:
         """The pair with the smallest distance at q (ValueError when the model has no pair)."""

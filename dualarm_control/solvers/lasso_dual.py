@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from dualarm_control.arrays import FloatArray
-from dualarm_control.qp import QPBackend, QPProblem
+from dualarm_control.qp import DaqpBackend, QPBackend, QPProblem
+from dualarm_control.status import Status
 
 
 class LassoDual:
@@ -36,6 +37,7 @@ class LassoDual:
 
     def __init__(self, backend: QPBackend) -> None:
         self.backend = backend
+        self._rows = backend.solve_rows if isinstance(backend, DaqpBackend) else None
         self._shape = (-1, -1)
         self._identity, self._upper, self._lower = np.eye(0), np.zeros(0), np.zeros(0)
 
@@ -51,8 +53,13 @@ class LassoDual:
         if jacobian.shape != self._shape:
             m, n = self._shape = jacobian.shape
             self._identity, self._upper, self._lower = np.eye(m), np.ones(n), -np.ones(n)
-        solution = self.backend.solve(QPProblem(H=self._identity, g=reference / -l1_weight, C=jacobian.T,
-                                                l=self._lower, u=self._upper))
-        if not solution.ok or solution.multipliers is None:
-            return None, solution.iterations
-        return l1_weight * solution.multipliers, solution.iterations
+        g = reference / -l1_weight
+        if self._rows is not None:  # daqp: its arrays as they are, no QPProblem or QPSolution record per cycle
+            x, status, iterations, _, z = self._rows(self._identity, g, jacobian.T, self._lower, self._upper)
+        else:
+            solution = self.backend.solve(QPProblem(H=self._identity, g=g, C=jacobian.T, l=self._lower,
+                                                    u=self._upper))
+            x, status, iterations, z = solution.x, solution.status, solution.iterations, solution.multipliers
+        if x is None or status is not Status.SOLVED or z is None:
+            return None, iterations
+        return l1_weight * z, iterations

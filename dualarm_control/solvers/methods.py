@@ -10,6 +10,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.linalg import lapack
 
+from dualarm_control.arrays import add_diagonal, split_columns
 from dualarm_control.qp import QPProblem, check_backend
 from dualarm_control.solvers import priority
 from dualarm_control.solvers.base import Solver, SolverParams, from_qp
@@ -145,9 +146,8 @@ class StandardQP(_QPSolver):
         if qd is not None and inside(qd, problem.lower, problem.upper) and problem.limit_excess(qd) <= 0.0:
             return qd, Status.SOLVED, 0, ""  # eq (14)'s optimum: no bound and no row is active
         jtj, jtr = _least_squares_terms(problem)
-        n = jtj.shape[0]
         h = jtj  # a fresh array: add eps to its diagonal in place
-        h.flat[:: n + 1] += self.params.regularization
+        add_diagonal(h, self.params.regularization)
         box = QPProblem(H=h, g=-jtr, lb=problem.lower, ub=problem.upper)
         if problem.has_limit_rows:  # the relaxation first: rows that its optimum meets are not active
             relaxed = from_qp(self._qp.solve(box))
@@ -166,7 +166,7 @@ def limit_rows_of(problem: ControlProblem, columns: int = 1) -> dict[str, FloatA
         return {}
     rows = problem.limit_matrix()
     assert rows is not None and problem.limit_bound is not None
-    a = rows if columns == 1 else np.hstack((rows, -rows))
+    a = rows if columns == 1 else split_columns(rows)
     return {"C": a, "l": np.full(a.shape[0], -INFINITY), "u": problem.limit_bound}
 
 
@@ -184,7 +184,7 @@ def damped_least_squares(jacobian: FloatArray, reference: FloatArray, eps: float
         qd [rad/s], (n,), or None when J J^T + eps I is singular.
     """
     gram = jacobian @ jacobian.T
-    gram.flat[:: gram.shape[0] + 1] += eps
+    add_diagonal(gram, eps)
     y = spd_solve(gram, reference)
     return None if y is None else jacobian.T @ y
 
@@ -206,8 +206,7 @@ def lasso_box(lower: FloatArray, upper: FloatArray) -> tuple[FloatArray, FloatAr
     Returns:
         (lb, ub) [rad/s], (2n,).
     """
-    return (np.concatenate((np.maximum(lower, 0.0), np.maximum(-upper, 0.0))),
-            np.concatenate((np.maximum(upper, 0.0), np.maximum(-lower, 0.0))))
+    return np.maximum(np.concatenate((lower, -upper)), 0.0), np.maximum(np.concatenate((upper, -lower)), 0.0)
 
 
 @register("sparse_qp")
@@ -247,6 +246,9 @@ class SparseQP(_QPSolver):
         super().__init__(params)
         self._previous: FloatArray | None = None  # the previous solution qd (n,), for the proximal term
         self._dual = LassoDual(self._backend()) if self._qp.active_set else None
+        self.inside_last = False
+        """Whether the last ``_solve`` returned the dual's minimiser after testing it inside the bounds (so that
+        a level above need not test or clip it again)."""
 
     def reset(self) -> None:
         super().reset()
@@ -265,6 +267,7 @@ class SparseQP(_QPSolver):
             if relaxed[0] is not None and relaxed[1] == Status.SOLVED and problem.limit_excess(relaxed[0]) <= 0.0:
                 return relaxed
             self._previous = previous  # the proximal centre stays the previous cycle's solution
+        self.inside_last = False
         j = problem.jacobian
         n = j.shape[1]
         mu = self.params.proximal_weight
@@ -273,13 +276,14 @@ class SparseQP(_QPSolver):
             qd, iterations = self._dual.solve(j, problem.reference, self.params.l1_weight)
             if qd is not None and inside(qd, problem.lower, problem.upper) and problem.limit_excess(qd) <= 0.0:
                 self._previous = qd
+                self.inside_last = True
                 return qd, Status.SOLVED, iterations, ""  # eq (17)'s optimum lies inside the bounds
-        b = np.hstack((j, -j))  # J [I, -I], (6, 2n)
+        b = split_columns(j)  # J [I, -I], (6, 2n)
         h = b.T @ b
         g = self.params.l1_weight - b.T @ problem.reference
         if prev is not None:  # z_prev = [max(qd, 0); max(-qd, 0)]: the split of an optimum (no overlap)
-            h.flat[:: 2 * n + 1] += mu
-            g -= mu * np.concatenate((np.maximum(prev, 0.0), np.maximum(-prev, 0.0)))
+            add_diagonal(h, mu)
+            g -= mu * np.maximum(np.concatenate((prev, -prev)), 0.0)
         lb, ub = lasso_box(problem.lower, problem.upper)
         solution = self._qp.solve(QPProblem(H=h, g=g, lb=lb, ub=ub, **limit_rows_of(problem, 2)))
         qd, status, iterations, detail = from_qp(solution, lambda z: z[:n] - z[n:])
@@ -348,15 +352,19 @@ class HierarchicalSparseQP(Solver):
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, Status, int, str]:
         qd1, status, iters, detail = self._primary._solve(problem)
+        tested = self._primary.inside_last  # QP1 gave the dual's minimiser, tested inside the bounds
         if problem.has_secondary and qd1 is not None and status not in FALLBACK_TRIGGERS \
                 and bound_excess(qd1, problem.lower, problem.upper) <= self.bound_tolerance:
             qd1 = np.minimum(np.maximum(qd1, problem.lower), problem.upper)  # absorbs QP1's tolerance
             qd1, status, iters, detail = self._primary._second_priority(problem, qd1, status, iters, detail)
             problem = problem.stacked()  # the repulsive level keeps both priorities' task velocities
-        if qd1 is None or not np.any(problem.repulsive) \
-                or not bound_excess(qd1, problem.lower, problem.upper) <= self.bound_tolerance:
+            tested = False
+        if qd1 is None or not problem.repulsive.any():
             return qd1, status, iters, detail  # no secondary motion, or a failure for solve() to handle
-        qd1 = np.minimum(np.maximum(qd1, problem.lower), problem.upper)  # absorbs QP1's tolerance
+        if not tested:  # (a tested qd1 is inside: the test and the clip would leave it as it is)
+            if not bound_excess(qd1, problem.lower, problem.upper) <= self.bound_tolerance:
+                return qd1, status, iters, detail  # a failure for solve() to handle
+            qd1 = np.minimum(np.maximum(qd1, problem.lower), problem.upper)  # absorbs QP1's tolerance
         return self._second_level(problem, qd1, status, iters, detail)
 
     def _second_level(self, problem: ControlProblem, qd1: FloatArray, status: Status, iters: int,
@@ -364,8 +372,10 @@ class HierarchicalSparseQP(Solver):
         """Eq (27)-(28) from QP1's result ``qd1`` (inside the bounds) and its status, iterations and detail."""
         lower2, upper2 = problem.lower - qd1, problem.upper - qd1
         qd2 = null_space_projection(problem.jacobian, problem.repulsive)
-        if qd2 is not None and inside(qd2, lower2, upper2) and problem.limit_excess(qd1 + qd2) <= 0.0:
-            return qd1 + qd2, status, iters, detail  # eq (27)'s optimum: no bound and no row is active
+        if qd2 is not None and inside(qd2, lower2, upper2):
+            qd = qd1 + qd2
+            if problem.limit_excess(qd) <= 0.0:
+                return qd, status, iters, detail  # eq (27)'s optimum: no bound and no row is active
         n = qd1.shape[0]
         qp2 = QPProblem(
             H=self._identity_of(n), g=-problem.repulsive, A=problem.jacobian, b=np.zeros(problem.jacobian.shape[0]),
@@ -421,7 +431,7 @@ class HierarchicalSparseL1QP(HierarchicalSparseQP):
             self._zone, self._hessian = key, secondary_l1_hessian(zone)
         h, g = self._hessian, secondary_l1_gradient(problem.repulsive, self.params.secondary_l1_weight)
         j = problem.jacobian
-        split = np.hstack((j, -j))
+        split = split_columns(j)
         lb, ub = lasso_box(problem.lower, problem.upper)
         n = qd1.shape[0]
         sol = self._secondary.solve(QPProblem(H=h, g=g, A=split, b=j @ qd1, lb=lb, ub=ub))

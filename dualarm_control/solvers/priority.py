@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dualarm_control.arrays import FloatArray
+from dualarm_control.arrays import FloatArray, add_diagonal, split_columns
 from dualarm_control.qp import QPProblem
 from dualarm_control.solvers.problem import ControlProblem
 from dualarm_control.solvers.slack_qp import INFINITY
@@ -64,7 +64,7 @@ def unbounded_second_level(problem: ControlProblem, qd1: FloatArray, eps: float)
     residual = r2 - j2 @ qd1
     if eps > 0.0:
         gram = j2z.T @ j2z
-        gram.flat[:: gram.shape[0] + 1] += eps
+        add_diagonal(gram, eps)
         y = np.linalg.solve(gram, j2z.T @ residual - eps * (z.T @ qd1))
     else:
         y = np.linalg.lstsq(j2z, residual, rcond=None)[0]
@@ -97,7 +97,7 @@ def rows_of(problem: ControlProblem, qd1: FloatArray, columns: int = 1) -> dict[
     if not blocks:
         return {}
     c = np.vstack(blocks)
-    c = c if columns == 1 else np.hstack((c, -c))
+    c = c if columns == 1 else split_columns(c)
     return {"C": c, "l": np.full(c.shape[0], -INFINITY), "u": np.concatenate(bounds)}
 
 
@@ -107,7 +107,7 @@ def least_squares_level(problem: ControlProblem, qd1: FloatArray, eps: float) ->
     j2, r2 = problem.secondary_jacobian, problem.secondary_reference
     assert j2 is not None and r2 is not None
     h = j2.T @ j2
-    h.flat[:: h.shape[0] + 1] += eps
+    add_diagonal(h, eps)
     return QPProblem(H=h, g=-(j2.T @ r2), A=problem.jacobian, b=problem.jacobian @ qd1, lb=problem.lower,
                      ub=problem.upper, **rows_of(problem, qd1))
 
@@ -119,9 +119,9 @@ def sparse_level(problem: ControlProblem, qd1: FloatArray, l1_weight: float, box
     and :func:`rows_of` on z."""
     j2, r2 = problem.secondary_jacobian, problem.secondary_reference
     assert j2 is not None and r2 is not None
-    b2 = np.hstack((j2, -j2))
+    b2 = split_columns(j2)
     j1 = problem.jacobian
-    return QPProblem(H=b2.T @ b2, g=l1_weight - b2.T @ r2, A=np.hstack((j1, -j1)), b=j1 @ qd1, lb=box[0],
+    return QPProblem(H=b2.T @ b2, g=l1_weight - b2.T @ r2, A=split_columns(j1), b=j1 @ qd1, lb=box[0],
                      ub=box[1], **rows_of(problem, qd1, 2))
 
 

@@ -45,6 +45,7 @@ from dualarm_control.tasks.relative_pose import (
     FixedTarget,
     RelativePoseTask,
     RelativeTarget,
+    relative_pose_rows,
 )
 from dualarm_control.tasks.table import UP, TablePlaneTask
 
@@ -79,5 +80,6 @@ __all__ = [
     "halfway_state",
     "manipulability",
     "register_task",
+    "relative_pose_rows",
     "task_types",
 ]

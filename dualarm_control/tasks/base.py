@@ -150,6 +150,8 @@ def assemble_problem(rows: Sequence[TaskRows], lower: FloatArray, upper: FloatAr
         rows: evaluated tasks, at least one equality.
         lower, upper: joint velocity bounds of eq (23) [rad/s], (n,). repulsive: (n,).
     """
+    if len(rows) == 1 and rows[0].kind == EQUALITY and rows[0].priority == 1:  # paper 000's problem, every cycle
+        return ControlProblem(rows[0].jacobian, rows[0].reference, lower, upper, repulsive)
     eq = [r for r in rows if r.kind == EQUALITY and r.priority == 1]
     ie = [r for r in rows if r.kind == INEQUALITY]
     second = [r for r in rows if r.kind == EQUALITY and r.priority == 2]

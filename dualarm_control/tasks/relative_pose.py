@@ -56,16 +56,25 @@ class RelativePoseTask:
         check_gain_weight(self.name, self.gain, self.weight)
 
     def evaluate(self, conf: Configuration, t: float) -> TaskRows:
-        state = conf.relative()
-        target = self.target
-        px, py, pz = state.position.tolist()
-        tx, ty, tz = np.asarray(target.position, float).tolist()
-        ox, oy, oz = luh_components(state.rotation, np.asarray(target.rotation, float))
-        value = np.array((px - tx, py - ty, pz - tz, -ox, -oy, -oz))  # f = -e = [p - p*; -e_o]
-        time_derivative = np.concatenate((target.linear_velocity, target.angular_velocity))
-        np.negative(time_derivative, out=time_derivative)
-        return TaskRows(self.name, self.kind, value, np.zeros(6), state.jacobian, time_derivative, self.gain,
-                        self.weight)
+        return relative_pose_rows(conf, self.target, self.gain, self.weight, self.name, self.kind)
+
+
+def relative_pose_rows(conf: Configuration, target: RelativeTarget, gain: float,
+                       weight: float = DEFAULT_EQUALITY_WEIGHT, name: str = "relative_pose",
+                       kind: Kind = EQUALITY) -> TaskRows:
+    """:class:`RelativePoseTask`'s rows at ``conf`` for ``target`` and gain k [1/s] (> 0, not checked here: the
+    task checks it once; :meth:`RelativeController.step <dualarm_control.controller.RelativeController.step>`
+    calls this every cycle with its validated gain): f = [p - p*; -e_o] (6,) [m; rad], b = 0, df/dq = J (6, n),
+    df/dt = -[v*; w*] (6,) [m/s; rad/s]."""
+    state = conf.relative()
+    px, py, pz = state.position.tolist()
+    tx, ty, tz = np.asarray(target.position, float).tolist()
+    ox, oy, oz = luh_components(state.rotation, np.asarray(target.rotation, float))
+    value = np.array((px - tx, py - ty, pz - tz, -ox, -oy, -oz))  # f = -e = [p - p*; -e_o]
+    vx, vy, vz = np.asarray(target.linear_velocity, float).tolist()
+    wx, wy, wz = np.asarray(target.angular_velocity, float).tolist()
+    time_derivative = np.array((-vx, -vy, -vz, -wx, -wy, -wz))  # df/dt = -[v*; w*]
+    return TaskRows(name, kind, value, np.zeros(6), state.jacobian, time_derivative, gain, weight)
 
 
 @dataclass(frozen=True)

@@ -6,13 +6,16 @@ measured in the same run, never a single absolute figure on its own. Parts:
 - random set (:mod:`dualarm_control.app.bench.random_set`): RelativeController.step per solver
   and QP back-end on seeded random configurations and targets, interleaved with pink's
   ``solve_ik`` on the same cases (:mod:`dualarm_control.app.bench.pink`), ratios of each
-  p50 to pink's fastest and default set-ups, active joints per cycle;
+  p50 to pink's fastest and default set-ups, active joints per cycle; the daqp QP solvers run
+  twice, on paper 000's problem as pink solves it and with the collision limit on as by default
+  ("solver | daqp, collision limit": pink has no collision checks);
 - the scenario (assembly) run in-process per solver and back-end, and pink replaying the
   recorded states and targets of one run;
 - exactness of the lasso solve against a reference (proxsuite at eps 1e-12);
 - scaling with the number of joints (3- and 4-arm chains of the LWR4);
 - the collision limit (:mod:`dualarm_control.app.bench.collision`): the assembly's cycles with and
-  without it, per robot (the other parts run without it: the solvers on paper 000's problem).
+  without it, per robot (the other parts run without it, but for the random set's and the scenario's
+  "collision limit" rows: the solvers on paper 000's problem).
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ import json
 import platform
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -79,17 +83,35 @@ def solver_configs(
     return configs, refused
 
 
+COLLISION_SUFFIX = ", collision limit"
+"""What the back-end column of a configuration with the collision limit on ends with."""
+
+
+def collision_configs(configs: dict[str, ControllerParams]) -> dict[str, ControllerParams]:
+    """The daqp QP configurations of ``configs`` again with the collision limit on (its default parameters), as
+    ``"solver | daqp, collision limit"``."""
+    return {f"{name}{COLLISION_SUFFIX}": replace(params, collision=CollisionParams())
+            for name, params in configs.items() if name.endswith(" | daqp")}
+
+
 def _pink_calls(model: DualArmModel) -> dict[str, Callable[[Case], None]]:
     if pink_version() is None:
         return {}
     return {name: pink_cycle(model, solver, update) for name, (solver, update) in PINK_SETUPS.items()}
 
 
-def add_ratio(rows: dict[str, dict[str, Any]], reference: str, column: str) -> None:
-    """Set ``row[column]`` = row's cycle p50 / the ``reference`` row's cycle p50, for every row."""
-    base = rows[reference]["cycle_p50_ms"]
+def add_ratio(rows: dict[str, dict[str, Any]], reference: str, column: str, key: str = "cycle_p50_ms") -> None:
+    """Set ``row[column]`` = row's ``key`` (cycle p50) / the ``reference`` row's, for every row."""
+    base = rows[reference][key]
     for row in rows.values():
-        row[column] = row["cycle_p50_ms"] / base
+        row[column] = row[key] / base
+
+
+def add_cpu_ratio(rows: dict[str, dict[str, Any]]) -> None:
+    """``cpu_p50_ratio_to_pink_fastest``: each row's CPU-time p50 / pink's fastest set-up's in CPU time (the
+    ratio that holds on a loaded machine: :func:`~dualarm_control.app.bench.random_set.time_random_set`)."""
+    fastest = min(PINK_SETUPS, key=lambda name: rows[name]["cpu_p50_ms"])
+    add_ratio(rows, fastest, "cpu_p50_ratio_to_pink_fastest", "cpu_p50_ms")
 
 
 def bench_random(
@@ -108,6 +130,7 @@ def bench_random(
         out["pink_fastest"] = fastest
         add_ratio(rows, fastest, "p50_ratio_to_pink_fastest")
         add_ratio(rows, PINK_DEFAULT, "p50_ratio_to_pink_default")
+        add_cpu_ratio(rows)
         out["ratio_columns"] = ["p50_ratio_to_pink_fastest", "p50_ratio_to_pink_default"]
     elif fallback_reference in rows:
         add_ratio(rows, fallback_reference, "p50_ratio_to_reference")
@@ -153,6 +176,13 @@ def bench_scenario(
         fastest = min(PINK_SETUPS, key=lambda name: rows[name]["cycle_p50_ms"])
         out["pink_fastest"] = fastest
         add_ratio(rows, fastest, "p50_ratio_to_pink_fastest")
+        if progress:
+            progress(f"scenario {scenario.name}: its states replayed through every configuration and pink, interleaved")
+        scenario_params = {name: scenario.controller_params(params) for name, params in configs.items()}  # its pairs
+        out["replay"] = replayed = time_random_set(model, replay, scenario_params, extra=pink, reset=False)
+        out["replay_pink_fastest"] = fastest = min(PINK_SETUPS, key=lambda name: replayed[name]["cycle_p50_ms"])
+        add_ratio(replayed, fastest, "p50_ratio_to_pink_fastest")
+        add_cpu_ratio(replayed)
     return out
 
 
@@ -169,9 +199,11 @@ def run_bench(
 ) -> dict[str, Any]:
     """The whole benchmark as one JSON-able record (see the module docstring)."""
     model = DualArmModel()
-    # the solvers on paper 000's problem (as pink solves it): the collision limit has its own part
+    # the solvers on paper 000's problem (as pink solves it); then, beside pink without collision checks, the QP
+    # solvers with the collision limit on, as by default (issue 39's target); the collision part compares both
     params = ControllerParams(collision=CollisionParams(enabled=False))
     configs, refused = solver_configs(params, solvers, backends)
+    configs.update(collision_configs(configs))
     say = progress or (lambda _msg: None)
     say(f"random set: {count} cases x {len(configs)} configurations")
     record: dict[str, Any] = {
@@ -187,7 +219,8 @@ def run_bench(
     record["scaling"] = time_scaling(model, params, qp_solvers, backends, scaling_arms, count=max(count // 4, 20),
                                      seed=seed + 1)
     if scenario is not None:
-        scenario_configs = {k: v for k, v in configs.items() if k.split(" | ")[1] in ("daqp", "proxsuite", "-")}
+        scenario_configs = {k: v for k, v in configs.items()
+                            if k.split(" | ")[1].split(",")[0] in ("daqp", "proxsuite", "-")}
         record["scenario"] = bench_scenario(scenario, model, scenario_configs, progress)
     if collision_robots:
         record["collision"] = bench_collision(collision_robots, ["hierarchical_sparse_qp", "sparse_qp", "standard_qp"],
@@ -217,7 +250,9 @@ def format_bench(record: dict[str, Any]) -> str:
               ("solve_p50_ms", "solve p50 [ms]", "{:.3f}"), ("solve_p99_ms", "solve p99 [ms]", "{:.3f}")]
     lines = [f"# Solver benchmark (python {record['machine']['python']}, pink {record['machine']['pink']})", "",
              f"## Random set: {rnd['cases']} configurations and targets (seed {rnd['seed']}), one run, interleaved", ""]
-    lines += _table(rnd["rows"], [*timing, *ratio_cols,
+    cpu = [("cpu_p50_ms", "CPU p50 [ms]", "{:.3f}"), ("cpu_p99_ms", "CPU p99 [ms]", "{:.3f}"),
+           ("cpu_p50_ratio_to_pink_fastest", "CPU p50 / pink fastest", "{:.2f}")]
+    lines += _table(rnd["rows"], [*timing, *ratio_cols, *cpu,
                                   ("active_joints_p50", "active joints p50", "{:.0f}"),
                                   ("active_joints_max", "max", "{:d}"),
                                   ("share_at_most_6_active", "share <= 6", "{:.3f}"),
@@ -243,6 +278,13 @@ def format_bench(record: dict[str, Any]) -> str:
         lines += _table(sc["rows"], [("cycles", "cycles", "{:d}"), *timing,
                                      ("p50_ratio_to_pink_fastest", "cycle p50 / pink fastest", "{:.2f}")],
                         "solver | QP back-end")
+        if sc.get("replay"):
+            title = (f"## Scenario {sc['scenario']}: its recorded states replayed through every configuration "
+                     "and pink, interleaved case by case (warm: no reset)")
+            lines += ["", title, ""]
+            lines += _table(sc["replay"], [("samples", "cycles", "{:d}"), *timing,
+                                           ("p50_ratio_to_pink_fastest", "cycle p50 / pink fastest", "{:.2f}"), *cpu],
+                            "solver | QP back-end")
     if record.get("collision"):
         lines += ["", "## Collision limit: the assembly's recorded cycles with and without it, interleaved", ""]
         lines += _table(record["collision"], [("pairs", "pairs", "{:d}"), ("rows_p50", "rows p50", "{:.0f}"),
