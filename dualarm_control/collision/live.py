@@ -110,31 +110,34 @@ class LivePairs:
 
     Attributes:
         links: each pair's (link, ``obstacle:<name>``). distance: d [m], (m,).
-        approach: n^T v_B [m/s], (m,) (< 0: the obstacle comes closer).
+        approach: n^T v_B [m/s], (m,) (< 0: the obstacle comes closer). moving: whether any is not 0.
         speed: how fast each pair's distance can change at most, C [m/rad], (m, n): |dd_dq qd| <= C |qd|
             (the reach of the link about each joint; :class:`~dualarm_control.limits.base.DeferredRows`).
         rows: dd_dq [m/rad], (m, n). points: p_a on the link, p_b on the obstacle [m], (2, m, 3).
         normals: n, (m, 3). These three are None when the call deferred them
             (:meth:`LiveDistances.complete` makes them, until the next call).
         pairs: each pair's index in the call's (obstacle, shape) table. call: the call's number.
+        labels: each pair's ``link – obstacle:<name>`` (the rows' labels).
     """
 
     links: tuple[tuple[str, str], ...]
     distance: FloatArray
     approach: FloatArray
+    moving: bool
     speed: FloatArray
     rows: FloatArray | None = None
     points: FloatArray | None = None
     normals: FloatArray | None = None
     pairs: tuple[int, ...] = ()
     call: int = 0
+    labels: tuple[str, ...] = ()
 
     def __len__(self) -> int:
         return len(self.links)
 
     @classmethod
     def empty(cls, n: int) -> LivePairs:
-        return cls((), np.zeros(0), np.zeros(0), np.zeros((0, n)), np.zeros((0, n)), np.zeros((2, 0, 3)),
+        return cls((), np.zeros(0), np.zeros(0), False, np.zeros((0, n)), np.zeros((0, n)), np.zeros((2, 0, 3)),
                    np.zeros((0, 3)))
 
 
@@ -202,11 +205,13 @@ class LiveDistances:
         self._obstacle_radii = np.zeros(0)
         self._table: list[tuple[Any, ...]] = []  # per (obstacle, shape), obstacle-major (_snapshot) ...
         self._moving: list[bool] = []  # ... whether the obstacle moves
+        self._any_moving = False
+        self._calls_table: list[tuple[Any, ...]] = []  # each entry's coal arguments, result and key
 
     def _snapshot(self, obstacles: Sequence[LiveObstacle]) -> None:
         """The per-snapshot values (class docstring): known bounds forgotten, the (obstacle, shape) table,
         entry j * shapes + i: coal's four arguments (the octree first), its result, the (obstacle, link)
-        key, i, j, whether the obstacle is an octree, the pair's (link, ``obstacle:<name>``)."""
+        key, i, j, whether the obstacle is an octree, the pair's (link, ``obstacle:<name>``) and its label."""
         count, shapes = len(obstacles), len(self.shapes)
         self._known = np.full((count, shapes), -np.inf)
         self._known_for = obstacles if isinstance(obstacles, tuple) else None
@@ -222,8 +227,10 @@ class LiveDistances:
                 call = ((o.shape, tf, self._geometries[i], placed[k]) if octree
                         else (self._geometries[i], placed[k], o.shape, tf))
                 self._table.append((*call, coal.DistanceResult(), j * shapes + self._first[i], i, j, octree,
-                                    (self.names[i], label)))
+                                    (self.names[i], label), f"{self.names[i]} – {label}"))
+        self._calls_table = [entry[:6] for entry in self._table]
         self._moving = [bool(np.any(o.velocity)) for o in obstacles]
+        self._any_moving = any(self._moving)
 
     def near(self, q: FloatArray, obstacles: Sequence[LiveObstacle], within: float, deferred: bool = False) -> LivePairs:
         """The (link, obstacle) pairs closer than ``within`` [m] at q [rad] (n,), each link's closest
@@ -257,9 +264,9 @@ class LiveDistances:
                 return LivePairs.empty(n)
         pin.updateGeometryPlacements(self.model, self.data, self.geometry, self.geometry_data)
         best: dict[int, tuple[float, int]] = {}  # (obstacle, link) key -> d, table index
-        request, table = self.request, self._table
+        request, table, calls = self.request, self._table, self._calls_table
         for c in candidates.tolist():
-            a, tf_a, b, tf_b, result, key = table[c][:6]
+            a, tf_a, b, tf_b, result, key = calls[c]
             result.clear()
             d = coal.distance(a, tf_a, b, tf_b, request, result)
             if not -_FAILED < d < _FAILED:  # also NaN: GJK failed, the pair is left out this cycle
@@ -269,17 +276,21 @@ class LiveDistances:
                 best[key] = (d, c)
         if not best:
             return LivePairs.empty(n)
-        chosen = [best[key] for key in sorted(best)]
+        chosen = [best[key] for key in sorted(best)] if len(best) > 1 else list(best.values())
         pairs = tuple([c for _, c in chosen])
-        shapes = [table[c][6] for c in pairs]
+        entries = [table[c] for c in pairs]
         approach = np.zeros(len(pairs))
-        moving = [r for r, c in enumerate(pairs) if self._moving[table[c][7]]]
-        if moving:  # n^T v_B
-            _, normals = self._witness([pairs[r] for r in moving])
-            velocities = np.array([obstacles[table[pairs[r]][7]].velocity for r in moving])
-            approach[moving] = np.einsum("mk,mk->m", normals, velocities)
-        found = LivePairs(tuple([table[c][9] for c in pairs]), np.array([d for d, _ in chosen]), approach,
-                          self._reach[shapes], pairs=pairs, call=self._calls)
+        moving = False
+        if self._any_moving:
+            rows = [r for r, entry in enumerate(entries) if self._moving[entry[7]]]
+            if rows:  # n^T v_B
+                _, normals = self._witness([pairs[r] for r in rows])
+                velocities = np.array([obstacles[entries[r][7]].velocity for r in rows])
+                approach[rows] = np.einsum("mk,mk->m", normals, velocities)
+                moving = True
+        found = LivePairs(tuple([entry[9] for entry in entries]), np.array([d for d, _ in chosen]), approach, moving,
+                          self._reach[[entry[6] for entry in entries]], pairs=pairs, call=self._calls,
+                          labels=tuple([entry[10] for entry in entries]))
         return found if deferred else self.complete(found)
 
     def _witness(self, entries: Sequence[int]) -> tuple[FloatArray, FloatArray]:
@@ -315,9 +326,12 @@ class LiveDistances:
         return pairs
 
 
-def live_damper_bound(distance: FloatArray, approach: FloatArray, influence: float, safety: float,
+def live_damper_bound(distance: FloatArray, approach: FloatArray | None, influence: float, safety: float,
                       gain: float) -> FloatArray:
     """b = xi (d - d_s) / (d_i - d_s) + n^T v_B [m/s], (m,) (module docstring): the velocity damper's
-    bound for m pairs at d [m] whose obstacle approaches at n^T v_B [m/s] (``approach``, (m,))."""
-    result: FloatArray = gain * (distance - safety) / (influence - safety) + approach
+    bound for m pairs at d [m] whose obstacle approaches at n^T v_B [m/s] (``approach``, (m,); None: all
+    still, n^T v_B = 0)."""
+    result: FloatArray = (distance - safety) * (gain / (influence - safety))
+    if approach is not None:
+        result += approach
     return result

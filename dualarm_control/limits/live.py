@@ -89,7 +89,6 @@ class LiveObstacleLimit(Limit):
         self.last = LivePairs.empty(collision.model.nv)
         self._count = 0
         self._rows = DeferredRows.of(np.zeros((0, collision.model.nv)), np.zeros(0))
-        self._labels: dict[tuple[str, str], str] = {}
 
     def constraints(self, configuration: Configuration, previous: FloatArray) -> Constraint:
         obstacles = self.feed.snapshot()
@@ -98,22 +97,16 @@ class LiveObstacleLimit(Limit):
         self.last = pairs = self.distances.near(configuration.q, obstacles, influence, deferred=True)
         if not len(pairs):
             return NONE
-        bound = live_damper_bound(pairs.distance, pairs.approach, influence, safety, self.params.gain)
+        bound = live_damper_bound(pairs.distance, pairs.approach if pairs.moving else None, influence, safety,
+                                  self.params.gain)
         self._rows = DeferredRows(pairs.speed, bound, lambda: self._matrix(pairs))
-        return Constraint(rows=self._rows, labels=tuple([self._label(link) for link in pairs.links]))
+        return Constraint(rows=self._rows, labels=pairs.labels)
 
     def _matrix(self, pairs: LivePairs) -> FloatArray:
         """The rows' matrix -dd_dq (m, n) [m/rad] of this cycle's ``pairs``."""
         rows = self.distances.complete(pairs).rows
         assert rows is not None
         return -rows
-
-    def _label(self, link: tuple[str, str]) -> str:
-        """``link – obstacle:<name>``, made once per pair."""
-        label = self._labels.get(link)
-        if label is None:
-            label = self._labels[link] = f"{link[0]} – {link[1]}"
-        return label
 
     def report(self, velocities: FloatArray) -> LiveReport | None:
         """The last cycle's :class:`LiveReport` (None with no live obstacle)."""
