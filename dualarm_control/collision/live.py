@@ -200,6 +200,7 @@ class LiveDistances:
         self._calls = 0  # near() calls that computed kinematics (a deferred pair's call)
         self._known: FloatArray = np.zeros((0, 0))  # (obstacles, shapes) lower bounds [m] ...
         self._known_q: FloatArray | None = None  # ... at these joint positions ...
+        self._below = np.zeros(0, dtype=bool)
         self._known_for: object = None  # ... for this snapshot (identity), whose per-obstacle values are:
         self._obstacle_centres = np.zeros((0, 3))  # bounding sphere centres in the world [m], (m, 3)
         self._obstacle_radii = np.zeros(0)
@@ -214,6 +215,7 @@ class LiveDistances:
         key, i, j, whether the obstacle is an octree, the pair's (link, ``obstacle:<name>``) and its label."""
         count, shapes = len(obstacles), len(self.shapes)
         self._known = np.full((count, shapes), -np.inf)
+        self._below = np.zeros(count * shapes, dtype=bool)  # the known bounds' test, preallocated
         self._known_for = obstacles if isinstance(obstacles, tuple) else None
         self._obstacle_centres = np.array([o.rotation @ o.centre + o.position for o in obstacles])
         self._obstacle_radii = np.array([o.radius for o in obstacles])
@@ -242,10 +244,11 @@ class LiveDistances:
         if obstacles is not self._known_for or self._known_q is None or not math.isfinite(sum(q.tolist())):
             self._snapshot(obstacles)
         else:
-            self._known -= self._reach @ np.abs(q - self._known_q)
+            moved = q - self._known_q
+            self._known -= self._reach @ np.abs(moved, out=moved)
         self._known_q = q.copy()
         known = self._known.reshape(-1)  # a view, (obstacle, shape) obstacle-major
-        candidates = np.flatnonzero(known < within)
+        candidates = np.flatnonzero(np.less(known, within, out=self._below))
         if not candidates.size:
             return LivePairs.empty(n)
         self._calls += 1  # data and the results change from here: earlier deferred pairs are gone

@@ -116,7 +116,7 @@ class LiveObstacleLimit(Limit):
         rows = self._rows  # a row vouched for by its speed bound (C |qd| <= b - 1e-6) is not active
         active = 0 if rows.meets(velocities) else int(np.count_nonzero(rows.matrix @ velocities
                                                                         >= rows.bound - ACTIVE_TOLERANCE))
-        r = int(np.argmin(pairs.distance))
+        r = int(pairs.distance.argmin())
         return LiveReport(self._count, float(pairs.distance[r]), pairs.links[r], float(pairs.approach[r]),
                           len(pairs), active)
 
