@@ -80,13 +80,14 @@ def voxelise(points: npt.NDArray[np.floating], side: float, max_points: int = DE
     scaled = np.array(sample.T, dtype=np.float32, order="C")
     scaled *= np.float32(1.0 / side)
     np.floor(scaled, out=scaled)
-    if not np.abs(scaled).max() < 2**30:
+    lowest, highest = scaled.min(axis=1), scaled.max(axis=1)  # the voxel box, (3,) each: also the range check
+    if not (-(2**30) < lowest.min() and highest.max() < 2**30):
         raise ValueError(f"a point {float(np.abs(sample).max())!r} m from the origin: beyond the voxel grid of "
                          f"side {side} m")
     index = scaled.astype(np.int32)
-    low = index.min(axis=1)
+    low = lowest.astype(np.int32)
     index -= low[:, None]
-    span = index.max(axis=1).astype(np.int64) + 1
+    span = (highest.astype(np.int64) - low) + 1
     cells_total = int(span[0] * span[1] * span[2])
     if cells_total <= BITMAP_CELLS:  # an occupancy bitmap of the cloud's bounding box: no sort
         key = index[0] * np.int32(span[1] * span[2])
