@@ -201,6 +201,7 @@ class LiveDistances:
         self._known: FloatArray = np.zeros((0, 0))  # (obstacles, shapes) lower bounds [m] ...
         self._known_q: FloatArray | None = None  # ... at these joint positions ...
         self._below = np.zeros(0, dtype=bool)
+        self._known_flat = self._known.reshape(-1)
         self._known_for: object = None  # ... for this snapshot (identity), whose per-obstacle values are:
         self._obstacle_centres = np.zeros((0, 3))  # bounding sphere centres in the world [m], (m, 3)
         self._obstacle_radii = np.zeros(0)
@@ -215,6 +216,7 @@ class LiveDistances:
         key, i, j, whether the obstacle is an octree, the pair's (link, ``obstacle:<name>``) and its label."""
         count, shapes = len(obstacles), len(self.shapes)
         self._known = np.full((count, shapes), -np.inf)
+        self._known_flat = self._known.reshape(-1)  # a view: the updates are in place
         self._below = np.zeros(count * shapes, dtype=bool)  # the known bounds' test, preallocated
         self._known_for = obstacles if isinstance(obstacles, tuple) else None
         self._obstacle_centres = np.array([o.rotation @ o.centre + o.position for o in obstacles])
@@ -247,7 +249,7 @@ class LiveDistances:
             moved = q - self._known_q
             self._known -= self._reach @ np.abs(moved, out=moved)
         self._known_q = q.copy()
-        known = self._known.reshape(-1)  # a view, (obstacle, shape) obstacle-major
+        known = self._known_flat  # a view, (obstacle, shape) obstacle-major
         candidates = np.flatnonzero(np.less(known, within, out=self._below))
         if not candidates.size:
             return LivePairs.empty(n)
@@ -267,7 +269,8 @@ class LiveDistances:
                 return LivePairs.empty(n)
         pin.updateGeometryPlacements(self.model, self.data, self.geometry, self.geometry_data)
         best: dict[int, tuple[float, int]] = {}  # (obstacle, link) key -> d, table index
-        request, table, calls = self.request, self._table, self._calls_table
+        calls = self._calls_table
+        request = self.request
         for c in candidates.tolist():
             a, tf_a, b, tf_b, result, key = calls[c]
             result.clear()
@@ -279,21 +282,27 @@ class LiveDistances:
                 best[key] = (d, c)
         if not best:
             return LivePairs.empty(n)
-        chosen = [best[key] for key in sorted(best)] if len(best) > 1 else list(best.values())
-        pairs = tuple([c for _, c in chosen])
-        entries = [table[c] for c in pairs]
+        table = self._table
+        distance, pairs, shapes, links, labels = [], [], [], [], []
+        for key in sorted(best) if len(best) > 1 else best:
+            d, c = best[key]
+            entry = table[c]
+            distance.append(d)
+            pairs.append(c)
+            shapes.append(entry[6])
+            links.append(entry[9])
+            labels.append(entry[10])
         approach = np.zeros(len(pairs))
         moving = False
         if self._any_moving:
-            rows = [r for r, entry in enumerate(entries) if self._moving[entry[7]]]
+            rows = [r for r, c in enumerate(pairs) if self._moving[table[c][7]]]
             if rows:  # n^T v_B
                 _, normals = self._witness([pairs[r] for r in rows])
-                velocities = np.array([obstacles[entries[r][7]].velocity for r in rows])
+                velocities = np.array([obstacles[table[pairs[r]][7]].velocity for r in rows])
                 approach[rows] = np.einsum("mk,mk->m", normals, velocities)
                 moving = True
-        found = LivePairs(tuple([entry[9] for entry in entries]), np.array([d for d, _ in chosen]), approach, moving,
-                          self._reach[[entry[6] for entry in entries]], pairs=pairs, call=self._calls,
-                          labels=tuple([entry[10] for entry in entries]))
+        found = LivePairs(tuple(links), np.array(distance), approach, moving, self._reach[shapes], pairs=tuple(pairs),
+                          call=self._calls, labels=tuple(labels))
         return found if deferred else self.complete(found)
 
     def _witness(self, entries: Sequence[int]) -> tuple[FloatArray, FloatArray]:
