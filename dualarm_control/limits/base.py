@@ -108,7 +108,7 @@ class DeferredRows:
                  parts: tuple[DeferredRows, ...] = ()) -> None:
         self.speed = speed
         self.bound = bound
-        self._below = bound - ROW_SPEED_MARGIN
+        self._below: FloatArray | None = None  # b - ROW_SPEED_MARGIN, made by the first meets()
         self._build: Callable[[], FloatArray] | None = build
         self._matrix: FloatArray | None = None
         self._met = b""  # the bytes of the last qd that met the bound (a cycle checks the same qd up to 3 times)
@@ -140,7 +140,10 @@ class DeferredRows:
         key = qd.tobytes()
         if key == self._met:
             return True
-        met = bool((self.speed @ np.abs(qd) <= self._below).all())
+        below = self._below
+        if below is None:
+            below = self._below = self.bound - ROW_SPEED_MARGIN
+        met = bool((self.speed @ np.abs(qd) <= below).all())
         if met:
             self._met = key
         return met
@@ -149,7 +152,11 @@ class DeferredRows:
         """max(A qd - b, 0) [m/s] at qd (n,) [rad/s], building only the matrices of the stacked parts whose
         speed bound does not vouch for qd (a vouched part's rows are below their bounds: they add nothing)."""
         if self._matrix is None and self._parts:
-            return max((part.excess(qd) for part in self._parts), default=0.0)
+            worst = 0.0
+            for part in self._parts:
+                excess = part.excess(qd)
+                worst = max(worst, excess)
+            return worst
         if self._matrix is None and self.meets(qd):
             return 0.0
         return float((self.matrix @ qd - self.bound).max(initial=0.0))
