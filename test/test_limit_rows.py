@@ -199,3 +199,28 @@ def test_meets_remembers_only_the_velocity_it_vouched_for() -> None:
     assert rows.meets(worse)
     worse[1] = 0.9  # the same array, changed in place: checked again
     assert not rows.meets(worse)
+
+
+def test_stacked_rows_build_only_the_parts_their_speed_bound_does_not_vouch_for() -> None:
+    """Two limits' rows stacked (the collision limit's and the live obstacles'): the excess at a qd that the
+    first part's speed bound vouches for builds the second part only, and equals max(A qd - b, 0) of the
+    whole stacked matrix; a qd both vouch for builds nothing."""
+    rng = np.random.default_rng(3)
+    a1, a2 = rng.standard_normal((2, N)), rng.standard_normal((3, N))
+    built: list[str] = []
+
+    def part(name: str, a: np.ndarray, bound: np.ndarray) -> DeferredRows:
+        return DeferredRows(np.abs(a), bound, lambda: built.append(name) or a)
+
+    qd = 0.01 * rng.standard_normal(N)
+    far = np.full(2, 10.0)  # C |qd| far below: vouched for
+    near = a2 @ qd - np.array([0.01, -0.02, 0.0])  # its first row broken by 0.01 m/s
+    stacked = part("first", a1, far).stacked(part("second", a2, near))
+    assert stacked.excess(qd) == pytest.approx(0.01, abs=1e-15)
+    assert built == ["second"]
+    whole = np.vstack((a1, a2))
+    assert np.array_equal(stacked.matrix, whole) and built == ["second", "first"]
+    assert stacked.excess(qd) == pytest.approx(float((whole @ qd - stacked.bound).max()), abs=1e-15)
+    quiet = part("first", a1, far).stacked(part("second", a2, np.full(3, 10.0)))
+    built.clear()
+    assert quiet.excess(qd) == 0.0 and built == []

@@ -65,6 +65,34 @@ def test_live_pairs_are_the_static_pairs() -> None:
     assert compared > 50 and worst < 1e-12
 
 
+def test_deferred_pairs_complete_to_the_eager_ones() -> None:
+    """The limit's call (``deferred=True``: no witness points, normals or rows until asked) completes to what
+    the eager call gives, bit for bit; its speed bound C holds |dd_dq qd| <= C |qd|; completing it after the
+    next call is refused (its coal results are gone)."""
+    c = static_model()
+    live, eager = LiveDistances(c.model, c.geometry), LiveDistances(c.model, c.geometry)
+    rng = np.random.default_rng(4)
+    m = c.kinematics
+    scene = tuple(live_scene())
+    compared = 0
+    for _ in range(80):
+        q = rng.uniform(m.q_min, m.q_max)
+        deferred, full = live.near(q, scene, 0.1, deferred=True), eager.near(q, scene, 0.1)
+        assert deferred.rows is None or not len(deferred)
+        done = live.complete(deferred)
+        assert done.links == full.links and np.array_equal(done.distance, full.distance)
+        assert done.rows is not None and full.rows is not None and np.array_equal(done.rows, full.rows)
+        qd = rng.standard_normal(len(q))
+        assert np.all(np.abs(done.rows @ qd) <= done.speed @ np.abs(qd) + 1e-12)
+        compared += len(done)
+    assert compared > 20
+    while not len(stale := live.near(rng.uniform(m.q_min, m.q_max), scene, 0.3, deferred=True)):
+        pass
+    live.near(rng.uniform(m.q_min, m.q_max), scene, 0.3)
+    with pytest.raises(ValueError, match="results are gone"):
+        live.complete(stale)
+
+
 def test_octree_witness_points_are_in_the_pairs_order() -> None:
     """An octree (a 2 cm voxel grid filling a box) against the arm links: d = n^T (p_b - p_a), n along
     p_b - p_a, the row the derivative of d (central differences: p_a on the link and n from it, which

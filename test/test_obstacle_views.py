@@ -101,3 +101,58 @@ def test_foxglove_replays_them(tmp_path: Path) -> None:
         assert schema is not None and schema.name == "visualization_msgs/msg/MarkerArray"
     finally:
         server.stop()
+
+
+def test_the_live_view_draws_the_running_cells_obstacles(tmp_path: Path) -> None:
+    """``dualarm view --save`` without a bag, as a person runs it beside a cell (the session's domain): the scene
+    latched on /dualarm/obstacles and a hand moving on /collision_objects, published by a node of this process,
+    are in the recording it writes when stopped (Ctrl-C): the table's shape, the hand's poses on the timeline."""
+    import signal
+    import subprocess
+    import sys
+
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from test_view import read_rrd
+    from visualization_msgs.msg import MarkerArray
+    from waiting import wait_until
+
+    from dualarm_control.ros.qos import latched_qos
+
+    rrd = tmp_path / "live.rrd"
+    view = subprocess.Popen([sys.executable, "-m", "dualarm_control.app.cli", "view", "--save", str(rrd)],
+                            cwd=Path(__file__).resolve().parents[1], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node("obstacle_publisher_test", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    sent = 0
+    try:
+        scene = node.create_publisher(MarkerArray, "/dualarm/obstacles", latched_qos())
+        scene.publish(scene_markers((Box("table", size=(1.2, 1.6, 0.05), position=(0.9, 0.0, 0.775)),), ()))
+        live = node.create_publisher(MarkerArray, "/collision_objects", 10)
+        hand = Sphere("hand", position=(0.5, 0.2, 1.9), radius=0.05)
+        wait_until(lambda: live.get_subscription_count() > 0 and scene.get_subscription_count() > 0,
+                   lambda: "no subscription from the view", what="dualarm view subscribed to the obstacles",
+                   timeout=120.0, step=lambda: executor.spin_once(timeout_sec=0.1),
+                   gone=lambda: None if view.poll() is None else f"view exited: {view.communicate()[0][-2000:]}")
+        for k in range(40):  # 2 s of a hand coming down at 0.25 m/s
+            moving = MarkerArray()
+            moving.markers = [obstacle_marker(hand, 1_000_000_000 + k * 50_000_000, position=(0.5, 0.2, 1.9 - 0.0125 * k))]
+            live.publish(moving)
+            sent += 1
+            executor.spin_once(timeout_sec=0.05)
+    finally:
+        view.send_signal(signal.SIGINT)
+        out = view.communicate(timeout=120)[0]
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    assert view.returncode == 0, out[-2000:]
+    rows, _ = read_rrd(rrd)
+    print(f"{sent} hand markers sent; rows: table {rows['/obstacles/table/shape']}, hand {rows['/obstacles/hand']}")
+    assert rows["/obstacles/table/shape"] >= 1 and rows["/obstacles/table"] >= 1, (dict(rows), out[-2000:])
+    assert rows["/obstacles/hand"] >= sent // 2, (dict(rows), out[-2000:])

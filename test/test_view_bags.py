@@ -382,8 +382,10 @@ def test_live_view_logs_the_running_cell(sim_node: Process, tmp_path: Path, monk
 
 
 def test_foxglove_server_of_the_running_cell(sim_node: Process) -> None:
-    """The live feed: the server reads the running sim_node's /robot_description and /joint_states."""
+    """The live feed: the server reads the running sim_node's /robot_description and /joint_states, and offers the
+    obstacles' topics."""
     from dualarm_control.app.view.foxglove_view import serve_live
 
-    _, description, tf = _foxglove_tf_and_description(serve_live)
+    channels, description, tf = _foxglove_tf_and_description(serve_live)
     _check_description_and_tf(description, tf)
+    assert {"/dualarm/obstacles", "/collision_objects"} <= channels.keys()  # the obstacles' MarkerArrays, for the 3D panel

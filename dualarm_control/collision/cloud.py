@@ -15,7 +15,7 @@ distance to the points (and the points are on the surface); docs/obstacles.md ha
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import coal
 import numpy as np
@@ -41,6 +41,7 @@ class Voxels:
         centres: the occupied voxels' centres [m], (v, 3), in the cloud's frame. side: s [m].
         points: points given. used: points voxelised (after dropping non-finite ones and decimating).
         stride: the decimation step (1: every point).
+        low, high: the occupied voxels' bounding box [m], (3,) each (the points' voxels' box).
     """
 
     centres: FloatArray
@@ -48,6 +49,8 @@ class Voxels:
     points: int
     used: int
     stride: int
+    low: FloatArray = field(default_factory=lambda: np.zeros(3))
+    high: FloatArray = field(default_factory=lambda: np.zeros(3))
 
     def note(self) -> str:
         """What was done to the cloud, '' when every point was used."""
@@ -77,13 +80,14 @@ def voxelise(points: npt.NDArray[np.floating], side: float, max_points: int = DE
     scaled = np.array(sample.T, dtype=np.float32, order="C")
     scaled *= np.float32(1.0 / side)
     np.floor(scaled, out=scaled)
-    if not np.abs(scaled).max() < 2**30:
+    lowest, highest = scaled.min(axis=1), scaled.max(axis=1)  # the voxel box, (3,) each: also the range check
+    if not (-(2**30) < lowest.min() and highest.max() < 2**30):
         raise ValueError(f"a point {float(np.abs(sample).max())!r} m from the origin: beyond the voxel grid of "
                          f"side {side} m")
     index = scaled.astype(np.int32)
-    low = index.min(axis=1)
+    low = lowest.astype(np.int32)
     index -= low[:, None]
-    span = index.max(axis=1).astype(np.int64) + 1
+    span = (highest.astype(np.int64) - low) + 1
     cells_total = int(span[0] * span[1] * span[2])
     if cells_total <= BITMAP_CELLS:  # an occupancy bitmap of the cloud's bounding box: no sort
         key = index[0] * np.int32(span[1] * span[2])
@@ -95,15 +99,15 @@ def voxelise(points: npt.NDArray[np.floating], side: float, max_points: int = DE
     else:
         unique = np.unique((index[0] * span[1] + index[1]) * span[2] + index[2])  # int64 keys
     cells = np.stack((unique // (span[1] * span[2]), (unique // span[2]) % span[1], unique % span[2]), axis=1)
-    centres: FloatArray = (cells + low.astype(np.int64) + 0.5) * side
-    return Voxels(centres, side, k, len(sample), stride)
+    origin = low.astype(np.int64)
+    centres: FloatArray = (cells + origin + 0.5) * side
+    return Voxels(centres, side, k, len(sample), stride, origin * side, (origin + span) * side)
 
 
 def voxel_sphere(voxels: Voxels) -> tuple[FloatArray, float]:
     """A sphere holding every occupied voxel: its centre [m] (3,) in the cloud's frame and radius [m]
-    (the voxels' bounding box's; no octree traversal)."""
-    half = voxels.side / 2.0
-    low, high = voxels.centres.min(axis=0) - half, voxels.centres.max(axis=0) + half
+    (the voxels' bounding box's, as voxelised: no pass over the voxels, no octree traversal)."""
+    low, high = voxels.low, voxels.high
     return (low + high) / 2.0, float(np.linalg.norm(high - low)) / 2.0
 
 

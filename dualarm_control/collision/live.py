@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import coal
 import numpy as np
@@ -37,6 +38,7 @@ import pinocchio as pin
 from dualarm_control.arrays import FloatArray
 from dualarm_control.collision.distances import witness_rows
 from dualarm_control.collision.params import (
+    _FAILED,
     KNOWN_MARGIN,
     SPHERE_BROADPHASE_MIN,
     distance_request,
@@ -108,23 +110,35 @@ class LivePairs:
 
     Attributes:
         links: each pair's (link, ``obstacle:<name>``). distance: d [m], (m,).
-        rows: dd_dq [m/rad], (m, n). approach: n^T v_B [m/s], (m,) (< 0: the obstacle comes closer).
-        points: p_a on the link, p_b on the obstacle [m], (2, m, 3). normals: n, (m, 3).
+        approach: n^T v_B [m/s], (m,) (< 0: the obstacle comes closer). moving: whether any is not 0.
+        speed: how fast each pair's distance can change at most, C [m/rad], (m, n): |dd_dq qd| <= C |qd|
+            (the reach of the link about each joint; :class:`~dualarm_control.limits.base.DeferredRows`).
+        rows: dd_dq [m/rad], (m, n). points: p_a on the link, p_b on the obstacle [m], (2, m, 3).
+        normals: n, (m, 3). These three are None when the call deferred them
+            (:meth:`LiveDistances.complete` makes them, until the next call).
+        pairs: each pair's index in the call's (obstacle, shape) table. call: the call's number.
+        labels: each pair's ``link – obstacle:<name>`` (the rows' labels).
     """
 
     links: tuple[tuple[str, str], ...]
     distance: FloatArray
-    rows: FloatArray
     approach: FloatArray
-    points: FloatArray
-    normals: FloatArray
+    moving: bool
+    speed: FloatArray
+    rows: FloatArray | None = None
+    points: FloatArray | None = None
+    normals: FloatArray | None = None
+    pairs: tuple[int, ...] = ()
+    call: int = 0
+    labels: tuple[str, ...] = ()
 
     def __len__(self) -> int:
         return len(self.links)
 
     @classmethod
     def empty(cls, n: int) -> LivePairs:
-        return cls((), np.zeros(0), np.zeros((0, n)), np.zeros(0), np.zeros((2, 0, 3)), np.zeros((0, 3)))
+        return cls((), np.zeros(0), np.zeros(0), False, np.zeros((0, n)), np.zeros((0, n)), np.zeros((2, 0, 3)),
+                   np.zeros((0, 3)))
 
 
 class LiveDistances:
@@ -134,9 +148,16 @@ class LiveDistances:
     distance less :data:`~dualarm_control.collision.params.KNOWN_MARGIN` is kept as a lower bound,
     moved to the next q by d(q) >= d(q') - sum_j c_j |q_j - q'_j| (c_j the reach of the shape about
     joint j: the joint offsets down the chain plus the shape's extent, a bound on how far a point of
-    the shape moves per radian of joint j). The bounds hold while the obstacles are the same snapshot
-    (the same tuple object: the feed swaps a new one whenever something moves or comes or goes); a
-    pair whose bound is at least the influence distance costs no kinematics and no coal call.
+    the shape moves per radian of joint j; 1 for a prismatic joint). The bounds hold while the
+    obstacles are the same snapshot (the same tuple object: the feed swaps a new one whenever something
+    moves or comes or goes); a pair whose bound is at least the influence distance costs no kinematics
+    and no coal call.
+
+    Cost (issue 42): per snapshot, a table of coal's arguments for every (obstacle, shape) pair (the
+    shapes' placements by reference, as the collision model's); per cycle, the known bounds moved (one
+    matrix-vector product), the kinematics when a pair may be in reach (``computeJointJacobians``, 3 us),
+    one ``coal.distance`` per candidate pair, and the witness points, normals and rows only when asked
+    for (:meth:`complete`; a moving obstacle's normal at once, for n^T v_B).
 
     Args:
         model, geometry: the collision model's reduced pinocchio model and geometry
@@ -171,93 +192,158 @@ class LiveDistances:
                 columns = slice(model.idx_vs[j], model.idx_vs[j] + model.joints[j].nv)
                 support[i, columns] = 1.0
                 offsets = sum(float(np.linalg.norm(model.jointPlacements[o].translation)) for o in chain[position + 1:])
-                reach[i, columns] = extent + offsets
+                prismatic = "P" in model.joints[j].shortname().replace("JointModel", "")
+                reach[i, columns] = 1.0 if prismatic else extent + offsets
         self._support = support
         self._reach = reach
         self.request = distance_request(gjk_tolerance)
-        self._result = coal.DistanceResult()
-        self._known: FloatArray = np.zeros((0, 0))  # (shapes, obstacles) lower bounds [m] ...
+        self._calls = 0  # near() calls that computed kinematics (a deferred pair's call)
+        self._known: FloatArray = np.zeros((0, 0))  # (obstacles, shapes) lower bounds [m] ...
         self._known_q: FloatArray | None = None  # ... at these joint positions ...
+        self._below = np.zeros(0, dtype=bool)
+        self._known_flat = self._known.reshape(-1)
         self._known_for: object = None  # ... for this snapshot (identity), whose per-obstacle values are:
         self._obstacle_centres = np.zeros((0, 3))  # bounding sphere centres in the world [m], (m, 3)
         self._obstacle_radii = np.zeros(0)
-        self._transforms: list[coal.Transform3s] = []
+        self._table: list[tuple[Any, ...]] = []  # per (obstacle, shape), obstacle-major (_snapshot) ...
+        self._moving: list[bool] = []  # ... whether the obstacle moves
+        self._any_moving = False
+        self._calls_table: list[tuple[Any, ...]] = []  # each entry's coal arguments, result and key
 
-    def near(self, q: FloatArray, obstacles: Sequence[LiveObstacle], within: float) -> LivePairs:
+    def _snapshot(self, obstacles: Sequence[LiveObstacle]) -> None:
+        """The per-snapshot values (class docstring): known bounds forgotten, the (obstacle, shape) table,
+        entry j * shapes + i: coal's four arguments (the octree first), its result, the (obstacle, link)
+        key, i, j, whether the obstacle is an octree, the pair's (link, ``obstacle:<name>``) and its label."""
+        count, shapes = len(obstacles), len(self.shapes)
+        self._known = np.full((count, shapes), -np.inf)
+        self._known_flat = self._known.reshape(-1)  # a view: the updates are in place
+        self._below = np.zeros(count * shapes, dtype=bool)  # the known bounds' test, preallocated
+        self._known_for = obstacles if isinstance(obstacles, tuple) else None
+        self._obstacle_centres = np.array([o.rotation @ o.centre + o.position for o in obstacles])
+        self._obstacle_radii = np.array([o.radius for o in obstacles])
+        placed = self.geometry_data.oMg  # references: they follow updateGeometryPlacements
+        self._table = []
+        for j, o in enumerate(obstacles):
+            tf, octree = coal.Transform3s(o.rotation, o.position), isinstance(o.shape, coal.OcTree)
+            label = o.label
+            for i, k in enumerate(self.shapes):
+                # coal answers an octree pair with the octree's point first, n from it: asked octree first, swapped back
+                call = ((o.shape, tf, self._geometries[i], placed[k]) if octree
+                        else (self._geometries[i], placed[k], o.shape, tf))
+                self._table.append((*call, coal.DistanceResult(), j * shapes + self._first[i], i, j, octree,
+                                    (self.names[i], label), f"{self.names[i]} – {label}"))
+        self._calls_table = [entry[:6] for entry in self._table]
+        self._moving = [bool(np.any(o.velocity)) for o in obstacles]
+        self._any_moving = any(self._moving)
+
+    def near(self, q: FloatArray, obstacles: Sequence[LiveObstacle], within: float, deferred: bool = False) -> LivePairs:
         """The (link, obstacle) pairs closer than ``within`` [m] at q [rad] (n,), each link's closest
-        shape, obstacle by obstacle in the order given, links in the geometry's order."""
+        shape, obstacle by obstacle in the order given, links in the geometry's order. ``deferred``: the
+        witness points, normals and rows are left for :meth:`complete` (until the next call)."""
         n = self.model.nv
         if not obstacles or not self.shapes:
             return LivePairs.empty(n)
-        if obstacles is not self._known_for or self._known_q is None or not np.isfinite(q).all():
-            self._known = np.full((len(self.shapes), len(obstacles)), -np.inf)
-            self._known_for = obstacles if isinstance(obstacles, tuple) else None
-            self._obstacle_centres = np.array([o.rotation @ o.centre + o.position for o in obstacles])
-            self._obstacle_radii = np.array([o.radius for o in obstacles])
-            self._transforms = [coal.Transform3s(o.rotation, o.position) for o in obstacles]
+        if obstacles is not self._known_for or self._known_q is None or not math.isfinite(sum(q.tolist())):
+            self._snapshot(obstacles)
         else:
-            self._known -= (self._reach @ np.abs(q - self._known_q))[:, None]
+            moved = q - self._known_q
+            self._known -= self._reach @ np.abs(moved, out=moved)
         self._known_q = q.copy()
-        candidates = self._known < within
-        if not candidates.any():
+        known = self._known_flat  # a view, (obstacle, shape) obstacle-major
+        candidates = np.flatnonzero(np.less(known, within, out=self._below))
+        if not candidates.size:
             return LivePairs.empty(n)
+        self._calls += 1  # data and the results change from here: earlier deferred pairs are gone
         pin.computeJointJacobians(self.model, self.data, q)  # data.oMi and data.J
-        if np.count_nonzero(candidates) <= SPHERE_BROADPHASE_MIN:  # coal on so few costs less than the spheres
-            close = np.argwhere(candidates)
-        else:
+        if candidates.size > SPHERE_BROADPHASE_MIN:  # coal on fewer costs less than the spheres
             oMi = self.data.oMi
             joints = np.array([oMi[j].homogeneous[:3] for j in self._joint.tolist()])  # (shapes, 3, 4)
             centres = np.einsum("sij,sj->si", joints, self._centres_joint)  # the shapes' sphere centres, world
-            offset = centres[:, None, :] - self._obstacle_centres[None, :, :]
-            gaps = (np.sqrt(np.einsum("smk,smk->sm", offset, offset))
-                    - self._radii[:, None] - self._obstacle_radii[None, :])  # sphere bounds, (shapes, obstacles)
-            self._known = np.where(candidates, np.maximum(self._known, gaps), self._known)
-            close = np.argwhere(candidates & (gaps < within))  # (shape, obstacle) rows, shape-major
-        if not len(close):
-            return LivePairs.empty(n)
+            obstacle, shape = np.divmod(candidates, len(self.shapes))
+            offset = centres[shape] - self._obstacle_centres[obstacle]
+            gaps = (np.sqrt(np.einsum("ck,ck->c", offset, offset))
+                    - self._radii[shape] - self._obstacle_radii[obstacle])  # sphere bounds, (candidates,)
+            known[candidates] = np.maximum(known[candidates], gaps)
+            candidates = candidates[gaps < within]
+            if not candidates.size:
+                return LivePairs.empty(n)
         pin.updateGeometryPlacements(self.model, self.data, self.geometry, self.geometry_data)
-        placed = self.geometry_data.oMg
-        best: dict[tuple[int, int], tuple[float, int, list[float]]] = {}  # (obstacle, link) -> d, shape, witness
-        result, request = self._result, self.request
-        transforms = self._transforms
-        for i, j in sorted(close.tolist(), key=lambda row: (row[1], row[0])):  # obstacle by obstacle
-            obstacle, tf = obstacles[j], transforms[j]
-            shape, frame = self._geometries[i], placed[self.shapes[i]]
+        best: dict[int, tuple[float, int]] = {}  # (obstacle, link) key -> d, table index
+        calls = self._calls_table
+        request = self.request
+        for c in candidates.tolist():
+            a, tf_a, b, tf_b, result, key = calls[c]
             result.clear()
-            if isinstance(obstacle.shape, coal.OcTree):  # coal answers with the octree's point first, n from it
-                d = coal.distance(obstacle.shape, tf, shape, frame, request, result)
-                witness = [*result.getNearestPoint2(), *result.getNearestPoint1(), *(-result.normal)]
-            else:
-                d = coal.distance(shape, frame, obstacle.shape, tf, request, result)
-                witness = [*result.getNearestPoint1(), *result.getNearestPoint2(), *result.normal]
-            if not math.isfinite(d):
+            d = coal.distance(a, tf_a, b, tf_b, request, result)
+            if not -_FAILED < d < _FAILED:  # also NaN: GJK failed, the pair is left out this cycle
                 continue
-            self._known[i, j] = d - KNOWN_MARGIN
-            key = (j, self._first[i])
+            known[c] = d - KNOWN_MARGIN
             if d < within and (key not in best or d < best[key][0]):
-                best[key] = (float(d), i, witness)
+                best[key] = (d, c)
         if not best:
             return LivePairs.empty(n)
-        order = sorted(best)
-        chosen = [best[key] for key in order]
-        distance = np.array([c[0] for c in chosen])
-        shape_rows = np.array([c[1] for c in chosen], dtype=np.intp)
-        raw = np.array([c[2] for c in chosen]).reshape(-1, 3, 3)  # (m, [p_a, p_b, n], 3)
-        points = raw[:, :2].transpose(1, 0, 2).copy()  # (2, m, 3)
+        table = self._table
+        distance, pairs, shapes, links, labels = [], [], [], [], []
+        for key in sorted(best) if len(best) > 1 else best:
+            d, c = best[key]
+            entry = table[c]
+            distance.append(d)
+            pairs.append(c)
+            shapes.append(entry[6])
+            links.append(entry[9])
+            labels.append(entry[10])
+        approach = np.zeros(len(pairs))
+        moving = False
+        if self._any_moving:
+            rows = [r for r, c in enumerate(pairs) if self._moving[table[c][7]]]
+            if rows:  # n^T v_B
+                _, normals = self._witness([pairs[r] for r in rows])
+                velocities = np.array([obstacles[table[pairs[r]][7]].velocity for r in rows])
+                approach[rows] = np.einsum("mk,mk->m", normals, velocities)
+                moving = True
+        found = LivePairs(tuple(links), np.array(distance), approach, moving, self._reach[shapes], pairs=tuple(pairs),
+                          call=self._calls, labels=tuple(labels))
+        return found if deferred else self.complete(found)
+
+    def _witness(self, entries: Sequence[int]) -> tuple[FloatArray, FloatArray]:
+        """Table entries' p_a (on the link), p_b (on the obstacle) [m], (2, m, 3), and unit n from A to B,
+        (m, 3), from their coal results (an octree's swapped back: it was asked first)."""
+        table = self._table
+        raw = np.array([(r.getNearestPoint1(), r.getNearestPoint2(), r.normal)
+                        for r in [table[c][4] for c in entries]]).reshape(-1, 3, 3)  # (m, [p1, p2, n], 3)
+        swapped = [table[c][8] for c in entries]
+        if any(swapped):
+            flip = np.array(swapped)
+            raw[flip] = raw[flip][:, [1, 0, 2]]
+            raw[flip, 2] *= -1.0
+        points = raw[:, :2].transpose(1, 0, 2).copy()
         normals = raw[:, 2]
         length = np.sqrt(np.einsum("mk,mk->m", normals, normals))
         normals = np.where(length[:, None] > 0.0, normals / np.where(length > 0.0, length, 1.0)[:, None],
                            np.array([0.0, 0.0, 1.0]))
-        velocities = np.array([obstacles[j].velocity for j, _ in order])
-        approach = np.einsum("mk,mk->m", normals, velocities)
-        rows = -witness_rows(normals, points[0], self.data.J) * self._support[shape_rows]
-        links = tuple((self.names[i], obstacles[j].label) for (j, _), i in zip(order, shape_rows.tolist(), strict=True))
-        return LivePairs(links, distance, rows, approach, points, normals)
+        return points, normals
+
+    def complete(self, pairs: LivePairs) -> LivePairs:
+        """``pairs`` with the witness points, normals and rows (module docstring) it deferred: from the
+        coal results and Jacobians of its call, which must be the last (ValueError otherwise)."""
+        if pairs.rows is not None:
+            return pairs
+        if pairs.call != self._calls:
+            raise ValueError(f"live pairs of call {pairs.call} completed after call {self._calls}: their coal "
+                             "results are gone (complete them before the next near())")
+        points, normals = self._witness(pairs.pairs)
+        shapes = [self._table[c][6] for c in pairs.pairs]
+        rows = -witness_rows(normals, points[0], self.data.J) * self._support[shapes]
+        pairs.rows, pairs.points, pairs.normals = rows, points, normals
+        return pairs
 
 
-def live_damper_bound(distance: FloatArray, approach: FloatArray, influence: float, safety: float,
+def live_damper_bound(distance: FloatArray, approach: FloatArray | None, influence: float, safety: float,
                       gain: float) -> FloatArray:
     """b = xi (d - d_s) / (d_i - d_s) + n^T v_B [m/s], (m,) (module docstring): the velocity damper's
-    bound for m pairs at d [m] whose obstacle approaches at n^T v_B [m/s] (``approach``, (m,))."""
-    result: FloatArray = gain * (distance - safety) / (influence - safety) + approach
+    bound for m pairs at d [m] whose obstacle approaches at n^T v_B [m/s] (``approach``, (m,); None: all
+    still, n^T v_B = 0)."""
+    result: FloatArray = (distance - safety) * (gain / (influence - safety))
+    if approach is not None:
+        result += approach
     return result

@@ -37,25 +37,25 @@ class LiveObstacleFeed:
             raise ValueError(f"live obstacle slots={slots!r}: expected an integer >= 0")
         self.slots = slots
         self.clock = clock
-        self._snapshot: tuple[LiveObstacle, ...] = ()
+        self._state: tuple[tuple[LiveObstacle, ...], float] = ((), math.inf)  # the snapshot, its first expiry
 
     def publish(self, obstacles: tuple[LiveObstacle, ...]) -> None:
         """The intake's new snapshot (at most ``slots`` obstacles; ValueError otherwise)."""
         if len(obstacles) > self.slots:
             raise ValueError(f"{len(obstacles)} live obstacles for {self.slots} slots")
-        self._snapshot = obstacles
+        self._state = (obstacles, min((o.expires for o in obstacles), default=math.inf))  # one swap
 
     def snapshot_now(self) -> tuple[LiveObstacle, ...]:
         """The snapshot as published (lifetimes not applied)."""
-        return self._snapshot
+        return self._state[0]
 
     def snapshot(self) -> tuple[LiveObstacle, ...]:
         """The obstacles now, those past their lifetime left out (no lock: one attribute read)."""
-        current = self._snapshot
-        if not current:
+        current, earliest = self._state
+        if not current or earliest == math.inf:
             return current
         now = self.clock()
-        if all(o.expires > now for o in current):
+        if earliest > now:
             return current
         return tuple(o for o in current if o.expires > now)
 

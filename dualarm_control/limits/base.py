@@ -102,15 +102,17 @@ class DeferredRows:
         build: returns A (m, n), called at most once.
     """
 
-    __slots__ = ("_below", "_build", "_matrix", "_met", "bound", "speed")
+    __slots__ = ("_below", "_build", "_matrix", "_met", "_parts", "bound", "speed")
 
-    def __init__(self, speed: FloatArray, bound: FloatArray, build: Callable[[], FloatArray]) -> None:
+    def __init__(self, speed: FloatArray, bound: FloatArray, build: Callable[[], FloatArray],
+                 parts: tuple[DeferredRows, ...] = ()) -> None:
         self.speed = speed
         self.bound = bound
-        self._below = bound - ROW_SPEED_MARGIN
+        self._below: FloatArray | None = None  # b - ROW_SPEED_MARGIN, made by the first meets()
         self._build: Callable[[], FloatArray] | None = build
         self._matrix: FloatArray | None = None
         self._met = b""  # the bytes of the last qd that met the bound (a cycle checks the same qd up to 3 times)
+        self._parts = parts  # the rows stacked into these (:meth:`stacked`), () for rows of one limit
 
     @classmethod
     def of(cls, matrix: FloatArray, bound: FloatArray) -> DeferredRows:
@@ -138,15 +140,32 @@ class DeferredRows:
         key = qd.tobytes()
         if key == self._met:
             return True
-        met = bool((self.speed @ np.abs(qd) <= self._below).all())
+        below = self._below
+        if below is None:
+            below = self._below = self.bound - ROW_SPEED_MARGIN
+        met = bool((self.speed @ np.abs(qd) <= below).all())
         if met:
             self._met = key
         return met
 
+    def excess(self, qd: FloatArray) -> float:
+        """max(A qd - b, 0) [m/s] at qd (n,) [rad/s], building only the matrices of the stacked parts whose
+        speed bound does not vouch for qd (a vouched part's rows are below their bounds: they add nothing)."""
+        if self._matrix is None and self._parts:
+            worst = 0.0
+            for part in self._parts:
+                excess = part.excess(qd)
+                worst = max(worst, excess)
+            return worst
+        if self._matrix is None and self.meets(qd):
+            return 0.0
+        return float((self.matrix @ qd - self.bound).max(initial=0.0))
+
     def stacked(self, other: DeferredRows) -> DeferredRows:
-        """These rows, then ``other``'s."""
+        """These rows, then ``other``'s (each part built only when needed: :meth:`excess`)."""
+        parts = (self._parts or (self,)) + (other._parts or (other,))
         return DeferredRows(np.vstack((self.speed, other.speed)), np.concatenate((self.bound, other.bound)),
-                            lambda: np.vstack((self.matrix, other.matrix)))
+                            lambda: np.vstack([part.matrix for part in parts]), parts)
 
 
 @dataclass(slots=True)

@@ -18,7 +18,13 @@ from dualarm_control.collision import CollisionModel, CollisionParams
 from dualarm_control.collision.live import LiveDistances, LivePairs, live_damper_bound
 from dualarm_control.collision.live_feed import LiveObstacleFeed
 from dualarm_control.kinematics import Configuration, FloatArray
-from dualarm_control.limits.base import NONE, ROW_PRIORITY, Constraint, Limit
+from dualarm_control.limits.base import (
+    NONE,
+    ROW_PRIORITY,
+    Constraint,
+    DeferredRows,
+    Limit,
+)
 from dualarm_control.limits.collision import ACTIVE_TOLERANCE
 from dualarm_control.limits.registry import LimitContext, register_limit
 
@@ -82,25 +88,35 @@ class LiveObstacleLimit(Limit):
         self._kept = params.kept_distances
         self.last = LivePairs.empty(collision.model.nv)
         self._count = 0
-        self._bound = np.zeros(0)
+        self._rows = DeferredRows.of(np.zeros((0, collision.model.nv)), np.zeros(0))
 
     def constraints(self, configuration: Configuration, previous: FloatArray) -> Constraint:
         obstacles = self.feed.snapshot()
         self._count = len(obstacles)
         influence, safety = self._kept
-        self.last = pairs = self.distances.near(configuration.q, obstacles, influence)
+        self.last = pairs = self.distances.near(configuration.q, obstacles, influence, deferred=True)
         if not len(pairs):
             return NONE
-        self._bound = bound = live_damper_bound(pairs.distance, pairs.approach, influence, safety, self.params.gain)
-        return Constraint.of_rows(-pairs.rows, bound, tuple(f"{a} – {b}" for a, b in pairs.links))
+        bound = live_damper_bound(pairs.distance, pairs.approach if pairs.moving else None, influence, safety,
+                                  self.params.gain)
+        self._rows = DeferredRows(pairs.speed, bound, lambda: self._matrix(pairs))
+        return Constraint(rows=self._rows, labels=pairs.labels)
+
+    def _matrix(self, pairs: LivePairs) -> FloatArray:
+        """The rows' matrix -dd_dq (m, n) [m/rad] of this cycle's ``pairs``."""
+        rows = self.distances.complete(pairs).rows
+        assert rows is not None
+        return -rows
 
     def report(self, velocities: FloatArray) -> LiveReport | None:
         """The last cycle's :class:`LiveReport` (None with no live obstacle)."""
         pairs = self.last
         if not len(pairs):
             return LiveReport(self._count, float("inf"), None, 0.0, 0, 0) if self._count else None
-        active = int(np.count_nonzero(-pairs.rows @ velocities >= self._bound - ACTIVE_TOLERANCE))
-        r = int(np.argmin(pairs.distance))
+        rows = self._rows  # a row vouched for by its speed bound (C |qd| <= b - 1e-6) is not active
+        active = 0 if rows.meets(velocities) else int(np.count_nonzero(rows.matrix @ velocities
+                                                                        >= rows.bound - ACTIVE_TOLERANCE))
+        r = int(pairs.distance.argmin())
         return LiveReport(self._count, float(pairs.distance[r]), pairs.links[r], float(pairs.approach[r]),
                           len(pairs), active)
 

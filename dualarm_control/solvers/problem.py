@@ -98,8 +98,8 @@ class ControlProblem:
         (0 without building deferred rows where their speed bound vouches for qd)."""
         if self.limit_bound is None or not self.has_limit_rows:
             return 0.0
-        if self.limit_rows is None and self.limit_deferred is not None and self.limit_deferred.meets(qd):
-            return 0.0
+        if self.limit_rows is None and self.limit_deferred is not None:  # built only where the speed bounds fail
+            return self.limit_deferred.excess(qd)
         a = self.limit_matrix()
         assert a is not None
         return float((a @ qd - self.limit_bound).max(initial=0.0))

@@ -75,7 +75,7 @@ def _resend_listener(wanted: threading.Event) -> Any:
 
     class Resend(ServerListener):
         def on_subscribe(self, client: Any, channel: Any) -> None:
-            if channel.topic in LATCHED:
+            if channel.topic in LATCHED or channel.topic == LIVE_SCENE[0]:
                 wanted.set()
 
     return Resend()
@@ -191,17 +191,21 @@ def serve_bag(bag: Path, port: int = DEFAULT_PORT, host: str = "127.0.0.1", **kw
 
 
 LIVE_SIGNALS: Final = {"/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
-                        "/velocity_controller/commands": "std_msgs/msg/Float64MultiArray"}
+                        "/velocity_controller/commands": "std_msgs/msg/Float64MultiArray",
+                        "/collision_objects": "visualization_msgs/msg/MarkerArray"}
 """Topics of the running cell forwarded as received beside /joint_states and the frames."""
+LIVE_SCENE: Final = ("/dualarm/obstacles", "visualization_msgs/msg/MarkerArray")
+"""The obstacles' latched scene: forwarded when it comes and again whenever a client subscribes to it."""
 
 
 def serve_live(port: int = DEFAULT_PORT, host: str = "127.0.0.1", *, stop: threading.Event | None = None,
                on_ready: Callable[[int], None] | None = None, wait_s: float = 30.0) -> None:
     """Serve the running cell (this ROS domain) over the Foxglove WebSocket protocol until ``stop``.
 
-    Subscribes /robot_description (transient local; waits up to ``wait_s`` for it), /joint_states
-    and :data:`LIVE_SIGNALS`; each joint state is forwarded with its /tf (the movable joints),
-    /robot_description and /tf_static are re-sent when a client subscribes to them.
+    Subscribes /robot_description (transient local; waits up to ``wait_s`` for it), /joint_states,
+    :data:`LIVE_SIGNALS` and the obstacles' latched scene :data:`LIVE_SCENE`; each joint state is forwarded
+    with its /tf (the movable joints), /robot_description, /tf_static and the scene are re-sent when a client
+    subscribes to them.
     No signal handlers: runs in any thread (Ctrl-C in the main thread raises KeyboardInterrupt).
     """
     import foxglove
@@ -233,7 +237,8 @@ def serve_live(port: int = DEFAULT_PORT, host: str = "127.0.0.1", *, stop: threa
         resend = threading.Event()
         server = foxglove.start_server(host=host, port=port, server_listener=_resend_listener(resend))
         try:
-            scene = FoxgloveScene(empty, [RawTopic(t, n, (), ()) for t, n in LIVE_SIGNALS.items()])
+            scene = FoxgloveScene(empty, [RawTopic(t, n, (), ()) for t, n in (*LIVE_SIGNALS.items(), LIVE_SCENE)])
+            obstacles: list[bytes] = []  # the latched scene, last one
             reader = JointStateReader()
             order: dict[tuple[str, ...], np.ndarray] = {}
             started: list[bool] = []
@@ -255,14 +260,21 @@ def serve_live(port: int = DEFAULT_PORT, host: str = "127.0.0.1", *, stop: threa
             def forward(topic: str) -> Callable[[bytes], None]:
                 return lambda data: scene.channels[topic].log(data, log_time=time.time_ns())
 
+            def on_scene(data: bytes) -> None:
+                obstacles[:] = [data]
+                forward(LIVE_SCENE[0])(data)
+
             listener.subscribe({"/joint_states": Topic(JOINT_STATE_TYPE, on_joint_state, raw=True),
-                                **{t: Topic(n, forward(t), raw=True) for t, n in LIVE_SIGNALS.items()}})
+                                **{t: Topic(n, forward(t), raw=True) for t, n in LIVE_SIGNALS.items()},
+                                LIVE_SCENE[0]: Topic(LIVE_SCENE[1], on_scene, latched_qos(), raw=True)})
             if on_ready is not None:
                 on_ready(server.port)
             while not stop.is_set():
                 if resend.is_set() and started:
                     resend.clear()
                     scene.send_latched()
+                    for data in obstacles:
+                        forward(LIVE_SCENE[0])(data)
                 listener.spin_once(0.05)
         finally:
             server.stop()

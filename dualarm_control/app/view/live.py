@@ -3,7 +3,9 @@
 Runs in its own process (never in a control node). Subscriptions are best effort (they match
 reliable and best-effort publishers; a viewer may drop a sample rather than slow anyone
 down) and read the CDR bytes with the nodes' own readers (:mod:`dualarm_control.ros.convert`);
-``/diagnostics`` is deserialized by rclpy (all through :mod:`dualarm_control.ros.listen`). Every
+``/diagnostics`` and the obstacles' MarkerArrays (the latched scene ``/dualarm/obstacles``, the moving
+ones on ``/collision_objects``: :mod:`.obstacles_view`) are deserialized by rclpy (all through
+:mod:`dualarm_control.ros.listen`). Every
 ``FLUSH_PERIOD_S`` the buffered samples go to Rerun through the parts of
 :func:`.rerun_view.log_run` (one ``send_columns`` per joint and series: at 200 Hz one ``rr.log``
 per joint and sample would not keep up). Time is the
@@ -22,16 +24,23 @@ import numpy as np
 
 from dualarm_control.app.record.bag import CONTROLLER_STATUS, parse_float
 from dualarm_control.app.view import rerun_view as rv
+from dualarm_control.app.view.obstacles_view import (
+    LIVE_TOPIC,
+    SCENE_TOPIC,
+    ObstacleTrack,
+    add_markers,
+    log_obstacles,
+)
 from dualarm_control.collision import CollisionModel
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.ros import convert
 from dualarm_control.ros.listen import Topic, listen
-from dualarm_control.ros.qos import stream_qos
+from dualarm_control.ros.qos import latched_qos, stream_qos
 
 FLUSH_PERIOD_S = 0.1
 QUEUE_DEPTH = 1000
 """Samples kept per subscription while the view is busy logging (5 s of one topic at 200 Hz)."""
-TOPICS = ("/joint_states", "/velocity_controller/commands", "/relative_target", "/diagnostics")
+TOPICS = ("/joint_states", "/velocity_controller/commands", "/relative_target", "/diagnostics", SCENE_TOPIC, LIVE_TOPIC)
 
 
 class LiveLog:
@@ -47,6 +56,7 @@ class LiveLog:
         self.commands: list[tuple[float, np.ndarray]] = []
         self.targets: list[tuple[float, np.ndarray]] = []
         self.cycles: list[tuple[float, dict[str, str]]] = []
+        self.obstacles: dict[str, ObstacleTrack] = {}  # the obstacles' poses since the last flush
         self.status: str | None = None
         self.counts = dict.fromkeys(TOPICS, 0)
         self.rejected = 0
@@ -87,9 +97,25 @@ class LiveLog:
             self.counts["/diagnostics"] += 1
             self.cycles.append((self.seconds(int(values["stamp_ns"])), values))
 
+    def scene(self, msg: Any) -> None:
+        """The latched scene (still obstacles: one pose each)."""
+        self.counts[SCENE_TOPIC] += 1
+        add_markers(self.obstacles, msg, live=False)
+
+    def markers(self, msg: Any) -> None:
+        """Obstacles on the live topic (moving ones: a pose per message, on the joint states' clock)."""
+        self.counts[LIVE_TOPIC] += 1
+        add_markers(self.obstacles, msg, live=True)
+
     def flush(self) -> None:
         """Log what arrived since the last flush."""
         rec = self.recording
+        if self.obstacles:
+            moving = [s for track in self.obstacles.values() for s in track.stamps if s >= 0]
+            if moving and self.t0 is None:
+                self.seconds(min(moving))
+            log_obstacles(self.obstacles, self.t0 or 0, rec)
+            self.obstacles = {}
         if self.states:
             t, q = zip(*self.states, strict=True)
             rv.log_joints(self.model.urdf, np.array(t), np.array(q), self.model.joint_names, rec)
@@ -133,6 +159,8 @@ def run_live(model: DualArmModel, recording: Any, duration: float | None = None,
         "/relative_target": Topic("trajectory_msgs/msg/MultiDOFJointTrajectory", log.target, qos,
                                   decoder=convert.TargetInput()),
         "/diagnostics": Topic("diagnostic_msgs/msg/DiagnosticArray", log.diagnostics, qos),
+        SCENE_TOPIC: Topic("visualization_msgs/msg/MarkerArray", log.scene, latched_qos()),
+        LIVE_TOPIC: Topic("visualization_msgs/msg/MarkerArray", log.markers, qos),
     }
     with listen("dualarm_view", topics, on_malformed=log.malformed) as listener:
         report(f"dualarm view: logging {', '.join(TOPICS)} (Ctrl-C to stop)")

@@ -54,6 +54,25 @@ def _name(marker: Any) -> str:
     return ns if marker.id == 0 else f"{ns}_{marker.id}"
 
 
+def add_markers(tracks: dict[str, ObstacleTrack], message: Any, live: bool) -> None:
+    """A MarkerArray's obstacles (ADD of CUBE, SPHERE, CYLINDER, MESH_RESOURCE; rosbags' or rclpy's message)
+    into ``tracks`` by name: a new track for a new name, one more pose for a known one, stamped with the
+    marker's stamp [ns] when ``live`` (the moving obstacles' topic), -1 for the latched scene."""
+    for marker in message.markers:
+        if marker.action != 0 or marker.type not in (CUBE, SPHERE, CYLINDER, MESH_RESOURCE):
+            continue
+        name = _name(marker)
+        track = tracks.get(name)
+        if track is None:
+            s, c = marker.scale, marker.color
+            track = tracks[name] = ObstacleTrack(
+                name, int(marker.type), np.array([s.x, s.y, s.z], dtype=float),
+                np.array([c.r, c.g, c.b, c.a if c.a > 0 else 1.0], dtype=float),
+                str(marker.mesh_resource).removeprefix("file://"))
+        stamp = marker.header.stamp.sec * 1_000_000_000 + marker.header.stamp.nanosec
+        track.add(stamp if live else -1, marker)
+
+
 def read_obstacles(bag: Path) -> dict[str, ObstacleTrack]:
     """The obstacles a bag recorded, by name: the latched scene's (one pose each) and the live markers'
     (one pose per message, ADD only), in the order first seen. {} for a bag without them."""
@@ -65,20 +84,7 @@ def read_obstacles(bag: Path) -> dict[str, ObstacleTrack]:
         if not conns:
             return tracks
         for connection, _, raw in reader.messages(connections=conns):
-            message: Any = reader.deserialize(raw, connection.msgtype)
-            for marker in message.markers:
-                if marker.action != 0 or marker.type not in (CUBE, SPHERE, CYLINDER, MESH_RESOURCE):
-                    continue
-                name = _name(marker)
-                track = tracks.get(name)
-                if track is None:
-                    s, c = marker.scale, marker.color
-                    track = tracks[name] = ObstacleTrack(
-                        name, int(marker.type), np.array([s.x, s.y, s.z], dtype=float),
-                        np.array([c.r, c.g, c.b, c.a if c.a > 0 else 1.0], dtype=float),
-                        str(marker.mesh_resource).removeprefix("file://"))
-                stamp = marker.header.stamp.sec * 1_000_000_000 + marker.header.stamp.nanosec
-                track.add(stamp if connection.topic == LIVE_TOPIC else -1, marker)
+            add_markers(tracks, reader.deserialize(raw, connection.msgtype), connection.topic == LIVE_TOPIC)
     return tracks
 
 
