@@ -143,7 +143,7 @@ class SimNode:
         pan = tasks is not None and held is None  # a task scenario's contact links: those of pan cleaning
         robot = scenario.robot
         self.cell = DualArmCell(
-            CellConfig.for_robot(robot, allowed=scenario.collision_allowed + ((tasks.contact_links,) if pan and tasks is not None else ()),
+            CellConfig.for_robot(robot, allowed=scenario.robot_pairs_allowed + ((tasks.contact_links,) if pan and tasks is not None else ()),
                                  collisions=p["collisions"],
                                  control_period=p["control_period"],
                                  physics_rate_hz=p["physics_rate_hz"], command_timeout=p["command_timeout"],

@@ -60,7 +60,7 @@ def run_scenario(
     period = params.period
     cell_options = source.cell(options)
     pairs: tuple[tuple[str, str], ...] = cell_options.get("contact_pairs", ())
-    config = CellConfig.for_robot(scenario.robot, allowed=scenario.collision_allowed, control_period=period,
+    config = CellConfig.for_robot(scenario.robot, allowed=scenario.robot_pairs_allowed, control_period=period,
                                   obstacles=scenario.obstacles, **cell_options)
     with DualArmCell(config, initial_positions=source.initial_positions(scenario.initial_positions)) as cell:
         state = cell.state()
