@@ -190,8 +190,10 @@ def path_of(phases: CarryPhases, control: InternalForceParams, absolute_grasp: t
     after the release (the path starts at ``control.motion_start``)."""
     path = chain(phases.segments, np.asarray(absolute_grasp[0], float), np.asarray(absolute_grasp[1], float), limits)
     end = control.motion_start + path.duration
-    if end > phases.release_time + 1e-9:
+    still = control.payload_start if control.payload_start >= control.motion_start else phases.release_time
+    if end > still + 1e-9:
         raise ScenarioError(f"scenario parameter '{PREFIX}held_object.release_time': got {phases.release_time} s, "
                             f"but the path ends at {end:.3f} s (motion start {control.motion_start:g} s + "
-                            f"{path.duration:.3f} s): release after it")
+                            f"{path.duration:.3f} s), after the release or the payload's still step before it "
+                            f"({still:g} s): release later")
     return path

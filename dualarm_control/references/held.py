@@ -117,7 +117,10 @@ def parse_held(flat: Mapping[str, Any]) -> HeldSetup | None:
     if params.grasp_time < params.still_time:
         raise ScenarioError(f"scenario parameter '{PREFIX}held_object.grasp_time': got {params.grasp_time}, expected "
                             f">= internal_force.still_time ({params.still_time} s: the bias's still step comes first)")
-    return HeldSetup(held, sensors, params, parse_phases(flat, params, grasp.release_time))
+    phases = parse_phases(flat, params, grasp.release_time)
+    if phases is not None and "payload_time" not in control:  # the box rests on its support until the lift
+        params = dataclasses.replace(params, payload_time=phases.release_time - 2.0 * params.still_time)
+    return HeldSetup(held, sensors, params, phases)
 
 
 def tuned(params: InternalForceParams, values: Mapping[str, Any]) -> InternalForceParams:
@@ -246,16 +249,7 @@ class HoldController:
     def _carry_targets(self, t: float) -> list[Task]:
         """The tasks at t on the carry's plan (the relative target before the admittance's offset)."""
         assert self.plan is not None
-        tasks = list(self.base.tasks)
-        rel, absolute = self.plan.relative(t), self.plan.absolute(t)
-        held, index = tasks[self._held_index], self._absolute[0]
-        assert isinstance(held, RelativePoseTask)
-        tasks[self._held_index] = dataclasses.replace(held, target=FixedTarget(
-            rel.position, rel.rotation, rel.linear_velocity, rel.angular_velocity))
-        tasks[index] = dataclasses.replace(tasks[index], position=absolute.position, rotation=absolute.rotation,
-                                           linear_velocity=absolute.linear_velocity,
-                                           angular_velocity=absolute.angular_velocity)
-        return tasks
+        return carry_tasks(self.base.tasks, self.plan, t, self._held_index, self._absolute[0])
 
     def _absolute_targets(self, t: float) -> list[Task]:
         """The tasks at t: the absolute ones at their start pose until ``motion_start``, then blended to their
@@ -312,3 +306,18 @@ def carry_plan(model: Any, tasks: list[Task], held_index: int, absolute_index: i
                      (state.position.copy(), state.rotation.copy()),
                      (np.asarray(absolute.position, float), np.asarray(absolute.rotation, float)),
                      absolute.grasp, limits)
+
+
+def carry_tasks(tasks: list[Task], plan: CarryPlan, t: float, held_index: int, absolute_index: int) -> list[Task]:
+    """``tasks`` with the relative_pose task at ``held_index`` and the absolute_pose one at ``absolute_index`` on the
+    carry plan's targets at t [s] (pose and feed-forward twist)."""
+    out = list(tasks)
+    rel, absolute = plan.relative(t), plan.absolute(t)
+    held, moved = out[held_index], out[absolute_index]
+    assert isinstance(held, RelativePoseTask) and isinstance(moved, AbsolutePoseTask)
+    out[held_index] = dataclasses.replace(held, target=FixedTarget(rel.position, rel.rotation, rel.linear_velocity,
+                                                                   rel.angular_velocity))
+    out[absolute_index] = dataclasses.replace(moved, position=absolute.position, rotation=absolute.rotation,
+                                              linear_velocity=absolute.linear_velocity,
+                                              angular_velocity=absolute.angular_velocity)
+    return out
