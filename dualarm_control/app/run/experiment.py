@@ -63,6 +63,8 @@ def run_scenario(
     config = CellConfig.for_robot(scenario.robot, allowed=scenario.robot_pairs_allowed, control_period=period,
                                   obstacles=scenario.obstacles, **cell_options)
     with DualArmCell(config, initial_positions=source.initial_positions(scenario.initial_positions)) as cell:
+        if cell.held_object is not None:  # as sim_node: the grasp clock starts with the first motion command (a
+            cell.count_grasp_from_motion()  # carry's first command is zero: its close starts at rest)
         state = cell.state()
         follower = source.follower(model, params, state.positions, options)
         steps, n = follower.steps, model.nq
