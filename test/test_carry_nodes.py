@@ -1,0 +1,81 @@
+"""The scenario `carry` over ROS (issue 41, item 5; docs/cooperative.md "The scenario `carry`"): sim_node's box on
+its support, grasped and released on the simulator's clock, controller_node's internal-force control, recorded.
+
+Lockstep: `dualarm launch carry --lockstep --force --record BAG` then `dualarm report BAG` give the in-process
+experiment's metrics (the issue asks 1e-6; measured: equal to the last bit, the wall-clock cycle times aside). The
+default run compares the short variant (test_carry.short_carry, 1200 cycles); the full carry is ``slow``, and so is
+the real-time run, which is judged on completing only (a real-time force bound flaked under load before).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+from launching import meanwhile
+from test_carry import PARAMS, _params, short_carry
+
+from dualarm_control.app.record.bag import read_run
+from dualarm_control.app.record.report import summarize_run
+from dualarm_control.app.run.experiment import run_scenario
+from dualarm_control.app.run.launcher import launch_scenario
+from dualarm_control.scenario import load_scenario
+
+WALL_CLOCK = ("cycle_time_p50_s", "cycle_time_p99_s")
+
+
+def _same_metrics(scenario_name: str, tmp_path: Path) -> dict[str, Any]:
+    """Launch ``scenario_name`` in lockstep with the control on, recorded, while the same runs in one process;
+    assert every metric of the bag's report equals the in-process one to 1e-6 (relative; NaN as NaN)."""
+    bag = tmp_path / "bag"
+
+    def in_process() -> dict[str, Any]:
+        scenario = load_scenario(scenario_name)
+        return summarize_run(run_scenario(scenario, _params(), force=True), scenario)
+
+    code, expected = meanwhile(
+        lambda: launch_scenario(scenario_name, [PARAMS], [], True, bag, timeout=300.0, force=True), in_process)
+    assert code == 0
+    (log,), scenario = read_run(bag)
+    assert scenario is not None and log.internal_wrench is not None
+    from_bag = summarize_run(log, scenario)
+    assert set(from_bag) == set(expected)
+    for key, value in expected.items():
+        if key in WALL_CLOCK:
+            continue
+        got = from_bag[key]
+        if isinstance(value, float):
+            assert (math.isnan(value) and math.isnan(float(got))) or math.isclose(float(got), value, rel_tol=1e-6,
+                                                                                   abs_tol=1e-12), (key, got, value)
+        else:
+            assert got == value, (key, got, value)
+    return from_bag
+
+
+def test_lockstep_short_carry_bag_metrics_equal_in_process(tmp_path: Path) -> None:
+    """The short carry over ROS in lockstep: the bag's report equals the experiment's (path error, internal
+    wrench, slip-free grasp, payload, closest pair, verdicts)."""
+    metrics = _same_metrics(str(short_carry(tmp_path)), tmp_path)
+    assert float(metrics["internal_force_settled_max_n"]) < 5.0 and float(metrics["path_error_max_m"]) < 5e-3
+
+
+@pytest.mark.slow
+def test_lockstep_carry_bag_metrics_equal_in_process(tmp_path: Path) -> None:
+    """The full carry (2900 cycles) over ROS in lockstep: the same metrics as in one process."""
+    metrics = _same_metrics("carry", tmp_path)
+    assert metrics["tasks_reached"] == 2, metrics["task_outcomes"]
+
+
+@pytest.mark.slow
+@pytest.mark.realtime
+def test_realtime_carry_runs_to_completion(tmp_path: Path) -> None:
+    """`dualarm launch carry --force --record BAG` in real time at 200 Hz: it runs to completion, recorded, and the
+    report reads it (no force bound on the wall-clock run: its squeeze depends on the machine's timing)."""
+    bag = tmp_path / "bag"
+    assert launch_scenario("carry", [PARAMS], [], False, bag, timeout=120.0, force=True) == 0
+    (log,), scenario = read_run(bag)
+    assert scenario is not None and log.internal_wrench is not None
+    metrics = summarize_run(log, scenario)
+    assert len(log.time) == 2900 and math.isfinite(float(metrics["path_error_max_m"])), metrics
