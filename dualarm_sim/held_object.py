@@ -212,6 +212,11 @@ class HeldObject:
         position, orientation = p.getBasePositionAndOrientation(self.body, physicsClientId=self._cid)
         return _pose_matrix(np.array(position), _rotation(orientation))
 
+    def pose_vector(self) -> FloatArray:
+        """The box centre's world pose as pybullet gives it: (x, y, z [m], qx, qy, qz, qw), (7,)."""
+        position, orientation = p.getBasePositionAndOrientation(self.body, physicsClientId=self._cid)
+        return np.array((*position, *orientation), dtype=float)
+
     @property
     def grasped(self) -> bool:
         """Whether the hands hold the box."""

@@ -59,6 +59,7 @@ def test_lockstep_short_carry_bag_metrics_equal_in_process(tmp_path: Path) -> No
     wrench, slip-free grasp, payload, closest pair, verdicts)."""
     metrics = _same_metrics(str(short_carry(tmp_path)), tmp_path)
     assert float(metrics["internal_force_settled_max_n"]) < 5.0 and float(metrics["path_error_max_m"]) < 5e-3
+    assert math.isfinite(float(metrics["slip_left_max_m"])), "the bag's /held_object/pose gives the slip"
 
 
 @pytest.mark.slow

@@ -72,6 +72,7 @@ def run_scenario(
         scal = {k: np.zeros(steps) for k in SCALARS}
         status: list[str] = []
         internal = np.full((steps, 6), np.nan) if cell.held_object is not None else None
+        box = np.full((steps, 7), np.nan) if cell.held_object is not None else None
         every = max(steps // 100, 1)
         moving = MovingFeed(scenario.moving_obstacles, follower) if scenario.moving_obstacles else None
         bodies = MovingBodies(scenario.moving_obstacles, cell.client_id)
@@ -83,6 +84,8 @@ def run_scenario(
             wrench = None if not follower.uses_wrench else (
                 cell.wrist_wrenches().ravel() if cell.held_object is not None else cell.wrench())
             out = follower.cycle(t, state.positions, wrench)
+            if box is not None and cell.held_object is not None:  # where the box is at this state (slip)
+                box[k] = cell.held_object.pose_vector()
             if moving is not None:
                 moving.observe(out.reports.get("live_obstacles"), t)
             cell.apply_command(out.velocities)
@@ -112,7 +115,7 @@ def run_scenario(
                        obstacle_events=moving.finish() if moving is not None else (),
                        absolute_error=absolute_columns(scal["absolute_position_error"],
                                                        scal["absolute_orientation_error"]),
-                       internal_wrench=internal)
+                       internal_wrench=internal, object_pose=box)
     identification = getattr(getattr(follower, "tracker", None), "identification", None)
     if identification is not None:  # a held object: the payload its still step identified
         record = dataclasses.replace(record, identified_mass=identification.mass)
