@@ -13,6 +13,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from launching import meanwhile
 from test_carry import PARAMS, _params, short_carry
@@ -60,6 +61,37 @@ def test_lockstep_short_carry_bag_metrics_equal_in_process(tmp_path: Path) -> No
     metrics = _same_metrics(str(short_carry(tmp_path)), tmp_path)
     assert float(metrics["internal_force_settled_max_n"]) < 5.0 and float(metrics["path_error_max_m"]) < 5e-3
     assert math.isfinite(float(metrics["slip_left_max_m"])), "the bag's /held_object/pose gives the slip"
+    # what `dualarm view BAG` draws: the box where the simulator had it (off the hands before the grasp, at the
+    # grasp while held), the wrist forces as arrows; the video's box where the simulator had it
+    from dualarm_control.app.view.from_bag import bag_run_arrays
+
+    bag = tmp_path / "bag"
+    arrays = bag_run_arrays(bag)
+    box = arrays.frames["held_object"]
+    held = round(3.0 / 0.005)  # t = 3 s: held, still
+    assert np.linalg.norm(box[0, :3] - (0.0, 0.0, 0.15)) > 0.03, box[0]  # the hands start away from it
+    np.testing.assert_allclose(box[held, :3], (0.0, 0.0, 0.15), atol=1e-3)
+    assert arrays.held is not None and np.isfinite(arrays.held.forces["left_tool"][held]).all()
+    from dualarm_control.app.view.video import box_poses, render_video
+
+    poses = box_poses(bag)
+    info = render_video(bag, tmp_path / "carry.mp4", fps=2.0, size=(160, 120), log=None)
+    assert info.frames >= 10 and (tmp_path / "carry.mp4").stat().st_size > 1000
+    start = poses[min(poses)]
+    np.testing.assert_allclose(start[:3], (0.675, 0.0, 0.145), atol=2e-3)  # on its support
+    import pybullet as p
+
+    from dualarm_control.app.view.recording import read_joint_recording
+    from dualarm_control.app.view.video import CellCamera, held_box
+
+    recording = read_joint_recording(bag)
+    camera = CellCamera(recording.urdf_text, (160, 120), recording.joint_names, None, held_box(bag), poses)
+    try:  # the video's box at the first frame: on its support, where the simulator had it
+        camera.render(recording.positions[0], int(recording.stamps_ns[0]))
+        drawn = p.getBasePositionAndOrientation(camera._box, physicsClientId=camera.cell.client_id)
+    finally:
+        camera.close()
+    np.testing.assert_allclose(drawn[0], start[:3], atol=1e-9)
 
 
 @pytest.mark.slow
