@@ -51,11 +51,11 @@ def variant(tmp_path: Path, name: str = "carry", **changes: Any) -> Path:
 
 def short_carry(tmp_path: Path) -> Path:
     """``carry`` shortened for the default run: a 3 cm lift turning 10 deg and back down, released at 5.0 s
-    (1200 cycles instead of 2900)."""
+    (1280 cycles instead of 2960)."""
     return variant(tmp_path, absolute_segments=["lift", "set_down"],
                    **{"lift.position": [0.675, 0.0, 0.175], "lift.rpy_deg": [90.0, 0.0, 10.0],
                       "set_down.position": [0.675, 0.0, 0.146], "set_down.rpy_deg": [90.0, 0.0, 10.0],
-                      "held_object.release_time": 5.0, "duration": 6.0})
+                      "held_object.release_time": 5.0, "duration": 6.4})
 
 
 _RUNS: dict[str, tuple[RunRecord, dict[str, Any], Scenario]] = {}
@@ -80,8 +80,8 @@ def test_carry_with_internal_force_control(name: str) -> None:
     """The full carry with the control on, on Baxter and on the LWR4 cell: the internal force within 5 N and the
     torque within 0.5 N m of the setpoint once settled, the path error < 5 mm, no joint limit violated, the box
     clear of everything it is not put on, the payload identified while it hangs still above the support, both tasks
-    at the plan's end, the box neither slipping in the hands nor moving once put down (measured on Baxter: 1.83 N,
-    0.042 N m, 0.150 mm, 74.4 mm, 1.9991 kg; on the LWR4 cell: 1.41 N, 0.091 N m, 0.14 mm, 56.5 mm, 1.998 kg)."""
+    at the plan's end, the box neither slipping in the hands nor moving once put down (measured on Baxter: 1.25 N,
+    0.042 N m, 0.150 mm, 74.4 mm, 1.999 kg; on the LWR4 cell: 1.46 N, 0.058 N m, 0.136 mm, 56.5 mm, 1.998 kg)."""
     record, metrics, _ = _carried(name)
     assert metrics["solver_failures"] == 0, metrics
     assert float(metrics["internal_force_settled_max_n"]) < 5.0, metrics
@@ -92,7 +92,7 @@ def test_carry_with_internal_force_control(name: str) -> None:
     assert abs(float(metrics["identified_mass_kg"]) - 2.0) < 0.05, metrics
     assert metrics["tasks_reached"] == 2, metrics["task_outcomes"]
     assert record.internal_wrench is not None
-    # the simulator's box in each hand: no slip (measured 0.018 / 0.005 mm, 0.077 mrad); after the release it
+    # the simulator's box in each hand: no slip (measured on Baxter 0.019 mm; LWR4 0.099 mm); after the release it
     # drops the 1 mm it was set down above the support and stays there (measured 1.002 mm)
     assert max(float(metrics["slip_left_max_m"]), float(metrics["slip_right_max_m"])) < 0.5e-3, metrics
     assert float(metrics["slip_max_rad"]) < 5e-3, metrics
@@ -134,6 +134,21 @@ def test_carry_without_control_squeezes_the_box(name: str) -> None:
     metrics = summarize_run(run_scenario(scenario, _params(), force=False), scenario)
     assert float(metrics["internal_force_max_n"]) > 50.0, metrics
     assert float(metrics["path_error_max_m"]) < 5e-3, metrics
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["carry", "carry_lwr4"])
+def test_carry_of_a_5_kg_box(tmp_path: Path, name: str) -> None:
+    """The same carries with a 5 kg box, control on: the same bounds (measured on Baxter 1.38 N, 0.067 N m; on the
+    LWR4 cell 1.66 N, 0.090 N m); the payload identified as 5 kg. (With hold_box's force_gain 1e-2 the squeeze ran
+    away at the end of the lift, 6 -> 153 N in 0.3 s, and the wrench limit stopped Baxter's carry.)"""
+    scenario = load_scenario(str(variant(tmp_path, name, **{"held_object.mass": 5.0})))
+    metrics = summarize_run(run_scenario(scenario, _params(), force=True), scenario)
+    assert metrics["solver_failures"] == 0, metrics
+    assert float(metrics["internal_force_settled_max_n"]) < 5.0, metrics
+    assert float(metrics["internal_torque_settled_max_nm"]) < 0.5, metrics
+    assert float(metrics["path_error_max_m"]) < 5e-3, metrics
+    assert abs(float(metrics["identified_mass_kg"]) - 5.0) < 0.05, metrics
 
 
 def test_box_rests_is_grasped_then_released_where_it_is() -> None:

@@ -3,7 +3,7 @@ its support, grasped and released on the simulator's clock, controller_node's in
 
 Lockstep: `dualarm launch carry --lockstep --force --record BAG` then `dualarm report BAG` give the in-process
 experiment's metrics (the issue asks 1e-6; measured: equal to the last bit, the wall-clock cycle times aside). The
-default run compares the short variant (test_carry.short_carry, 1200 cycles); the full carry is ``slow``, and so is
+default run compares the short variant (test_carry.short_carry, 1280 cycles); the full carry is ``slow``, and so is
 the real-time run, which is judged on completing only (a real-time force bound flaked under load before).
 """
 
@@ -96,7 +96,7 @@ def test_lockstep_short_carry_bag_metrics_equal_in_process(tmp_path: Path) -> No
 
 @pytest.mark.slow
 def test_lockstep_carry_bag_metrics_equal_in_process(tmp_path: Path) -> None:
-    """The full carry (2900 cycles) over ROS in lockstep: the same metrics as in one process."""
+    """The full carry (2960 cycles) over ROS in lockstep: the same metrics as in one process."""
     metrics = _same_metrics("carry", tmp_path)
     assert metrics["tasks_reached"] == 2, metrics["task_outcomes"]
 
@@ -111,4 +111,6 @@ def test_realtime_carry_runs_to_completion(tmp_path: Path) -> None:
     (log,), scenario = read_run(bag)
     assert scenario is not None and log.internal_wrench is not None
     metrics = summarize_run(log, scenario)
-    assert len(log.time) == 2900 and math.isfinite(float(metrics["path_error_max_m"])), metrics
+    assert scenario.tasks is not None
+    assert len(log.time) >= round(scenario.tasks.duration / log.period) - 20, len(log.time)  # recorder's start
+    assert math.isfinite(float(metrics["path_error_max_m"])), metrics

@@ -10,12 +10,16 @@ A held-object task scenario (:mod:`dualarm_control.references.held`) becomes a c
   from the absolute task's pose (the object frame at the grasp);
 * ``phases.close_time`` [s]: the hands move from where they start onto the grasp (the relative task's pose, the
   absolute task's pose) along a smoothstep over [0, close_time];
-* ``phases.retreat`` [m], ``phases.retreat_time`` [s]: after ``held_object.release_time`` the hands move that far
-  apart (each half of it, along the axis from the left tool to the right one), over retreat_time.
+* ``phases.retreat`` [m], ``phases.retreat_time`` [s], ``phases.retreat_delay`` [s]: ``retreat_delay`` after
+  ``held_object.release_time`` the hands move that far apart (each half of it, along the axis from the left tool to
+  the right one), over retreat_time. The delay covers the offset between the controller's clock and the
+  simulator's (which counts from the first motion command): in real time a retreat that began before the hands
+  opened tore at the held box (287 N, the wrench limit stopped it).
 
 Timeline: close in [0, close_time]; still until the grasp (``held_object.grasp_time``, the bias identified in
 the still step before it) and the payload step after it (``internal_force.still_time``); the path from
-``motion_start`` (grasp + 2 still) on; the end pose held until the release; then the retreat.
+``motion_start`` (grasp + 2 still) on; the end pose held until the release, and ``retreat_delay`` after it; then
+the retreat.
 
 Targets (:meth:`CarryPlan.relative` and :meth:`CarryPlan.absolute`): pose and twist (p [m], R, v [m/s],
 w [rad/s]); the relative one in F1, the absolute one in the world. A blend with s(t) the smoothstep from pose 0
@@ -51,7 +55,7 @@ class CarryPhases:
 
     Attributes:
         segments: the absolute frame's path. close_time: [s], > 0. retreat: [m], >= 0. retreat_time: [s], > 0.
-        release_time: when the hands open [s] (``held_object.release_time``).
+        release_time: when the hands open [s] (``held_object.release_time``). retreat_delay: [s], >= 0.
     """
 
     segments: tuple[SegmentSpec, ...]
@@ -59,9 +63,15 @@ class CarryPhases:
     retreat: float
     retreat_time: float
     release_time: float
+    retreat_delay: float = 0.3
+
+    @property
+    def retreat_start(self) -> float:
+        """When the hands start to move apart [s]."""
+        return self.release_time + self.retreat_delay
 
 
-PHASE_KEYS = ("close_time", "retreat", "retreat_time")
+PHASE_KEYS = ("close_time", "retreat", "retreat_time", "retreat_delay")
 
 
 def parse_phases(flat: Mapping[str, Any], control: InternalForceParams, release_time: float) -> CarryPhases | None:
@@ -78,18 +88,19 @@ def parse_phases(flat: Mapping[str, Any], control: InternalForceParams, release_
     close = number(flat, "phases.close_time", 1.0)
     retreat = number(flat, "phases.retreat", 0.05)
     retreat_time = number(flat, "phases.retreat_time", 1.0)
+    delay = number(flat, "phases.retreat_delay", 0.3)
     bias_step = control.grasp_time - control.still_time
     if not 0.0 < close <= bias_step + 1e-9:
         raise ScenarioError(f"scenario parameter '{PREFIX}phases.close_time': got {close}, expected > 0 and <= "
                             f"held_object.grasp_time - internal_force.still_time = {bias_step:g} s (the hands are "
                             "still while the sensors' bias is identified)")
-    if retreat < 0 or retreat_time <= 0:
-        raise ScenarioError(f"scenario parameters '{PREFIX}phases.retreat' / 'retreat_time': got {retreat}, "
-                            f"{retreat_time}, expected >= 0 m and > 0 s")
+    if retreat < 0 or retreat_time <= 0 or delay < 0:
+        raise ScenarioError(f"scenario parameters '{PREFIX}phases.retreat' / 'retreat_time' / 'retreat_delay': got "
+                            f"{retreat}, {retreat_time}, {delay}, expected >= 0 m, > 0 s and >= 0 s")
     if math.isinf(release_time):
         raise ScenarioError(f"scenario parameter '{PREFIX}held_object.release_time': a carry sets the box down "
                             "and releases it: give the time [s]")
-    return CarryPhases(_specs(flat, "absolute_segments"), close, retreat, retreat_time, release_time)
+    return CarryPhases(_specs(flat, "absolute_segments"), close, retreat, retreat_time, release_time, delay)
 
 
 @dataclass(frozen=True)
@@ -150,25 +161,27 @@ class CarryPlan:
     @property
     def end(self) -> float:
         """When the retreat is over [s]."""
-        return self.phases.release_time + self.phases.retreat_time
+        return self.phases.retreat_start + self.phases.retreat_time
 
     def stage(self, t: float) -> str:
-        """The phase at t [s]: close, grasp (the still steps), carry, place (the end pose held), retreat."""
+        """The phase at t [s]: close, grasp (the still steps), carry, place (the end pose held), release, retreat."""
         if t < self.phases.close_time:
             return "close"
         if t < self.control.motion_start:
             return "grasp"
         if t < self.path_end:
             return "carry"
-        return "place" if t < self.phases.release_time else "retreat"
+        if t < self.phases.release_time:
+            return "place"
+        return "release" if t < self.phases.retreat_start else "retreat"
 
     def relative(self, t: float) -> PoseTarget:
         """F2's target in F1 at t [s]."""
         if t < self.phases.close_time:
             return blend_target(self.relative_start, self.relative_grasp, t, 0.0, self.phases.close_time)
-        if t < self.phases.release_time:
+        if t < self.phases.retreat_start:
             return _at_rest(self.relative_grasp)
-        return blend_target(self.relative_grasp, self.relative_retreat, t, self.phases.release_time,
+        return blend_target(self.relative_grasp, self.relative_retreat, t, self.phases.retreat_start,
                             self.phases.retreat_time)
 
     def absolute(self, t: float) -> PoseTarget:
@@ -177,10 +190,10 @@ class CarryPlan:
             return blend_target(self.absolute_start, self.absolute_grasp, t, 0.0, self.phases.close_time)
         if t < self.control.motion_start:
             return _at_rest(self.absolute_grasp)
-        if t < self.phases.release_time:
+        if t < self.phases.retreat_start:
             sample = self.path.sample(t - self.control.motion_start)
             return PoseTarget(sample.position, sample.rotation, sample.linear_velocity, sample.angular_velocity)
-        return blend_target(self.absolute_end, self.absolute_retreat, t, self.phases.release_time,
+        return blend_target(self.absolute_end, self.absolute_retreat, t, self.phases.retreat_start,
                             self.phases.retreat_time)
 
 

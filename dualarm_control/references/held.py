@@ -8,7 +8,10 @@ Scenario keys (under ``scenario.``, besides the tasks' keys, :mod:`dualarm_contr
   ``max_force`` [N], ``grasp_time`` [s]);
 * ``wrist_sensors.*``: their bias and noise (:class:`~dualarm_sim.held_object.WristSensorConfig`);
 * ``internal_force.*``: the control (:class:`~dualarm_control.internal_force.InternalForceParams`; its
-  ``grasp_time`` is ``held_object.grasp_time``).
+  ``grasp_time`` is ``held_object.grasp_time``);
+* ``absolute_segments`` and ``phases.*``: a carry (:mod:`~dualarm_control.references.carry`: close on the box, carry
+  it along a path of the absolute frame, set it down and let go); its payload step is then the still step before
+  the release (the box rests on its support until the lift).
 
 The tracker (:class:`HoldController`) reads both wrist sensors every cycle ((12,): left then right, each as
 :mod:`dualarm_sim.held_object` gives it), identifies the bias and payload in the still steps, computes the
