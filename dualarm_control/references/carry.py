@@ -44,7 +44,7 @@ from dualarm_control.internal_force import (
     ramp_fraction,
 )
 from dualarm_control.kinematics import FloatArray
-from dualarm_control.references.segments import SegmentSpec, _specs, chain
+from dualarm_control.references.segments import SegmentSpec, chain, segment_specs
 from dualarm_control.scenario_keys import PREFIX, number
 from dualarm_control.trajectory import MotionLimits, RelativeTrajectory
 
@@ -100,7 +100,7 @@ def parse_phases(flat: Mapping[str, Any], control: InternalForceParams, release_
     if math.isinf(release_time):
         raise ScenarioError(f"scenario parameter '{PREFIX}held_object.release_time': a carry sets the box down "
                             "and releases it: give the time [s]")
-    return CarryPhases(_specs(flat, "absolute_segments"), close, retreat, retreat_time, release_time, delay)
+    return CarryPhases(segment_specs(flat, "absolute_segments"), close, retreat, retreat_time, release_time, delay)
 
 
 @dataclass(frozen=True)
