@@ -57,6 +57,9 @@ class InternalForceParams:
         start_ramp: after the still steps the absolute tasks' targets blend from the start pose to theirs over
             this time [s] (smoothstep; a step would jolt the stiff grasp), >= 0.
         wrench_limit: a hand's force on the object beyond this [N] stops the motion safely, > 0.
+        payload_time: the payload's still step starts here [s] (lasting ``still_time``); None: at grasp + still
+            (a carry lifts the box off its support first and identifies it while it hangs still, set down above
+            the support: :mod:`~dualarm_control.references.carry`).
         tool_mass: each tool link's mass [kg] (the sensors carry it), >= 0.
     """
 
@@ -73,6 +76,7 @@ class InternalForceParams:
     start_ramp: float = 1.0
     wrench_limit: float = 200.0
     tool_mass: float = TOOL_MASS
+    payload_time: float | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.task, str) or not self.task:
@@ -86,6 +90,13 @@ class InternalForceParams:
             _number(name, getattr(self, name))
         for name in ("max_offset", "max_rotation", "wrench_limit"):
             _number(name, getattr(self, name), strict=True)
+        if self.payload_time is not None:
+            _number("payload_time", self.payload_time, self.grasp_time)
+
+    @property
+    def payload_start(self) -> float:
+        """When the payload's still step starts [s]."""
+        return self.grasp_time + self.still_time if self.payload_time is None else self.payload_time
 
     @property
     def motion_start(self) -> float:
@@ -160,10 +171,11 @@ class WrenchIdentification:
             assert self._rotations is not None
             self._bias_known = True
             self.bias = identify_bias(np.mean(self._sums["bias"], axis=0), self._rotations, p.tool_mass)
-        if grasp + still <= t < grasp + 2.0 * still:
+        payload = p.payload_start
+        if payload <= t < payload + still:
             self._sums["payload"].append(np.asarray(readings, float))
             self._rotations = np.asarray(rotations, float)
-        elif t >= grasp + 2.0 * still and self._sums["payload"] and math.isnan(self.mass):
+        elif t >= payload + still and self._sums["payload"] and math.isnan(self.mass):
             assert self._rotations is not None
             self.mass = identify_payload(np.mean(self._sums["payload"], axis=0), self._rotations, self.bias,
                                          p.tool_mass)

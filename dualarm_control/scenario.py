@@ -105,6 +105,13 @@ class Scenario:
         it; the left one is its own arm's, at joint distance 0)."""
         return self.collision_allowed + tuple((body.label, "right_tool") for body in self.held_bodies)
 
+    @property
+    def robot_pairs_allowed(self) -> tuple[tuple[str, str], ...]:
+        """``collision_allowed`` without the pairs naming a held object or an obstacle (``held:``, ``obstacle:``,
+        e.g. a carried box against the support it is put on): the robot's own links' pairs, for the simulator."""
+        return tuple(pair for pair in self.collision_allowed
+                     if not any(name.startswith(("held:", "obstacle:")) for name in pair))
+
     def controller_params(self, params: ControllerParams) -> ControllerParams:
         """``params`` with the scenario's allowed contacts added to the collision limit's
         (``scenario.collision_allowed``: e.g. the assembly's tools, which meet on purpose) and its

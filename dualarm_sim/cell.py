@@ -392,6 +392,9 @@ class DualArmCell:
         if held is not None and held.waiting and self._grasp_from is not None and \
                 (self._steps - self._grasp_from) * self.config.control_period >= held.config.grasp_time - 1e-9:
             held.grasp()  # the hands close at the end of this period
+        elif held is not None and held.grasped and self._grasp_from is not None and \
+                (self._steps - self._grasp_from) * self.config.control_period >= held.config.release_time - 1e-9:
+            held.release()  # the hands open at the end of this period
         sample = self.state()
         self._reference = np.clip(reference, sample.positions - MAX_LAG, sample.positions + MAX_LAG)
         return sample

@@ -51,6 +51,11 @@ class HeldObjectConfig:
         max_force: each grasp constraint's force (and torque) limit [N, N m], > 0.
         grasp_time: sim time [s] the hands close on the box, >= 0; before it a fixture holds the box where it
             is (a fixed constraint to the world) and the hands are empty (the sensors read their bias).
+        position: the box centre's world position at the start [m], (3,), or () (the default): at the grasp of
+            the left tool's start pose. rpy_deg: its world orientation then (with ``position``) [deg].
+        resting: no fixture: the box rests on what is under it (a support obstacle) until the grasp.
+        release_time: sim time [s] the hands open (the grasp constraints are removed: the box stays where it
+            was put), > ``grasp_time``; inf (the default): never.
     """
 
     mass: float = 2.0
@@ -59,9 +64,22 @@ class HeldObjectConfig:
     grasp_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
     max_force: float = 1.0e5
     grasp_time: float = 0.0
+    position: tuple[float, ...] = ()
+    rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    resting: bool = False
+    release_time: float = math.inf
 
     def __post_init__(self) -> None:
         _finite("mass", (self.mass,), 1)
+        if self.position:
+            _finite("position", tuple(self.position), 3)
+        _finite("rpy_deg", tuple(self.rpy_deg), 3)
+        if not isinstance(self.resting, bool):
+            raise TypeError(f"resting must be true or false, got {self.resting!r}")
+        if isinstance(self.release_time, bool) or not isinstance(self.release_time, int | float) \
+                or math.isnan(self.release_time) or self.release_time <= self.grasp_time:
+            raise ValueError(f"release_time must be a time [s] after grasp_time ({self.grasp_time}), got "
+                             f"{self.release_time!r}")
         _finite("grasp_time", (self.grasp_time,), 1)
         if self.grasp_time < 0:
             raise ValueError(f"grasp_time must be >= 0 [s], got {self.grasp_time}")
@@ -149,6 +167,9 @@ class HeldObject:
         grasp = _pose_matrix(np.array(config.grasp_position, float),
                              pin.rpy.rpyToMatrix(*np.radians(np.array(config.grasp_rpy_deg, float))))
         world = self.tool_matrix(LEFT_TOOL) @ grasp
+        if config.position:  # a box placed in the cell (on a support), not at the hands
+            world = _pose_matrix(np.array(config.position, float),
+                                 pin.rpy.rpyToMatrix(*np.radians(np.array(config.rpy_deg, float))))
         half = [0.5 * s for s in config.size]
         shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
         visual = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=(0.2, 0.5, 0.9, 1), physicsClientId=client)
@@ -160,13 +181,15 @@ class HeldObject:
                          angularDamping=0.0, physicsClientId=client)
         self.constraints: dict[str, int] = {}
         self._fixture: int | None = None
-        if config.grasp_time > 0:
+        self.released = False
+        self._waiting = config.grasp_time > 0
+        if self._waiting and not config.resting:
             self._fixture = int(p.createConstraint(self.body, -1, -1, -1, p.JOINT_FIXED, (0.0, 0.0, 0.0),
                                                    (0.0, 0.0, 0.0), world[:3, 3].tolist(),
                                                    childFrameOrientation=_quaternion(world[:3, :3]),
                                                    physicsClientId=client))
             p.changeConstraint(self._fixture, maxForce=config.max_force, physicsClientId=client)
-        else:
+        elif not self._waiting:
             self.grasp()
         for tool in SIDES:
             p.enableJointForceTorqueSensor(body, self._tool_joint(tool), True, physicsClientId=client)
@@ -189,6 +212,11 @@ class HeldObject:
         position, orientation = p.getBasePositionAndOrientation(self.body, physicsClientId=self._cid)
         return _pose_matrix(np.array(position), _rotation(orientation))
 
+    def pose_vector(self) -> FloatArray:
+        """The box centre's world pose as pybullet gives it: (x, y, z [m], qx, qy, qz, qw), (7,)."""
+        position, orientation = p.getBasePositionAndOrientation(self.body, physicsClientId=self._cid)
+        return np.array((*position, *orientation), dtype=float)
+
     @property
     def grasped(self) -> bool:
         """Whether the hands hold the box."""
@@ -196,8 +224,8 @@ class HeldObject:
 
     @property
     def waiting(self) -> bool:
-        """Whether the box is still on its fixture, the hands not yet closed (``grasp_time``)."""
-        return self._fixture is not None
+        """Whether the box is still on its fixture (or support), the hands not yet closed (``grasp_time``)."""
+        return self._waiting
 
     def grasp(self) -> None:
         """Close both hands on the box where it is now (no squeeze) and remove the fixture."""
@@ -205,6 +233,7 @@ class HeldObject:
             return
         world = self.object_matrix()
         self.constraints = {tool: self._grasp(link, world) for tool, link in self._tools.items()}
+        self._waiting = False
         if self._fixture is not None:
             p.removeConstraint(self._fixture, physicsClientId=self._cid)
             self._fixture = None
@@ -240,9 +269,10 @@ class HeldObject:
         return np.array([p.getConstraintState(self.constraints[t], physicsClientId=self._cid) for t in SIDES])
 
     def release(self) -> None:
-        """Open both hands: remove the constraints (the box falls)."""
+        """Open both hands: remove the constraints (the box falls, or stays on what it was put on)."""
         for c in self.constraints.values():
             p.removeConstraint(c, physicsClientId=self._cid)
+        self.released = self.released or bool(self.constraints)
         self.constraints = {}
 
     def remove(self) -> None:

@@ -51,7 +51,7 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import Vector3Stamped, WrenchStamped
+from geometry_msgs.msg import PoseStamped, Vector3Stamped, WrenchStamped
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -61,7 +61,7 @@ from dualarm_control.cell_robot import node_scenario
 from dualarm_control.errors import InputRejected
 from dualarm_control.hardware import HARDWARE_PARAMETERS, profile_from_values
 from dualarm_control.params import ParamSpec, non_negative, positive
-from dualarm_control.references.base import LEFT_WRENCH, RIGHT_WRENCH
+from dualarm_control.references.base import HELD_OBJECT_POSE, LEFT_WRENCH, RIGHT_WRENCH
 from dualarm_control.robot import LEFT_TOOL, RIGHT_TOOL
 from dualarm_control.ros import convert
 from dualarm_control.ros.cell_topic import CellPublisher
@@ -143,7 +143,7 @@ class SimNode:
         pan = tasks is not None and held is None  # a task scenario's contact links: those of pan cleaning
         robot = scenario.robot
         self.cell = DualArmCell(
-            CellConfig.for_robot(robot, allowed=scenario.collision_allowed + ((tasks.contact_links,) if pan and tasks is not None else ()),
+            CellConfig.for_robot(robot, allowed=scenario.robot_pairs_allowed + ((tasks.contact_links,) if pan and tasks is not None else ()),
                                  collisions=p["collisions"],
                                  control_period=p["control_period"],
                                  physics_rate_hz=p["physics_rate_hz"], command_timeout=p["command_timeout"],
@@ -181,6 +181,8 @@ class SimNode:
         self.pub_wrists = [local_publisher(bus, n.create_publisher(WrenchStamped, topic, depth), topic)
                            for topic in (LEFT_WRENCH, RIGHT_WRENCH)] if self.cell.held_object is not None else []
         self.wrists = self.cell.wrist_wrenches() if self.pub_wrists else None  # read once per step (noise)
+        self.pub_object = local_publisher(bus, n.create_publisher(PoseStamped, HELD_OBJECT_POSE, depth),
+                                          HELD_OBJECT_POSE) if self.cell.held_object is not None else None
         self.pub_clock = n.create_publisher(Clock, "/clock", depth)
         self.pub_diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.pub_description = n.create_publisher(String, "/robot_description", latched_qos())
@@ -245,6 +247,9 @@ class SimNode:
             wrists = self.wrists
             for pub, frame, reading in zip(self.pub_wrists, (LEFT_TOOL, RIGHT_TOOL), wrists, strict=True):
                 pub.publish(convert.wrench_stamped(ns, reading, frame))
+        held = self.cell.held_object
+        if self.pub_object is not None and held is not None:  # the box where it is at this state (a carry's slip)
+            publish_if_subscribed(self.pub_object, lambda: convert.world_pose_stamped(ns, held.pose_vector()))
         if self.pub_contact is not None and self.contact is not None:
             contact = self.contact
             publish_if_subscribed(self.pub_contact, lambda: convert.contact_force(ns, self.cell.contact_force(*contact)))

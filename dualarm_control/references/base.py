@@ -51,6 +51,9 @@ WRENCH = "/wrench"
 LEFT_WRENCH = "/left/wrench"
 RIGHT_WRENCH = "/right/wrench"
 """The wrist F/T sensors of a held object's run (geometry_msgs/WrenchStamped in each tool frame)."""
+HELD_OBJECT_POSE = "/held_object/pose"
+"""The simulator's held box, its centre's world pose (geometry_msgs/PoseStamped, frame ``world``; ground truth
+of the physics, not a sensor): what a carry's slip is measured on."""
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,10 @@ Scenario keys (under ``scenario.``, besides the tasks' keys, :mod:`dualarm_contr
   ``max_force`` [N], ``grasp_time`` [s]);
 * ``wrist_sensors.*``: their bias and noise (:class:`~dualarm_sim.held_object.WristSensorConfig`);
 * ``internal_force.*``: the control (:class:`~dualarm_control.internal_force.InternalForceParams`; its
-  ``grasp_time`` is ``held_object.grasp_time``).
+  ``grasp_time`` is ``held_object.grasp_time``);
+* ``absolute_segments`` and ``phases.*``: a carry (:mod:`~dualarm_control.references.carry`: close on the box, carry
+  it along a path of the absolute frame, set it down and let go); its payload step is then the still step before
+  the release (the box rests on its support until the lift).
 
 The tracker (:class:`HoldController`) reads both wrist sensors every cycle ((12,): left then right, each as
 :mod:`dualarm_sim.held_object` gives it), identifies the bias and payload in the still steps, computes the
@@ -41,8 +44,15 @@ from dualarm_control.internal_force import (
 )
 from dualarm_control.kinematics import Configuration, FloatArray
 from dualarm_control.references.base import LEFT_WRENCH, RIGHT_WRENCH, StreamSample
+from dualarm_control.references.carry import (
+    CarryPhases,
+    CarryPlan,
+    parse_phases,
+    path_of,
+)
 from dualarm_control.scenario_keys import PREFIX
 from dualarm_control.tasks import AbsolutePoseTask, FixedTarget, RelativePoseTask, Task
+from dualarm_control.trajectory import MotionLimits
 
 HELD_KEYS = ("held_object", "wrist_sensors", "internal_force")
 
@@ -64,6 +74,14 @@ class HeldSetup:
     held_object: dict[str, Any]
     wrist_sensors: dict[str, Any]
     control: InternalForceParams
+    phases: CarryPhases | None = None
+    """A carry's phases (close, path, release: :mod:`~dualarm_control.references.carry`), or None (held from the
+    start to the end)."""
+
+    @property
+    def release_time(self) -> float:
+        """When the hands open [s] (inf: never)."""
+        return float(self.held_object.get("release_time", math.inf))
 
     def cell(self) -> dict[str, Any]:
         """The simulator's settings (:class:`~dualarm_sim.cell.CellConfig` fields)."""
@@ -77,6 +95,9 @@ def parse_held(flat: Mapping[str, Any]) -> HeldSetup | None:
     """The ``held_object``, ``wrist_sensors`` and ``internal_force`` keys (module docstring); None without a
     held object; ScenarioError naming the section and the bad value."""
     if not any(k.startswith(f"{PREFIX}{name}.") for k in flat for name in HELD_KEYS):
+        if PREFIX + "absolute_segments" in flat:
+            raise ScenarioError(f"scenario parameter '{PREFIX}absolute_segments' in a task scenario: a carry's path, "
+                                f"it needs the object, '{PREFIX}held_object.*'")
         return None
     from dualarm_sim.held_object import HeldObjectConfig, WristSensorConfig
 
@@ -99,7 +120,10 @@ def parse_held(flat: Mapping[str, Any]) -> HeldSetup | None:
     if params.grasp_time < params.still_time:
         raise ScenarioError(f"scenario parameter '{PREFIX}held_object.grasp_time': got {params.grasp_time}, expected "
                             f">= internal_force.still_time ({params.still_time} s: the bias's still step comes first)")
-    return HeldSetup(held, sensors, params)
+    phases = parse_phases(flat, params, grasp.release_time)
+    if phases is not None and "payload_time" not in control:  # the box rests on its support until the lift
+        params = dataclasses.replace(params, payload_time=phases.release_time - 2.0 * params.still_time)
+    return HeldSetup(held, sensors, params, phases)
 
 
 def tuned(params: InternalForceParams, values: Mapping[str, Any]) -> InternalForceParams:
@@ -122,8 +146,10 @@ class HoldController:
     uses_wrench = True
     wrench_streams = (LEFT_WRENCH, RIGHT_WRENCH)
 
-    def __init__(self, base: Any, params: InternalForceParams, enabled: bool) -> None:
+    def __init__(self, base: Any, params: InternalForceParams, enabled: bool, phases: CarryPhases | None = None,
+                 limits: MotionLimits | None = None) -> None:
         self.base = base
+        self.phases, self.limits = phases, limits or MotionLimits()
         self.params = self.scenario_params = params
         self.enabled = enabled
         self.label = f"{base.label} internal {'on' if enabled else 'off'}"
@@ -136,6 +162,13 @@ class HoldController:
                                 "name of a relative_pose task of the scenario")
         self._held_index = held[0]
         self._absolute = [i for i, t in enumerate(tasks) if isinstance(t, AbsolutePoseTask)]
+        if phases is not None and len(self._absolute) != 1:
+            raise ScenarioError(f"scenario parameter '{PREFIX}absolute_segments': a carry moves one absolute_pose "
+                                f"task, the scenario has {len(self._absolute)}")
+        if phases is not None:  # the path from the scenario's grasp pose is known now: refuse a late release now
+            grasp = tasks[self._absolute[0]]
+            assert isinstance(grasp, AbsolutePoseTask)
+            path_of(phases, params, (grasp.position, grasp.rotation), self.limits)
         self.reset()
 
     @property
@@ -154,6 +187,13 @@ class HoldController:
         self.internal = np.full(6, math.nan)
         self.stopped = ""
         self._start: list[Task] | None = None
+        self.plan: CarryPlan | None = None
+
+    def carry_plan(self, q0: FloatArray) -> CarryPlan:
+        """The carry's targets (:class:`~dualarm_control.references.carry.CarryPlan`) from the start q0 (n,) [rad]."""
+        assert self.phases is not None
+        return carry_plan(self.base.model, self.base.tasks, self._held_index, self._absolute[0], self.phases,
+                          self.params, self.limits, q0)
 
     def measure(self, q: FloatArray, t: float, wrench: FloatArray) -> FloatArray:
         """The hands' wrenches on the object (2, 6) (world axes, each about its tool origin) from the readings (12,) at q,
@@ -165,6 +205,8 @@ class HoldController:
         self.identification.add(t, readings, rotations)
         hands = hand_wrenches(readings, rotations, self.identification.bias, self.params.tool_mass)
         self.internal = in_frame(internal_wrench(hands), left.rotation)
+        if self.phases is not None and self.plan is None:
+            self.plan = self.carry_plan(q)
         if self._start is None:
             self._start = [dataclasses.replace(t_, position=(s := t_.state(conf)).position, rotation=s.rotation)
                            if isinstance(t_, AbsolutePoseTask) else t_ for t_ in self.base.tasks]
@@ -183,13 +225,14 @@ class HoldController:
             side = ("left", "right")[worst]
             return self._stop(q, t, self.stopped or f"wrench limit: the {side} hand's force on the object "
                               f"{force:.1f} N > wrench_limit {self.params.wrench_limit:g} N; motion stopped")
-        if self.enabled and t >= self.params.grasp_time:
+        if self.enabled and self.params.grasp_time <= t < self.release_time:
             self.admittance.step(self.internal, self.period)
-        tasks = self._absolute_targets(t)
+        tasks = self._absolute_targets(t) if self.plan is None else self._carry_targets(t)
         held = tasks[self._held_index]
         assert isinstance(held, RelativePoseTask)
         position, rotation = offset_target(held.target.position, held.target.rotation, self.admittance.offset)
-        tasks[self._held_index] = dataclasses.replace(held, target=FixedTarget(position, rotation))
+        tasks[self._held_index] = dataclasses.replace(held, target=FixedTarget(
+            position, rotation, held.target.linear_velocity, held.target.angular_velocity))
         out = self.controller.solve_tasks(q, tasks, t)
         self._annotate(out, t)
         return out
@@ -200,6 +243,16 @@ class HoldController:
         ValueError naming the bad value (the change is refused)."""
         self.params = tuned(self.scenario_params, values)
         self.admittance.params = self.params
+
+    @property
+    def release_time(self) -> float:
+        """When the hands open [s] (inf: never)."""
+        return self.phases.release_time if self.phases is not None else math.inf
+
+    def _carry_targets(self, t: float) -> list[Task]:
+        """The tasks at t on the carry's plan (the relative target before the admittance's offset)."""
+        assert self.plan is not None
+        return carry_tasks(self.base.tasks, self.plan, t, self._held_index, self._absolute[0])
 
     def _absolute_targets(self, t: float) -> list[Task]:
         """The tasks at t: the absolute ones at their start pose until ``motion_start``, then blended to their
@@ -226,7 +279,12 @@ class HoldController:
         out.measured_force = float(np.linalg.norm(self.internal[:3] - np.asarray(self.params.setpoint[:3])))
         out.normal_offset = float(np.linalg.norm(self.admittance.offset[:3]))
         out.internal_wrench = self.internal.copy()
-        out.stage = "stopped" if self.stopped else ("identify" if t < self.params.motion_start else "hold")
+        if self.stopped:
+            out.stage = "stopped"
+        elif self.plan is not None:
+            out.stage = self.plan.stage(t)
+        else:
+            out.stage = "identify" if t < self.params.motion_start else "hold"
 
     def report(self, cycle: Cycle, t: float) -> dict[str, Any]:
         """The task cycle's /diagnostics values and the internal wrench [N, N m] in F1, the offset, the mass."""
@@ -235,3 +293,34 @@ class HoldController:
                     "relative_offset": " ".join(repr(float(v)) for v in self.admittance.offset),
                     "identified_mass_kg": repr(self.identification.mass), "wrench_stop": self.stopped})
         return out
+
+
+def carry_plan(model: Any, tasks: list[Task], held_index: int, absolute_index: int, phases: CarryPhases,
+               control: InternalForceParams, limits: MotionLimits, q0: FloatArray) -> CarryPlan:
+    """The :class:`~dualarm_control.references.carry.CarryPlan` of a carry's tasks (the relative_pose task at
+    ``held_index``, the absolute_pose one at ``absolute_index``: their poses are the grasp's) from q0 (n,) [rad]
+    (the controller's, and the report's from a run's first joint positions)."""
+    held, absolute = tasks[held_index], tasks[absolute_index]
+    assert isinstance(held, RelativePoseTask) and isinstance(absolute, AbsolutePoseTask)
+    conf = Configuration(model, q0)
+    relative, state = conf.relative(), absolute.state(conf)
+    return CarryPlan(phases, control, (relative.position.copy(), relative.rotation.copy()),
+                     (np.asarray(held.target.position, float), np.asarray(held.target.rotation, float)),
+                     (state.position.copy(), state.rotation.copy()),
+                     (np.asarray(absolute.position, float), np.asarray(absolute.rotation, float)),
+                     absolute.grasp, limits)
+
+
+def carry_tasks(tasks: list[Task], plan: CarryPlan, t: float, held_index: int, absolute_index: int) -> list[Task]:
+    """``tasks`` with the relative_pose task at ``held_index`` and the absolute_pose one at ``absolute_index`` on the
+    carry plan's targets at t [s] (pose and feed-forward twist)."""
+    out = list(tasks)
+    rel, absolute = plan.relative(t), plan.absolute(t)
+    held, moved = out[held_index], out[absolute_index]
+    assert isinstance(held, RelativePoseTask) and isinstance(moved, AbsolutePoseTask)
+    out[held_index] = dataclasses.replace(held, target=FixedTarget(rel.position, rel.rotation, rel.linear_velocity,
+                                                                   rel.angular_velocity))
+    out[absolute_index] = dataclasses.replace(moved, position=absolute.position, rotation=absolute.rotation,
+                                              linear_velocity=absolute.linear_velocity,
+                                              angular_velocity=absolute.angular_velocity)
+    return out

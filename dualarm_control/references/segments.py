@@ -160,17 +160,17 @@ class SegmentsStream:
 
 def parse_segments(flat: Mapping[str, Any]) -> SegmentsSource:
     """Read the segment keys (module docstring) from flattened parameters; ScenarioError on a bad value."""
-    absolute = _specs(flat, "absolute_segments") if PREFIX + "absolute_segments" in flat else ()
+    absolute = segment_specs(flat, "absolute_segments") if PREFIX + "absolute_segments" in flat else ()
     frame = parse_absolute_frame(flat, bool(absolute))
     if absolute and PREFIX + "segments" not in flat:  # the relative pose held where it starts
         return SegmentsSource((SegmentSpec("hold", "screw", axis=np.array([0.0, 0.0, 1.0])),), absolute, frame)
     if frame is not None and frame.hold:
         raise ScenarioError(f"scenario parameter '{PREFIX}segments': refused, {HOLD_REASON} (give absolute_segments "
                             "and no segments)")
-    return SegmentsSource(_specs(flat, "segments"), absolute, frame)
+    return SegmentsSource(segment_specs(flat, "segments"), absolute, frame)
 
 
-def _specs(flat: Mapping[str, Any], key: str) -> tuple[SegmentSpec, ...]:
+def segment_specs(flat: Mapping[str, Any], key: str) -> tuple[SegmentSpec, ...]:
     """The segments named by ``scenario.<key>`` (a non-empty list of names), each from its keys."""
     names = get(flat, key)
     if not isinstance(names, list) or not all(isinstance(n, str) for n in names) or not names:

@@ -111,7 +111,7 @@ class TasksSource(SourceDefaults):
         duration = options.duration if options.duration is not None else self.duration
         if self.held is not None:
             base = TasksController(model, params, self, self.gain(options), False, duration)
-            return HoldController(base, self.held.control, options.force)
+            return HoldController(base, self.held.control, options.force, self.held.phases, options.limits)
         return TasksController(model, params, self, self.gain(options), options.force, duration)
 
     def stream(self, model: DualArmModel, q0: FloatArray, options: RunOptions, period: float) -> Any:

@@ -297,6 +297,11 @@ def diagnostics(ns: int, name: str, level: int, message: str, values: Mapping[st
 CONTACT_FRAME = "pan_normal"
 
 
+def world_pose_stamped(ns: int, pose: np.ndarray) -> bytes:
+    """geometry_msgs/PoseStamped (CDR) in the frame ``world`` of ``pose`` = (x, y, z [m], qx, qy, qz, qw)."""
+    return cdr.stamped_doubles(ns, "world", [float(v) for v in pose])
+
+
 def wrench_stamped(ns: int, wrench: np.ndarray, frame_id: str = RIGHT_FRAME) -> bytes:
     """geometry_msgs/WrenchStamped (CDR), ``wrench`` = [fx, fy, fz, tx, ty, tz] [N, N m]."""
     return cdr.stamped_doubles(ns, frame_id, wrench)

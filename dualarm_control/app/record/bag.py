@@ -41,6 +41,7 @@ from dualarm_control.app.record.cell import (
 )
 from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import DualArmError
+from dualarm_control.references.base import HELD_OBJECT_POSE
 from dualarm_control.ros.cell_topic import CELL_TOPIC
 from dualarm_control.ros.convert import stamp_ns
 
@@ -250,6 +251,7 @@ class Bag:
     pose_stamps: list[int] = field(default_factory=list)  # /relative_pose header stamps
     contact: dict[int, float] = field(default_factory=dict)  # /contact_force by header stamp
     wrists: dict[str, dict[int, FloatArray]] = field(default_factory=dict)  # a held object's wrist readings by stamp
+    object_poses: dict[int, FloatArray] = field(default_factory=dict)  # the held box's world pose (7,) by stamp
     missing: list[str] = field(default_factory=list)  # the relative report's topics the bag lacks
     description: str | None = None  # the first /robot_description (the cell's URDF)
     recorded: frozenset[str] = frozenset()  # every topic of the bag
@@ -265,6 +267,9 @@ class Bag:
             f, m = msg.wrench.force, msg.wrench.torque
             self.wrists.setdefault(topic, {}).setdefault(stamp_ns(msg.header.stamp),
                                                          np.array((f.x, f.y, f.z, m.x, m.y, m.z)))
+        elif topic == HELD_OBJECT_POSE:
+            self.object_poses.setdefault(stamp_ns(msg.header.stamp),
+                                         np.array(_pose_vector(msg.pose.position, msg.pose.orientation)))
         elif topic == POSE_TOPIC:
             self.rows[topic].append((t, _pose_vector(msg.pose.position, msg.pose.orientation)))
             self.pose_stamps.append(stamp_ns(msg.header.stamp))
@@ -380,7 +385,7 @@ def read_bag(path: Path) -> Bag:
             raise BagError(f"bag {path}: the controller's hardware profile on {CELL_TOPIC}: {exc}") from None
         bag = Bag(streams=ProfileStreams(topics), cell=cell, recorded=frozenset(reader.topics))
         bag.missing = missing_topics(reader, bag.needed)
-        wanted = (*bag.needed, CONTACT_TOPIC, DESCRIPTION_TOPIC, *WRIST_TOPICS)
+        wanted = (*bag.needed, CONTACT_TOPIC, DESCRIPTION_TOPIC, *WRIST_TOPICS, HELD_OBJECT_POSE)
         connections = [c for c in reader.connections if c.topic in wanted]
         for topic, t, msg in _decoded(reader, connections, path):
             bag.add(topic, t, msg)

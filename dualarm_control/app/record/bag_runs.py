@@ -216,7 +216,9 @@ def _task_record(path: Path, bag: Bag) -> tuple[list[RunRecord], Scenario]:
         contact_force=contact, measured_force=column("measured_force_n"), normal_offset=column("normal_offset_m"),
         table_contacts=table, internal_wrench=(np.array([[float(x) for x in v["internal_wrench"].split()]
                                                          for _, v in cycles]) if "internal_wrench" in first else None),
-        identified_mass=float(cycles[-1][1].get("identified_mass_kg", "nan")))
+        identified_mass=float(cycles[-1][1].get("identified_mass_kg", "nan")),
+        object_pose=(np.array([bag.object_poses.get(s, np.full(7, np.nan)) for s in stamps]) if bag.object_poses
+                     else None))
     return [with_task_values(record, scenario, model, gain, force)], scenario
 
 

@@ -2,7 +2,7 @@
 about its setpoint, the drift of the held relative pose and the absolute task's error.
 
 Window: from the end of the identification (``internal_force`` ``motion_start``: the grasp plus two still
-steps) to the end of the run. Keys (metrics.json):
+steps) to the end of the run, or to the release of a carry (``held_object.release_time``). Keys (metrics.json):
 
 * ``internal_force_max_n``, ``internal_force_rms_n``: max and RMS of |f_I - f_I*| [N] (h_I in F1);
 * ``internal_torque_max_nm``, ``internal_torque_rms_nm``: the same for the moment [N m];
@@ -30,8 +30,9 @@ def hold_metrics(log: RunRecord, part: TaskValues, held: HeldSetup, convergence_
     """The metrics of the module docstring for a run with an internal wrench column."""
     assert log.internal_wrench is not None
     control = held.control
-    window = log.time >= control.motion_start
-    settled = log.time >= max(convergence_time, control.motion_start)
+    held_until = log.time < held.release_time
+    window = (log.time >= control.motion_start) & held_until
+    settled = (log.time >= max(convergence_time, control.motion_start)) & held_until
     error = log.internal_wrench - np.asarray(control.setpoint, float)
     force = np.linalg.norm(error[:, :3], axis=1)
     torque = np.linalg.norm(error[:, 3:], axis=1)

@@ -19,6 +19,11 @@ from typing import Any
 import numpy as np
 
 from dualarm_control.app.record.allowances import allowance_lines, allowance_metrics
+from dualarm_control.app.record.carry_metrics import (
+    CARRY_ROWS,
+    carry_metrics,
+    final_task_errors,
+)
 from dualarm_control.app.record.hold_metrics import (
     HOLD_ROWS,
     hold_metrics,
@@ -80,8 +85,9 @@ def summarize_run(record: RunRecord, scenario: Scenario | None, model: DualArmMo
     None for a relative-motion record that holds its ``final_errors`` (a bag's)."""
     if record.tasks is not None:
         assert scenario is not None
-        return {**task_metrics(record, record.tasks, scenario),
-                **task_verdicts(record, record.tasks, scenario, model or DualArmModel(scenario.robot))}
+        model = model or DualArmModel(scenario.robot)
+        return {**task_metrics(record, record.tasks, scenario, model),
+                **task_verdicts(record, record.tasks, scenario, model)}
     model = model or (DualArmModel(scenario.robot) if scenario is not None else DualArmModel())
     errors = record.final_errors
     if errors is None:
@@ -221,8 +227,9 @@ def convergence_time(time: FloatArray, error: FloatArray, threshold: float) -> f
     return float(time[last + 1]) if last + 1 < time.size else float("nan")
 
 
-def task_metrics(log: RunRecord, part: TaskValues, scenario: Scenario) -> dict[str, float | int | str]:
-    """The metrics.json record of one task run (keys in docs/constraint_based.md)."""
+def task_metrics(log: RunRecord, part: TaskValues, scenario: Scenario,
+                 model: DualArmModel | None = None) -> dict[str, float | int | str]:
+    """The metrics.json record of one task run (keys in docs/constraint_based.md; a carry's need ``model``)."""
     spec = scenario.tasks
     assert spec is not None, f"scenario {scenario.name!r} has no tasks"
     after = log.time >= spec.convergence_time
@@ -263,6 +270,8 @@ def task_metrics(log: RunRecord, part: TaskValues, scenario: Scenario) -> dict[s
     if log.internal_wrench is not None and spec.held is not None:
         absolute = [s.name for s in spec.tasks if s.type == "absolute_pose"]
         record.update(hold_metrics(log, part, spec.held, spec.convergence_time, absolute))
+        if spec.held.phases is not None:  # a carry: its path, joint limits and closest pair while held
+            record.update(carry_metrics(log, part, scenario, model or DualArmModel(scenario.robot)))
     elif part.force:
         record.update(force_metrics(log, part.set_point, spec.convergence_time, spec.force.contact_threshold))
     return record
@@ -286,10 +295,12 @@ def task_verdicts(log: RunRecord, part: TaskValues, scenario: Scenario, model: D
     t = float(log.time[-1] + log.period)
     collision = scenario.collision_model(model)
     outcomes = []
+    carry = final_task_errors(log, part, scenario, model, log.positions[-1], float(log.time[-1])) \
+        if spec.held is not None and spec.held.phases is not None else {}  # a carry: on its plan's targets
     for name, kind in part.kinds.items():
         if kind == INEQUALITY:
             continue
-        error = float(np.linalg.norm(part.values[name][-1] - part.bounds[name]))
+        error = carry.get(name, float(np.linalg.norm(part.values[name][-1] - part.bounds[name])))
         head = f"task '{name}' (t = {t:g} s)"
         if error <= tolerances[name]:
             outcomes.append((True, f"{head}: reached, |f - b| = {error:.3g}"))
@@ -405,6 +416,7 @@ TASK_ROWS = (
     ("peak contact force [N]", "contact_force_peak_n", 1.0, "{:.2f}"),
     ("measured force RMS error [N]", "measured_force_rms_error_n", 1.0, "{:.3f}"),
     *HOLD_ROWS,
+    *CARRY_ROWS,
 )
 """Paper 001's metrics (task runs): (label, key, scale, format)."""
 

@@ -77,6 +77,8 @@ class RunRecord:
         internal_wrench: a held object's internal wrench h_I [N, N m] in F1, (N, 6)
             (:mod:`dualarm_control.references.held`); None without a held object.
         identified_mass: the held object's mass the still step identified [kg] (NaN: none).
+        object_pose: the simulated held box's world pose at each cycle's state, (x, y, z [m], qx, qy, qz, qw),
+            (N, 7) (a bag: /held_object/pose by the state's stamp, NaN where missing); None without one.
     """
 
     label: str
@@ -102,6 +104,7 @@ class RunRecord:
     absolute_error: FloatArray | None = None
     internal_wrench: FloatArray | None = None
     identified_mass: float = math.nan
+    object_pose: FloatArray | None = None
 
 
 def with_task_values(record: RunRecord, scenario: Scenario, model: DualArmModel, gain: float | None,

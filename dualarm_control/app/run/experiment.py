@@ -61,9 +61,11 @@ def run_scenario(
     period = params.period
     cell_options = source.cell(options)
     pairs: tuple[tuple[str, str], ...] = cell_options.get("contact_pairs", ())
-    config = CellConfig.for_robot(scenario.robot, allowed=scenario.collision_allowed, control_period=period,
+    config = CellConfig.for_robot(scenario.robot, allowed=scenario.robot_pairs_allowed, control_period=period,
                                   obstacles=scenario.obstacles, **cell_options)
     with DualArmCell(config, initial_positions=source.initial_positions(scenario.initial_positions)) as cell:
+        if cell.held_object is not None:  # as sim_node: the grasp clock starts with the first motion command (a
+            cell.count_grasp_from_motion()  # carry's first command is zero: its close starts at rest)
         state = cell.state()
         follower = source.follower(model, params, state.positions, options)
         steps, n = follower.steps, model.nq
@@ -71,6 +73,7 @@ def run_scenario(
         scal = {k: np.zeros(steps) for k in SCALARS}
         status: list[str] = []
         internal = np.full((steps, 6), np.nan) if cell.held_object is not None else None
+        box = np.full((steps, 7), np.nan) if cell.held_object is not None else None
         every = max(steps // 100, 1)
         moving = MovingFeed(scenario.moving_obstacles, follower) if scenario.moving_obstacles else None
         bodies = MovingBodies(scenario.moving_obstacles, cell.client_id)
@@ -82,6 +85,8 @@ def run_scenario(
             wrench = None if not follower.uses_wrench else (
                 cell.wrist_wrenches().ravel() if cell.held_object is not None else cell.wrench())
             out = follower.cycle(t, state.positions, wrench)
+            if box is not None and cell.held_object is not None:  # where the box is at this state (slip)
+                box[k] = cell.held_object.pose_vector()
             if moving is not None:
                 moving.observe(out.reports.get("live_obstacles"), t)
             cell.apply_command(out.velocities)
@@ -111,7 +116,7 @@ def run_scenario(
                        obstacle_events=moving.finish() if moving is not None else (),
                        absolute_error=absolute_columns(scal["absolute_position_error"],
                                                        scal["absolute_orientation_error"]),
-                       internal_wrench=internal)
+                       internal_wrench=internal, object_pose=box)
     identification = getattr(getattr(follower, "tracker", None), "identification", None)
     if identification is not None:  # a held object: the payload its still step identified
         record = dataclasses.replace(record, identified_mass=identification.mass)

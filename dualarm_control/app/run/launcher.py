@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from dualarm_control.references.base import RELATIVE_TARGET
+from dualarm_control.references.base import HELD_OBJECT_POSE, RELATIVE_TARGET
 from dualarm_control.ros.env import (
     LAUNCHER_PID_VARIABLE,
     RECORDER_NODE,
@@ -286,7 +286,7 @@ def launch_scenario(
             controller_args += ["-p", "task_start_readers:=1"]
         if record_topics == GRAPH_TOPICS:
             held = loaded.tasks is not None and loaded.tasks.held is not None  # its wrist sensors instead
-            record_topics = ((*TASK_TOPICS, "/left/wrench", "/right/wrench") if held
+            record_topics = ((*TASK_TOPICS, "/left/wrench", "/right/wrench", HELD_OBJECT_POSE) if held
                              else (*TASK_TOPICS, "/contact_force") if force else TASK_TOPICS)
     finisher = "controller_node" if tasks else "trajectory_node"
     launch = Launch()

@@ -122,9 +122,11 @@ def record_arrays(record: RunRecord, model: DualArmModel,
                      frames or {}, list(record.status), rv.closest_pairs(model, record.positions, collision))
 
 
-def held_frames(scenario: Scenario, n: int) -> dict[str, FloatArray]:
+def held_frames(scenario: Scenario, n: int, record: RunRecord | None = None,
+                model: DualArmModel | None = None) -> dict[str, FloatArray]:
     """A held object's centre in the left tool frame, (n, 7) [x y z qx qy qz qw], by its name (drawn as axes);
-    {} without one."""
+    {} without one. At its grasp, or, where ``record`` has the simulator's box pose (a carry's bag:
+    /held_object/pose), where the box was: on its support before the grasp and after the release."""
     import pinocchio as pin
 
     out = {}
@@ -132,7 +134,22 @@ def held_frames(scenario: Scenario, n: int) -> dict[str, FloatArray]:
         quaternion = pin.Quaternion(body.rotation)
         pose = np.array([*body.position, quaternion.x, quaternion.y, quaternion.z, quaternion.w])
         out[body.name] = np.tile(pose, (n, 1))
+        if record is not None and model is not None and record.object_pose is not None:
+            for k, (q, world) in enumerate(zip(record.positions, record.object_pose, strict=True)):
+                if np.all(np.isfinite(world)) and np.all(np.isfinite(q)):
+                    out[body.name][k] = _in_left_tool(model, q, world)
     return out
+
+
+def _in_left_tool(model: DualArmModel, q: FloatArray, world: FloatArray) -> FloatArray:
+    """A world pose (x, y, z, qx, qy, qz, qw) in the left tool frame at q (n,) [rad], the same 7 numbers."""
+    import pinocchio as pin
+
+    tool = model.frame_poses(q, ("left_tool",))[0]
+    x, y, z, w = world[3:]
+    placed = tool.actInv(pin.SE3(pin.Quaternion(w, x, y, z).normalized().toRotationMatrix(), world[:3]))
+    quaternion = pin.Quaternion(placed.rotation)
+    return np.array([*placed.translation, quaternion.x, quaternion.y, quaternion.z, quaternion.w])
 
 
 def bag_run_arrays(path: Path) -> RunArrays:
@@ -152,7 +169,8 @@ def bag_run_arrays(path: Path) -> RunArrays:
         arrays.obstacles = read_obstacles(Path(path))  # a task scenario's: its table (no moving ones)
         return arrays
     # a held object: its frame, box and wrist forces, and the closest pairs of the scenario's collision model
-    arrays = record_arrays(record, model, held_frames(scenario, len(record.time)), scenario.collision_model(model))
+    arrays = record_arrays(record, model, held_frames(scenario, len(record.time), record, model),
+                           scenario.collision_model(model))
     body = scenario.held_bodies[0]
     stamps = sorted({int(v["stamp_ns"]) for _, v in bag.task_cycles})[-len(record.time):]  # read_run's cycles
     return dataclasses.replace(arrays, held=HeldDrawing(body.name, body.size, wrist_forces(bag.wrists, stamps)),

@@ -17,6 +17,7 @@ import math
 import sys
 import tempfile
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Final, TextIO
@@ -26,6 +27,7 @@ import numpy.typing as npt
 
 from dualarm_control.app.view.obstacles_view import CameraObstacles, ObstacleTrack
 from dualarm_control.app.view.recording import JointRecording, read_joint_recording
+from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import DualArmError
 from dualarm_control.obstacles import AttachedBox
 
@@ -80,7 +82,8 @@ class CellCamera:
     """The cell in a DIRECT pybullet client and a fixed camera looking at both arms."""
 
     def __init__(self, urdf_text: str, size: tuple[int, int], joint_names: tuple[str, ...] = (),
-                 obstacles: dict[str, ObstacleTrack] | None = None, held: AttachedBox | None = None) -> None:
+                 obstacles: dict[str, ObstacleTrack] | None = None, held: AttachedBox | None = None,
+                 box_poses: Mapping[int, FloatArray] | None = None) -> None:
         import pybullet as p
 
         from dualarm_sim.cell import DualArmCell
@@ -100,6 +103,10 @@ class CellCamera:
         self._view = p.computeViewMatrix(CAMERA_EYE, CAMERA_TARGET, (0.0, 0.0, 1.0))
         self._projection = p.computeProjectionMatrixFOV(FIELD_OF_VIEW_DEG, width / height, 0.05, 20.0)
         self.held, self._box = held, None
+        # the simulator's box where it was (a bag's /held_object/pose by stamp): on its support before the grasp
+        # and after the release; else drawn on its frame
+        self._box_stamps = np.array(sorted(box_poses or {}), dtype=np.int64)
+        self._box_poses = dict(box_poses or {})
         if held is not None:  # a held object: a box drawn on its frame (no collision shape: it is only drawn)
             visual = p.createVisualShape(p.GEOM_BOX, halfExtents=[0.5 * s for s in held.size],
                                          rgbaColor=(0.2, 0.5, 0.9, 1), physicsClientId=self.cell.client_id)
@@ -112,7 +119,12 @@ class CellCamera:
         self.cell.reset(np.clip(q, self.lower, self.upper))
         if stamp_ns is not None:
             self.obstacles.place(stamp_ns)
-        if self.held is not None and self._box is not None:
+        if self._box is not None and stamp_ns is not None and len(self._box_stamps):
+            i = max(int(np.searchsorted(self._box_stamps, stamp_ns, side="right")) - 1, 0)
+            pose = self._box_poses[int(self._box_stamps[i])]
+            p.resetBasePositionAndOrientation(self._box, pose[:3].tolist(), pose[3:].tolist(),
+                                              physicsClientId=self.cell.client_id)
+        elif self.held is not None and self._box is not None:
             position, rotation = self.cell.link_pose(self.held.frame)
             centre = position + rotation @ np.asarray(self.held.position, dtype=float)
             import pinocchio as pin
@@ -132,7 +144,7 @@ class CellCamera:
 
 def render_recording(recording: JointRecording, out_path: Path, fps: float = DEFAULT_FPS,
                      size: tuple[int, int] = DEFAULT_SIZE, log: TextIO | None = sys.stderr,
-                     held: AttachedBox | None = None) -> VideoInfo:
+                     held: AttachedBox | None = None, box_poses: Mapping[int, FloatArray] | None = None) -> VideoInfo:
     """Encode ``recording`` as an H.264 MP4 at ``out_path`` (module docstring); progress on ``log``; ``held``: a
     held object's box, drawn on its frame."""
     try:
@@ -145,7 +157,7 @@ def render_recording(recording: JointRecording, out_path: Path, fps: float = DEF
     positions = recording.at(times)
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    camera = CellCamera(recording.urdf_text, size, recording.joint_names, recording.obstacles, held)
+    camera = CellCamera(recording.urdf_text, size, recording.joint_names, recording.obstacles, held, box_poses)
     writer = imageio_ffmpeg.write_frames(str(out_path), size, fps=fps, codec="libx264", macro_block_size=2,
                                          ffmpeg_log_level="error")
     render_s = encode_s = 0.0
@@ -190,8 +202,9 @@ def render_video(bag_path: Path, out_path: Path, fps: float = DEFAULT_FPS, size:
         :class:`VideoInfo` (frames, render and encode times). Raises BagError (no joint states)
         or VideoError.
     """
-    return render_recording(read_joint_recording(Path(bag_path)), Path(out_path), fps, size, log,
-                            held_box(Path(bag_path)))
+    held = held_box(Path(bag_path))
+    return render_recording(read_joint_recording(Path(bag_path)), Path(out_path), fps, size, log, held,
+                            box_poses(Path(bag_path)) if held is not None else None)
 
 
 def held_box(bag_path: Path) -> AttachedBox | None:
@@ -207,6 +220,17 @@ def held_box(bag_path: Path) -> AttachedBox | None:
     except DualArmError:
         return None
     return bodies[0] if bodies else None
+
+
+def box_poses(bag_path: Path) -> dict[int, FloatArray]:
+    """The simulator's held box in the world by stamp [ns] (``/held_object/pose``: x, y, z, qx, qy, qz, qw), {}
+    when the bag has none."""
+    from dualarm_control.app.record.bag import read_bag
+
+    try:
+        return dict(read_bag(bag_path).object_poses)
+    except DualArmError:
+        return {}
 
 
 def parse_size(text: str) -> tuple[int, int]:
