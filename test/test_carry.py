@@ -22,7 +22,8 @@ from dualarm_control.errors import ScenarioError
 from dualarm_control.params import read_params_files
 from dualarm_control.references.base import RunOptions
 from dualarm_control.scenario import Scenario, load_scenario, scenario_file
-from dualarm_sim.cell import CellConfig, DualArmCell
+from dualarm_sim.cell import DualArmCell
+from dualarm_sim.cell_config import CellConfig
 
 PARAMS = str(Path(__file__).parents[1] / "config" / "solvers" / "constraint_based.yaml")
 

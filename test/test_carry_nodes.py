@@ -18,7 +18,7 @@ import pytest
 from launching import meanwhile
 from test_carry import PARAMS, _params, short_carry
 
-from dualarm_control.app.record.bag import read_run
+from dualarm_control.app.record.bag_runs import read_run
 from dualarm_control.app.record.report import summarize_run
 from dualarm_control.app.run.experiment import run_scenario
 from dualarm_control.app.run.launcher import launch_scenario
