@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 from launching import meanwhile
+from metrics_match import assert_same_metrics
 from test_carry import PARAMS, _params, short_carry
 
 from dualarm_control.app.record.bag_runs import read_run
@@ -23,8 +24,6 @@ from dualarm_control.app.record.report import summarize_run
 from dualarm_control.app.run.experiment import run_scenario
 from dualarm_control.app.run.launcher import launch_scenario
 from dualarm_control.scenario import load_scenario
-
-WALL_CLOCK = ("cycle_time_p50_s", "cycle_time_p99_s")
 
 
 def _same_metrics(scenario_name: str, tmp_path: Path) -> dict[str, Any]:
@@ -42,16 +41,7 @@ def _same_metrics(scenario_name: str, tmp_path: Path) -> dict[str, Any]:
     (log,), scenario = read_run(bag)
     assert scenario is not None and log.internal_wrench is not None
     from_bag = summarize_run(log, scenario)
-    assert set(from_bag) == set(expected)
-    for key, value in expected.items():
-        if key in WALL_CLOCK:
-            continue
-        got = from_bag[key]
-        if isinstance(value, float):
-            assert (math.isnan(value) and math.isnan(float(got))) or math.isclose(float(got), value, rel_tol=1e-6,
-                                                                                   abs_tol=1e-12), (key, got, value)
-        else:
-            assert got == value, (key, got, value)
+    assert_same_metrics(from_bag, expected, rel_tol=1e-6)
     return from_bag
 
 
