@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 import signal
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -125,10 +125,19 @@ class CellRun:
         os.kill(self.process(name).popen.pid, sig)
         return t
 
-    def pause(self, name: str, seconds: float) -> tuple[int, int]:
-        """SIGSTOP ``name`` for ``seconds``; wall-clock times [ns] of the stop and of the SIGCONT."""
+    def pause(self, name: str, seconds: float, until: Callable[[], bool] | None = None,
+              hold_after: float = 0.0, timeout: float = 30.0) -> tuple[int, int]:
+        """SIGSTOP ``name`` for ``seconds``, and past that until ``until()`` holds (polled; at most ``timeout``
+        s, then it is resumed anyway) and ``hold_after`` s more; wall-clock times [ns] of the stop and of the
+        SIGCONT. A watchdog episode waits for the controller's safe state this way: on a loaded machine the
+        controller may read the last states late, and the safe window must still be seen."""
         stopped = self.send(name, signal.SIGSTOP)
         time.sleep(seconds)
+        if until is not None:
+            end = time.monotonic() + timeout
+            while not until() and time.monotonic() < end:
+                time.sleep(0.01)
+            time.sleep(hold_after)
         return stopped, self.send(name, signal.SIGCONT)
 
     def elapsed(self) -> float:

@@ -75,10 +75,10 @@ EXPECTED = {
     "goal_into_collision": "interactive cell, real time: a goal through the other arm (xyz 0 0 -0.35, rpy pi 0 0) "
                            f"ends stalled with 'collision constraint: <pair> at d m', d >= {SAFETY_DISTANCE:g} m - "
                            "1 mm; the simulator counts no contact (its /diagnostics 'contacts' stays 0)",
-    "stale_states": f"sim_node SIGSTOP {PAUSE_S:g} s mid-motion: zero commands + /diagnostics ERROR once joint states "
+    "stale_states": f"sim_node SIGSTOP {PAUSE_S:g} s (longer until the controller is safe) mid-motion: zero commands + /diagnostics ERROR once joint states "
                     f"are older than stale_timeout {STALE_TIMEOUT * 1e3:.0f} ms (tripped at <= +2 periods); OK again "
                     f"< {RECOVER_WITHIN_MS:.0f} ms after SIGCONT; one log line each way",
-    "target_stopped": f"trajectory_node SIGSTOP {PAUSE_S:g} s mid-motion: zero commands + ERROR once no target for "
+    "target_stopped": f"trajectory_node SIGSTOP {PAUSE_S:g} s (longer until safe) mid-motion: zero commands + ERROR once no target for "
                       f"target_timeout {TARGET_TIMEOUT * 1e3:.0f} ms (<= +2 periods); OK again < "
                       f"{RECOVER_WITHIN_MS:.0f} ms after SIGCONT; one log line each way",
     "kill_sim": f"kill -9 sim_node mid-run, restart it {RESTART_AFTER_S:g} s later: zero commands + ERROR while it is "
@@ -142,6 +142,17 @@ def _recovered(run: CellRun, line: int, timeout: float = 30.0) -> tuple[int, int
     end = run.wait_line("controller_node", "recovered after", timeout, start=line) + 1
     lines = run.process("controller_node").lines[line:end]
     return sum("safe state:" in t for t in lines), sum("recovered after" in t for t in lines)
+
+
+SAFE_HOLD_S = 0.1
+"""A pause lasts :data:`PAUSE_S`, and past that until the controller logged its safe state plus this [s]: the
+zero commands while safe are seen even when a loaded machine delays the controller's reading of the last states
+(a 0.5 s pause once ended before the controller, 490 ms behind, tripped: an empty safe window)."""
+
+
+def _safe_since(run: CellRun, line: int) -> Callable[[], bool]:
+    """Whether the controller logged 'safe state:' after its log line ``line``."""
+    return lambda: any("safe state:" in t for t in run.process("controller_node").lines[line:])
 
 
 def _episode_row(name: str, rec: GraphStreams, ep: _Episode, reason: str, limit_ms: float, within_ms: float) -> Row:
@@ -216,7 +227,7 @@ def loopback_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[
                 run.wait_moving(PAUSE_S + 0.3)
                 line = len(run.process("controller_node").lines)
                 say(f"{name}: SIGSTOP {node} for {PAUSE_S:g} s at t={run.elapsed():.2f} s")
-                start, resume = run.pause(node, PAUSE_S)
+                start, resume = run.pause(node, PAUSE_S, until=_safe_since(run, line), hold_after=SAFE_HOLD_S)
                 episodes[name] = _Episode(start, resume, _recovered(run, line))
         if "kill_sim" in names:
             run.wait_moving(1.0)
