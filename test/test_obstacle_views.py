@@ -145,6 +145,12 @@ def test_the_live_view_draws_the_running_cells_obstacles(tmp_path: Path) -> None
             live.publish(moving)
             sent += 1
             executor.spin_once(timeout_sec=0.05)
+        delete = MarkerArray()
+        delete.markers = [obstacle_marker(hand, 0)]
+        delete.markers[0].action = delete.markers[0].DELETE  # a zero stamp: at the latest one the view saw
+        for _ in range(5):  # best effort: sent a few times (a repeat changes nothing)
+            live.publish(delete)
+            executor.spin_once(timeout_sec=0.05)
     finally:
         view.send_signal(signal.SIGINT)
         out = view.communicate(timeout=120)[0]
@@ -156,3 +162,120 @@ def test_the_live_view_draws_the_running_cells_obstacles(tmp_path: Path) -> None
     print(f"{sent} hand markers sent; rows: table {rows['/obstacles/table/shape']}, hand {rows['/obstacles/hand']}")
     assert rows["/obstacles/table/shape"] >= 1 and rows["/obstacles/table"] >= 1, (dict(rows), out[-2000:])
     assert rows["/obstacles/hand"] >= sent // 2, (dict(rows), out[-2000:])
+    # its timeline's 0 is the first marker's stamp (1 s), the last marker at 1.95 s; the DELETE took that stamp
+    assert shown_in_rrd(rrd, "/obstacles/hand", 1.0) and not shown_in_rrd(rrd, "/obstacles/hand", 1.96), out[-2000:]
+
+
+# ----------------------------------------------------------------------------- DELETE, DELETEALL, lifetime
+
+S = 1_000_000_000
+LIFECYCLE = {"hand": [(1.0 * S, 1.2 * S), (1.5 * S, 1.8 * S)], "cup": [(2.0 * S, 2.3 * S)], "table": [(-1, None)]}
+"""The spans of :func:`write_lifecycle_bag`'s obstacles [ns]."""
+
+
+def write_lifecycle_bag(path: Path) -> None:
+    """A bag whose live markers come and go as a user's would: the hand ADDed at 1.0, 1.1, 1.2 s, DELETEd with a
+    zero stamp (RViz's habit: the latest stamp seen, 1.2 s), ADDed again at 1.5 and 1.6 s, gone with a DELETEALL
+    stamped 1.8 s; a cup ADDed once at 2.0 s with a 0.3 s lifetime. The latched table stays throughout."""
+    from visualization_msgs.msg import Marker, MarkerArray
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    hand, cup = Sphere("hand", position=(0.5, 0.2, 1.6), radius=0.08), Box("cup", size=(0.1, 0.1, 0.12), position=(0.5, -0.2, 1.6))
+
+    def action(kind: int, stamp_ns: int, name: str = "") -> Marker:
+        m = Marker()
+        m.ns, m.action = name, kind
+        m.header.stamp.sec, m.header.stamp.nanosec = divmod(stamp_ns, S)
+        return m
+
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        scene = writer.add_connection("/dualarm/obstacles", "visualization_msgs/msg/MarkerArray", typestore=store)
+        live = writer.add_connection("/collision_objects", "visualization_msgs/msg/MarkerArray", typestore=store)
+        writer.write(scene, 0, serialize_message(scene_markers((Box("table", size=(1.2, 1.6, 0.05), position=(0.9, 0.0, 0.775)),), ())))
+        cup_marker = obstacle_marker(cup, 2 * S)
+        cup_marker.lifetime.nanosec = 300_000_000
+        events = [*(obstacle_marker(hand, int(t * S)) for t in (1.0, 1.1, 1.2)), action(Marker.DELETE, 0, "hand"),
+                  *(obstacle_marker(hand, int(t * S)) for t in (1.5, 1.6)), action(Marker.DELETEALL, int(1.8 * S)), cup_marker]
+        for k, marker in enumerate(events):
+            message = MarkerArray()
+            message.markers = [marker]
+            writer.write(live, S + k, serialize_message(message))
+
+
+def test_delete_deleteall_and_lifetime_end_an_obstacles_spans(tmp_path: Path) -> None:
+    write_lifecycle_bag(tmp_path / "bag")
+    tracks = read_obstacles(tmp_path / "bag")
+    assert {name: track.spans for name, track in tracks.items()} == LIFECYCLE
+    hand = tracks["hand"]
+    assert [hand.shown(int(t * S)) for t in (0.9, 1.0, 1.19, 1.2, 1.4, 1.5, 1.79, 1.8, 5.0)] == \
+        [False, True, True, False, False, True, True, False, False]
+    assert tracks["table"].shown(int(5.0 * S)) and tracks["cup"].shown(int(2.29 * S)) and not tracks["cup"].shown(int(2.3 * S))
+
+
+def shown_in_rrd(path: Path, entity: str, seconds: float) -> bool:
+    """Whether the saved recording shows ``entity``'s shape at ``seconds`` on the ``time`` timeline, by Rerun's
+    rule: its latest shape row at or before then is newer than the latest recursive Clear of it or of a parent."""
+    import datetime
+
+    from rerun.chunk import RrdReader
+
+    at = datetime.timedelta(seconds=seconds)
+    shape: list[datetime.timedelta] = []
+    cleared: list[datetime.timedelta] = []
+    for chunk in RrdReader(str(path)).stream():
+        batch = chunk.to_record_batch()
+        if "time" not in batch.schema.names:
+            continue
+        times = [t for t in batch.column("time").to_pylist() if t <= at]
+        if chunk.entity_path == entity + "/shape" and any(n.endswith(("half_sizes", "radii", "blob")) for n in batch.schema.names):
+            shape += times
+        if "Clear:is_recursive" in batch.schema.names and (entity + "/").startswith(chunk.entity_path + "/"):
+            cleared += times
+    return bool(shape) and (not cleared or max(shape) > max(cleared))
+
+
+def test_rerun_clears_a_deleted_or_expired_obstacle(tmp_path: Path) -> None:
+    """The recording ``dualarm view`` would save: the hand and the cup shown exactly in their spans (start_ns 1 s:
+    the timeline's 0 is the hand's first ADD); the latched table at any time."""
+    import rerun as rr
+
+    write_lifecycle_bag(tmp_path / "bag")
+    rec = rr.RecordingStream("dualarm_test_obstacles")
+    rec.save(str(tmp_path / "scene.rrd"))
+    log_obstacles(read_obstacles(tmp_path / "bag"), start_ns=S, recording=rec)
+    rec.flush()
+    rec.disconnect()
+    rrd = tmp_path / "scene.rrd"
+    times = (0.05, 0.15, 0.25, 0.45, 0.65, 0.85, 1.1, 1.25, 1.35)  # [s] after 1 s
+    seen = {name: [shown_in_rrd(rrd, f"/obstacles/{name}", t) for t in times] for name in ("hand", "cup")}
+    assert seen == {name: [read_obstacles(tmp_path / "bag")[name].shown(int((1 + t) * S)) for t in times]
+                    for name in ("hand", "cup")}, seen
+    assert seen["hand"] == [True, True, False, False, True, False, False, False, False], seen
+    assert seen["cup"] == [False] * 6 + [True, True, False], seen
+
+
+def test_the_video_camera_shows_an_obstacle_only_in_its_spans(tmp_path: Path) -> None:
+    """Rendered as the video's frames are (pybullet's camera, its segmentation mask): the hand's and the cup's
+    pixels in the frame at each time, none after a DELETE, a DELETEALL or the cup's lifetime."""
+    import pybullet as p
+
+    write_lifecycle_bag(tmp_path / "bag")
+    client = p.connect(p.DIRECT)
+    try:
+        camera = CameraObstacles(read_obstacles(tmp_path / "bag"), client)
+        view = p.computeViewMatrix((2.0, 0.0, 1.8), (0.5, 0.0, 1.6), (0.0, 0.0, 1.0))
+        projection = p.computeProjectionMatrixFOV(50.0, 1.0, 0.05, 10.0)
+
+        def pixels(seconds: float) -> dict[str, int]:
+            camera.place(int(seconds * S))
+            mask = np.array(p.getCameraImage(96, 96, view, projection, renderer=p.ER_TINY_RENDERER,
+                                             physicsClientId=client)[4]).reshape(96, 96)
+            return {name: int((mask == camera.bodies[name]).sum()) for name in ("hand", "cup")}
+
+        frames = {t: pixels(t) for t in (0.9, 1.1, 1.3, 1.55, 1.9, 2.1, 2.4)}
+        print(frames)
+        assert all(frames[t]["hand"] > 20 for t in (1.1, 1.55)), frames
+        assert all(frames[t]["hand"] == 0 for t in (0.9, 1.3, 1.9, 2.1, 2.4)), frames
+        assert frames[2.1]["cup"] > 20 and all(frames[t]["cup"] == 0 for t in (0.9, 1.1, 1.3, 1.55, 1.9, 2.4)), frames
+    finally:
+        p.disconnect(client)

@@ -56,7 +56,7 @@ class LiveLog:
         self.commands: list[tuple[float, np.ndarray]] = []
         self.targets: list[tuple[float, np.ndarray]] = []
         self.cycles: list[tuple[float, dict[str, str]]] = []
-        self.obstacles: dict[str, ObstacleTrack] = {}  # the obstacles' poses since the last flush
+        self.obstacles: dict[str, ObstacleTrack] = {}  # the obstacles' poses since the last flush, live ones' spans
         self.status: str | None = None
         self.counts = dict.fromkeys(TOPICS, 0)
         self.rejected = 0
@@ -105,17 +105,20 @@ class LiveLog:
     def markers(self, msg: Any) -> None:
         """Obstacles on the live topic (moving ones: a pose per message, on the joint states' clock)."""
         self.counts[LIVE_TOPIC] += 1
-        add_markers(self.obstacles, msg, live=True)
+        add_markers(self.obstacles, msg, live=True, latest_ns=self.last_state_ns or 0)
 
-    def flush(self) -> None:
-        """Log what arrived since the last flush."""
+    def flush(self, final: bool = False) -> None:
+        """Log what arrived since the last flush (``final``: the last one, every obstacle's span ends too)."""
         rec = self.recording
         if self.obstacles:
             moving = [s for track in self.obstacles.values() for s in track.stamps if s >= 0]
             if moving and self.t0 is None:
                 self.seconds(min(moving))
-            log_obstacles(self.obstacles, self.t0 or 0, rec)
-            self.obstacles = {}
+            seen = max([*moving, self.last_state_ns or 0])
+            log_obstacles(self.obstacles, self.t0 or 0, rec, until_ns=None if final else seen)
+            # a live obstacle's last span stays: a DELETE or its lifetime's end may come in a later batch
+            self.obstacles = {name: track.trimmed() for name, track in self.obstacles.items()
+                              if track.live and track.shown(seen)}
         if self.states:
             t, q = zip(*self.states, strict=True)
             rv.log_joints(self.model.urdf, np.array(t), np.array(q), self.model.joint_names, rec)
@@ -170,7 +173,7 @@ def run_live(model: DualArmModel, recording: Any, duration: float | None = None,
             if time.monotonic() - last >= FLUSH_PERIOD_S:
                 log.flush()
                 last = time.monotonic()
-        log.flush()
+        log.flush(final=True)
     counts = ", ".join(f"{topic} {n}" for topic, n in log.counts.items())
     report(f"dualarm view: logged {counts}; {log.rejected} samples rejected")
     return 0
