@@ -28,7 +28,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import ruckig
-from scipy.interpolate import CubicSpline
 
 from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.planning.global_opt import project_to_pose
@@ -127,6 +126,9 @@ class JointPathTrajectory:
             raise ValueError("consecutive sample positions must differ")
         self.knots: FloatArray = np.concatenate(([0.0], np.cumsum(chords)))
         self.length = float(self.knots[-1])
+        # imported here: scipy.interpolate would cost every node that never runs a plan 0.1-0.2 s to start
+        from scipy.interpolate import CubicSpline
+
         self.spline = CubicSpline(self.knots, qs, axis=0)
         self._d1 = self.spline.derivative(1)
         self._d2 = self.spline.derivative(2)
