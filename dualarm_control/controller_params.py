@@ -27,7 +27,7 @@ from dualarm_control.params import (
     resolve,
     unit_interval,
 )
-from dualarm_control.qp import DEFAULT_BACKEND, QPSettings
+from dualarm_control.qp import DEFAULT_BACKEND, DEFAULT_MAX_ITER, QPSettings
 from dualarm_control.solvers import SolverParams
 
 
@@ -107,7 +107,7 @@ CONTROLLER_PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("plugins", [""], "Python files or module names imported first: a user's own limits and tasks "
               "register there ([''] = none; docs/limits.md)", check=_names_check, read_only=True),
     ParamSpec("qp_eps_abs", 1e-9, "QP absolute tolerance", check=positive),
-    ParamSpec("qp_max_iter", 10000, "QP iteration cap", check=positive),
+    ParamSpec("qp_max_iter", DEFAULT_MAX_ITER, "QP iteration cap (a solve that reaches it falls back)", check=positive),
 )
 
 

@@ -28,6 +28,13 @@ from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import ParameterError, UnknownSolverError
 from dualarm_control.status import Status
 
+DEFAULT_MAX_ITER = 1_000
+"""The QP iteration cap (``qp_max_iter``). The documented runs need at most 34 (the assembly's 10,438 solves per
+solver and back-end: daqp 33, proxsuite 34) and 48 (collision_demo, daqp); a cap of 10,000 let one
+proxsuite solve that never converged take 0.1 s on a quiet machine (20 control periods) and one
+property test of the suite 46-150 s instead of 0.5 s (issue 38). A solve that reaches the cap falls
+back (docs/safety.md)."""
+
 
 @dataclass(frozen=True)
 class QPSettings:
@@ -36,12 +43,12 @@ class QPSettings:
     Attributes:
         eps_abs: absolute primal/dual residual tolerance. Small (1e-9) because the l1 weight
             of the sparse QP is 1e-6: a coarser tolerance would stop before sparsity shows.
-        max_iter: iteration cap; reaching it is reported, not raised.
+        max_iter: iteration cap (:data:`DEFAULT_MAX_ITER`); reaching it is reported, not raised.
         warm_start: reuse the previous cycle's primal/dual solution (proxsuite).
     """
 
     eps_abs: float = 1e-9
-    max_iter: int = 10_000
+    max_iter: int = DEFAULT_MAX_ITER
     warm_start: bool = True
 
     def __post_init__(self) -> None:

@@ -767,3 +767,34 @@ def test_the_fallback_is_loaded_with_a_solver_not_with_the_nodes_that_only_read_
     lines = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True,
                            timeout=120).stdout.split()
     assert lines[-2:] == ["False", "True"], lines
+
+
+@pytest.mark.parametrize("name", ["hierarchical_sparse_qp", "hierarchical_sparse_l1_qp"])
+@pytest.mark.parametrize("status", ["max_iter", "infeasible"])
+def test_a_second_level_that_does_not_solve_leaves_the_primary_task(name: str, status: str,
+                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """The second level's QP ends at its iteration cap (its x an iterate far beyond the bounds) or infeasible: the
+    command is the first level's, inside the bounds, its detail naming the second level's status. Before, a
+    "max_iter" iterate was commanded and reported "bounds_violated" (proxsuite in the property tests, once the
+    cap was 1,000)."""
+    from dualarm_control.status import Status
+
+    rng = np.random.default_rng(43)
+    p = random_problem(rng, 0.5)
+    p = Problem(p.jacobian, p.reference, p.lower, p.upper, 3.0 * p.upper * np.sign(rng.standard_normal(14)))
+    solver = make_solver(name)
+    primary = make_solver("sparse_qp").solve(Problem(p.jacobian, p.reference, p.lower, p.upper, np.zeros(14)))
+    calls: list[int] = []
+
+    def unsolved(problem: object) -> QPSolution:
+        calls.append(1)
+        n = problem.H.shape[0]  # type: ignore[attr-defined]
+        return QPSolution(x=np.full(n, 50.0) if status == "max_iter" else None, status=Status(status), iterations=1000,
+                          solve_time=0.0)
+
+    monkeypatch.setattr(solver._secondary, "solve", unsolved)
+    res = solver.solve(p)
+    assert calls, "the second level was not reached: the test's problem needs a larger repulsive velocity"
+    assert res.status == "solved" and f"QP {status}; primary task only" in res.detail, res
+    assert np.allclose(res.velocities, primary.velocities, atol=1e-12), (res.velocities, primary.velocities)
+    assert np.all(res.velocities >= p.lower - 1e-12) and np.all(res.velocities <= p.upper + 1e-12)

@@ -382,11 +382,11 @@ class HierarchicalSparseQP(Solver):
             lb=lower2, ub=upper2,
         )
         sol = self._secondary.solve(qp2)  # the relaxation first: rows its optimum meets are not active
-        if problem.has_limit_rows and (sol.x is None or problem.limit_excess(qd1 + sol.x) > 0.0):
+        if problem.has_limit_rows and (not sol.ok or problem.limit_excess(qd1 + sol.x) > 0.0):
             rows2 = limit_rows_of(problem)  # hard in QP2 too: A (qd1 + qd2) <= b
             rows2["u"] = rows2["u"] - rows2["C"] @ qd1
             sol = self._secondary.solve(QPProblem(H=qp2.H, g=qp2.g, A=qp2.A, b=qp2.b, lb=lower2, ub=upper2, **rows2))
-        if sol.x is None:
+        if not sol.ok:  # "max_iter" too: its x is an iterate, maybe beyond the bounds
             return qd1, status, iters + sol.iterations, f"secondary QP {sol.status}; primary task only"
         return qd1 + sol.x, status, iters + sol.iterations, detail
 
@@ -436,10 +436,10 @@ class HierarchicalSparseL1QP(HierarchicalSparseQP):
         n = qd1.shape[0]
         sol = self._secondary.solve(QPProblem(H=h, g=g, A=split, b=j @ qd1, lb=lb, ub=ub))
         # the relaxation first: rows its optimum meets are not active (and are never built, DeferredRows)
-        if problem.has_limit_rows and (sol.x is None or problem.limit_excess(sol.x[:n] - sol.x[n:]) > 0.0):
+        if problem.has_limit_rows and (not sol.ok or problem.limit_excess(sol.x[:n] - sol.x[n:]) > 0.0):
             sol = self._secondary.solve(QPProblem(H=h, g=g, A=split, b=j @ qd1, lb=lb, ub=ub,
                                                   **limit_rows_of(problem, 2)))
-        if sol.x is None:
+        if not sol.ok:  # "max_iter" too: its x is an iterate, maybe beyond the bounds
             return qd1, status, iters + sol.iterations, f"secondary l1 QP {sol.status}; primary task only"
         return sol.x[:n] - sol.x[n:], status, iters + sol.iterations, detail
 
