@@ -37,10 +37,11 @@ def _solver_choices() -> list[str]:
     return solver_names()
 
 
-def _backend_choices() -> list[str]:
-    from dualarm_control.qp import available_backends
+def _backend_check(value: Any) -> str:
+    """daqp, proxsuite or a qpsolvers solver installed here (dualarm_control.qp.available_backends)"""
+    from dualarm_control.qp import available_backends, is_backend
 
-    return available_backends()
+    return "" if is_backend(value) else "one of: " + ", ".join(available_backends())
 
 
 def _acceleration_check(value: Any) -> str:
@@ -88,7 +89,7 @@ CONTROLLER_PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("acceleration_limit", [0.0],
               "joint acceleration bound [rad/s^2]: [0.0] = none, one value for all joints or one per joint "
               f"(documented choice: [{DEFAULT_ACCELERATION_LIMIT}])", check=_acceleration_check),
-    ParamSpec("qp_backend", DEFAULT_BACKEND, "QP back-end", choices=_backend_choices),
+    ParamSpec("qp_backend", DEFAULT_BACKEND, "QP back-end", check=_backend_check),
     ParamSpec("collision.enabled", True, "collision limit on (velocity damper rows, hard in every solver)"),
     ParamSpec("collision.influence_distance", 0.10, "collision limit: influence distance d_i [m] (> safety_distance)",
               check=positive),

@@ -364,9 +364,17 @@ def available_backends() -> list[str]:
     return [*_NATIVE, *sorted(s for s in qpsolvers.available_solvers if s not in _NATIVE_IN_QPSOLVERS)]
 
 
+def is_backend(name: str) -> bool:
+    """Whether :func:`make_backend` knows ``name`` (daqp and proxsuite without importing qpsolvers: it imports
+    scipy.sparse, 0.1-0.2 s that a node using them need not pay at start)."""
+    return name in _NATIVE or name in available_backends()
+
+
 def make_backend(name: str, settings: QPSettings | None = None) -> QPBackend:
     """Create a QP back-end by name; raises UnknownSolverError listing the valid names."""
     settings = settings or QPSettings()
+    if name in _NATIVE:
+        return _NATIVE[name](settings)
     factories: dict[str, Callable[[], QPBackend]] = {
         key: (lambda cls=cls: cls(settings)) for key, cls in _NATIVE.items()  # type: ignore[misc]
     }

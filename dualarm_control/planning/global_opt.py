@@ -22,7 +22,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import Bounds, minimize
 
 from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.planning.index import (
@@ -248,6 +247,9 @@ def solve_block(
     then ~1e-10); if that fails, or the polished value is not below the start's, the start
     is returned (status "kept_start"): a block never returns worse than its starting point.
     """
+    # imported here: the nodes, which only execute a plan, never need scipy.optimize (0.1 s to import)
+    from scipy.optimize import Bounds, minimize
+
     problem = BlockProblem(model, path, block)
     x0 = np.asarray(start, dtype=float).ravel()
     start_value = problem.value(x0)

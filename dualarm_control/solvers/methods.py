@@ -6,9 +6,12 @@ velocity bounds of eq (23), qd_r repulsive velocity of eq (25). Units rad/s, m/s
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 import numpy.typing as npt
-from scipy.linalg import lapack
 
 from dualarm_control.arrays import add_diagonal, split_columns
 from dualarm_control.qp import QPProblem, check_backend
@@ -482,5 +485,14 @@ def spd_solve(a: FloatArray, b: FloatArray) -> FloatArray | None:
     Called directly: np.linalg.solve costs twice as much on these 6x6 systems (its general
     LU and checks). Returns None when ``a`` is not positive definite (singular J J^T).
     """
-    _, x, info = lapack.dposv(a, b)
+    _, x, info = _dposv()(a, b)
     return None if info != 0 else np.asarray(x)
+
+
+@functools.cache
+def _dposv() -> Callable[..., Any]:
+    """LAPACK's dposv from scipy, imported on first use: scipy.linalg costs 0.15-0.2 s to import, which every
+    node that never solves (the simulator, the trajectory node) paid at start."""
+    from scipy.linalg import lapack
+
+    return lapack.dposv  # type: ignore[no-any-return]
