@@ -24,6 +24,7 @@ from pathlib import Path
 import pytest
 
 from dualarm_control.app.faults import matrix as faults
+from dualarm_control.app.faults import rows as row_names
 from dualarm_control.app.faults.episodes import SafeEpisode
 from dualarm_control.app.faults.run_all import run_matrix
 
@@ -54,8 +55,8 @@ def run_rows(runs: Runs, tmp_path_factory: pytest.TempPathFactory, group: str, s
 
 def judged(runs: Runs, tmp_path_factory: pytest.TempPathFactory, name: str) -> faults.Row:
     """Row ``name`` of its group's run, printed; skipped (with the reason) where it cannot run."""
-    if name in faults.LOOPBACK_ROWS:
-        _, rows, lines = run_rows(runs, tmp_path_factory, "loopback", "assembly", faults.LOOPBACK_ROWS)
+    if name in row_names.LOOPBACK_ROWS:
+        _, rows, lines = run_rows(runs, tmp_path_factory, "loopback", "assembly", row_names.LOOPBACK_ROWS)
     elif name in ("across_hosts", "link_cut"):
         _, rows, lines = run_rows(runs, tmp_path_factory, "link", FAULT_MOVE, ("across_hosts", "link_cut"))
     else:
@@ -102,10 +103,10 @@ def test_kill_controller_row(runs: Runs, tmp_path_factory: pytest.TempPathFactor
     """The controller killed mid-motion: the simulator's command timeout brings the arms to rest
     within command_timeout + 3 simulator steps (counted in steps, not wall-clock time)."""
     stop = passed(runs, tmp_path_factory, "kill_controller").figures
-    assert stop["speed_at_kill"] > 0.01 and 0 <= stop["steps"] <= faults.COMMAND_TIMEOUT_STEPS + 3
+    assert stop["speed_at_kill"] > 0.01 and 0 <= stop["steps"] <= row_names.COMMAND_TIMEOUT_STEPS + 3
 
 
-@pytest.mark.parametrize("name", list(faults.PROFILE_KILLS))
+@pytest.mark.parametrize("name", list(row_names.PROFILE_KILLS))
 def test_kill_controller_on_each_shipped_profile(runs: Runs, tmp_path_factory: pytest.TempPathFactory,
                                                  name: str) -> None:
     """Issue 40 item 5: the controller killed mid-motion on ros2_control_velocity.yaml (a trajectory controller
@@ -113,7 +114,7 @@ def test_kill_controller_on_each_shipped_profile(runs: Runs, tmp_path_factory: p
     the row's steps of the last command (counted in simulator steps), read from a bag of the profile's topics."""
     row = passed(runs, tmp_path_factory, name)
     stop = row.figures
-    assert stop["speed_at_kill"] > 0.01 and 0 <= stop["steps"] <= faults.PROFILE_KILLS[name][1], row.observed
+    assert stop["speed_at_kill"] > 0.01 and 0 <= stop["steps"] <= row_names.PROFILE_KILLS[name][1], row.observed
 
 
 def test_the_kill_row_fails_on_a_group_velocity_controller(tmp_path: Path) -> None:
@@ -123,7 +124,7 @@ def test_the_kill_row_fails_on_a_group_velocity_controller(tmp_path: Path) -> No
 
     name = "kill_controller_velocity_profile"
     group = Path(__file__).parent / "data" / "group_velocity.yaml"
-    row = kill_row(tmp_path, FAULT_MOVE, name, group, faults.PROFILE_KILLS[name][1], print)
+    row = kill_row(tmp_path, FAULT_MOVE, name, group, row_names.PROFILE_KILLS[name][1], print)
     print(f"[{row.status}] {row.observed}")
     assert not row.observed.startswith("run failed"), row.observed
     assert row.status == "FAIL" and row.figures["speed_at_kill"] > 0.01 and row.figures["steps"] == -1, row.observed
@@ -137,9 +138,9 @@ def test_recorder_signal_rows(runs: Runs, tmp_path_factory: pytest.TempPathFacto
 
 
 def test_loopback_results_are_written(runs: Runs, tmp_path_factory: pytest.TempPathFactory) -> None:
-    out, rows, _ = run_rows(runs, tmp_path_factory, "loopback", "assembly", faults.LOOPBACK_ROWS)
+    out, rows, _ = run_rows(runs, tmp_path_factory, "loopback", "assembly", row_names.LOOPBACK_ROWS)
     doc = json.loads((out / "faults.json").read_text())
-    assert [r["name"] for r in doc["rows"]] == list(faults.LOOPBACK_ROWS)
+    assert [r["name"] for r in doc["rows"]] == list(row_names.LOOPBACK_ROWS)
     assert doc["passed"] == all(r.status != "FAIL" for r in rows.values())
     assert "| stale states |" in (out / "faults.md").read_text()
     assert (out / "loopback" / "controller_node.log").read_text().count("safe state:") >= 3

@@ -11,7 +11,8 @@ from pathlib import Path
 
 def cmd_faults(args: argparse.Namespace) -> int:
     """The fault matrix against real processes: DIR/faults.md and faults.json; exit 1 if a row failed."""
-    from dualarm_control.app.faults.matrix import ROWS, format_table, write_results
+    from dualarm_control.app.faults.matrix import format_table, write_results
+    from dualarm_control.app.faults.rows import ROWS
     from dualarm_control.app.faults.run_all import run_matrix
     from dualarm_control.scenario import scenario_file
 
@@ -55,7 +56,7 @@ def add_faults_parsers(sub: argparse._SubParsersAction[argparse.ArgumentParser])
                          "cannot run here are reported as skipped, with the reason.")
     fau.add_argument("--output", default="out/faults", metavar="DIR", help="output directory (default: %(default)s)")
     fau.add_argument("--scenario", default="assembly", help="scenario of the runs (default: %(default)s)")
-    from dualarm_control.app.faults.matrix import ROWS
+    from dualarm_control.app.faults.rows import ROWS
 
     fau.add_argument("--only", metavar="ROW,...", help=f"run only these rows (default: all): {', '.join(ROWS)}")
     fau.set_defaults(func=cmd_faults)

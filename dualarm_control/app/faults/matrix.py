@@ -36,12 +36,16 @@ from dualarm_control.app.faults.netns import (
     private_link,
     unavailable,
 )
+from dualarm_control.app.faults.rows import (
+    COMMAND_TIMEOUT_STEPS,
+    LOOPBACK_ROWS,
+    PROFILE_KILLS,
+)
 from dualarm_control.paths import config_path
 
 PERIOD = 0.005
 STALE_TIMEOUT = 0.015  # controller defaults (nodes/controller_setup.py: NODE_PARAMETERS)
 TARGET_TIMEOUT = 0.05
-COMMAND_TIMEOUT_STEPS = 10  # sim_node command_timeout 0.05 s / 5 ms
 PAUSE_S = 0.5
 CUT_S = 1.0
 RESTART_AFTER_S = 0.5
@@ -55,13 +59,6 @@ FINAL_ORIENTATION_RAD = 1e-2
 LOSS = ("loss", "10%")
 LINK_NETEM = ("delay", "2ms", "1ms", "loss", "2%")
 
-LOOPBACK_ROWS = ("stale_states", "target_stopped", "kill_sim", "kill_controller", "recorder_sigint",
-                 "recorder_sigterm")
-PROFILE_KILLS = {"kill_controller_velocity_profile": ("ros2_control_velocity", COMMAND_TIMEOUT_STEPS + 3),
-                 "kill_controller_position_profile": ("lbr_dual_position", 3)}
-"""Controller kills on the shipped hardware profiles (app/faults/profile_kills.py): profile, at rest within steps."""
-ROWS = (*LOOPBACK_ROWS, *PROFILE_KILLS, "best_effort_loss", "across_hosts", "link_cut", "link_netem",
-        "goal_into_collision")
 COLLISION_GOAL = ("0", "0", "-0.35", "3.14159265", "0", "0")
 """goal_into_collision: F2 35 cm behind F1, through the left forearm (xyz [m], rpy [rad])."""
 SAFE_GOAL = ("0", "0", "0.15", "3.14159265", "0", "0")

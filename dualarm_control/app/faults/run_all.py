@@ -10,7 +10,6 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from dualarm_control.app.faults.matrix import (
-    ROWS,
     Row,
     collision_rows,
     link_rows,
@@ -18,6 +17,7 @@ from dualarm_control.app.faults.matrix import (
     loss_rows,
 )
 from dualarm_control.app.faults.profile_kills import profile_kill_rows
+from dualarm_control.app.faults.rows import ROWS
 
 
 def run_matrix(out: Path, scenario: str = "assembly", only: Sequence[str] = ROWS,
