@@ -45,11 +45,17 @@ from dualarm_control.errors import InputRejected
 from dualarm_control.params import ParamSpec, non_negative, positive
 from dualarm_control.ros.convert import rotation_xyzw
 from dualarm_control.ros.inputs import DESERIALIZE_ERRORS, Throttle
+from dualarm_control.ros.marker_kinds import (
+    CUBE,
+    CYLINDER,
+    DELETE,
+    DELETEALL,
+    SPHERE,
+    TYPES,
+    marker_name,
+)
 from dualarm_control.ros.point_cloud import cloud_message, cloud_points
 
-CUBE, SPHERE, CYLINDER, MESH_RESOURCE = 1, 2, 3, 10
-ADD, DELETE, DELETEALL = 0, 2, 3
-TYPES = {CUBE: "CUBE", SPHERE: "SPHERE", CYLINDER: "CYLINDER", MESH_RESOURCE: "MESH_RESOURCE"}
 MARKER_QUEUE = 64
 """Marker arrays waiting for the worker; an older one is dropped when a new one comes (counted)."""
 
@@ -76,12 +82,6 @@ def fixed_frames(model: pin.Model) -> dict[str, tuple[FloatArray, FloatArray]]:
         if frame.parentJoint == 0:
             frames[frame.name] = (np.array(frame.placement.rotation), np.array(frame.placement.translation))
     return frames
-
-
-def marker_name(marker: Any) -> str:
-    """An obstacle's name from its marker: ``ns`` for id 0, else ``<ns>_<id>`` (``marker`` for an empty ns)."""
-    ns = str(marker.ns) or "marker"
-    return ns if marker.id == 0 else f"{ns}_{marker.id}"
 
 
 def _finite(*values: float) -> bool:

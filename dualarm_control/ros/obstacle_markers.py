@@ -21,10 +21,15 @@ import numpy as np
 from dualarm_control.moving_obstacles import MovingObstacle
 from dualarm_control.obstacles import Box, Cylinder, Mesh, Obstacle, Plane, Sphere
 from dualarm_control.ros import convert
-from dualarm_control.ros.obstacle_io import CUBE, CYLINDER, MESH_RESOURCE, SPHERE
+from dualarm_control.ros.marker_kinds import (
+    CUBE,
+    CYLINDER,
+    LIVE_TOPIC,
+    MESH_RESOURCE,
+    OBSTACLES_TOPIC,
+    SPHERE,
+)
 
-OBSTACLES_TOPIC: Final = "/dualarm/obstacles"
-LIVE_TOPIC: Final = "/collision_objects"
 FRAME: Final = "world"
 COLOUR: Final = (0.55, 0.55, 0.6, 0.8)
 MOVING_COLOUR: Final = (0.9, 0.6, 0.45, 0.9)

@@ -25,18 +25,18 @@ from typing import Any
 import numpy as np
 
 from dualarm_control.arrays import FloatArray
-from dualarm_control.ros.obstacle_io import (
+from dualarm_control.ros.marker_kinds import (
     ADD,
     CUBE,
     CYLINDER,
     DELETE,
     DELETEALL,
+    LIVE_TOPIC,
     MESH_RESOURCE,
     SPHERE,
     marker_name,
 )
-from dualarm_control.ros.obstacle_markers import LIVE_TOPIC
-from dualarm_control.ros.obstacle_markers import OBSTACLES_TOPIC as SCENE_TOPIC
+from dualarm_control.ros.marker_kinds import OBSTACLES_TOPIC as SCENE_TOPIC
 
 HIDDEN_AT = (0.0, 0.0, -1000.0)
 """Where the video's camera puts an obstacle that is not shown at a frame's stamp [m]."""
