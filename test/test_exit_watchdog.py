@@ -18,12 +18,12 @@ def fired(stage: str | None, capsys: pytest.CaptureFixture[str]) -> tuple[list[i
         codes.append(code)
         done.set()
 
-    watchdog = ExitWatchdog(0.05, exit=fake_exit)
-    if stage is None:
+    if stage is None:  # a timer long enough that a loaded machine's delay before cancel() cannot reach it
+        watchdog = ExitWatchdog(0.5, exit=fake_exit)
         watchdog.cancel()
-        time.sleep(0.3)  # the timer would have fired by now: nothing may happen
+        time.sleep(0.8)  # the timer would have fired by now: nothing may happen
     else:
-        watchdog.stage = stage
+        ExitWatchdog(0.05, exit=fake_exit, stage=stage)
         assert done.wait(30.0), "the watchdog did not fire within 30 s"
     return codes, capsys.readouterr().err
 
@@ -59,3 +59,23 @@ def test_the_c_level_dump_is_armed_and_cancelled() -> None:
     watchdog.cancel()
     assert not watchdog._c_dump
     faulthandler.cancel_dump_traceback_later()  # idempotent: nothing was left armed
+
+
+def test_a_timer_that_fires_before_the_constructor_returns_still_exits(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The constructor delayed past the timer (as a loaded machine did in a CI run: "the watchdog did not fire
+    within 30 s", its thread dead of an AttributeError): the watchdog still exits, once."""
+    from dualarm_control.ros import node_exit
+
+    arm = node_exit._dump_stacks_later
+
+    def slow_arm(seconds: float) -> bool:
+        armed = arm(seconds)
+        time.sleep(0.3)  # the 0.05 s timer would fire here if it were already started
+        return armed
+
+    monkeypatch.setattr(node_exit, "_dump_stacks_later", slow_arm)
+    codes: list[int] = []
+    done = threading.Event()
+    ExitWatchdog(0.05, exit=lambda code: (codes.append(code), done.set()), stage="teardown")
+    assert done.wait(30.0), "the watchdog did not fire within 30 s"
+    assert codes == [0]

@@ -46,22 +46,24 @@ class ExitWatchdog:
         stage: ``close``, ``flush`` or ``teardown`` (set by the caller as it goes).
     """
 
-    def __init__(self, seconds: float, exit: Callable[[int], None] | None = None) -> None:
+    def __init__(self, seconds: float, exit: Callable[[int], None] | None = None, stage: str = "close") -> None:
         import os
 
-        self.stage = "close"
+        self.stage = stage
         self.seconds = seconds
         self._exit = exit or os._exit
+        # everything _fire reads is set before the timer starts: on a loaded machine a short timer fired
+        # before _c_dump existed, its thread died of the AttributeError and nothing exited
+        self._c_dump = _dump_stacks_later(seconds + C_DUMP_DELAY_S)
         self._timer = threading.Timer(seconds, self._fire)
         self._timer.daemon = True
         self._timer.start()
-        self._c_dump = _dump_stacks_later(seconds + C_DUMP_DELAY_S)
 
     def _fire(self) -> None:
         import traceback
 
-        self._cancel_c_dump()
         try:
+            self._cancel_c_dump()
             stacks = "".join(f"Thread {ident:#x}:\n" + "".join(traceback.format_stack(frame))
                              for ident, frame in sys._current_frames().items())
             print(f"exit watchdog: the way out is stuck in '{self.stage}' after {self.seconds:.0f} s; every "
