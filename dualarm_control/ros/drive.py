@@ -28,11 +28,6 @@ from typing import Any, TextIO
 
 import yaml
 
-from dualarm_control.drive_commands import (
-    finite_vector,
-    rotation_from_quaternion,
-    rotation_from_rpy,
-)
 from dualarm_control.drive_status import (
     ABSOLUTE_STATUS_NAME,
     REACHED,
@@ -42,7 +37,7 @@ from dualarm_control.drive_status import (
     parse_status,
 )
 from dualarm_control.errors import DualArmError
-from dualarm_control.kinematics import LEFT_TOOL
+from dualarm_control.robot import LEFT_TOOL
 from dualarm_control.ros.convert import quaternion_xyzw
 from dualarm_control.ros.graph import fq_topic, message_class
 from dualarm_control.ros.node import tool_node
@@ -218,6 +213,11 @@ def goal_rotation(rpy: Sequence[float] | None, quat: Sequence[float] | None) -> 
     """The goal's rotation matrix from ``--rpy`` or ``--quat`` (identity if neither)."""
     import numpy as np
 
+    from dualarm_control.drive_commands import (
+        rotation_from_quaternion,
+        rotation_from_rpy,
+    )
+
     if quat is not None:
         return rotation_from_quaternion(quat)
     if rpy is not None:
@@ -228,6 +228,8 @@ def goal_rotation(rpy: Sequence[float] | None, quat: Sequence[float] | None) -> 
 def pose_stamped(node: Any, xyz: Sequence[float], rotation: Any, frame: str = LEFT_TOOL) -> Any:
     """geometry_msgs/PoseStamped in ``frame`` (``left_tool``; ``world`` for an absolute goal) stamped now."""
     from geometry_msgs.msg import PoseStamped
+
+    from dualarm_control.drive_commands import finite_vector
 
     msg = PoseStamped()
     msg.header.frame_id = frame
@@ -324,6 +326,8 @@ def jog(linear: Sequence[float], angular: Sequence[float], seconds: float, rate:
     """Stream geometry_msgs/TwistStamped (``left_tool``) on ``/relative_twist`` for ``seconds`` at ``rate`` Hz
     (``absolute``: ``world`` on ``/absolute_twist``, the absolute frame's twist)."""
     from geometry_msgs.msg import TwistStamped
+
+    from dualarm_control.drive_commands import finite_vector
 
     v = finite_vector(linear, 3, "--linear")
     w = finite_vector(angular, 3, "--angular")

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from dualarm_control.app.view.options import add_foxglove_arguments, add_video_arguments
 from dualarm_control.errors import DualArmError
 
 if TYPE_CHECKING:
@@ -28,9 +29,7 @@ control nodes come first (docs/visualization.md, what the view costs the control
 
 def add_view_parser(sub: Any) -> None:
     """The ``view`` verb on the ``dualarm`` sub-parsers."""
-    from dualarm_control.app.view.foxglove_view import add_foxglove_arguments
     from dualarm_control.app.view.server import DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT
-    from dualarm_control.app.view.video import add_video_arguments
 
     view = sub.add_parser(
         "view", help="see the cell: Rerun 3D and plots (live or from a bag), a video of a bag, or a Foxglove server",

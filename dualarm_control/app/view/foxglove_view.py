@@ -26,11 +26,11 @@ from typing import Any, Final
 import numpy as np
 
 from dualarm_control.app.record.bag import open_reader
+from dualarm_control.app.view.options import DEFAULT_FOXGLOVE_PORT as DEFAULT_PORT
 from dualarm_control.app.view.recording import JointRecording, read_joint_recording
 from dualarm_control.errors import DualArmError
 from dualarm_control.link_frames import STRING_TYPE, TF_TYPE, LinkFrames, TfSerializer
 
-DEFAULT_PORT: Final = 8765
 JOINT_STATE_TYPE: Final = "sensor_msgs/msg/JointState"
 SIGNAL_TOPICS: Final = ("/diagnostics", "/velocity_controller/commands", "/relative_pose", "/relative_target",
                         "/wrench", "/contact_force", "/dualarm/obstacles", "/collision_objects")
@@ -280,18 +280,8 @@ def serve_live(port: int = DEFAULT_PORT, host: str = "127.0.0.1", *, stop: threa
             server.stop()
 
 
-def add_foxglove_arguments(parser: Any) -> None:
-    """``--foxglove``, ``--foxglove-port`` and ``--speed`` on a verb taking a BAG (``dualarm view``)."""
-    parser.add_argument("--foxglove", action="store_true",
-                        help="serve the run over the Foxglove WebSocket protocol (Foxglove app: Open connection, "
-                        "Foxglove WebSocket, ws://127.0.0.1:PORT)")
-    parser.add_argument("--foxglove-port", type=int, default=DEFAULT_PORT, metavar="PORT",
-                        help="port of the Foxglove WebSocket server (default: %(default)s)")
-    parser.add_argument("--speed", type=float, default=1.0, help="replay speed of a bag (default: %(default)g)")
-
-
 def foxglove_from_args(bag: str | None, args: Any) -> int:
-    """Handle ``--foxglove`` (after :func:`add_foxglove_arguments`): serve ``bag``, or the running cell
+    """Handle ``--foxglove`` (after :func:`dualarm_control.app.view.options.add_foxglove_arguments`): serve ``bag``, or the running cell
     when None, until Ctrl-C; 0."""
     def ready(port: int) -> None:
         what = f"replaying {bag} in a loop" if bag is not None else "the running cell"

@@ -26,13 +26,12 @@ import numpy as np
 import numpy.typing as npt
 
 from dualarm_control.app.view.obstacles_view import CameraObstacles, ObstacleTrack
+from dualarm_control.app.view.options import DEFAULT_FPS, DEFAULT_SIZE
 from dualarm_control.app.view.recording import JointRecording, read_joint_recording
 from dualarm_control.arrays import FloatArray
 from dualarm_control.errors import DualArmError
 from dualarm_control.obstacles import AttachedBox
 
-DEFAULT_FPS: Final = 25.0
-DEFAULT_SIZE: Final = (640, 480)
 CAMERA_EYE: Final = (2.1, -1.6, 1.6)
 """Camera position [m] in the world: in front of and to the right of the cell, above the torso."""
 CAMERA_TARGET: Final = (0.5, 0.0, 0.75)
@@ -233,27 +232,8 @@ def box_poses(bag_path: Path) -> dict[int, FloatArray]:
         return {}
 
 
-def parse_size(text: str) -> tuple[int, int]:
-    """``WIDTHxHEIGHT`` -> (width, height)."""
-    try:
-        width, height = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"size {text!r} is not WIDTHxHEIGHT, e.g. 640x480") from None
-    return width, height
-
-
-def add_video_arguments(parser: argparse._ActionsContainer) -> None:
-    """``--video FILE.mp4``, ``--fps`` and ``--size`` on a verb taking a BAG (``dualarm view``)."""
-    parser.add_argument("--video", metavar="FILE.mp4",
-                        help="render the bag's run to an MP4 with pybullet's offscreen renderer (no viewer)")
-    parser.add_argument("--fps", type=float, default=DEFAULT_FPS,
-                        help="video frames per second; joint states resampled on that clock (default: %(default)g)")
-    parser.add_argument("--size", type=parse_size, default=DEFAULT_SIZE, metavar="WxH",
-                        help="video size in pixels, both even (default: 640x480)")
-
-
 def video_from_args(bag: str | None, args: argparse.Namespace) -> int:
-    """Handle ``--video`` (after :func:`add_video_arguments`): render ``bag`` to ``args.video``; 0 on success."""
+    """Handle ``--video`` (after :func:`dualarm_control.app.view.options.add_video_arguments`): render ``bag`` to ``args.video``; 0 on success."""
     if bag is None:
         raise VideoError("--video renders a recorded run: name the BAG")
     render_video(Path(bag), Path(args.video), fps=args.fps, size=args.size, log=sys.stderr)
