@@ -131,6 +131,10 @@ def plan_start(path: str, joint_names: list[str]) -> np.ndarray:
     return read_plan(path, joint_names).configurations[0]
 
 
+FIRST_COMMAND = "first command received"
+"""Logged once, at the first command: after a restart, when the controller's commands reach this simulator again
+(the fault matrix's kill_sim row waits for it)."""
+
 class SimNode:
     """Node shell around :class:`DualArmCell`."""
 
@@ -272,6 +276,8 @@ class SimNode:
     def on_command(self, output: str, data: np.ndarray) -> None:
         """A command of one output of the profile; lockstep: the step runs once every output's has arrived."""
         self.received += 1
+        if self.received == 1:  # the command path works (a restarted simulator waits for the controller's writer)
+            self.log.info(f"{FIRST_COMMAND} ({output})")
         self.merger.put(output, data, self.cell.reference)
         if self.lockstep and not self.merger.complete:
             return

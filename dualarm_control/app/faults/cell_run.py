@@ -8,6 +8,7 @@ target is moving (its twist is non-zero), timed from the trajectory node's start
 from __future__ import annotations
 
 import os
+import re
 import signal
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -119,6 +120,18 @@ class CellRun:
             time.sleep(0.02)
         raise RunError(f"{name}: '{text}' not seen within {timeout:.0f} s; last lines:\n{self.tail(name)}")
 
+    def line_after_ms(self, name: str, text: str, since_ns: int, timeout: float) -> float:
+        """[ms] from ``since_ns`` (wall clock) to the stamp of the latest ``name`` process's first line containing
+        ``text``; inf when none came within ``timeout`` [s]. E.g. after a simulator's restart, its first command:
+        its reader can match the controller's writer seconds after the controller has its states again (seen:
+        0 commands 1.2 s after the recovery; about 2 s later on a quiet machine)."""
+        try:
+            i = self.wait_line(name, text, timeout)
+        except RunError:
+            return float("inf")
+        stamp = log_stamp(self.process(name).lines[i])
+        return float("nan") if stamp is None else (stamp * 1e9 - since_ns) / 1e6
+
     def send(self, name: str, sig: int) -> int:
         """Send ``sig`` to the latest ``name`` process; the wall-clock time [ns] it was sent."""
         t = time.time_ns()
@@ -167,3 +180,9 @@ class CellRun:
 
     def record(self) -> GraphStreams:
         return read_record(self.bag)
+
+
+def log_stamp(line: str) -> float | None:
+    """The wall-clock stamp [s] of a ROS log line ``[LEVEL] [sec.nsec] [node]: ...`` (None without one)."""
+    stamp = re.search(r"\[(\d+\.\d+)\]", line)
+    return None if stamp is None else float(stamp[1])

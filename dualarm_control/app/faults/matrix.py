@@ -22,7 +22,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from dualarm_control.app.faults.cell_run import CellRun, RunError
+from dualarm_control.app.faults.cell_run import CellRun, RunError, log_stamp
 from dualarm_control.app.faults.episodes import (
     GraphStreams,
     arm_stop,
@@ -79,7 +79,8 @@ EXPECTED = {
                       f"target_timeout {TARGET_TIMEOUT * 1e3:.0f} ms (<= +2 periods); OK again < "
                       f"{RECOVER_WITHIN_MS:.0f} ms after SIGCONT; one log line each way",
     "kill_sim": f"kill -9 sim_node mid-run, restart it {RESTART_AFTER_S:g} s later: zero commands + ERROR while it is "
-                f"gone, cycles resume (OK) once the new simulator publishes (< {RESTART_RECOVER_WITHIN_MS / 1e3:.0f} s)",
+                f"gone, cycles resume (OK) once the new simulator publishes and the controller's commands reach it "
+                f"(its log's 'first command received'; both < {RESTART_RECOVER_WITHIN_MS / 1e3:.0f} s)",
     "kill_controller": f"kill -9 controller_node mid-motion: the arms are at rest (all joints < 1e-3 rad/s) within "
                        f"command_timeout ({COMMAND_TIMEOUT_STEPS} steps) + 3 steps of its last command's arrival",
     **{name: f"kill -9 controller_node mid-motion on config/hardware/{profile}.yaml: the arms at rest (< 1e-3 rad/s) "
@@ -132,6 +133,7 @@ class _Episode:
     start: int  # wall-clock ns of the fault
     resume: int  # wall-clock ns the input came back (process continued or restarted, link up)
     logs: tuple[int, int]  # controller log lines 'safe state' and 'recovered' during the episode
+    commands_ms: float | None = None  # a restart: from the fault to the new simulator's first command [ms]
 
 
 def _recovered(run: CellRun, line: int, timeout: float = 30.0) -> tuple[int, int]:
@@ -155,11 +157,14 @@ def _safe_since(run: CellRun, line: int) -> Callable[[], bool]:
 def _episode_row(name: str, rec: GraphStreams, ep: _Episode, reason: str, limit_ms: float, within_ms: float) -> Row:
     e = safe_episode(rec, ep.start, ep.resume, reason)
     logs = ep.logs
+    commands = {} if ep.commands_ms is None else {"commands_back_ms": ep.commands_ms}
     passed = (e.age_ms <= limit_ms and e.other_commands == 0 and e.zero_commands > 0
-              and e.recovered_ms <= within_ms and logs[0] == logs[1] >= 1)
-    return _row(name, passed, f"{e.text()}; log: {logs[0]} 'safe state', {logs[1]} 'recovered'",
+              and e.recovered_ms <= within_ms and logs[0] == logs[1] >= 1
+              and all(v <= within_ms for v in commands.values()))
+    text = "".join(f"; commands reached the restarted simulator {v:.0f} ms after the fault" for v in commands.values())
+    return _row(name, passed, f"{e.text()}; log: {logs[0]} 'safe state', {logs[1]} 'recovered'{text}",
                 detected_ms=e.detected_ms, input_age_ms=e.age_ms, zero_commands=e.zero_commands,
-                other_commands=e.other_commands, recovered_ms=e.recovered_ms)
+                other_commands=e.other_commands, recovered_ms=e.recovered_ms, **commands)
 
 
 def _recently_safe(run: CellRun, seconds: float) -> bool:
@@ -169,8 +174,8 @@ def _recently_safe(run: CellRun, seconds: float) -> bool:
         if "safe state:" in line:
             return True
         if "recovered after" in line:
-            stamp = re.search(r"\[(\d+\.\d+)\]", line)
-            return stamp is None or time.time() - float(stamp[1]) < seconds
+            stamp = log_stamp(line)
+            return stamp is None or time.time() - stamp < seconds
     return False
 
 
@@ -234,7 +239,13 @@ def loopback_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[
             time.sleep(RESTART_AFTER_S)
             resume = time.time_ns()
             run.start_node("sim_node")
-            episodes["kill_sim"] = _Episode(start, resume, _recovered(run, line, RESTART_RECOVER_WITHIN_MS / 1e3))
+            logs = _recovered(run, line, RESTART_RECOVER_WITHIN_MS / 1e3)
+            from dualarm_sim.sim_node import (
+                FIRST_COMMAND,  # the restarted simulator's first command: the path works
+            )
+
+            episodes["kill_sim"] = _Episode(start, resume, logs,
+                                            run.line_after_ms("sim_node", FIRST_COMMAND, start, RESTART_RECOVER_WITHIN_MS / 1e3))
         if "kill_controller" in names:
             killed_controller = _kill_controller(run, "kill_controller", say)
     except RunError as exc:
