@@ -195,7 +195,9 @@ while not states or pub.get_subscription_count() < 1:
         sys.exit("no simulator")
 first = len(states)
 command = [0.2] + [0.0] * 13
-while len(states) < first + 200:  # 200 simulator steps of 5 ms (more if this script lags and misses states)
+# 200 moving simulator states of 5 ms: the first commands may be lost while the simulator's reader matches this
+# writer (it can lag the writer's side by 100 ms and more on a loaded machine: 25 states once)
+while sum(v > 0.1 for _, v in states[first:]) < 200:
     pub.publish(Float64MultiArray(data=command))
     rclpy.spin_once(node, timeout_sec=0.005)
     if time.monotonic() > end:
@@ -210,9 +212,11 @@ print(window[-1][0] - window[0][0], statistics.median(v for _, v in window), sta
 
 
 def test_plain_rclpy_script_drives_the_simulator(tmp_path: Path) -> None:
-    """sim_node alone, driven by Float64MultiArray commands from a foreign script at 0.2 rad/s for 200
-    of its states: the joint reports 0.2 rad/s and advances 0.2 rad/s x 5 ms per state. Counted in
-    simulator states, not wall-clock seconds (before: 1 s of wall clock, 0.2 +- 0.03 rad)."""
+    """sim_node alone, driven by Float64MultiArray commands from a foreign script at 0.2 rad/s until 200 of its
+    states move: the joint reports 0.2 rad/s and advances 0.2 rad/s x 5 ms per state. Counted in simulator
+    states, not wall-clock seconds (before: 1 s of wall clock, 0.2 +- 0.03 rad); how soon the first command
+    takes effect is discovery's timing, not asserted (under stress-ng the simulator's reader matched 25 states
+    after the script's writer had)."""
     script = tmp_path / "driver.py"
     script.write_text(FOREIGN_DRIVER)
     sim = subprocess.Popen([sys.executable, "-m", "dualarm_control.app.cli", "run", "sim_node", "--ros-args",
@@ -229,8 +233,7 @@ def test_plain_rclpy_script_drives_the_simulator(tmp_path: Path) -> None:
           f"median step {step:.3e} rad")
     assert velocity == pytest.approx(0.2, rel=0.01)
     assert step == pytest.approx(0.2 * 0.005, rel=0.01)
-    # Before the command took effect: at most the subscription's 10 queued states and a step or two.
-    assert moving >= 200 - 15
+    assert moving >= 200
     # 0.2 rad/s x 5 ms per moving state after the first; more where the script missed states.
     assert moved >= 0.99 * 0.2 * 0.005 * (moving - 1)  # 1 %: the median step above
     assert code == 0
