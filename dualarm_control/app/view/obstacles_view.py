@@ -52,6 +52,7 @@ class ObstacleTrack:
         stamps: the poses' stamps [ns], (k,). positions: [m], (k, 3). quaternions: (x, y, z, w), (k, 4).
         spans: when it is shown, [start, end) [ns] each, in order; end None: until the end of the run
             (the latched scene's one span: [-1, None)).
+        spans_logged, poses_logged: how many of the first spans' starts and poses a live view has logged already.
     """
 
     name: str
@@ -63,6 +64,8 @@ class ObstacleTrack:
     positions: list[FloatArray] = field(default_factory=list)
     quaternions: list[FloatArray] = field(default_factory=list)
     spans: list[tuple[int, int | None]] = field(default_factory=list)
+    spans_logged: int = 0
+    poses_logged: int = 0
 
     def add(self, stamp: int, marker: Any) -> None:
         """One more pose at ``stamp`` [ns]: it continues the last span when that has not ended before ``stamp``
@@ -103,7 +106,8 @@ class ObstacleTrack:
         """This track with its last pose and its last span only (what a live view keeps after logging: a later
         DELETE with a zero stamp takes that pose's)."""
         return ObstacleTrack(self.name, self.kind, self.scale, self.colour, self.mesh, self.stamps[-1:],
-                             self.positions[-1:], self.quaternions[-1:], self.spans[-1:])
+                             self.positions[-1:], self.quaternions[-1:], self.spans[-1:],
+                             spans_logged=len(self.spans[-1:]), poses_logged=len(self.stamps[-1:]))
 
 
 def _stamp(marker: Any) -> int:
@@ -197,14 +201,15 @@ def log_obstacles(tracks: dict[str, ObstacleTrack], start_ns: int, recording: An
             rr.log(path, rr.Transform3D(translation=track.positions[0], quaternion=rr.Quaternion(xyzw=track.quaternions[0]),
                                         parent_frame=world, child_frame=frame), static=True, recording=recording)
             continue
-        for start, _ in track.spans:
+        for start, _ in track.spans[track.spans_logged:]:
             at(start)
             rr.log(path + "/shape", *parts, recording=recording)
-        if track.stamps:
-            n = len(track.stamps)
-            rr.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, duration=(np.array(track.stamps) - start_ns) * 1e-9)],
-                            columns=rr.Transform3D.columns(translation=np.array(track.positions),
-                                                           quaternion=np.array(track.quaternions),
+        new = slice(track.poses_logged, None)
+        if track.stamps[new]:
+            n = len(track.stamps[new])
+            rr.send_columns(path, indexes=[rr.TimeColumn(TIMELINE, duration=(np.array(track.stamps[new]) - start_ns) * 1e-9)],
+                            columns=rr.Transform3D.columns(translation=np.array(track.positions[new]),
+                                                           quaternion=np.array(track.quaternions[new]),
                                                            parent_frame=[world] * n, child_frame=[frame] * n),
                             recording=recording)
         for end in track.ends(until_ns):
