@@ -19,9 +19,10 @@ def fired(stage: str | None, capsys: pytest.CaptureFixture[str]) -> tuple[list[i
         done.set()
 
     if stage is None:  # a timer long enough that a loaded machine's delay before cancel() cannot reach it
-        watchdog = ExitWatchdog(0.5, exit=fake_exit)
+        watchdog = ExitWatchdog(60.0, exit=fake_exit)
         watchdog.cancel()
-        time.sleep(0.8)  # the timer would have fired by now: nothing may happen
+        watchdog._timer.join(30.0)  # a cancelled timer's thread ends without calling: nothing may happen
+        assert not watchdog._timer.is_alive(), "the cancelled timer's thread is still waiting"
     else:
         ExitWatchdog(0.05, exit=fake_exit, stage=stage)
         assert done.wait(30.0), "the watchdog did not fire within 30 s"

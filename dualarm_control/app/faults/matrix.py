@@ -157,11 +157,11 @@ def _safe_since(run: CellRun, line: int) -> Callable[[], bool]:
 def _episode_row(name: str, rec: GraphStreams, ep: _Episode, reason: str, limit_ms: float, within_ms: float) -> Row:
     e = safe_episode(rec, ep.start, ep.resume, reason)
     logs = ep.logs
-    commands = {} if ep.commands_ms is None else {"commands_back_ms": ep.commands_ms}
+    back = ep.commands_ms
+    commands = {} if back is None else {"commands_back_ms": back}
     passed = (e.age_ms <= limit_ms and e.other_commands == 0 and e.zero_commands > 0
-              and e.recovered_ms <= within_ms and logs[0] == logs[1] >= 1
-              and all(v <= within_ms for v in commands.values()))
-    text = "".join(f"; commands reached the restarted simulator {v:.0f} ms after the fault" for v in commands.values())
+              and e.recovered_ms <= within_ms and logs[0] == logs[1] >= 1 and (back is None or back <= within_ms))
+    text = "" if back is None else f"; commands reached the restarted simulator {back:.0f} ms after the fault"
     return _row(name, passed, f"{e.text()}; log: {logs[0]} 'safe state', {logs[1]} 'recovered'{text}",
                 detected_ms=e.detected_ms, input_age_ms=e.age_ms, zero_commands=e.zero_commands,
                 other_commands=e.other_commands, recovered_ms=e.recovered_ms, **commands)
@@ -239,13 +239,12 @@ def loopback_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[
             time.sleep(RESTART_AFTER_S)
             resume = time.time_ns()
             run.start_node("sim_node")
-            logs = _recovered(run, line, RESTART_RECOVER_WITHIN_MS / 1e3)
-            from dualarm_sim.sim_node import (
-                FIRST_COMMAND,  # the restarted simulator's first command: the path works
-            )
+            from dualarm_sim.sim_node import FIRST_COMMAND
 
-            episodes["kill_sim"] = _Episode(start, resume, logs,
-                                            run.line_after_ms("sim_node", FIRST_COMMAND, start, RESTART_RECOVER_WITHIN_MS / 1e3))
+            logs = _recovered(run, line, RESTART_RECOVER_WITHIN_MS / 1e3)
+            # the restarted simulator's first command: the command path works again
+            commands_ms = run.line_after_ms("sim_node", FIRST_COMMAND, start, RESTART_RECOVER_WITHIN_MS / 1e3)
+            episodes["kill_sim"] = _Episode(start, resume, logs, commands_ms)
         if "kill_controller" in names:
             killed_controller = _kill_controller(run, "kill_controller", say)
     except RunError as exc:

@@ -123,7 +123,8 @@ def add_markers(tracks: dict[str, ObstacleTrack], message: Any, live: bool, late
     for marker in message.markers:
         action = int(marker.action)
         if live and action in (DELETE, DELETEALL):
-            gone = [t for t in tracks.values() if t.live and (action == DELETEALL or t.name == marker_name(marker))]
+            name = marker_name(marker)
+            gone = [t for t in tracks.values() if t.live and (action == DELETEALL or t.name == name)]
             stamp = _stamp(marker) or max([latest_ns, *(t.stamps[-1] for t in tracks.values() if t.live and t.stamps)])
             for old in gone:
                 old.remove(stamp)
@@ -250,11 +251,11 @@ class CameraObstacles:
         (:data:`HIDDEN_AT`) where it is not shown then (before its first ADD, after a DELETE or its lifetime)."""
         for name, body in self.bodies.items():
             track = self.tracks[name]
-            i = int(np.searchsorted(track.stamps, stamp_ns, side="right")) - 1  # stamps ascending (the scene's: -1)
             if not track.live:
                 continue
-            if i < 0 or not track.shown(stamp_ns):
+            if not track.shown(stamp_ns):
                 self._p.resetBasePositionAndOrientation(body, HIDDEN_AT, (0.0, 0.0, 0.0, 1.0), physicsClientId=self.client)
-            else:
+            else:  # shown: a span started at a pose at or before stamp_ns (stamps ascending)
+                i = int(np.searchsorted(track.stamps, stamp_ns, side="right")) - 1
                 self._p.resetBasePositionAndOrientation(body, track.positions[i].tolist(),
                                                         track.quaternions[i].tolist(), physicsClientId=self.client)
