@@ -45,6 +45,10 @@ from dualarm_control.collision.params import (
 )
 from dualarm_control.collision.shapes import bounding_sphere, farthest
 
+_CHOSEN_KEPT = 64
+"""Pair sets whose links, labels and speed bounds :meth:`LiveDistances.near` keeps (forgotten all at once
+past this many, and at every new snapshot)."""
+
 
 @dataclass(frozen=True, slots=True)
 class LiveObstacle:
@@ -173,6 +177,8 @@ class LiveDistances:
         self.shapes = [k for k, obj in enumerate(objects) if obj.parentJoint != 0]
         self.names = [model.frames[objects[k].parentFrame].name for k in self.shapes]
         self._first = [self.names.index(name) for name in self.names]  # a link's first shape: its pairs' key
+        # a link's shapes next to each other: the candidates (ascending) meet the pairs' keys in ascending order
+        self._keys_ascending = all(a <= b for a, b in zip(self._first, self._first[1:]))
         self._geometries = [objects[k].geometry for k in self.shapes]
         spheres = [bounding_sphere(g) for g in self._geometries]
         self._centres = np.array([c for c, _ in spheres]).reshape(-1, 3)  # in each shape's frame
@@ -209,6 +215,8 @@ class LiveDistances:
         self._moving: list[bool] = []  # ... whether the obstacle moves
         self._any_moving = False
         self._calls_table: list[tuple[Any, ...]] = []  # each entry's coal arguments, result and key
+        # the last cycles' pair sets (table indices) -> their links, speed bounds (read-only) and labels
+        self._chosen: dict[tuple[int, ...], tuple[tuple[tuple[str, str], ...], FloatArray, tuple[str, ...]]] = {}
 
     def _snapshot(self, obstacles: Sequence[LiveObstacle]) -> None:
         """The per-snapshot values (class docstring): known bounds forgotten, the (obstacle, shape) table,
@@ -233,6 +241,7 @@ class LiveDistances:
                 self._table.append((*call, coal.DistanceResult(), j * shapes + self._first[i], i, j, octree,
                                     (self.names[i], label), f"{self.names[i]} – {label}"))
         self._calls_table = [entry[:6] for entry in self._table]
+        self._chosen = {}
         self._moving = [bool(np.any(o.velocity)) for o in obstacles]
         self._any_moving = any(self._moving)
 
@@ -284,11 +293,19 @@ class LiveDistances:
         if not best:
             return LivePairs.empty(n)
         table = self._table
-        chosen = [best[key] for key in (sorted(best) if len(best) > 1 else best)]
-        distance = [d for d, _ in chosen]
-        pairs = [c for _, c in chosen]
-        entries = [table[c] for c in pairs]
-        shapes = [entry[6] for entry in entries]
+        # in the keys' order: that of insertion where the candidates meet them in ascending order
+        chosen = list(best.values()) if self._keys_ascending else [best[key] for key in sorted(best)]
+        pairs = tuple([c for _, c in chosen])
+        known_pairs = self._chosen.get(pairs)
+        if known_pairs is None:  # a new set of pairs (the same set is common from one cycle to the next)
+            entries = [table[c] for c in pairs]
+            speed = self._reach.take([entry[6] for entry in entries], axis=0)
+            speed.flags.writeable = False  # shared by the cycles with the same pairs
+            known_pairs = (tuple([entry[9] for entry in entries]), speed, tuple([entry[10] for entry in entries]))
+            if len(self._chosen) >= _CHOSEN_KEPT:
+                self._chosen.clear()
+            self._chosen[pairs] = known_pairs
+        links, speed, labels = known_pairs
         approach = np.zeros(len(pairs))
         moving = False
         if self._any_moving:
@@ -298,9 +315,8 @@ class LiveDistances:
                 velocities = np.array([obstacles[table[pairs[r]][7]].velocity for r in rows])
                 approach[rows] = np.einsum("mk,mk->m", normals, velocities)
                 moving = True
-        found = LivePairs(tuple([entry[9] for entry in entries]), np.array(distance), approach, moving,
-                          self._reach.take(shapes, axis=0), pairs=tuple(pairs), call=self._calls,
-                          labels=tuple([entry[10] for entry in entries]))
+        found = LivePairs(links, np.array([d for d, _ in chosen]), approach, moving, speed, pairs=pairs,
+                          call=self._calls, labels=labels)
         return found if deferred else self.complete(found)
 
     def _witness(self, entries: Sequence[int]) -> tuple[FloatArray, FloatArray]:

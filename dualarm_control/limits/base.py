@@ -102,7 +102,7 @@ class DeferredRows:
         build: returns A (m, n), called at most once.
     """
 
-    __slots__ = ("_below", "_build", "_matrix", "_met", "_parts", "bound", "speed")
+    __slots__ = ("_below", "_build", "_excess", "_matrix", "_met", "_parts", "bound", "speed")
 
     def __init__(self, speed: FloatArray, bound: FloatArray, build: Callable[[], FloatArray],
                  parts: tuple[DeferredRows, ...] = ()) -> None:
@@ -113,6 +113,7 @@ class DeferredRows:
         self._matrix: FloatArray | None = None
         self._met = b""  # the bytes of the last qd that met the bound (a cycle checks the same qd up to 3 times)
         self._parts = parts  # the rows stacked into these (:meth:`stacked`), () for rows of one limit
+        self._excess: tuple[bytes, float] = (b"", 0.0)  # the last qd's bytes and excess (a cycle asks 2-3 times)
 
     @classmethod
     def of(cls, matrix: FloatArray, bound: FloatArray) -> DeferredRows:
@@ -150,22 +151,30 @@ class DeferredRows:
 
     def excess(self, qd: FloatArray) -> float:
         """max(A qd - b, 0) [m/s] at qd (n,) [rad/s], building only the matrices of the stacked parts whose
-        speed bound does not vouch for qd (a vouched part's rows are below their bounds: they add nothing)."""
+        speed bound does not vouch for qd (a vouched part's rows are below their bounds: they add nothing).
+        The same value whether A is built or not (a vouched qd's rows are all below b: 0.0), so the last qd's
+        is kept."""
+        key = qd.tobytes()
+        if key == self._excess[0]:
+            return self._excess[1]
         if self._matrix is None and self._parts:
             worst = 0.0
             for part in self._parts:
                 excess = part.excess(qd)
                 worst = max(worst, excess)
-            return worst
-        if self._matrix is None and self.meets(qd):
-            return 0.0
-        return float((self.matrix @ qd - self.bound).max(initial=0.0))
+        elif self._matrix is None and self.meets(qd):
+            worst = 0.0
+        else:
+            worst = float((self.matrix @ qd - self.bound).max(initial=0.0))
+        self._excess = (key, worst)
+        return worst
 
     def stacked(self, other: DeferredRows) -> DeferredRows:
         """These rows, then ``other``'s (each part built only when needed: :meth:`excess`)."""
         parts = (self._parts or (self,)) + (other._parts or (other,))
-        return DeferredRows(np.vstack((self.speed, other.speed)), np.concatenate((self.bound, other.bound)),
-                            lambda: np.vstack([part.matrix for part in parts]), parts)
+        # concatenate, not vstack: both are (m, n) already, and vstack's Python layer costs 2 us a cycle
+        return DeferredRows(np.concatenate((self.speed, other.speed)), np.concatenate((self.bound, other.bound)),
+                            lambda: np.concatenate([part.matrix for part in parts]), parts)
 
 
 @dataclass(slots=True)
