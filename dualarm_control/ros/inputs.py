@@ -226,7 +226,7 @@ class CycleTiming:
         self.jitter: deque[float] = deque(maxlen=WINDOW)
         self.latency: deque[float] = deque(maxlen=WINDOW)
         self._last: int | None = None
-        self._stats = self.percentiles()
+        self._stats = self._formatted(self.percentiles())
 
     def arrival(self, now_ns: int, period: float) -> None:
         """A sample of the driving stream arrived at monotonic ``now_ns``; ``period`` [s] is the nominal one."""
@@ -253,13 +253,18 @@ class CycleTiming:
         """A cycle's /diagnostics timing values: its ``latency`` [s], the last interval, and the
         percentiles of both (recomputed when ``refresh``: once a second, not every cycle)."""
         if refresh:
-            self._stats = self.percentiles()
-        (j50, j99), (l50, l99) = self._stats
+            self._stats = self._formatted(self.percentiles())
+        return {**self._stats, "state_interval_s": f"{self.interval:.6e}",
+                "state_to_command_latency_s": f"{latency:.6e}"}
+
+    @staticmethod
+    def _formatted(stats: tuple[tuple[float, float], tuple[float, float]]) -> dict[str, str]:
+        """The percentiles' /diagnostics values (formatted once per refresh, not every cycle)."""
+        (j50, j99), (l50, l99) = stats
         return {"period_jitter_p50_s": f"{j50:.6e}", "period_jitter_p99_s": f"{j99:.6e}",
-                "state_interval_s": f"{self.interval:.6e}", "state_to_command_latency_s": f"{latency:.6e}",
                 "state_to_command_latency_p50_s": f"{l50:.6e}", "state_to_command_latency_p99_s": f"{l99:.6e}"}
 
     def percentiles(self) -> tuple[tuple[float, float], tuple[float, float]]:
         """(p50, p99) of the period jitter and of the latency [s] (NaN when there is no sample)."""
-        return tuple(percentiles(np.array(b)) if b else (math.nan, math.nan)  # type: ignore[return-value]
+        return tuple(percentiles(np.fromiter(b, float, len(b))) if b else (math.nan, math.nan)  # type: ignore[return-value]
                      for b in (self.jitter, self.latency))
