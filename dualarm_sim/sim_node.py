@@ -134,6 +134,12 @@ def plan_start(path: str, joint_names: list[str]) -> np.ndarray:
 FIRST_COMMAND = "first command received"
 """Logged once, at the first command: after a restart, when the controller's commands reach this simulator again
 (the fault matrix's kill_sim row waits for it)."""
+UNHEARD = "no command received"
+"""Logged (WARN, once a status period) while commands are published on a command topic and none has arrived:
+after a restart, the controller's writer may be matched to this simulator's reader seconds later than the other
+way round (DDS discovery), and its commands are lost meanwhile."""
+UNHEARD_AFTER_S = 2.0
+"""Seconds (wall clock) with a publisher on a command topic and no command, before :data:`UNHEARD`."""
 
 class SimNode:
     """Node shell around :class:`DualArmCell`."""
@@ -193,6 +199,8 @@ class SimNode:
         self.pub_description.publish(String(data=robot.urdf_xml))
         self.pub_contact = (n.create_publisher(Vector3Stamped, "/contact_force", depth) if self.contact is not None
                             else None)
+        self.command_topics = [o.topic for o in profile.outputs]
+        self.publishers_seen: float | None = None  # monotonic s since a command topic has had a publisher
         for o in profile.outputs:  # each output's registered message type (dualarm_control.outputs)
             decoder = self.merger.decoders[o.name]
             subscribe_checked(n, decoder.kind.message_class(), o.topic, functools.partial(self.on_command, o.name),
@@ -328,6 +336,31 @@ class SimNode:
                    f"links in contact: {touching}" if touching else "running")
         self.pub_diag.publish(convert.diagnostics(self._stamp_ns(), "sim_node", 1 if self.timed_out or touching else 0,
                                                   message, values))
+        unheard = self.unheard_commands()
+        if unheard:
+            self.log.warning(unheard)
+
+    def unheard_commands(self) -> str:
+        """:data:`UNHEARD` with the command topics' publishers (node names), when the physics steps, no command
+        has arrived, and a command topic has had a publisher for :data:`UNHEARD_AFTER_S`; '' otherwise (and
+        always once a command has arrived)."""
+        if self.received or self.rejected or not self.steps:
+            return ""
+        found = {topic: sorted({info.node_name for info in self.node.get_publishers_info_by_topic(topic)})
+                 for topic in self.command_topics}
+        named = "; ".join(f"{topic} by {', '.join(nodes)}" for topic, nodes in found.items() if nodes)
+        now = time.monotonic()
+        if not named:
+            self.publishers_seen = None
+            return ""
+        if self.publishers_seen is None:
+            self.publishers_seen = now
+        waited = now - self.publishers_seen
+        if waited < UNHEARD_AFTER_S:
+            return ""
+        return (f"{UNHEARD} in the {waited:.1f} s since commands are published ({named}): none has reached this "
+                "simulator (none sent yet, or DDS discovery has not yet matched this reader to that writer: a "
+                "restarted node can wait seconds for it)")
 
     def lockstep_watchdog(self) -> None:
         """Start once the readers are matched; re-send a state that got no command: before the first

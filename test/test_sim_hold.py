@@ -68,3 +68,38 @@ def test_sim_node_alone_holds_still_without_a_command() -> None:
     assert sim.returncode == 0, output
     drift = np.abs(states[-1][1] - states[0][1])
     assert drift.max() < HOLD_TOLERANCE, drift
+
+
+def test_sim_node_names_a_publisher_whose_commands_never_arrive() -> None:
+    """A command topic with a publisher and, for 2 s, no command: the simulator says so, naming the publisher's
+    node (after a restart its reader can be matched to the controller's writer seconds late, and the commands
+    sent meanwhile are lost: issue 38's "a hang nobody can diagnose"). Once a command arrives, it says so."""
+    import rclpy
+    from std_msgs.msg import Float64MultiArray
+    from waiting import NodeProcess
+
+    from dualarm_control.ros.node import init_rclpy
+    from dualarm_sim.sim_node import FIRST_COMMAND, UNHEARD
+
+    sim = NodeProcess("sim_node")
+    context = init_rclpy([])
+    node = rclpy.create_node("silent_commander", context=context)
+    pub = node.create_publisher(Float64MultiArray, "/velocity_controller/commands", 10)
+    try:
+        line = sim.lines[sim.wait_for(UNHEARD, timeout=60.0)]
+        assert "/velocity_controller/commands by silent_commander" in line, line
+        wait_until(lambda: pub.get_subscription_count() > 0 or None, lambda: "no subscription matched",
+                   what="the simulator's reader matched", timeout=60.0)
+        start = len(sim.lines)
+
+        def sent() -> bool | None:
+            pub.publish(Float64MultiArray(data=[0.0] * 14))
+            return any(FIRST_COMMAND in text for text in sim.lines[start:]) or None
+
+        wait_until(sent, lambda: "\n".join(sim.lines[-10:]), what=f"'{FIRST_COMMAND}' from sim_node", timeout=60.0,
+                   interval=0.1, gone=exited(sim.popen, "sim_node"))
+    finally:
+        node.destroy_node()
+        context.try_shutdown()
+        code = sim.stop()
+    assert code == 0, "\n".join(sim.lines[-30:])
