@@ -120,7 +120,7 @@ class ControllerNode:
         self.last_commanded_stamp: int | None = None
         self.collision_log = CollisionLog(self.log)
         self.timing = inputs.CycleTiming(realtime=not self.lockstep)
-        self.stats_every = max(2, round(STATS_EVERY_S / self.params.period))  # cycles
+        self.stats_every = max(2, round(STATS_EVERY_S / self.params.period))  # cycles (>= 2: refreshed at count % it == 1)
         self.completed_at: float | None = None  # task mode: monotonic s at which the duration was reached
         qos = stream_qos(self.values["qos_reliability"])
         depth = publisher_depth(self.lockstep)
