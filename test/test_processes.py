@@ -56,6 +56,19 @@ def test_local_samples_reach_every_local_subscription_and_the_wire() -> None:
     assert pub.get_subscription_count() == 3
 
 
+def test_a_sample_no_reader_on_the_wire_matches_goes_to_the_local_subscriptions_only() -> None:
+    """As rclcpp's intra-process publisher: the middleware write is skipped while nothing outside matches,
+    and made again from the first sample after a reader matched."""
+    bus, wire, got = LocalBus(["/a"]), Wire(readers=0), []
+    pub = bus.publisher(wire, "/a")
+    bus.subscribe("/a", got.append)
+    pub.publish(b"1")
+    wire.readers = 1
+    pub.publish(b"2")
+    assert got == [b"1", b"2"]
+    assert wire.sent == [b"2"]
+
+
 def test_a_sample_published_in_a_callback_is_delivered_after_the_current_one() -> None:
     """Breadth-first, as a middleware: a command computed on a state does not recurse into the state's other readers."""
     bus, order = LocalBus(["/state", "/command"]), []
