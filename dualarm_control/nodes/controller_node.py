@@ -185,7 +185,7 @@ class ControllerNode:
 
     def on_malformed(self, reason: str) -> None:
         """A sample that failed to deserialize (see :func:`subscribe_checked`): reported, dropped."""
-        self.out.reject(self.node.get_clock().now().nanoseconds, reason)
+        self.out.reject(shell.clock_ns(self.node.get_clock()), reason)
 
     def on_joint_state(self, stamp: int, q: np.ndarray, now: int) -> None:
         """A consistent state of both arms (:class:`JointStates`; a rejected sample is reported there and
@@ -266,7 +266,7 @@ class ControllerNode:
         (:meth:`ControllerInputs.watchdog`)."""
         if self.state is None:
             text, late = self.startup.waiting(self.joint_states.waiting_reason)
-            stamp = self.node.get_clock().now().nanoseconds
+            stamp = shell.clock_ns(self.node.get_clock())
             (self.out.enter_safe_state if late else self.out.safe)(stamp, text)
             return
         reason = self.inputs.watchdog(time.monotonic_ns(), self.state[2])

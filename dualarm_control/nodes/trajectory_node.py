@@ -55,7 +55,7 @@ from dualarm_control.ros.cell_topic import CellPublisher
 from dualarm_control.ros.hardware_io import JointStates, declare_with_profile
 from dualarm_control.ros.inputs import StampGate, Throttle
 from dualarm_control.ros.local_bus import LocalBus, local_publisher
-from dualarm_control.ros.node import Tick, declare, run, usage
+from dualarm_control.ros.node import Tick, clock_ns, declare, run, usage
 from dualarm_control.ros.priority import (
     log_priority,
     node_scheduling,
@@ -171,7 +171,7 @@ class TrajectoryNode:
         if self.stream is None:
             options = RunOptions(self.scenario.limits, self.scenario.settle_time)
             self.stream = self.source.stream(self.model, q, options, self.period)
-            self.start_ns = stamp if self.lockstep else self.node.get_clock().now().nanoseconds
+            self.start_ns = stamp if self.lockstep else clock_ns(self.node.get_clock())
             self.held_since = time.monotonic()
             if self.drive is not None and isinstance(self.stream, GoalsStream):
                 self.drive.start(self.stream.generator, self.stream.absolute)
@@ -183,7 +183,7 @@ class TrajectoryNode:
         if self.lockstep:
             self.publish(stamp, stamp - self.start_ns, q)
         elif self.judge is not None and self.controller_seen is not None:  # real time: the state at its receipt
-            self.outcomes(stamp, self.judge.feed((self.node.get_clock().now().nanoseconds - self.start_ns) / 1e9, q))
+            self.outcomes(stamp, self.judge.feed((clock_ns(self.node.get_clock()) - self.start_ns) / 1e9, q))
 
     def reject(self, reason: str) -> None:
         """Throttled warning for an unusable input (the sample is not used)."""
@@ -198,7 +198,7 @@ class TrajectoryNode:
                 s.name == "controller_node" and any(kv.key == "cycles" and kv.value not in ("", "0") for kv in s.values)
                 for s in msg.status):
             self.controller_seen = time.monotonic()
-            self.start_ns = self.node.get_clock().now().nanoseconds
+            self.start_ns = clock_ns(self.node.get_clock())
             then = f"once {self.awaited_reader} reads {RELATIVE_TARGET}" if self.awaited_reader else "now"
             self.log.info(f"controller_node cycling ({self.controller_seen - self.held_since:.2f} s after the first "
                           f"target): the scenario's clock starts {then}")
@@ -211,7 +211,7 @@ class TrajectoryNode:
             if self.states is not None and self.drive is None and self.judge is None:  # started: the timer drives it
                 self.states.close()  # (not destroyed in its own callback)
                 self.states = None
-            now = self.node.get_clock().now().nanoseconds
+            now = clock_ns(self.node.get_clock())
             if self.awaited_reader and not self.reader_arrived():  # hold: the clock starts when it reads
                 self.publish(now, 0)
                 self.start_ns = now

@@ -10,6 +10,7 @@
   context is invalid"). Exit codes: 0 normal end or signal, 2 bad parameters, 1 other errors.
 * :func:`tool_node` gives the tool verbs a short-lived node and executor.
 * :class:`LiveParameters`: live changes validated at once, applied at the next cycle boundary.
+* :func:`clock_ns`: a clock's time in integer nanoseconds, without a ``Time`` object.
 """
 
 from __future__ import annotations
@@ -236,6 +237,14 @@ def spin_until_stopped(executor: Any, stop: StopOnSignal, until: Callable[[], bo
         timeout = ticker.timeout(time.monotonic())
         if timeout > 0.0:
             executor.spin_once(timeout_sec=timeout)
+
+
+def clock_ns(clock: Any) -> int:
+    """``clock.now().nanoseconds`` of an rclpy ``Clock`` without building the ``Time`` (4.2 against 1.1 us a
+    call): the same reading of rcl's clock, /clock's time where it overrides ROS time (``use_sim_time``)."""
+    handle = clock.handle
+    with handle:
+        return int(handle.get_now().nanoseconds)
 
 
 def usage(name: str, doc: str, specs: Iterable[ParamSpec]) -> str:

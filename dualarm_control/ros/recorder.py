@@ -50,7 +50,7 @@ from dualarm_control.ros.computed_tf import (
 )
 from dualarm_control.ros.env import RECORDER_NODE
 from dualarm_control.ros.graph import adapted_qos, fq_topic, message_class
-from dualarm_control.ros.node import tool_node
+from dualarm_control.ros.node import clock_ns, tool_node
 
 BAG_VERSION: Final = 9
 """rosbag2 metadata version written by Jazzy."""
@@ -241,20 +241,20 @@ class Recorder:
 
         if tf is not None and topic == JOINT_STATES_TOPIC:
             def on_joint_state(data: bytes) -> None:
-                now = clock.now().nanoseconds
+                now = clock_ns(clock)
                 self.bag.write(topic, data, now)
                 tf.on_joint_state(data, now)
 
             return on_joint_state
         if tf is not None and topic == DESCRIPTION_TOPIC:
             def on_description(data: bytes) -> None:
-                self.bag.write(topic, data, clock.now().nanoseconds)
+                self.bag.write(topic, data, clock_ns(clock))
                 tf.on_description(data)
 
             return on_description
 
         def on_message(data: bytes) -> None:
-            self.bag.write(topic, data, clock.now().nanoseconds)
+            self.bag.write(topic, data, clock_ns(clock))
 
         return on_message
 
