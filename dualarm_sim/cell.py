@@ -239,6 +239,7 @@ class DualArmCell:
         q = self._check_vector(positions, "pose positions")
         if not np.isfinite(q).all():
             raise ValueError(f"pose positions must be finite, got {q.tolist()}")
+        self._last_q = None
         for j, qj in zip(self._idx, q.tolist()):
             p.resetJointState(self._body, j, qj, 0.0, physicsClientId=self._client)
 
@@ -313,6 +314,7 @@ class DualArmCell:
         ]
         if bad:
             raise ValueError(f"reset positions outside the joint limits or non-finite: {', '.join(bad)}")
+        self._last_q: FloatArray | None = None  # the joints' positions as state() last read them, until they move
         for j, qj in zip(self._idx, q):
             p.resetJointState(self._body, j, float(qj), 0.0, physicsClientId=self._client)
         for j, qj in zip(self._held_idx, self._held_q):
@@ -379,8 +381,11 @@ class DualArmCell:
         reference = self._reference
         qd_max, qd_min = self._qd_max, -self._qd_max
         advance = target * dt
+        last = self._last_q  # nothing moved the joints since state() read them: the same values, one read less
+        self._last_q = None
         for _ in range(self.config.substeps):  # np.minimum(np.maximum()) is np.clip, without its dispatch
-            q = np.array([s[0] for s in p.getJointStates(body, idx, physicsClientId=cid)])
+            q = last if last is not None else np.array([s[0] for s in p.getJointStates(body, idx, physicsClientId=cid)])
+            last = None
             velocity = np.minimum(np.maximum(target + gain * (reference - q), qd_min), qd_max)
             p.setJointMotorControlArray(body, idx, p.VELOCITY_CONTROL, targetVelocities=velocity.tolist(),
                                         forces=self._forces, physicsClientId=cid)
@@ -402,9 +407,10 @@ class DualArmCell:
     def state(self) -> JointSample:
         """Current joint state read from the physics, without stepping."""
         states = p.getJointStates(self._body, self._idx, physicsClientId=self._client)
-        q = np.array([s[0] for s in states])
+        q = _readonly(np.array([s[0] for s in states]))
         qd = np.array([s[1] for s in states])
-        return JointSample(time=self.time, positions=_readonly(q), velocities=_readonly(qd))
+        self._last_q = q  # the next step's first substep starts from it (pose() and reset() forget it)
+        return JointSample(time=self.time, positions=q, velocities=_readonly(qd))
 
     def held_state(self) -> tuple[FloatArray, FloatArray]:
         """Positions [rad or m] and velocities of the held joints (``held_names``), read from the physics."""

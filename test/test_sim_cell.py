@@ -157,6 +157,24 @@ def test_joint_limits_are_enforced_by_pybullet(cell: DualArmCell) -> None:
     assert abs(s.velocities[6]) < 1e-2
 
 
+def test_a_step_after_pose_starts_from_the_posed_joints() -> None:
+    """A step's first substep reuses the positions state() last read (one read of the physics less) only while
+    nothing moved the joints: after pose() it reads them again. Two cells, the same commands: one reads its state
+    after pose() (its reuse is then of the posed joints), the other does not; their next steps agree bit for bit."""
+    moved = Q0 + 0.05
+    steps = []
+    with DualArmCell(initial_positions=Q0) as a, DualArmCell(initial_positions=Q0) as b:
+        for c, read in ((a, False), (b, True)):
+            run(c, np.full(N, 0.1), 3)  # its last step ended with state(): the positions a next step would reuse
+            c.pose(moved)
+            if read:
+                c.state()
+            c.apply_command(np.full(N, 0.1))
+            steps.append(np.concatenate([c.step().positions, c.step().positions]))
+    np.testing.assert_array_equal(steps[0], steps[1])
+    assert np.abs(steps[0][:N] - moved).max() < 0.05  # it moved on from the posed joints, not from before them
+
+
 def test_two_cells_in_one_process_are_independent() -> None:
     with DualArmCell(initial_positions=Q0) as a, DualArmCell(initial_positions=Q0) as b:
         assert a.client_id != b.client_id
