@@ -108,6 +108,9 @@ class DualArmCell:
     Before the first command the arms hold their position (zero velocity command, not a time-out).
     """
 
+    _last_q: FloatArray | None
+    """The joints' positions as :meth:`state` last read them, until anything moves them (the next step reuses them)."""
+
     def __init__(self, config: CellConfig | None = None, initial_positions: FloatArray | None = None) -> None:
         """Connect a DIRECT pybullet client, load the URDF and reset to ``initial_positions``.
 
@@ -314,7 +317,7 @@ class DualArmCell:
         ]
         if bad:
             raise ValueError(f"reset positions outside the joint limits or non-finite: {', '.join(bad)}")
-        self._last_q: FloatArray | None = None  # the joints' positions as state() last read them, until they move
+        self._last_q = None
         for j, qj in zip(self._idx, q):
             p.resetJointState(self._body, j, float(qj), 0.0, physicsClientId=self._client)
         for j, qj in zip(self._held_idx, self._held_q):

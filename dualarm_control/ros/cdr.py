@@ -272,8 +272,8 @@ def multi_dof_point(ns: int, frame_id: str, joint_name: str, transform: Sequence
     return multi_dof_joints(ns, frame_id, [joint_name], [transform], [twist], [acceleration], elapsed_ns)
 
 
-def multi_dof_joints(ns: int, frame_id: str, joint_names: Sequence[str], transforms: Sequence[Sequence[float]],
-                     twists: Sequence[Sequence[float]], accelerations: Sequence[Sequence[float]],
+def multi_dof_joints(ns: int, frame_id: str, joint_names: Sequence[str], transforms: Sequence[Sequence[float] | np.ndarray],
+                     twists: Sequence[Sequence[float] | np.ndarray], accelerations: Sequence[Sequence[float] | np.ndarray],
                      elapsed_ns: int) -> bytes:
     """trajectory_msgs/MultiDOFJointTrajectory with one point of k joints: k transforms (7,), twists and
     accelerations (6,) each, in the order of ``joint_names``, and time_from_start."""
