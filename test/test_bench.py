@@ -238,6 +238,16 @@ def test_variants_interleave_the_baseline_before_the_current_tree() -> None:
     assert [(v.tree, v.processes) for v in layouts] == [("bf34bc7", 3), ("now", 3), ("now", 1)]
 
 
+def test_a_baseline_with_the_container_runs_in_each_layout_before_the_current_tree(tmp_path: Path) -> None:
+    """An A/B of ``--processes 1`` compares the same layout when the baseline checkout has ``cell_container``."""
+    from dualarm_control.app.bench.realtime import CONTAINER_MODULE, variants
+
+    (tmp_path / CONTAINER_MODULE).parent.mkdir(parents=True)
+    (tmp_path / CONTAINER_MODULE).write_text("")
+    layouts = variants(["a"], [1.0], baseline=("cb29c1b", tmp_path), current="now", processes=[3, 1])
+    assert [(v.tree, v.processes) for v in layouts] == [("cb29c1b", 3), ("now", 3), ("cb29c1b", 1), ("now", 1)]
+
+
 @pytest.mark.parametrize("argv, named", [
     (["--load", "none,heavy"], "'heavy'"),
     (["--scheduling", "fifo"], "'fifo'"),

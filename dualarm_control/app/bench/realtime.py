@@ -185,15 +185,23 @@ class Variant:
                 f"scheduling {self.scheduling}, tree {self.tree}{' (baseline)' if self.baseline else ''}{view}")
 
 
+CONTAINER_MODULE = Path("dualarm_control/nodes/container.py")
+"""Where a checkout has the one-process container (``dualarm launch --processes 1``)."""
+
+
 def variants(solvers: Sequence[str], rates: Sequence[float], loads: Sequence[str] = ("none",),
              schedulings: Sequence[str] = ("rt",), with_view: bool = False,
              baseline: tuple[str, Path] | None = None, current: str = "current",
              processes: Sequence[int] = (3,)) -> list[Variant]:
-    """Every launch in run order: per (solver, rate, load, scheduling, view), the baseline tree's
-    launch (separate processes: an older tree may have no container) right before the current tree's
-    in each of the ``processes`` layouts, so all meet the same machine state."""
-    trees: list[tuple[str, Path | None, int]] = [*([(*baseline, 3)] if baseline else []),
-                                                  *((current, None, n) for n in processes)]
+    """Every launch in run order: per (solver, rate, load, scheduling, view), in each of the ``processes``
+    layouts, the baseline tree's launch right before the current tree's, so both meet the same machine state
+    (a baseline without ``cell_container``, an older tree, runs in separate processes, once)."""
+    trees: list[tuple[str, Path | None, int]] = []
+    if baseline is not None and (baseline[1] / CONTAINER_MODULE).is_file():
+        for n in processes:
+            trees += [(*baseline, n), (current, None, n)]
+    else:
+        trees = [*([(*baseline, 3)] if baseline else []), *((current, None, n) for n in processes)]
     return [Variant(solver, rate, load, sched, tree, base, view, n)
             for solver in solvers for rate in rates for load in loads for sched in schedulings
             for view in ((False, True) if with_view else (None,)) for tree, base, n in trees]
