@@ -80,6 +80,31 @@ def test_a_rejected_joint_state_carries_its_stamp_and_the_names_are_mapped_again
     np.testing.assert_array_equal(decoder.from_message(good)[1][0], np.full(14, 0.1))
 
 
+def test_a_payload_decoded_again_gives_the_kept_answer_and_a_new_one_is_read(order: dict[str, int]) -> None:
+    """The nodes of one process share a decoder (LocalBus.shared) and get the same bytes object: it is read once,
+    its arrays read-only; a rejected payload is rejected again with the same error; equal bytes in another
+    object are read again."""
+    names = list(order)
+    decoder = convert.JointStateInput(order)
+    reads = []
+    read = decoder.read
+    decoder.read = lambda data: reads.append(data) or read(data)  # type: ignore[method-assign]
+    data = convert.joint_state(names, 5, np.full(14, 0.1), np.zeros(14))
+    first = decoder.from_bytes(data)
+    assert decoder.from_bytes(data) is first and len(reads) == 1
+    assert first[0] == 5 and not first[1][0].flags.writeable and not first[1][1].flags.writeable
+    with pytest.raises(ValueError):
+        first[1][0][0] = 1.0
+    decoder.from_bytes(bytes(bytearray(data)))
+    assert len(reads) == 2
+    bad = convert.joint_state(names, 6, np.full(14, np.nan), np.zeros(14))
+    with pytest.raises(InputRejected, match="NaN") as caught:
+        decoder.from_bytes(bad)
+    with pytest.raises(InputRejected) as again:
+        decoder.from_bytes(bad)
+    assert again.value is caught.value and again.value.stamp == 6 and len(reads) == 3
+
+
 def test_joint_state_without_velocities_gives_zero_velocities(order: dict[str, int]) -> None:
     decoded = convert.JointStateInput(order).message_vectors(joint_state(list(order), [0.2] * 14))
     np.testing.assert_array_equal(decoded[1], np.zeros(14))

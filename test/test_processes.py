@@ -69,6 +69,13 @@ def test_a_sample_no_reader_on_the_wire_matches_goes_to_the_local_subscriptions_
     assert wire.sent == [b"2"]
 
 
+def test_shared_gives_one_object_per_key() -> None:
+    bus, made = LocalBus(["/a"]), []
+    first = bus.shared(("decoder", "/a"), lambda: made.append(1) or object())
+    assert bus.shared(("decoder", "/a"), lambda: made.append(2) or object()) is first and made == [1]
+    assert bus.shared(("decoder", "/b"), object) is not first
+
+
 def test_a_sample_published_in_a_callback_is_delivered_after_the_current_one() -> None:
     """Breadth-first, as a middleware: a command computed on a state does not recurse into the state's other readers."""
     bus, order = LocalBus(["/state", "/command"]), []

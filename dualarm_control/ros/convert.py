@@ -70,6 +70,7 @@ class JointStateInput:
         self._idx: list[int] | None = None  # None: the names are not mapped
         self.present = np.arange(len(order))
         """Model index of each value decoded (``partial``: the model's joints the last message carried)."""
+        self._last: tuple[bytes | None, Any] = (None, None)  # the last payload and its answer (from_bytes)
 
     @property
     def names(self) -> tuple[str, ...] | None:
@@ -89,13 +90,30 @@ class JointStateInput:
         return joint_indices(list(names), carried, "joint_states")
 
     def from_bytes(self, data: bytes) -> tuple[int, tuple[np.ndarray, np.ndarray]]:
-        """The fast path: the CDR payload (raises :class:`cdr.CdrError` if it cannot read it)."""
-        stamp, names, position, velocity = self.read(data)
+        """The fast path: the CDR payload (raises :class:`cdr.CdrError` if it cannot read it).
+
+        The last payload's answer is kept (the value, or the error raised again): the nodes of one process
+        share a decoder per topic (:meth:`~dualarm_control.ros.local_bus.LocalBus.shared`), and the bus hands
+        them the same bytes object, decoded once. q and qd are read-only for that reason."""
+        if data is self._last[0]:
+            answer = self._last[1]
+            if isinstance(answer, Exception):
+                raise answer
+            return answer
         try:
-            return stamp, self.vectors(names, position, velocity)
-        except InputRejected as exc:
-            exc.stamp = stamp
+            stamp, names, position, velocity = self.read(data)
+            try:
+                q, qd = self.vectors(names, position, velocity)
+            except InputRejected as exc:
+                exc.stamp = stamp
+                raise
+        except (cdr.CdrError, InputRejected) as exc:
+            self._last = (data, exc)
             raise
+        q.flags.writeable = qd.flags.writeable = False
+        answer = (stamp, (q, qd))
+        self._last = (data, answer)
+        return answer
 
     def from_message(self, msg: Any) -> tuple[int, tuple[np.ndarray, np.ndarray]]:
         stamp = stamp_ns(msg.header.stamp)

@@ -11,6 +11,7 @@ the command outputs out.
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -72,8 +73,12 @@ class JointStates:
         order = {name: i for i, name in enumerate(profile.hardware_names(joint_names))}  # matched by hardware name
         self.subscriptions = []
         self.decoders: dict[str, convert.JointStateInput] = {}
+        partial = len(topics) > 1
         for topic in topics:
-            self.decoders[topic] = decoder = convert.JointStateInput(order, partial=len(topics) > 1)
+            make = functools.partial(convert.JointStateInput, order, partial=partial)
+            # nodes of one process reading the same joints decode each sample once (LocalBus.shared)
+            self.decoders[topic] = decoder = (bus.shared(("joint_states", topic, tuple(order.items()), partial), make)
+                                              if bus is not None and bus.carries(topic) else make())
             self.subscriptions.append(subscribe_checked(
                 node, JointState, topic, self.receiver(topic, decoder), qos, self.malformed(topic, on_malformed),
                 decoder, bus, self.rejecter(topic)))

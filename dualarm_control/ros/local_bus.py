@@ -16,10 +16,11 @@ per cycle"). The receiver still decodes the bytes with the same checks as over t
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable, Iterable
-from typing import Any
+from collections.abc import Callable, Hashable, Iterable
+from typing import Any, TypeVar
 
 Receive = Callable[[bytes], None]
+T = TypeVar("T")
 
 
 class LocalSubscription:
@@ -70,6 +71,7 @@ class LocalBus:
         self.subscriptions: dict[str, list[LocalSubscription]] = {}
         self._queue: deque[tuple[str, bytes]] = deque()
         self._delivering = False
+        self._shared: dict[Hashable, Any] = {}
 
     def carries(self, topic: str) -> bool:
         return topic in self.topics
@@ -82,6 +84,14 @@ class LocalBus:
     def publisher(self, wire: Any, topic: str) -> Any:
         """``wire`` (an rclpy publisher of ``topic``) as a :class:`LocalPublisher` when the topic is local."""
         return LocalPublisher(self, wire, topic) if self.carries(topic) else wire
+
+    def shared(self, key: Hashable, make: Callable[[], T]) -> T:
+        """One object per ``key`` for the nodes of the process: ``make()`` the first time, the same object after.
+        For the decoders of a local topic: the nodes that read it with the same decoder settings decode each
+        sample once (``JointStateInput.from_bytes`` keeps its last answer)."""
+        if key not in self._shared:
+            self._shared[key] = make()
+        return self._shared[key]
 
     def deliver(self, topic: str, data: bytes) -> None:
         """Hand ``data`` to every local subscription of ``topic`` (queued while a delivery runs)."""
