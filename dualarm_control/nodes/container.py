@@ -5,7 +5,7 @@ nodes with the same names, parameters, topics and services, on one executor and 
 participant; the per-cycle samples between them (``/joint_states``, ``/wrench``,
 ``/velocity_controller/commands``, ``/relative_target``, ``/joint_reference``) go from node to
 node in the process (:mod:`dualarm_control.ros.local_bus`) and are published on the wire as
-well, so every ROS 2 tool still reads every topic. A sample published on those topics by
+well while a reader outside the process matches them, so every ROS 2 tool still reads every topic. A sample published on those topics by
 another process is not heard by the container. What it saves is measured in docs/bench.md
 ("One process").
 
