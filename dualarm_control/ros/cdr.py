@@ -206,7 +206,8 @@ def diagnostic_array(ns: int, level: int, name: str, message: str, hardware_id: 
     if values:  # each key and value a string field; a key's bytes are made once (the keys repeat every cycle)
         *pairs, (key, value) = values.items()
         last = str(value).encode()
-        w.buf += (b"".join([_padded_key(k) + _padded(str(v)) for k, v in pairs]) + _padded_key(key)
+        w.buf += (b"".join([_padded_key(k) + (_padded_value(v) if type(v) in _KEPT_TYPES else _padded(str(v)))
+                            for k, v in pairs]) + _padded_key(key)
                   + _U32.pack(len(last) + 1) + last + b"\x00")  # the last string is not padded
     return w.bytes()
 
@@ -218,6 +219,16 @@ def _padded(text: str) -> bytes:
 
 
 _padded_key = functools.lru_cache(maxsize=256)(_padded)
+_KEPT_TYPES = (str, int)
+"""The value types whose fields :func:`_padded_value` keeps (exactly these types: an int and its text are different
+keys, a float is left out: 0.0 == -0.0 would share one)."""
+
+
+@functools.lru_cache(maxsize=1024)
+def _padded_value(value: str | int) -> bytes:
+    """A value's field (:func:`_padded` of ``str(value)``), kept: most of a status's values repeat from one cycle to
+    the next (the solver, the counters, the robot); one that changes every cycle is a miss, pushed out by later ones."""
+    return _padded(str(value))
 
 
 @functools.lru_cache(maxsize=8)
