@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import time
 
 import numpy as np
+import pytest
 
 from dualarm_control.app.bench.obstacles import (
     NEAR,
@@ -37,8 +39,32 @@ def test_cloud_intake_is_timed_in_periods() -> None:
     assert cloud["worker_p50_periods"] == cloud["worker_p50_ms"] / 5.0
     row = {"obstacles": 20, "rows_mean": 1.0, "with_p50_ms": 1.0, "with_p99_ms": 2.0, "without_p50_ms": 1.0,
            "without_p99_ms": 2.0, "ratio_p50": 1.0, "ratio_p99": 1.0}
-    text = format_obstacle_bench({"standard_qp | >= 3.5 cm": row}, cloud)
+    text = format_obstacle_bench({"standard_qp | >= 3.5 cm": row, "sparse_qp | >= 3.5 cm": {**row, "paired_ratio_p50": 1.25}},
+                                 cloud)
     assert "| standard_qp | >= 3.5 cm | 20 |" in text and "20000 points" in text
+    assert text.splitlines()[2].endswith("| 1.00x / 1.00x | - |") and text.splitlines()[3].endswith("| 1.25x |")
+
+
+def test_the_paired_ratio_is_the_median_of_each_cycles_ratio(monkeypatch: pytest.MonkeyPatch) -> None:
+    """On a clock of the test's own (each step advances it by its case's duration): a controller that adds 0.3 to
+    every cycle of a bimodal set (half 0.2, half 1.0). Per cycle the ratio is 2.5 or 1.3, their median 1.9; the p50s
+    fall between the modes (0.6 and 0.9), their ratio 1.5."""
+    from dualarm_control.app.bench.obstacles import interleaved
+
+    now = [0.0]
+    monkeypatch.setattr(time, "perf_counter", lambda: now[0])
+
+    class Timed:
+        def __init__(self, extra: float) -> None:
+            self.extra = extra
+
+        def step(self, q: float, target: object) -> object:
+            now[0] += q + self.extra
+            return type("Cycle", (), {"reports": {}})()
+
+    row = interleaved(Timed(0.3), Timed(0.0), [(0.2, None)] * 10 + [(1.0, None)] * 10)  # type: ignore[arg-type]
+    assert row["paired_ratio_p50"] == pytest.approx(1.9)
+    assert row["ratio_p50"] == pytest.approx(1.5)
 
 
 def test_bad_counts_are_refused() -> None:
