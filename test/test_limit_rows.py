@@ -21,6 +21,7 @@ from dualarm_control.solvers import (
     solver_names,
 )
 from dualarm_control.solvers.policy import separating_step
+from dualarm_control.status import Status
 
 N = 14
 SOLVERS = solver_names()
@@ -117,6 +118,30 @@ def test_rows_that_the_box_forbids_are_relaxed_by_the_least_slack() -> None:
         assert "relaxed by up to 0.4" in result.detail, result.detail
         np.testing.assert_allclose(result.velocities[4], 0.1, atol=1e-9)
         assert np.all(result.velocities >= problem.lower) and np.all(result.velocities <= problem.upper)
+
+
+@pytest.mark.parametrize(("status", "least_squares_tried"), [(Status.INFEASIBLE, False), (Status.MAX_ITER, True),
+                                                             (Status.FAILED, True)])
+def test_an_infeasible_qp_with_rows_goes_to_the_separating_step_at_once(monkeypatch: pytest.MonkeyPatch,
+                                                                       status: Status, least_squares_tried: bool) -> None:
+    """Infeasible with rows: the box meets no point of them, so the bounded least-squares step (inside the box) is not
+    computed; the command is the separating step's. Another failure still tries the least-squares step first."""
+    from dualarm_control.solvers import policy
+
+    problem = problem_with_rows(3, rows=1, bound=-0.5)
+    problem.lower, problem.upper = np.zeros(N), np.zeros(N)
+    problem.upper[4] = 0.1
+    problem.limit_rows = np.zeros((1, N))
+    problem.limit_rows[0, 4] = -1.0  # -qd_4 <= -0.5 with qd_4 <= 0.1: the box meets no point of the row
+    calls = []
+    least_squares = policy.bounded_least_squares
+    monkeypatch.setattr(policy, "bounded_least_squares", lambda *a: calls.append(1) or least_squares(*a))
+    velocities, final, detail = policy.fallback(problem, None, status, "test")
+    assert bool(calls) == least_squares_tried
+    separated = separating_step(problem)
+    assert separated is not None
+    np.testing.assert_array_equal(velocities, separated[0])
+    assert final == Status.FALLBACK and "separating step used" in detail
 
 
 def test_separating_step_without_conflict_is_the_constrained_least_squares() -> None:
