@@ -5,9 +5,9 @@ nodes with the same names, parameters, topics and services, on one executor and 
 participant; the per-cycle samples between them (``/joint_states``, ``/wrench``,
 ``/velocity_controller/commands``, ``/relative_target``, ``/joint_reference``) go from node to
 node in the process (:mod:`dualarm_control.ros.local_bus`) and are published on the wire as
-well while a reader outside the process matches them, so every ROS 2 tool still reads every topic. A sample published on those topics by
-another process is not heard by the container. What it saves is measured in docs/bench.md
-("One process").
+well while a reader outside the process matches them, so every ROS 2 tool still reads every
+topic. A sample published on those topics by another process is not heard by the container.
+What it saves is measured in docs/bench.md ("One process").
 
 Parameters per node: rcl's node-scoped form ``-p controller_node:solver:=daqp`` or a
 ``--params-file`` (keyed by node name, as for separate processes); an unscoped ``-p NAME:=VALUE``

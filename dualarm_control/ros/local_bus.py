@@ -4,9 +4,10 @@ As rclcpp's intra-process communication in a component container: a sample that 
 process publishes on a *local* topic goes, as the same CDR bytes, straight to the callbacks of
 the process's subscriptions on that topic, in publication order; it is also published on the
 wire while a reader outside the process matches it, so any ROS 2 tool outside the process
-(``dualarm topic echo``, a recorder, the view) reads every topic as before. The nodes do not subscribe the local topics on the wire: a sample another
-process publishes on one of them is not heard by the container (its inputs from outside are
-``/relative_goal``, ``/relative_twist`` and the parameters).
+(``dualarm topic echo``, a recorder, the view) reads every topic as before. The nodes do not
+subscribe the local topics on the wire: a sample another process publishes on one of them is not
+heard by the container (its inputs from outside are ``/relative_goal``, ``/relative_twist`` and
+the parameters).
 
 What it saves per sample: the middleware's delivery to another process (shared memory, its
 threads' wake-ups) and the executor's dispatch of the receiving callback (docs/bench.md, "Cost

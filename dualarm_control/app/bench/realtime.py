@@ -196,10 +196,9 @@ def variants(solvers: Sequence[str], rates: Sequence[float], loads: Sequence[str
     """Every launch in run order: per (solver, rate, load, scheduling, view), in each of the ``processes``
     layouts, the baseline tree's launch right before the current tree's, so both meet the same machine state
     (a baseline without ``cell_container``, an older tree, runs in separate processes, once)."""
-    trees: list[tuple[str, Path | None, int]] = []
+    trees: list[tuple[str, Path | None, int]]
     if baseline is not None and (baseline[1] / CONTAINER_MODULE).is_file():
-        for n in processes:
-            trees += [(*baseline, n), (current, None, n)]
+        trees = [tree for n in processes for tree in ((*baseline, n), (current, None, n))]
     else:
         trees = [*([(*baseline, 3)] if baseline else []), *((current, None, n) for n in processes)]
     return [Variant(solver, rate, load, sched, tree, base, view, n)
