@@ -213,6 +213,7 @@ class SimNode:
         self.started = False
         self.last_publish = 0.0
         self.rejected = self.received = self.timeouts = 0
+        self.command_ns = 0  # the last accepted command's arrival, in the states' stamp clock [ns] (0: none yet)
         self.timed_out = False
         n.create_timer(STATUS_PERIOD_S, self.publish_status)
         self.ticks: list[Tick] = []  # real time: the physics tick (ros.node.Ticker, not an rclpy timer)
@@ -284,6 +285,7 @@ class SimNode:
     def on_command(self, output: str, data: np.ndarray) -> None:
         """A command of one output of the profile; lockstep: the step runs once every output's has arrived."""
         self.received += 1
+        self.command_ns = self._stamp_ns()
         if self.received == 1:  # the command path works (a restarted simulator waits for the controller's writer)
             self.log.info(f"{FIRST_COMMAND} ({output})")
         self.merger.put(output, data, self.cell.reference)
@@ -311,7 +313,9 @@ class SimNode:
                              "arms brought to rest")
         elif self.timed_out and not timed_out:
             self.log.info("commands resumed")
-        self.timed_out = timed_out
+        changed, self.timed_out = timed_out != self.timed_out, timed_out
+        if changed:  # the status says so at once, not up to STATUS_PERIOD_S later
+            self.publish_status()
         self.moving.place(self.steps * self.period_s)
         self.stepped = self.cell.step()
         if self.wrists is not None:
@@ -330,6 +334,7 @@ class SimNode:
     def publish_status(self) -> None:
         values = {"steps": self.steps, "commands_received": self.received, "commands_rejected": self.rejected,
                   "command_timeouts": self.timeouts, "timed_out": self.timed_out,
+                  "last_command_ns": self.command_ns,
                   **({"table_contacts": self.table_contacts} if self.table else {}), **self.contacts.diagnostics()}
         touching = ", ".join(f"{a}-{b}" for a, b in self.contacts.current)
         message = ("arms at rest: command timeout" if self.timed_out else

@@ -59,6 +59,22 @@ def test_arm_stop_counts_from_a_late_commands_arrival() -> None:
     assert "8 steps = 40 ms sim time" in stop.text(0.005) and "(5 steps after the last state" in stop.text(0.005)
 
 
+def test_arm_stop_counts_from_the_simulators_arrival_not_a_starved_recorders() -> None:
+    """A recorder starved for 2 s received the last command after every state it then recorded (the CI
+    failure of 2026-12-07: 'never at rest'); the simulator's own figure (``last_command_ns``, in its
+    states' stamp clock) puts the arrival at state 14: at rest 8 steps later."""
+    stamps = [k * 5 * MS for k in range(30)]
+    speeds = [0.2] * 12 + [0.1] * 10 + [1e-4] * 8
+    late = [stamps[-1] + 2000 * MS]
+    starved = GraphStreams(state_stamp=stamps, state_speed=speeds, pose_stamp=stamps[:10], command_t=late)
+    assert arm_stop(starved, 0).steps == -1  # the receive time alone: no state after it
+    sim = [Status(t, "sim_node", 0, "running", {"last_command_ns": str(c)})
+           for t, c in ((stamps[5], stamps[4] + MS), (late[0], stamps[13] + MS))]
+    rec = GraphStreams(state_stamp=stamps, state_speed=speeds, pose_stamp=stamps[:10], command_t=late, sim=sim)
+    stop = arm_stop(rec, 0)
+    assert (stop.late_steps, stop.steps) == (5, 8), stop
+
+
 def test_arm_stop_never_at_rest() -> None:
     stamps = [k * 5 * MS for k in range(5)]
     rec = GraphStreams(state_stamp=stamps, state_speed=[0.2] * 5, pose_stamp=stamps[:2])

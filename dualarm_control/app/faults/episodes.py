@@ -127,10 +127,20 @@ class ArmStop:
                 "state it answered)")
 
 
+def command_arrival(rec: GraphStreams) -> int:
+    """When the simulator received its last command, in its states' stamp clock [ns]: the largest
+    ``last_command_ns`` of its statuses (it publishes one at once when its command timeout fires). The
+    recorder's receive time of the last command only without one (0 if no command): a recorder starved on
+    a busy machine takes a queued command seconds after it arrived, later than every state then recorded."""
+    sent = [int(s.values["last_command_ns"]) for s in rec.sim if "last_command_ns" in s.values]
+    return max(sent) if sent else max(rec.command_t, default=0)
+
+
 def arm_stop(rec: GraphStreams, after_stamp: int) -> ArmStop:
     """Steps to rest from the arrival of the controller's last command (the first state stamped at or after
-    its receipt, or the last state it answered if later: the simulator's command timeout counts from the
-    command it received, and a loaded controller answers a state late), over states stamped >= ``after_stamp``."""
+    it (:func:`command_arrival`), or the last state it answered if later: the simulator's command timeout
+    counts from the command it received, and a loaded controller answers a state late), over states stamped
+    >= ``after_stamp``."""
     answered = [s for s in rec.pose_stamp if s >= after_stamp]
     if not answered:
         return ArmStop(float("nan"), -1, float("nan"))
@@ -141,8 +151,7 @@ def arm_stop(rec: GraphStreams, after_stamp: int) -> ArmStop:
     i_answered = int(np.searchsorted(stamps, last))
     if i_answered >= len(stamps) or stamps[i_answered] != last:
         return ArmStop(float("nan"), -1, float("nan"))
-    arrived = max(rec.command_t) if rec.command_t else last
-    i0 = max(i_answered, int(np.searchsorted(stamps, arrived)))
+    i0 = max(i_answered, int(np.searchsorted(stamps, command_arrival(rec))))
     rest = np.nonzero(speeds[i0:] < STOPPED_SPEED)[0]
     if not len(rest):
         return ArmStop(float(speeds[i_answered]), -1, float("nan"), i0 - i_answered)
