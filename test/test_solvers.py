@@ -754,19 +754,55 @@ def test_quadprog_backend_gives_the_same_standard_qp() -> None:
         np.testing.assert_allclose(res.velocities, quadprog_standard(p), atol=1e-12)
 
 
-def test_the_fallback_is_loaded_with_a_solver_not_with_the_nodes_that_only_read_types() -> None:
-    """scipy.optimize (the fallback's BVLS, ~0.3 s to import) is loaded when a solver is built, so a
-    first fallback in the loop never pays the import; the simulator node, which only reads the
-    solvers' types, starts without it."""
+def test_a_controller_and_its_fallback_never_import_scipy_optimize() -> None:
+    """scipy.optimize cost every controller process 0.45-0.5 s of CPU to import (it was the fallback's BVLS);
+    the fallback is a daqp box QP now: a solver built and a fallback taken leave it unimported."""
     import subprocess
     import sys
 
-    probe = ("import sys, dualarm_sim.sim_node; print('scipy.optimize' in sys.modules); "
-             "from dualarm_control.solvers import make_solver; make_solver('sparse_qp'); "
-             "print('scipy.optimize' in sys.modules)")
+    probe = ("import sys, numpy as np; from dualarm_control.solvers import make_solver; "
+             "from dualarm_control.solvers.policy import bounded_least_squares; make_solver('sparse_qp'); "
+             "qd = bounded_least_squares(np.ones((6, 14)), np.ones(6), -np.ones(14), np.ones(14)); "
+             "print(qd is not None, 'scipy.optimize' in sys.modules)")
     lines = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True,
                            timeout=120).stdout.split()
-    assert lines[-2:] == ["False", "True"], lines
+    assert lines[-2:] == ["True", "False"], lines
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_the_fallback_step_is_scipys_bounded_least_squares(seed: int) -> None:
+    """The fallback's box QP (daqp) against scipy's BVLS (``lsq_linear``) on the stacked system
+    [J; sqrt(eps) I] qd = [r; 0]: random J (some rank-deficient), references that push several joints
+    onto their bounds, some joints fixed (lower == upper). The same minimiser to 1e-7 rad/s and the same
+    objective to 1e-9 (relative)."""
+    from scipy.optimize import lsq_linear
+
+    from dualarm_control.solvers.policy import FALLBACK_DAMPING, bounded_least_squares
+
+    rng = np.random.default_rng(seed)
+    n = 14
+    jac = rng.standard_normal((6, n))
+    if seed % 4 == 0:
+        jac[:, 3] = jac[:, 2]  # a repeated column: J^T J singular, the damping decides
+    r = rng.standard_normal(6) * (0.5 + 3.0 * (seed % 3))
+    upper = rng.uniform(0.05, 1.0, n)
+    lower = -rng.uniform(0.05, 1.0, n)
+    if seed % 5 == 0:
+        lower[5] = upper[5] = 0.2  # a fixed joint
+    qd = bounded_least_squares(jac, r, lower, upper)
+    assert qd is not None and np.all(qd >= lower) and np.all(qd <= upper)
+    free = upper - lower > 1e-12
+    fixed = np.where(free, 0.0, lower)
+    a = np.vstack((jac[:, free], np.sqrt(FALLBACK_DAMPING) * np.eye(int(free.sum()))))
+    b = np.concatenate((r - jac @ fixed, np.zeros(int(free.sum()))))
+    ref = np.where(free, 0.0, lower)
+    ref[free] = lsq_linear(a, b, bounds=(lower[free], upper[free]), method="bvls", tol=1e-14).x
+
+    def cost(x: np.ndarray) -> float:
+        return float(np.sum((jac @ x - r) ** 2) + FALLBACK_DAMPING * np.sum(x[free] ** 2))
+
+    np.testing.assert_allclose(qd, ref, atol=1e-7)
+    assert abs(cost(qd) - cost(ref)) <= 1e-9 * max(1.0, cost(ref))
 
 
 @pytest.mark.parametrize("name", ["hierarchical_sparse_qp", "hierarchical_sparse_l1_qp"])

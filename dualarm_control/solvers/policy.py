@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from dualarm_control.qp import make_backend
+from dualarm_control.qp import QPProblem, make_backend
 from dualarm_control.solvers.problem import ControlProblem, FloatArray
 from dualarm_control.solvers.slack_qp import slack_qp
 from dualarm_control.status import FALLBACK_TRIGGERS, Status
@@ -34,12 +34,12 @@ among the least-squares ones and keeps the problem well posed at singular config
 
 
 def load_fallback() -> None:
-    """Import what :func:`bounded_least_squares` needs (scipy.optimize, ~0.3 s on a first import).
+    """Import what :func:`bounded_least_squares` and :func:`separating_step` need (the daqp back-end).
 
     Called when a solver is built (:class:`~dualarm_control.solvers.base.Solver`), so that a
-    first fallback inside the control loop never pays the import; processes that only read the
-    solvers' types (the simulator, the trajectory node, the ``dualarm`` verbs) never load it."""
-    import scipy.optimize  # noqa: F401
+    first fallback inside the control loop never pays an import. The fallback needs no scipy:
+    scipy.optimize cost every controller process 0.45-0.5 s of CPU to import (issue 38)."""
+    make_backend("daqp")
 
 
 def fallback(problem: ControlProblem, qd: FloatArray | None, status: Status, detail: str) -> tuple[FloatArray, Status, str]:
@@ -55,8 +55,8 @@ def fallback(problem: ControlProblem, qd: FloatArray | None, status: Status, det
     the pairs apart as fast as the bounds let it, or stops), and ``detail`` says by how much the
     rows were relaxed; when that fails too, the command nearest to rest. A solver that found its QP
     with rows infeasible goes to the separating step at once: the least-squares step lies in the box,
-    which meets no point of the rows then (it cost 0.1-0.2 ms of scipy in every such cycle, e.g. the
-    random set's worst cases, whose pairs are inside d_s).
+    which meets no point of the rows then (it cost 0.1-0.2 ms in every such cycle, e.g. the random
+    set's worst cases, whose pairs are inside d_s).
     """
     if qd is not None and status not in FALLBACK_TRIGGERS and status != Status.BOUNDS_VIOLATED:
         status, detail = Status.FAILED, detail or f"solver returned non-finite velocities or shape {qd.shape}"
@@ -166,14 +166,14 @@ def bounded_least_squares(jacobian: FloatArray, reference: FloatArray, lower: Fl
                           damping: float = FALLBACK_DAMPING) -> FloatArray | None:
     """The fallback step: argmin ||J qd - r||^2 + damping ||qd||^2  s.t.  lower <= qd <= upper.
 
-    Eq (14) with its bounds (eq 23), solved by bounded-variable least squares
-    (scipy.optimize.lsq_linear, BVLS) on the stacked system [J; sqrt(damping) I] qd = [r; 0],
-    which is well posed even where J is singular. Joints whose bounds (nearly) coincide are
-    fixed at them first (BVLS needs lower < upper).
+    Eq (14) with its bounds (eq 23): the box QP min 1/2 qd^T (J^T J + damping I) qd - (J^T r)^T qd,
+    solved by daqp (an active-set method, as BVLS; ``test_solvers.py`` checks it against scipy's
+    ``lsq_linear``). The damping keeps H positive definite even where J is singular. Joints whose
+    bounds (nearly) coincide are fixed at them first.
 
     Args:
         jacobian: J (m, n); reference: r (m,) [m/s; rad/s]; lower, upper: bounds [rad/s], (n,).
-        damping: weight of ||qd||^2, >= 0.
+        damping: weight of ||qd||^2, > 0.
 
     Returns:
         qd [rad/s], (n,), finite and inside the bounds; None when the solve fails.
@@ -182,17 +182,15 @@ def bounded_least_squares(jacobian: FloatArray, reference: FloatArray, lower: Fl
     free = upper - lower > 1e-12
     if not free.any():
         return qd
-    a = np.vstack((jacobian[:, free], math.sqrt(damping) * np.eye(int(free.sum()))))
-    b = np.concatenate((reference - jacobian[:, ~free] @ qd[~free], np.zeros(int(free.sum()))))
-    # loaded already by load_fallback(): a dict lookup here
-    from scipy.optimize import lsq_linear
-
-    try:
-        solution = lsq_linear(a, b, bounds=(lower[free], upper[free]), method="bvls")
-    except (ValueError, np.linalg.LinAlgError):  # e.g. non-finite data
+    j = jacobian[:, free]
+    r = reference - jacobian[:, ~free] @ qd[~free]
+    h = j.T @ j
+    h[np.diag_indices_from(h)] += damping
+    if not (math.isfinite(float(h.sum())) and math.isfinite(float(r.sum()))):
         return None
-    x = np.asarray(solution.x, dtype=float)
-    if solution.status < 0 or x.shape != (int(free.sum()),) or not math.isfinite(x.sum()):
+    solution = make_backend("daqp").solve(QPProblem(H=h, g=-(j.T @ r), lb=lower[free], ub=upper[free]))
+    if not solution.ok or solution.x is None or solution.x.shape != (int(free.sum()),) \
+            or not math.isfinite(float(solution.x.sum())):
         return None
-    qd[free] = x
+    qd[free] = solution.x
     return np.minimum(np.maximum(qd, lower), upper)
