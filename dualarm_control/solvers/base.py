@@ -20,6 +20,7 @@ import numpy as np
 from dualarm_control.metrics import ACTIVITY_THRESHOLD
 from dualarm_control.qp import DEFAULT_BACKEND, QPSettings, QPSolution, make_backend
 from dualarm_control.solvers import priority
+from dualarm_control.solvers.lapack import dposv
 from dualarm_control.solvers.policy import (
     ROUND_OFF,
     bound_excess,
@@ -150,7 +151,8 @@ class Solver:
 
     def __init__(self, params: SolverParams | None = None) -> None:
         self.params = params or SolverParams()
-        load_fallback()  # the fallback's import now, never inside the control loop
+        load_fallback()  # the imports now, never inside the control loop
+        dposv()
 
     def reset(self) -> None:
         """Forget warm-start memory (e.g. after a discontinuity)."""

@@ -6,10 +6,6 @@ velocity bounds of eq (23), qd_r repulsive velocity of eq (25). Units rad/s, m/s
 
 from __future__ import annotations
 
-import functools
-from collections.abc import Callable
-from typing import Any
-
 import numpy as np
 import numpy.typing as npt
 
@@ -17,6 +13,7 @@ from dualarm_control.arrays import add_diagonal, split_columns
 from dualarm_control.qp import QPProblem, check_backend
 from dualarm_control.solvers import priority
 from dualarm_control.solvers.base import Solver, SolverParams, from_qp
+from dualarm_control.solvers.lapack import spd_solve
 from dualarm_control.solvers.lasso_dual import LassoDual
 from dualarm_control.solvers.policy import ROUND_OFF, bound_excess, inside
 from dualarm_control.solvers.problem import ControlProblem, FloatArray
@@ -477,22 +474,3 @@ def null_space_projection(jacobian: FloatArray, velocity: FloatArray) -> FloatAr
     """
     y = spd_solve(jacobian @ jacobian.T, jacobian @ velocity)
     return None if y is None else velocity - jacobian.T @ y
-
-
-def spd_solve(a: FloatArray, b: FloatArray) -> FloatArray | None:
-    """x with a x = b for a symmetric positive definite ``a`` (m, m), by Cholesky (LAPACK dposv).
-
-    Called directly: np.linalg.solve costs twice as much on these 6x6 systems (its general
-    LU and checks). Returns None when ``a`` is not positive definite (singular J J^T).
-    """
-    _, x, info = _dposv()(a, b)
-    return None if info != 0 else np.asarray(x)
-
-
-@functools.cache
-def _dposv() -> Callable[..., Any]:
-    """LAPACK's dposv from scipy, imported on first use: scipy.linalg costs 0.15-0.2 s to import, which every
-    node that never solves (the simulator, the trajectory node) paid at start."""
-    from scipy.linalg import lapack
-
-    return lapack.dposv  # type: ignore[no-any-return]
