@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 
+from dualarm_control.arrays import add_diagonal
 from dualarm_control.qp import QPProblem, make_backend
 from dualarm_control.solvers.problem import ControlProblem, FloatArray
 from dualarm_control.solvers.slack_qp import slack_qp
@@ -185,7 +186,7 @@ def bounded_least_squares(jacobian: FloatArray, reference: FloatArray, lower: Fl
     j = jacobian[:, free]
     r = reference - jacobian[:, ~free] @ qd[~free]
     h = j.T @ j
-    h[np.diag_indices_from(h)] += damping
+    add_diagonal(h, damping)
     if not (math.isfinite(float(h.sum())) and math.isfinite(float(r.sum()))):
         return None
     solution = make_backend("daqp").solve(QPProblem(H=h, g=-(j.T @ r), lb=lower[free], ub=upper[free]))
