@@ -8,6 +8,8 @@ Keys under ``scenario.`` (flattened names):
   name, description; ``robot``: a robot description's name (``config/robots/``) or a YAML path
   (relative to the scenario file; default ``lwr4_cell``, :mod:`dualarm_control.robot`);
   ``obstacles`` (static obstacles by name, each one's keys under its name: :mod:`dualarm_control.obstacles`);
+  ``acceleration_limit`` (the controller's default joint acceleration bound in this cell [rad/s^2], one value
+  or one per joint, over the robot's; a parameter given to the controller overrides it);
   ``initial_positions_deg`` (one value per joint of the robot, left then right; default: the
   robot's ready positions); ``robot_starts.<robot name>``: the start on another robot (used when
   the run's robot, e.g. ``--robot``, is that one; else its ready positions); settle_time [s], limits.<MotionLimits field>; and the keys of the
@@ -30,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from dualarm_control.collision import CollisionModel
-from dualarm_control.controller import ControllerParams
+from dualarm_control.controller import ControllerParams, acceleration_limit_problem
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel, FloatArray
 from dualarm_control.moving_obstacles import MovingObstacle, parse_moving_obstacles
@@ -48,7 +50,7 @@ from dualarm_control.references.segments import SegmentsSource, parse_segments
 from dualarm_control.references.tasks import TasksSource, parse_tasks
 from dualarm_control.robot import RobotDescription
 from dualarm_control.robot_files import RobotError
-from dualarm_control.robot_params import DEFAULT_ROBOT, load_robot
+from dualarm_control.robot_params import DEFAULT_ROBOT, load_robot, robot_defaults
 from dualarm_control.scenario_keys import PREFIX, get, number, vector
 from dualarm_control.trajectory import MotionLimits, RelativeTrajectory
 
@@ -70,6 +72,8 @@ class Scenario:
             them, the simulator has them (docs/obstacles.md).
         moving_obstacles: shapes that come in and go out (``scenario.moving_obstacles``, a hand): live
             obstacles of the collision limit, moved bodies of the simulator.
+        acceleration_limit: the controller's default joint acceleration bound [rad/s^2] in this cell
+            (``scenario.acceleration_limit``; empty: the robot's, :meth:`controller_defaults`).
     """
 
     name: str
@@ -83,6 +87,17 @@ class Scenario:
     collision_allowed: tuple[tuple[str, str], ...] = ()
     obstacles: tuple[Obstacle, ...] = ()
     moving_obstacles: tuple[MovingObstacle, ...] = ()
+    acceleration_limit: tuple[float, ...] = ()
+
+    def controller_defaults(self) -> dict[str, Any]:
+        """The controller parameters this cell sets by default, as parameter values (a parameter given to the
+        controller, in a file or on the command line, overrides them): the robot's joint acceleration bound
+        (``robot.acceleration_limit``), the scenario's in its place when it has one (busy_cell: two rows
+        pressing on one plate from both sides make the commands alternate without it, docs/obstacles.md)."""
+        defaults = robot_defaults(self.robot)
+        if self.acceleration_limit:
+            defaults["acceleration_limit"] = list(self.acceleration_limit)
+        return defaults
 
     @property
     def held_bodies(self) -> tuple[AttachedBox, ...]:
@@ -191,6 +206,17 @@ def _link_pairs(flat: Mapping[str, Any]) -> tuple[tuple[str, str], ...]:
         raise ScenarioError(f"scenario parameter '{PREFIX}collision_allowed': {exc.expected}") from None
 
 
+def _acceleration_limit(flat: Mapping[str, Any], n: int) -> tuple[float, ...]:
+    """``scenario.acceleration_limit`` [rad/s^2]: one value or ``n``, each > 0 (empty or missing: none); ScenarioError
+    naming the key and value otherwise."""
+    value = get(flat, "acceleration_limit", [])
+    if not isinstance(value, list) or len(value) not in (0, 1, n) or any(isinstance(v, bool) for v in value) \
+            or acceleration_limit_problem(value):
+        raise ScenarioError(f"scenario parameter '{PREFIX}acceleration_limit': got {value!r}, expected values > 0 "
+                            f"[rad/s^2], one for all joints or {n} (one per joint)")
+    return tuple(float(v) for v in value)
+
+
 def _motion_limits(flat: Mapping[str, Any]) -> MotionLimits:
     """MotionLimits from the ``scenario.limits.*`` keys; ScenarioError naming the full key and value.
 
@@ -264,6 +290,7 @@ def scenario_from_parameters(flat: Mapping[str, Any], source: Path,
         raise ScenarioError(f"scenario {source}: the start on robot {chosen.name!r} is outside the joint limits: "
                             + ", ".join(outside))
     return Scenario(
+        acceleration_limit=_acceleration_limit(flat, chosen.nq),
         collision_allowed=_link_pairs(flat),
         obstacles=(static := parse_obstacles(flat, Path(source).parent)),
         moving_obstacles=parse_moving_obstacles(flat, static),

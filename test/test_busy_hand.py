@@ -17,8 +17,10 @@ import pytest
 
 from dualarm_control.app.record.report import summarize_run
 from dualarm_control.app.record.run_record import RunRecord
+from dualarm_control.app.run.command import cell_values
 from dualarm_control.app.run.experiment import run_scenario
 from dualarm_control.controller import ControllerParams
+from dualarm_control.controller_params import controller_params
 from dualarm_control.errors import ScenarioError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.moving_obstacles import MovingObstacle, parse_moving_obstacles
@@ -32,7 +34,7 @@ SAFE = 0.028
 def run_with_hand() -> tuple[RunRecord, dict[str, object]]:
     scenario = load_scenario("busy_cell")
     model = DualArmModel(scenario.robot)
-    params = ControllerParams(solver="standard_qp", acceleration_limit=[10.0])
+    params = controller_params({**cell_values(scenario, []), "solver": "standard_qp"})  # the scenario's 10 rad/s^2
     record = run_scenario(scenario, params, model)
     return record, summarize_run(record, scenario, model, params.alpha)
 
@@ -128,9 +130,10 @@ def test_over_ros_recorded(tmp_path: Path) -> None:
     from dualarm_control.app.run.launcher import launch_scenario
 
     bag = tmp_path / "bag"
-    params = [str(Path(__file__).parents[1] / "config" / "acceleration_limit.yaml")]
-    assert launch_scenario("busy_cell", params, ["-p", "solver:=standard_qp"], True, bag, timeout=400.0) == 0
+    assert launch_scenario("busy_cell", [], ["-p", "solver:=standard_qp"], True, bag, timeout=400.0) == 0
     (run,), _ = read_run(bag, read_bag(bag))
+    acceleration = np.abs(np.diff(run.commands, axis=0)).max() / run.period  # the scenario's bound, in the node
+    assert acceleration <= 10.0 * (1 + 1e-9), acceleration
     overall, hand = distances(run), distances(run, hand_only=True)
     print(f"over ROS: pybullet min {overall.minimum * 1e3:.1f} mm {overall.pair}, the hand's own "
           f"{hand.minimum * 1e3:.1f} mm {hand.pair}")

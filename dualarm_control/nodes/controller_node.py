@@ -59,6 +59,7 @@ from dualarm_control.nodes.controller_setup import (
     controller_params,
     run_options,
     start_text,
+    with_cell_defaults,
 )
 from dualarm_control.nodes.controller_status import (
     CollisionLog,
@@ -68,10 +69,7 @@ from dualarm_control.nodes.controller_status import (
 from dualarm_control.nodes.controller_streams import subscribe_streams
 from dualarm_control.nodes.startup_wait import CHECK_PERIOD_S, StartupWait
 from dualarm_control.nodes.task_clock import TaskClock
-from dualarm_control.references.base import (
-    WRENCH,
-    Tracker,
-)
+from dualarm_control.references.base import WRENCH, Tracker
 from dualarm_control.references.held import tuned
 from dualarm_control.references.plan import PlanSource
 from dualarm_control.ros import convert, inputs, local_bus, priority
@@ -105,6 +103,7 @@ class ControllerNode:
         self.values = declare_with_profile(n, ALL_PARAMETERS)
         self.lockstep = bool(self.values["lockstep"])
         self.scenario, robot_note = node_scenario(self.values, n.get_name())
+        self.values = with_cell_defaults(n, self.scenario, self.values)  # the robot's or scenario's bound
         self.log.info(robot_note)
         self.profile = profile_from_values(self.values, self.scenario.robot.joint_names, n.get_name())
         self.params = controller_params(self.scenario, self.values, n.get_name())

@@ -63,6 +63,20 @@ ALL_PARAMETERS = schema.CONTROLLER_PARAMETERS + NODE_PARAMETERS
 """Every parameter controller_node declares: the core's, then its own."""
 
 
+def with_cell_defaults(node: Any, scenario: Scenario, values: Mapping[str, Any]) -> dict[str, Any]:
+    """``values`` with the cell's defaults (:meth:`~dualarm_control.scenario.Scenario.controller_defaults`: the
+    robot's or the scenario's joint acceleration bound) in place of the parameters the node was not given (in a
+    file or on the command line: its overrides), and set on the node: ``dualarm param get`` shows the value in
+    use, a live change starts from it."""
+    from rclpy.parameter import Parameter
+
+    given = getattr(node, "_parameter_overrides", {})
+    cell = {key: value for key, value in scenario.controller_defaults().items() if key not in given}
+    if cell:
+        node.set_parameters([Parameter(key, value=value) for key, value in cell.items()])
+    return {**values, **cell}
+
+
 def controller_params(scenario: Scenario, values: Mapping[str, Any], node: str) -> core.ControllerParams:
     """The controller's settings from the parameter ``values`` of ``node`` (ParameterError naming a bad
     one), with the scenario's allowed contacts (the assembly's tools) in the collision limit."""

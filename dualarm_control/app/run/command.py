@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -30,11 +31,17 @@ from dualarm_control.controller_params import controller_params
 from dualarm_control.errors import DualArmError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.params import read_params_files
-from dualarm_control.robot_params import robot_defaults
-from dualarm_control.scenario import load_scenario
+from dualarm_control.scenario import Scenario, load_scenario
 
 EXIT_INTERRUPTED = 130
 """Exit code of an interrupted experiment (what it completed is written)."""
+
+
+def cell_values(scenario: Scenario, params_files: Sequence[str]) -> dict[str, Any]:
+    """The controller parameter values of a run of ``scenario``: the cell's defaults
+    (:meth:`~dualarm_control.scenario.Scenario.controller_defaults`), then the ``controller_node`` values of
+    ``params_files`` in order (a file overrides a default: ``acceleration_limit: [0.0]`` turns a cell's bound off)."""
+    return {**scenario.controller_defaults(), **read_params_files(params_files, "controller_node")}
 
 
 def experiment_command(scenario_name: str, solver_names: str | None, params_files: list[str], out: Path,
@@ -47,7 +54,7 @@ def experiment_command(scenario_name: str, solver_names: str | None, params_file
     if params_files:
         print(robot_note(scenario, profile_robot, robot or ""), file=sys.stderr)
     spec = scenario.tasks
-    base = {**robot_defaults(scenario.robot), **read_params_files(params_files, "controller_node")}
+    base = cell_values(scenario, params_files)
     runs: list[tuple[str, ControllerParams, float | None]]
     if spec is None:
         if gain_values or force or duration:

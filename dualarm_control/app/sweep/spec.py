@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +33,7 @@ from dualarm_control.app.sweep.tasks import TaskSampling
 from dualarm_control.controller import ControllerParams
 from dualarm_control.controller_params import controller_params
 from dualarm_control.errors import DualArmError
-from dualarm_control.robot_params import load_robot, robot_defaults
+from dualarm_control.scenario import load_scenario
 
 
 class SpecError(DualArmError):
@@ -86,12 +87,19 @@ class SweepSpec:
         return replace(self, robots=chosen)
 
     def params(self, robot: str, solver: str, variant: str) -> ControllerParams:
-        """Controller parameters of one grid cell: the robot's defaults, the variant's, the solver."""
+        """Controller parameters of one grid cell: the cell's defaults (the scenario's on the robot:
+        :meth:`~dualarm_control.scenario.Scenario.controller_defaults`), the variant's, the solver."""
         overrides = dict(dict(self.variants)[variant])
         try:
-            return controller_params({**robot_defaults(load_robot(robot)), **overrides, "solver": solver})
+            return controller_params({**cell_defaults(self.scenario, robot), **overrides, "solver": solver})
         except (ValueError, DualArmError) as exc:
             raise SpecError(f"sweep.variants.{variant} with solver {solver!r} on {robot!r}: {exc}") from None
+
+
+@lru_cache(maxsize=16)
+def cell_defaults(scenario: str, robot: str) -> Mapping[str, Any]:
+    """The controller defaults of ``scenario`` on ``robot`` (read once per pair; not to be modified)."""
+    return load_scenario(scenario, robot).controller_defaults()
 
 
 def _integer(raw: Mapping[str, Any], key: str, default: int) -> int:
