@@ -72,8 +72,10 @@ def with_cell_defaults(node: Any, scenario: Scenario, values: Mapping[str, Any])
 
     given = getattr(node, "_parameter_overrides", {})
     cell = {key: value for key, value in scenario.controller_defaults().items() if key not in given}
-    if cell:
-        node.set_parameters([Parameter(key, value=value) for key, value in cell.items()])
+    refused = [f"{key}: {result.reason}" for key, result in zip(cell, node.set_parameters(
+        [Parameter(key, value=value) for key, value in cell.items()]), strict=True) if not result.successful]
+    if refused:
+        raise ValueError(f"{node.get_name()}: the cell's default parameters were refused ({'; '.join(refused)})")
     return {**values, **cell}
 
 
