@@ -229,6 +229,8 @@ class RelativeController:
     def reset(self) -> None:
         self.solver.reset()
         self._previous = np.zeros(self.model.nq)
+        for limit in self.constraints:
+            limit.reset()
 
     @property
     def previous_command(self) -> FloatArray:

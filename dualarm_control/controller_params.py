@@ -98,6 +98,9 @@ CONTROLLER_PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("collision.gain", 0.5, "collision limit: approach speed xi [m/s] allowed at d_i", check=positive),
     ParamSpec("collision.shape_margin", 0.001, "collision limit: the shapes grown by this [m] each (pybullet's "
               "collision margin): d_s is kept between them", check=non_negative),
+    ParamSpec("collision.stall_acceleration", 10.0, "collision limit: joint acceleration bound [rad/s^2] while a "
+              "collision or obstacle row holds the command and 0.1 s after (0 = none; docs/collision.md)",
+              check=non_negative),
     ParamSpec("collision.live_obstacles", 0, "collision limit: the most live obstacles at once (markers on "
               "/collision_objects, a point cloud, a moving hand; 0 = none; docs/obstacles.md)", check=non_negative,
               read_only=True),
@@ -134,7 +137,7 @@ def controller_params(values: Mapping[str, Any], node: str = "controller_node") 
             enabled=v["collision.enabled"], influence_distance=v["collision.influence_distance"],
             safety_distance=v["collision.safety_distance"], gain=v["collision.gain"],
             shape_margin=v["collision.shape_margin"], live_obstacles=v["collision.live_obstacles"],
-            allowed=_allowed(v["collision.allowed"])),
+            stall_acceleration=v["collision.stall_acceleration"], allowed=_allowed(v["collision.allowed"])),
         limits=_names(v["limits"]),
         plugins=_names(v["plugins"]),
     )

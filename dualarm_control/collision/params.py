@@ -103,6 +103,10 @@ class CollisionParams:
     live_obstacles: int = 0
     """The most live obstacles at once (markers on a topic, a point cloud, a moving hand; slots, >= 0;
     0: no live obstacle limit): :mod:`dualarm_control.limits.live`."""
+    stall_acceleration: float = 10.0
+    """rad/s^2, >= 0: the joint acceleration bound the row limits add while their rows hold the command and
+    0.1 s after (:mod:`dualarm_control.limits.stall`: the period-2 limit cycle at a stall); 0: none. Default:
+    the documented acceleration bound (``config/acceleration_limit.yaml``)."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.enabled, bool):
@@ -121,6 +125,10 @@ class CollisionParams:
         if not (isinstance(self.shape_margin, int | float) and math.isfinite(self.shape_margin)
                 and self.shape_margin >= 0.0):
             raise ParameterError("collision.shape_margin", self.shape_margin, "a distance >= 0 [m]")
+        if isinstance(self.stall_acceleration, bool) or not isinstance(self.stall_acceleration, int | float) \
+                or not math.isfinite(self.stall_acceleration) or self.stall_acceleration < 0.0:
+            raise ParameterError("collision.stall_acceleration", self.stall_acceleration,
+                                 "an acceleration >= 0 [rad/s^2] (0: no brake at a stall)")
         if isinstance(self.live_obstacles, bool) or not isinstance(self.live_obstacles, int) \
                 or not 0 <= self.live_obstacles <= MAX_LIVE_OBSTACLES:
             raise ParameterError("collision.live_obstacles", self.live_obstacles,

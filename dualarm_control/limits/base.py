@@ -289,6 +289,9 @@ class Limit:
         """What the limit saw in the cycle whose command is ``velocities`` [rad/s], (n,); None: nothing to say."""
         return None
 
+    def reset(self) -> None:
+        """Forget what earlier cycles left (a new run from rest): nothing by default."""
+
 
 def _priority(limit: Limit) -> int:
     return limit.priority

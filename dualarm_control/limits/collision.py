@@ -40,6 +40,7 @@ from dualarm_control.limits.base import (
     Limit,
 )
 from dualarm_control.limits.registry import LimitContext, register_limit
+from dualarm_control.limits.stall import StallBrake
 
 ACTIVE_TOLERANCE = 1e-6
 """A row is active (at its bound) when A qd >= b - 1e-6 m/s."""
@@ -91,14 +92,17 @@ class CollisionLimit(Limit):
     Args:
         collision: the robot's collision model (its allowed pairs already removed).
         params: d_i, d_s, xi (``enabled`` is the controller's business: it adds this limit or not).
+        brake: the acceleration box added while the rows hold the command (:mod:`~dualarm_control.limits.stall`);
+            None: none.
     """
 
     name = "collision"
     priority = ROW_PRIORITY
 
-    def __init__(self, collision: CollisionModel, params: CollisionParams) -> None:
+    def __init__(self, collision: CollisionModel, params: CollisionParams, brake: StallBrake | None = None) -> None:
         self.collision = collision
         self.params = params
+        self.brake = brake
         self.last = NearPairs.empty(collision.model.nv)
         self._rows = DeferredRows.of(np.zeros((0, collision.model.nv)), np.zeros(0))
         self._labels = tuple(f"{a} – {b}" for a, b in collision.pairs)
@@ -113,14 +117,20 @@ class CollisionLimit(Limit):
 
     def constraints(self, configuration: Configuration, previous: FloatArray) -> Constraint:
         influence, safety = self._kept
+        box = None if self.brake is None else self.brake.box(configuration.q, previous)
         self.last = near = self.collision.near(configuration.q, within=influence, rows=False)
         if not near.index:
-            return NONE
+            return NONE if box is None else Constraint(*box)
         gain, collision = self.params.gain, self.collision
         self._rows = rows = DeferredRows(near.speed, velocity_damper_bound(near.distance, influence, safety, gain),
                                          lambda: velocity_damper(collision.rows(near), near.distance, influence,
                                                                  safety, gain)[0])
-        return Constraint(rows=rows, labels=tuple([self._labels[i] for i in near.index]))
+        labels = tuple([self._labels[i] for i in near.index])
+        return Constraint(rows=rows, labels=labels) if box is None else Constraint(*box, rows, labels)
+
+    def reset(self) -> None:
+        if self.brake is not None:
+            self.brake.reset()
 
     def report(self, velocities: FloatArray) -> CollisionReport:
         """The last cycle's :class:`CollisionReport` for its command ``velocities`` [rad/s] (n,)."""
@@ -131,6 +141,8 @@ class CollisionLimit(Limit):
         # a row vouched for by its speed bound (C |qd| <= b - 1e-6) is not active; else A qd decides
         active = 0 if rows.meets(velocities) else int(np.count_nonzero(rows.matrix @ velocities
                                                                         >= rows.bound - ACTIVE_TOLERANCE))
+        if self.brake is not None:
+            self.brake.saw(active)
         distances = near.distance.tolist()
         closest = min(distances)
         return CollisionReport(closest, near.links[distances.index(closest)], len(distances), active, self._kept[0])
@@ -141,4 +153,4 @@ def collision_limit(context: LimitContext) -> CollisionLimit | None:
     """On when the controller's ``collision.enabled`` is (the controller then has a collision model)."""
     if context.collision is None:
         return None
-    return CollisionLimit(context.collision, context.params.collision)
+    return CollisionLimit(context.collision, context.params.collision, StallBrake.of(context))

@@ -27,6 +27,7 @@ from dualarm_control.limits.base import (
 )
 from dualarm_control.limits.collision import ACTIVE_TOLERANCE
 from dualarm_control.limits.registry import LimitContext, register_limit
+from dualarm_control.limits.stall import StallBrake
 
 LIVE_LIMIT = "live_obstacles"
 """The limit's name (``Cycle.reports`` key, ``controller.limit(...)``)."""
@@ -76,13 +77,17 @@ class LiveObstacleLimit(Limit):
         collision: the robot's collision model (its reduced model and shapes are read).
         params: d_i, d_s, xi, the shape margin, and ``live_obstacles`` (the feed's slots).
         feed: where the obstacles come from (a new one with ``params.live_obstacles`` slots by default).
+        brake: the acceleration box added while the rows hold the command (:mod:`~dualarm_control.limits.stall`);
+            None: none.
     """
 
     name = LIVE_LIMIT
     priority = ROW_PRIORITY
 
-    def __init__(self, collision: CollisionModel, params: CollisionParams, feed: LiveObstacleFeed | None = None) -> None:
+    def __init__(self, collision: CollisionModel, params: CollisionParams, feed: LiveObstacleFeed | None = None,
+                 brake: StallBrake | None = None) -> None:
         self.params = params
+        self.brake = brake
         self.feed = feed if feed is not None else LiveObstacleFeed(params.live_obstacles)
         self.distances = LiveDistances(collision.model, collision.geometry, collision.request.gjk_tolerance)
         self._kept = params.kept_distances
@@ -94,19 +99,26 @@ class LiveObstacleLimit(Limit):
         obstacles = self.feed.snapshot()
         self._count = len(obstacles)
         influence, safety = self._kept
+        box = None if self.brake is None else self.brake.box(configuration.q, previous)
         self.last = pairs = self.distances.near(configuration.q, obstacles, influence, deferred=True)
         if not len(pairs):
-            return NONE
+            return NONE if box is None else Constraint(*box)
         bound = live_damper_bound(pairs.distance, pairs.approach if pairs.moving else None, influence, safety,
                                   self.params.gain)
         self._rows = DeferredRows(pairs.speed, bound, lambda: self._matrix(pairs))
-        return Constraint(rows=self._rows, labels=pairs.labels)
+        if box is None:
+            return Constraint(rows=self._rows, labels=pairs.labels)
+        return Constraint(*box, self._rows, pairs.labels)
 
     def _matrix(self, pairs: LivePairs) -> FloatArray:
         """The rows' matrix -dd_dq (m, n) [m/rad] of this cycle's ``pairs``."""
         rows = self.distances.complete(pairs).rows
         assert rows is not None
         return -rows
+
+    def reset(self) -> None:
+        if self.brake is not None:
+            self.brake.reset()
 
     def report(self, velocities: FloatArray) -> LiveReport | None:
         """The last cycle's :class:`LiveReport` (None with no live obstacle)."""
@@ -116,6 +128,8 @@ class LiveObstacleLimit(Limit):
         rows = self._rows  # a row vouched for by its speed bound (C |qd| <= b - 1e-6) is not active
         active = 0 if rows.meets(velocities) else int(np.count_nonzero(rows.matrix @ velocities
                                                                         >= rows.bound - ACTIVE_TOLERANCE))
+        if self.brake is not None:
+            self.brake.saw(active)
         r = int(pairs.distance.argmin())
         return LiveReport(self._count, float(pairs.distance[r]), pairs.links[r], float(pairs.approach[r]),
                           len(pairs), active)
@@ -126,4 +140,4 @@ def live_obstacle_limit(context: LimitContext) -> LiveObstacleLimit | None:
     """On when the controller has a collision model and ``collision.live_obstacles`` > 0."""
     if context.collision is None or context.params.collision.live_obstacles <= 0:
         return None
-    return LiveObstacleLimit(context.collision, context.params.collision)
+    return LiveObstacleLimit(context.collision, context.params.collision, brake=StallBrake.of(context))
