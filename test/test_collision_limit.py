@@ -14,6 +14,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 from test_properties import Target
 
+from dualarm_control.collision import CollisionParams
 from dualarm_control.controller import ControllerParams, RelativeController
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.limits import CollisionLimit, DeferredRows
@@ -21,15 +22,19 @@ from dualarm_control.limits import CollisionLimit, DeferredRows
 PERIOD = 0.005
 
 
-@pytest.mark.parametrize("solver", ["hierarchical_sparse_qp", "sparse_qp", "standard_qp"])
-def test_deferred_rows_change_no_command(solver: str, monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.parametrize(("solver", "stall"), [("hierarchical_sparse_qp", 0.0), ("sparse_qp", 10.0),
+                                               ("standard_qp", 10.0)])
+def test_deferred_rows_change_no_command(solver: str, stall: float, monkeypatch: pytest.MonkeyPatch) -> None:
     """From the LWR4 cell's ready configuration, kinematic loop q += T qd: 2 s to a goal with the tools
     side by side, 10 cm apart (wrist links 8 cm apart, within d_i: rows deferred), then 2 s to the goal through the left forearm (right tool 0.35 m
     behind the left one: the issue's example). The deferring controller and the always-building one
-    command the same bits every cycle."""
+    command the same bits every cycle. The hierarchical QP runs without the brake at a stall
+    (``collision.stall_acceleration`` 0: with it, its rows are built in every cycle that has rows, 757 of 757,
+    and the deferred path would go untested here); the other two with it (deferred in 230-240 cycles)."""
     model = DualArmModel("lwr4_cell")
-    deferring = RelativeController(model, ControllerParams(solver=solver))
-    building = RelativeController(model, ControllerParams(solver=solver))
+    params = ControllerParams(solver=solver, collision=CollisionParams(stall_acceleration=stall))
+    deferring = RelativeController(model, params)
+    building = RelativeController(model, params)
     facing = Rotation.from_euler("xyz", [np.pi, 0.0, 0.0]).as_matrix()
     zero = np.zeros(3)
     goals = [Target(np.array([0.0, 0.1, 0.0]), facing, zero, zero),  # side by side: links 8 cm apart
