@@ -155,12 +155,15 @@ def test_lockstep_over_ros_equals_the_in_process_run(lwr4_lockstep_over_ros: Fut
     bag = lwr4_lockstep_over_ros.result()
     assert_stops_at_the_safety_distance(bag)
     assert bag["goal_outcomes"] == lwr4_on["goal_outcomes"]  # to the printed 0.01 mm and 1e-4 rad
-    # Not bit for bit as the assembly (1e-9): held against the limit the commands alternate from one
-    # cycle to the next (docs/collision.md, "At a stall"), which amplifies the last-bit differences of
-    # the target's quaternion round trip through /relative_target (2e-3 of 9.88 rad in l1_integral).
+    # Not bit for bit as the assembly (1e-9): at a stall the commands follow the last bits of their inputs
+    # (docs/collision.md, "At a stall"), and those differ between the two runs: the target's quaternion
+    # round trip through /relative_target, and in a pytest worker the process's history (an in-process run
+    # after other modules' tests first differs from a fresh process's by 1e-16 rad/s at cycle 775 of
+    # 6,644, 0.05 rad/s later). Measured: l0_mean 1.8e-3 apart (the count of moving joints: a threshold),
+    # l1_integral 8e-5, l2_integral below that.
     assert abs(bag["collision_min_distance_m"] - lwr4_on["collision_min_distance_m"]) <= 1e-6
-    for key in ("l0_mean", "l1_integral", "l2_integral"):
-        assert abs(bag[key] - lwr4_on[key]) <= 1e-3 * abs(lwr4_on[key]), (key, bag[key], lwr4_on[key])
+    for key, share in (("l0_mean", 1e-2), ("l1_integral", 1e-3), ("l2_integral", 1e-3)):
+        assert abs(bag[key] - lwr4_on[key]) <= share * abs(lwr4_on[key]), (key, bag[key], lwr4_on[key])
 
 
 @pytest.mark.slow
