@@ -43,7 +43,7 @@ lint: $(VENV)/.installed
 # phase's duration in $(OUT)/test-durations*.txt (CI prints them).
 TEST_WORKERS ?= 2
 test: lint bytecode
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder -m 'not slow and not realtime' --durations-file=$(OUT)/test-durations.txt
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile -m 'not slow and not realtime' --durations-file=$(OUT)/test-durations.txt
 	$(PY) -m pytest -q -m 'realtime and not slow' --durations-file=$(OUT)/test-durations-realtime.txt
 
 test-slow: $(VENV)/.installed bytecode

@@ -32,7 +32,7 @@ ROS_REQUIRES = [
     "ros-jazzy-ament-index-python>=1.8,<2",
 ]
 TEST_REQUIRES = ["pytest>=8,<10", "hypothesis>=6.100,<7", "ruff>=0.5", "mypy>=1.10",
-                 "pytest-xdist>=3.6,<4", "pytest-timeout>=2.3,<3", "psutil>=5.9",  # docs/testing.md
+                 "pytest-xdist>=3.5,<4", "pytest-timeout>=2.3,<3", "psutil>=5.9",  # docs/testing.md
                  "colcon-common-extensions>=0.3,<1",
                  "websocket-client>=1.7,<2"]  # the browser test drives headless Chromium (DevTools protocol)
 # `dualarm bench` compares with pink's solve_ik; not needed by the controller itself.
