@@ -116,17 +116,20 @@ class CollisionLimit(Limit):
         return last.pair_distances()
 
     def constraints(self, configuration: Configuration, previous: FloatArray) -> Constraint:
+        constraint = self._rows_at(configuration.q)
+        return constraint if self.brake is None else self.brake.narrow(constraint, configuration.q, previous)
+
+    def _rows_at(self, q: FloatArray) -> Constraint:
+        """The damper's rows of the pairs within d_i at q [rad] (n,) (module docstring); NONE without any."""
         influence, safety = self._kept
-        box = None if self.brake is None else self.brake.box(configuration.q, previous)
-        self.last = near = self.collision.near(configuration.q, within=influence, rows=False)
+        self.last = near = self.collision.near(q, within=influence, rows=False)
         if not near.index:
-            return NONE if box is None else Constraint(*box)
+            return NONE
         gain, collision = self.params.gain, self.collision
         self._rows = rows = DeferredRows(near.speed, velocity_damper_bound(near.distance, influence, safety, gain),
                                          lambda: velocity_damper(collision.rows(near), near.distance, influence,
                                                                  safety, gain)[0])
-        labels = tuple([self._labels[i] for i in near.index])
-        return Constraint(rows=rows, labels=labels) if box is None else Constraint(*box, rows, labels)
+        return Constraint(rows=rows, labels=tuple([self._labels[i] for i in near.index]))
 
     def reset(self) -> None:
         if self.brake is not None:

@@ -96,19 +96,21 @@ class LiveObstacleLimit(Limit):
         self._rows = DeferredRows.of(np.zeros((0, collision.model.nv)), np.zeros(0))
 
     def constraints(self, configuration: Configuration, previous: FloatArray) -> Constraint:
+        constraint = self._rows_at(configuration.q)
+        return constraint if self.brake is None else self.brake.narrow(constraint, configuration.q, previous)
+
+    def _rows_at(self, q: FloatArray) -> Constraint:
+        """The damper's rows of the (link, live obstacle) pairs within d_i at q [rad] (n,); NONE without any."""
         obstacles = self.feed.snapshot()
         self._count = len(obstacles)
         influence, safety = self._kept
-        box = None if self.brake is None else self.brake.box(configuration.q, previous)
-        self.last = pairs = self.distances.near(configuration.q, obstacles, influence, deferred=True)
+        self.last = pairs = self.distances.near(q, obstacles, influence, deferred=True)
         if not len(pairs):
-            return NONE if box is None else Constraint(*box)
+            return NONE
         bound = live_damper_bound(pairs.distance, pairs.approach if pairs.moving else None, influence, safety,
                                   self.params.gain)
         self._rows = DeferredRows(pairs.speed, bound, lambda: self._matrix(pairs))
-        if box is None:
-            return Constraint(rows=self._rows, labels=pairs.labels)
-        return Constraint(*box, self._rows, pairs.labels)
+        return Constraint(rows=self._rows, labels=pairs.labels)
 
     def _matrix(self, pairs: LivePairs) -> FloatArray:
         """The rows' matrix -dd_dq (m, n) [m/rad] of this cycle's ``pairs``."""

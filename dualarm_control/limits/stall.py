@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualarm_control.limits.acceleration import acceleration_box
-from dualarm_control.limits.base import FloatArray, JointLimits
+from dualarm_control.limits.base import Constraint, FloatArray, JointLimits
 from dualarm_control.limits.registry import LimitContext
 
 HOLD_S = 0.1
@@ -64,6 +64,12 @@ class StallBrake:
             return None
         self.left -= 1
         return acceleration_box(q, self.limits, previous, self.acceleration, self.period)
+
+    def narrow(self, constraint: Constraint, q: FloatArray, previous: FloatArray) -> Constraint:
+        """``constraint`` (a row limit's, once per cycle) with this cycle's box (:meth:`box`) while the brake
+        holds; ``constraint`` itself while released."""
+        box = self.box(q, previous)
+        return constraint if box is None else Constraint(*box, constraint.rows, constraint.labels)
 
     def saw(self, active: int) -> None:
         """The row limit's count of active rows in the cycle just ended: any holds the brake for ``hold`` cycles."""
