@@ -248,7 +248,9 @@ class RelativeController:
         * with the same solver and solver parameters, ``old``'s solver object itself: its QP
           warm start and the sparse QPs' proximal memory z_prev go on unchanged;
         * with another solver (or other solver parameters), the new solver starts from the
-          previous command (:meth:`~dualarm_control.solvers.base.Solver.seed`).
+          previous command (:meth:`~dualarm_control.solvers.base.Solver.seed`);
+        * each limit, what the limit of its name in ``old`` carries from cycle to cycle
+          (:meth:`~dualarm_control.limits.base.Limit.continue_from`: a stall's brake, the live obstacles' feed).
 
         Raises ValueError when the two controllers do not control the same joints.
         """
@@ -260,6 +262,10 @@ class RelativeController:
                 and old.collision_model.obstacles == self.collision_model.obstacles:
             self.collision_model = old.collision_model
             self.constraints = self._limits()
+        before = {limit.name: limit for limit in old.constraints}
+        for limit in self.constraints:
+            if limit.name in before:
+                limit.continue_from(before[limit.name])
         if (old.params.solver, old.params.solver_params) == (self.params.solver, self.params.solver_params):
             self.solver = old.solver
         else:

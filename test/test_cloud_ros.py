@@ -2,7 +2,8 @@
 assembly --interactive --lockstep`` with the controller's cloud topic set, the arms holding their pose; a node of
 this process publishes a PointCloud2 of a ball's surface within the safety distance of an arm link on that topic.
 The controller takes it in (raw subscription, the intake's worker), reports the pair on /diagnostics and moves the
-link out to the safety distance, and keeps it there."""
+link out to the safety distance, and keeps it there; a live change of solver keeps the cloud (the new controller's
+limit reads the intake's feed)."""
 
 from __future__ import annotations
 
@@ -75,6 +76,19 @@ def cloud_message(points: np.ndarray) -> Any:
     return msg
 
 
+def switch_solver(node: Any, executor: Any, solver: str) -> bool:
+    """``solver`` set on /controller_node through a parameter client of ``node``; whether it was accepted."""
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+
+    client = AsyncParameterClient(node, "/controller_node")
+    assert client.wait_for_services(timeout_sec=60.0), "no parameter services of /controller_node"
+    future = client.set_parameters([Parameter("solver", value=solver)])
+    executor.spin_until_future_complete(future, timeout_sec=60.0)
+    assert future.done(), "no answer from /controller_node within 60 s"
+    return all(r.successful for r in future.result().results)
+
+
 def test_a_cloud_on_the_topic_makes_the_controller_keep_its_distance(tmp_path: Path) -> None:
     from diagnostic_msgs.msg import DiagnosticArray
     from sensor_msgs.msg import JointState, PointCloud2
@@ -133,6 +147,9 @@ def test_a_cloud_on_the_topic_makes_the_controller_keep_its_distance(tmp_path: P
                               seen, what=f"the pair out to d_s' = {safety} m", step=spin, gone=gone, timeout=120)
             end = len(reports) + 200  # then 200 more cycles: the distance kept
             wait_until(lambda: len(reports) >= end, seen, what="200 more cycles", step=spin, gone=gone, timeout=120)
+            switched = switch_solver(node, executor, "sparse_qp")  # a live change: the new controller reads the feed
+            wait_until(lambda: sum(r.get("solver") == "sparse_qp" for r in reports) >= 100, seen,
+                       what="100 cycles of sparse_qp after the live change", step=spin, gone=gone, timeout=120)
     finally:
         launch.kill()
     distances = np.array([float(r["live_obstacle_distance_m"]) for r in reports[first:]])
@@ -142,6 +159,11 @@ def test_a_cloud_on_the_topic_makes_the_controller_keep_its_distance(tmp_path: P
           f"seen, {held - first} cycles to within {TOLERANCE * 1e3:g} mm of d_s' = {safety * 1e3:.0f} mm (rows active "
           f"in {sum(a > 0 for a in active)}), then {after.min() * 1e3:.3f} to {after.max() * 1e3:.3f} mm over "
           f"{len(after)} cycles, the last 50 from {after[-50:].min() * 1e3:.4f} mm")
+    assert switched, "the live change of solver was refused"
+    changed = [r for r in reports if r.get("solver") == "sparse_qp"]
+    assert all(r["live_obstacle_pair"].endswith("obstacle:cloud") and r["live_obstacles"] == "1" for r in changed), \
+        changed[0]  # the cloud still there for the new controller (its limit took over the intake's feed)
+    assert min(float(r["live_obstacle_distance_m"]) for r in changed) >= safety - TOLERANCE
     assert distances[0] < safety - 0.005  # it was put inside the safety distance
     assert any(active), "the rows held the command while the link moved out"
     assert after.min() >= safety - TOLERANCE  # once out, never back in

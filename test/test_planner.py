@@ -451,3 +451,43 @@ def test_full_plan_meets_the_issue_targets() -> None:
     assert np.max(result.closure_position_errors) <= 1e-5
     assert np.max(result.closure_rotation_errors) <= 1e-4
     assert result.joint_limit_violations == 0
+
+
+def test_a_plan_runs_in_the_cell_of_its_scenario_file(small_plan: PlanResult, model: DualArmModel, tmp_path: Path,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """A plan made from a scenario file runs under that cell's settings: its joint acceleration bound (a
+    controller default, as ``dualarm experiment`` and controller_node take it) and its obstacles. Before, the
+    execution built its controller from the bare defaults and dropped both. A config with no file (the
+    tests' small one) keeps the defaults: the documented plan figures are unchanged."""
+    from dualarm_control.app.plan import execute
+    from dualarm_control.controller import ControllerParams
+    from dualarm_control.references.plan import PlanSource
+
+    text = Path("config/scenarios/corner_path.yaml").read_text()
+    assert "      settle_time: 0.5\n" in text
+    cell = tmp_path / "corner_in_a_cell.yaml"
+    cell.write_text(text.replace("      settle_time: 0.5\n", """      settle_time: 0.5
+      acceleration_limit: [2.0]
+      obstacles: [post]
+      post: {type: box, size: [0.05, 0.05, 0.4], position: [1.5, 0.9, 1.0]}
+"""))
+    config = dataclasses.replace(load_plan_config(str(cell)), starts=3, inner_starts=2)
+    source = PlanSource(model, config, small_plan.configurations)
+    scenario, params = execute.plan_cell(config, source)
+    assert params.acceleration_limit == (2.0,) and params.period == 0.005  # one value: every joint
+    assert [o.name for o in params.collision.obstacles] == ["post"]
+    np.testing.assert_array_equal(scenario.initial_positions, small_plan.configurations[0])
+    assert scenario.reference is source and scenario.obstacles == params.collision.obstacles
+    bare_scenario, bare = execute.plan_cell(small_config(), source)
+    assert bare == ControllerParams(period=0.005) and not bare_scenario.obstacles
+
+    used: list[ControllerParams] = []
+
+    def stop(scenario_run: object, params_run: ControllerParams, *args: object) -> None:
+        used.append(params_run)
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(execute, "run_scenario", stop)
+    with pytest.raises(RuntimeError, match="stop here"):
+        execute.execute_plan(config, small_plan.configurations, model)
+    assert used == [params]

@@ -111,3 +111,32 @@ def test_a_collision_model_shared_by_both_row_limits_gives_each_its_own_brake(mo
     brakes = [controller.limit(name).brake for name in ("collision", "live_obstacles")]  # type: ignore[attr-defined]
     assert all(isinstance(b, StallBrake) for b in brakes) and brakes[0] is not brakes[1]
     assert isinstance(controller.collision_model, CollisionModel)
+
+
+def test_a_live_parameter_change_during_a_stall_keeps_the_brake_and_the_obstacles(model: DualArmModel) -> None:
+    """A controller built with new parameters takes over each limit's state from the running one
+    (``RelativeController.continue_from``): a stall's brake holds on for the cycles it had left (before, the new
+    brake started released, and the first cycle after the change could jump by any amount the box allows), and
+    the live obstacles' feed goes on (the node's intake fills it)."""
+    import coal
+
+    values = {"solver": "standard_qp", "collision.live_obstacles": 1}
+    running = RelativeController(model, controller_params(values))
+    live = running.limit("live_obstacles")
+    assert isinstance(live, LiveObstacleLimit) and live.brake is not None
+    live.feed.publish((LiveObstacle.make("ball", coal.Sphere(0.05), np.eye(3), np.array([0.9, 0.0, 1.2])),))
+    running.limit("collision").brake.saw(1)  # type: ignore[attr-defined]  # a stall: held for 20 cycles
+    for _ in range(5):
+        running.limit("collision").brake.box(model.description.ready, np.zeros(model.nq))  # type: ignore[attr-defined]
+    live.brake.saw(2)
+    changed = RelativeController(model, controller_params({**values, "solver": "sparse_qp"})).continue_from(running)
+    assert changed.limit("collision").brake.left == 15  # type: ignore[attr-defined]
+    new_live = changed.limit("live_obstacles")
+    assert isinstance(new_live, LiveObstacleLimit) and new_live.brake is not None and new_live.brake.left == 20
+    assert new_live.feed is live.feed and [o.name for o in new_live.feed.snapshot()] == ["ball"]
+    previous = np.linspace(-0.3, 0.3, model.nq)
+    changed._previous = previous
+    braked = changed.limit("collision").constraints(Configuration(model, model.description.ready), previous)
+    assert braked.lower is not None and braked.upper is not None  # the box from the first cycle on
+    off = RelativeController(model, controller_params({**values, "collision.stall_acceleration": 0.0}))
+    assert off.continue_from(running).limit("collision").brake is None  # type: ignore[attr-defined]

@@ -292,6 +292,11 @@ class Limit:
     def reset(self) -> None:
         """Forget what earlier cycles left (a new run from rest): nothing by default."""
 
+    def continue_from(self, old: Limit) -> None:
+        """Take over what ``old``, the limit of the same name in the controller before a live parameter
+        change (:meth:`~dualarm_control.controller.RelativeController.continue_from`), carries from one
+        cycle to the next: nothing by default."""
+
 
 def _priority(limit: Limit) -> int:
     return limit.priority

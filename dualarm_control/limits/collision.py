@@ -37,10 +37,9 @@ from dualarm_control.limits.base import (
     ROW_PRIORITY,
     Constraint,
     DeferredRows,
-    Limit,
 )
 from dualarm_control.limits.registry import LimitContext, register_limit
-from dualarm_control.limits.stall import StallBrake
+from dualarm_control.limits.stall import BrakedLimit, StallBrake
 
 ACTIVE_TOLERANCE = 1e-6
 """A row is active (at its bound) when A qd >= b - 1e-6 m/s."""
@@ -86,7 +85,7 @@ def allowed_pairs(model: DualArmModel, params: CollisionParams) -> tuple[tuple[s
     return tuple(model.description.collision_allowed) + tuple(params.allowed)
 
 
-class CollisionLimit(Limit):
+class CollisionLimit(BrakedLimit):
     """The velocity damper of every pair closer than d_i, as hard rows (module docstring).
 
     Args:
@@ -130,10 +129,6 @@ class CollisionLimit(Limit):
                                          lambda: velocity_damper(collision.rows(near), near.distance, influence,
                                                                  safety, gain)[0])
         return Constraint(rows=rows, labels=tuple([self._labels[i] for i in near.index]))
-
-    def reset(self) -> None:
-        if self.brake is not None:
-            self.brake.reset()
 
     def report(self, velocities: FloatArray) -> CollisionReport:
         """The last cycle's :class:`CollisionReport` for its command ``velocities`` [rad/s] (n,)."""

@@ -27,7 +27,7 @@ from dualarm_control.limits.base import (
 )
 from dualarm_control.limits.collision import ACTIVE_TOLERANCE
 from dualarm_control.limits.registry import LimitContext, register_limit
-from dualarm_control.limits.stall import StallBrake
+from dualarm_control.limits.stall import BrakedLimit, StallBrake
 
 LIVE_LIMIT = "live_obstacles"
 """The limit's name (``Cycle.reports`` key, ``controller.limit(...)``)."""
@@ -70,7 +70,7 @@ class LiveReport:
                 f"({self.rows} rows, {self.active} active)")
 
 
-class LiveObstacleLimit(Limit):
+class LiveObstacleLimit(BrakedLimit):
     """The velocity damper of every (arm link, live obstacle) pair closer than d_i (module docstring).
 
     Args:
@@ -118,9 +118,12 @@ class LiveObstacleLimit(Limit):
         assert rows is not None
         return -rows
 
-    def reset(self) -> None:
-        if self.brake is not None:
-            self.brake.reset()
+    def continue_from(self, old: Limit) -> None:
+        """The brake's state (:class:`~dualarm_control.limits.stall.BrakedLimit`) and ``old``'s feed: the obstacles
+        a node's intake fills go on (docs/obstacles.md)."""
+        super().continue_from(old)
+        if isinstance(old, LiveObstacleLimit):
+            self.feed = old.feed
 
     def report(self, velocities: FloatArray) -> LiveReport | None:
         """The last cycle's :class:`LiveReport` (None with no live obstacle)."""

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualarm_control.limits.acceleration import acceleration_box
-from dualarm_control.limits.base import Constraint, FloatArray, JointLimits
+from dualarm_control.limits.base import Constraint, FloatArray, JointLimits, Limit
 from dualarm_control.limits.registry import LimitContext
 
 HOLD_S = 0.1
@@ -79,3 +79,19 @@ class StallBrake:
     def reset(self) -> None:
         """Released (a new run)."""
         self.left = 0
+
+
+class BrakedLimit(Limit):
+    """A row limit with a :class:`StallBrake` (``brake``; None: none): released for a new run, and holding
+    on across a live parameter change as it held before (a change during a stall keeps the stall braked)."""
+
+    brake: StallBrake | None = None
+
+    def reset(self) -> None:
+        if self.brake is not None:
+            self.brake.reset()
+
+    def continue_from(self, old: Limit) -> None:
+        brake = getattr(old, "brake", None)
+        if self.brake is not None and isinstance(brake, StallBrake):
+            self.brake.left = min(brake.left, self.brake.hold)

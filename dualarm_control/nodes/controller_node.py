@@ -81,7 +81,7 @@ from dualarm_control.ros.hardware_io import (
     JointStates,
     declare_with_profile,
 )
-from dualarm_control.ros.obstacle_io import obstacle_intake, share_feed
+from dualarm_control.ros.obstacle_io import obstacle_intake
 from dualarm_control.ros.obstacle_markers import ObstacleTopics
 from dualarm_control.ros.output import CommandOutput
 from dualarm_control.ros.qos import publisher_depth, stream_qos
@@ -169,13 +169,13 @@ class ControllerNode:
         """An accepted live parameter change takes effect at the cycle boundary: the controller
         built with the new values when they were set (off the cycle) continues from the running
         one (:meth:`~dualarm_control.controller.RelativeController.continue_from`: the previous
-        command, so the acceleration bound holds; the solver's memory where the solver stays)."""
+        command, so the acceleration bound holds; the solver's memory where the solver stays; each limit's
+        state: a stall's brake, the live obstacles' feed)."""
         change = self.live.take(f" at cycle {self.out.count['cycles']}")
         if change is not None:
             self.values, built = change
             # the tracker keeps its own state (tasks: the force loop) and solves with the new controller
             self.tracker.controller = built.continue_from(self.tracker.controller)
-            share_feed(self.obstacles, self.tracker.controller)
             self.params = self.tracker.controller.params
             self.out.solver = self.params.solver
             self.out.count["parameter_switches"] += 1

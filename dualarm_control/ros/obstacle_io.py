@@ -318,10 +318,3 @@ def obstacle_intake(node: Any, controller: Any, values: dict[str, Any]) -> Obsta
     if limit is None or controller.collision_model is None:
         return None
     return start_intake(node, limit.feed, controller.collision_model.model, values)
-
-
-def share_feed(intake: ObstacleIntake | None, controller: Any) -> None:
-    """A controller built anew (a live parameter change) reads the running intake's feed."""
-    limit = controller.limit("live_obstacles")
-    if intake is not None and limit is not None:
-        limit.feed = intake.scene.feed

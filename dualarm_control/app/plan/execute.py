@@ -18,7 +18,7 @@ the reference itself (q_ref, no physics) separate interpolation from tracking.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -26,11 +26,12 @@ import numpy as np
 from dualarm_control.app.run.experiment import run_scenario
 from dualarm_control.collision import CollisionModel
 from dualarm_control.controller import ControllerParams
+from dualarm_control.controller_params import controller_params
 from dualarm_control.drive_monitor import closest_pair
 from dualarm_control.kinematics import DualArmModel, FloatArray, rotation_angle
 from dualarm_control.planning.config import PlanConfig
 from dualarm_control.references.plan import PlanSource
-from dualarm_control.scenario import Scenario
+from dualarm_control.scenario import Scenario, load_scenario
 from dualarm_control.trajectory import MotionLimits
 
 CONTROL_PERIOD = 0.005  # s, as the controller node
@@ -76,6 +77,23 @@ class ExecutionResult:
         return ": stalled" in self.outcome
 
 
+def plan_cell(config: PlanConfig, source: PlanSource) -> tuple[Scenario, ControllerParams]:
+    """The cell a plan is executed in, and its controller's settings: the scenario file the plan was made from
+    (``config.source``; its obstacles, allowed contacts and the controller defaults it sets, e.g. a joint
+    acceleration bound, :meth:`~dualarm_control.scenario.Scenario.controller_defaults`) on the plan's robot,
+    started at the plan's first configuration and tracking ``source``. A config with no file: the robot alone."""
+    start = np.asarray(source.configurations[0], dtype=float)
+    scenario = Scenario(name=config.name, description="plan execution", initial_positions=start, reference=source,
+                        limits=MotionLimits(), settle_time=config.execution_settle, source=Path(config.name),
+                        robot=config.robot)
+    if config.source is not None:
+        cell = load_scenario(str(config.source), config.robot)
+        scenario = replace(cell, description="plan execution", initial_positions=start, reference=source,
+                           limits=MotionLimits(), settle_time=config.execution_settle, source=Path(config.name))
+    params = controller_params({**scenario.controller_defaults(), "control_period": CONTROL_PERIOD})
+    return scenario, scenario.controller_params(params)
+
+
 def execute_plan(
     config: PlanConfig,
     configurations: FloatArray,
@@ -87,10 +105,8 @@ def execute_plan(
     :class:`~dualarm_control.references.plan.PlanSource`) and measure the relative path error."""
     model = model or DualArmModel(config.robot)
     source = PlanSource(model, config, configurations)
-    scenario = Scenario(name=config.name, description="plan execution", initial_positions=configurations[0],
-                        reference=source, limits=MotionLimits(), settle_time=config.execution_settle,
-                        source=Path(config.name), robot=config.robot)
-    record = run_scenario(scenario, ControllerParams(period=CONTROL_PERIOD), model, progress)
+    scenario, params = plan_cell(config, source)
+    record = run_scenario(scenario, params, model, progress)
     path = config.corner.sample()
     sub = config.execution_subdivisions
     traj = source.trajectory
