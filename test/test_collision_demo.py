@@ -156,13 +156,14 @@ def test_lockstep_over_ros_equals_the_in_process_run(lwr4_lockstep_over_ros: Fut
     assert_stops_at_the_safety_distance(bag)
     assert bag["goal_outcomes"] == lwr4_on["goal_outcomes"]  # to the printed 0.01 mm and 1e-4 rad
     # Not bit for bit as the assembly (1e-9): at a stall the commands follow the last bits of their inputs
-    # (docs/collision.md, "At a stall"), and those differ between the two runs: the target's quaternion
-    # round trip through /relative_target, and in a pytest worker the process's history (an in-process run
-    # after other modules' tests first differs from a fresh process's by 1e-16 rad/s at cycle 775 of
-    # 6,644, 0.05 rad/s later). Measured: l0_mean 1.8e-3 apart (the count of moving joints: a threshold),
-    # l1_integral 8e-5, l2_integral below that.
+    # (docs/collision.md, "At a stall"), and the target's quaternion round trip through /relative_target
+    # changes those. Measured 2026-12-07: l0_mean equal, l1_integral 1.7e-8 and l2_integral 3.0e-7 apart
+    # (relative). Until then a pytest worker's history also changed coal's box (test_box_support.py): l0_mean
+    # 1.8e-3 apart, l1_integral 8e-5.
+    print("lockstep bag against the in-process run, relative:",
+          {key: abs(bag[key] - lwr4_on[key]) / abs(lwr4_on[key]) for key in ("l0_mean", "l1_integral", "l2_integral")})
     assert abs(bag["collision_min_distance_m"] - lwr4_on["collision_min_distance_m"]) <= 1e-6
-    for key, share in (("l0_mean", 1e-2), ("l1_integral", 1e-3), ("l2_integral", 1e-3)):
+    for key, share in (("l0_mean", 1e-3), ("l1_integral", 1e-5), ("l2_integral", 1e-5)):
         assert abs(bag[key] - lwr4_on[key]) <= share * abs(lwr4_on[key]), (key, bag[key], lwr4_on[key])
 
 

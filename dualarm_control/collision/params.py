@@ -8,6 +8,7 @@ import math
 from dataclasses import dataclass
 
 import coal
+import numpy as np
 
 from dualarm_control.errors import DualArmError, ParameterError
 from dualarm_control.obstacles import Obstacle
@@ -154,3 +155,43 @@ def distance_request(gjk_tolerance: float) -> coal.DistanceRequest:
     request.epa_max_iterations = GJK_MAX_ITERATIONS
     request.enable_signed_distance = True
     return request
+
+
+def _oblique() -> np.ndarray:
+    """Rz(0.7) Ry(0.5) Rx(0.3): a rotation with no zero entry (no axis turns into a direction with a zero component)."""
+    (cx, sx), (cy, sy), (cz, sz) = ((math.cos(a), math.sin(a)) for a in (0.3, 0.5, 0.7))
+    return np.array([[cz * cy, cz * sy * sx - sz * cx, cz * sy * cx + sz * sx],
+                     [sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx],
+                     [-sy, cy * sx, cy * cx]])
+
+
+def settle_box_support() -> bool:
+    """Make coal's box support exact in this process, once: whether it is.
+
+    coal 3.0's support function of a box (``getShapeSupport(const Box*, ...)``) keeps its inflation of the
+    box's negative sides in a function-local ``static const``, set by the process's first box support query:
+    1 + 1e-10 when that query's direction had a zero component (GJK's first direction is its default guess
+    (1, 0, 0), so any query with a box as the first shape), else 1. Every later box distance in the process
+    then depends on which query came first: the same tool box and link gave 0.10179354994222353 m in one
+    process and 0.10179354994207389 m in another (1.5e-13 m), and a stall amplified that to 0.05 rad/s
+    (docs/collision.md, "At a stall"). One query with the box second at an oblique rotation sets it to 1 (the
+    exact box); this module makes it when it is imported, before any distance of this package. A process that
+    queried a box through coal before (its own code, pinocchio's collision functions) keeps what that query
+    set: False then (:func:`box_support_exact`)."""
+    coal.distance(coal.Cylinder(0.1, 0.2), coal.Transform3s(), coal.Box(1.0, 1.0, 1.0),
+                  coal.Transform3s(_oblique(), np.array([1.3, 1.1, 0.9])), distance_request(DEFAULT_GJK_TOLERANCE),
+                  coal.DistanceResult())
+    return box_support_exact()
+
+
+def box_support_exact() -> bool:
+    """Whether coal's box support is exact in this process (:func:`settle_box_support`): a unit box and a
+    cylinder 2 m from its centre along -x are 1.4 m apart, 1.39999999994 m with the box inflated (and the
+    cylinder's own inflation, 1e-11 m, either way)."""
+    d = coal.distance(coal.Box(1.0, 1.0, 1.0), coal.Transform3s(), coal.Cylinder(0.1, 0.2),
+                      coal.Transform3s(np.eye(3), np.array([-2.0, 0.0, 0.0])), distance_request(DEFAULT_GJK_TOLERANCE),
+                      coal.DistanceResult())
+    return bool(d > 1.4 - 3e-11)
+
+
+settle_box_support()
