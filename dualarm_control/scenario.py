@@ -186,15 +186,18 @@ def scenario_file(name_or_path: str) -> Path:
     return registry_file("scenarios", name_or_path, "scenario", ScenarioError)
 
 
-def load_scenario(name_or_path: str, robot: str | RobotDescription | None = None) -> Scenario:
+def load_scenario(name_or_path: str, robot: str | RobotDescription | None = None, *,
+                  reference: ReferenceSource | None = None) -> Scenario:
     """Load and validate a scenario by registry name or path, on its robot or on ``robot``
-    (``--robot``: a name or a YAML path; '' or None: the scenario's)."""
+    (``--robot``: a name or a YAML path; '' or None: the scenario's). ``reference``: the cell of the file (robot,
+    start, obstacles, allowed contacts, controller defaults) tracking this source instead of the file's (which
+    is then not read: a plan's scenario may have none)."""
     path = scenario_file(name_or_path)
     try:
         flat = read_params_file(path, "trajectory_node")
     except ParameterError as exc:
         raise ScenarioError(str(exc)) from None
-    return scenario_from_parameters(flat, path, robot or None)
+    return scenario_from_parameters(flat, path, robot or None, reference=reference)
 
 
 def _link_pairs(flat: Mapping[str, Any]) -> tuple[tuple[str, str], ...]:
@@ -258,17 +261,22 @@ def scenario_robot(flat: Mapping[str, Any], source: Path, robot: str | RobotDesc
     return chosen, chosen == own_robot
 
 
-def scenario_from_parameters(flat: Mapping[str, Any], source: Path,
-                             robot: str | RobotDescription | None = None) -> Scenario:
-    """Build a Scenario from flattened parameters (as read from the file or declared in a node),
-    on its own robot or on ``robot`` (its ready positions are then the start)."""
-    reference: ReferenceSource
+def _reference(flat: Mapping[str, Any], source: Path) -> ReferenceSource:
+    """The scenario's reference: its tasks (paper 001), its goals stream, or its segments."""
     if PREFIX + "tasks" in flat:
-        reference = parse_tasks(flat, Path(source).parent)
-    elif PREFIX + "goals" in flat:
-        reference = parse_goals_source(flat[PREFIX + "goals"], flat)
-    else:
-        reference = parse_segments(flat)
+        return parse_tasks(flat, source.parent)
+    if PREFIX + "goals" in flat:
+        return parse_goals_source(flat[PREFIX + "goals"], flat)
+    return parse_segments(flat)
+
+
+def scenario_from_parameters(flat: Mapping[str, Any], source: Path, robot: str | RobotDescription | None = None, *,
+                             reference: ReferenceSource | None = None) -> Scenario:
+    """Build a Scenario from flattened parameters (as read from the file or declared in a node),
+    on its own robot or on ``robot`` (its ready positions are then the start); tracking ``reference``
+    instead of the file's own when given."""
+    if reference is None:
+        reference = _reference(flat, Path(source))
     limits = _motion_limits(flat)
     settle = number(flat, "settle_time", 1.0)
     if settle < 0:

@@ -480,6 +480,14 @@ def test_a_plan_runs_in_the_cell_of_its_scenario_file(small_plan: PlanResult, mo
     assert scenario.reference is source and scenario.obstacles == params.collision.obstacles
     bare_scenario, bare = execute.plan_cell(small_config(), source)
     assert bare == ControllerParams(period=0.005) and not bare_scenario.obstacles
+    # a plan's scenario needs no segments of its own (the planner reads only its corner): its cell still counts
+    plain = tmp_path / "corner_only.yaml"
+    lines = cell.read_text().splitlines(keepends=True)
+    start = next(k for k, line in enumerate(lines) if line.startswith("      segments:"))
+    end = next(k for k, line in enumerate(lines) if line.startswith("      side_2:"))
+    plain.write_text("".join(lines[:start] + lines[end + 1:]))
+    only = dataclasses.replace(load_plan_config(str(plain)), starts=3, inner_starts=2)
+    assert execute.plan_cell(only, PlanSource(model, only, small_plan.configurations))[1] == params
 
     used: list[ControllerParams] = []
 

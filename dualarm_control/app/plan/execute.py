@@ -87,9 +87,9 @@ def plan_cell(config: PlanConfig, source: PlanSource) -> tuple[Scenario, Control
                         limits=MotionLimits(), settle_time=config.execution_settle, source=Path(config.name),
                         robot=config.robot)
     if config.source is not None:
-        cell = load_scenario(str(config.source), config.robot)
-        scenario = replace(cell, description="plan execution", initial_positions=start, reference=source,
-                           limits=MotionLimits(), settle_time=config.execution_settle, source=Path(config.name))
+        cell = load_scenario(str(config.source), config.robot, reference=source)
+        scenario = replace(cell, description="plan execution", initial_positions=start, limits=MotionLimits(),
+                           settle_time=config.execution_settle, source=Path(config.name))
     params = controller_params({**scenario.controller_defaults(), "control_period": CONTROL_PERIOD})
     return scenario, scenario.controller_params(params)
 
