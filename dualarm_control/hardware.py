@@ -322,6 +322,7 @@ def waiting_reason(views: Sequence[TopicView], assembler: StateAssembler, joint_
         missing = [joint_map.label(n) for n, c in zip(joint_names, carried, strict=True) if not c]
         causes.append(f"joints of the description missing from every topic: {', '.join(missing)}")
     if len(assembler.latest) > 1 and assembler.spread() > assembler.tolerance_ns:
-        causes.append(f"stamps of {', '.join(assembler.latest)} differ by {assembler.spread() / 1e6:.1f} ms > "
+        heard = [topic for topic in assembler.topics if topic in assembler.latest]  # the profile's order, not arrival's
+        causes.append(f"stamps of {', '.join(heard)} differ by {assembler.spread() / 1e6:.1f} ms > "
                       f"{assembler.tolerance_ns / 1e6:.1f} ms")
     return "; ".join(causes)

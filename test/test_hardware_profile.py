@@ -166,6 +166,11 @@ def test_waiting_reason_names_every_cause() -> None:
                                              "/left/joint_states, /right/joint_states differ by 7.0 ms > 2.5 ms")
     a.put("/right/joint_states", sample(1_000_000, [2, 3], [0.0, 0.0]))
     assert waiting_reason(one, a, names) == ""
+    # the topics named in the profile's order, whichever arrived first (the right one here)
+    late = StateAssembler(["/left/joint_states", "/right/joint_states"], 4, 2_500_000)
+    late.put("/right/joint_states", sample(7_000_000, [2, 3], [0.0, 0.0]))
+    late.put("/left/joint_states", sample(0, [0, 1], [0.0, 0.0]))
+    assert waiting_reason(one, late, names) == "stamps of /left/joint_states, /right/joint_states differ by 7.0 ms > 2.5 ms"
 
 
 def test_sim_state_layout_per_namespace_in_its_own_order() -> None:

@@ -192,6 +192,57 @@ def solver_property(solver: Solver, model: DualArmModel, examples: settings = PR
     check()
 
 
+SEPARATING_CASES = {
+    # the arms inside each other at their joint limits, one joint beyond its range (its box a single speed), a
+    # target 8 m away at 38 m/s: the standard QP on quadprog fails, the least-squares step breaks the rows, daqp
+    # fails on the slack QP (144 iterations), proxsuite solves it (rows relaxed by 3.7 mm/s)
+    "daqp fails": ([2.8279790625, -1.832595625, 2.96706, 2.094395, 2.96706, -2.094395, -2.96706, 0.741765, -1.832595625,
+                    1.8544125000000005, 2.094395, 0.0, -2.094395, -3.708825],
+                   ([-8.0, 0.0, 1.0], [0.0, 38.0, 1.0], [59.0, 5.0, -3.0]), 1, "standard_qp | quadprog", 1),
+    # the second cycle, inside the stall brake's box (0.05 rad/s wide) that the first cycle's active rows engaged:
+    # daqp fails (154 iterations), proxsuite calls the slack QP infeasible, quadprog solves it
+    "daqp and proxsuite fail": ([2.78161875, -1.832595625, 2.96706, 2.094395, 2.96706, -2.094395, -2.96706, -2.96706,
+                                 2.094395, -2.96706, 2.094395, 0.0, -2.094395, -2.96706],
+                                ([0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [18.0, -10.0, 1.0]), 2, "standard_qp | proxsuite", 2),
+}
+
+
+@pytest.mark.parametrize("case", list(SEPARATING_CASES))
+def test_a_separating_qp_that_daqp_cannot_solve_still_separates(case: str, model: DualArmModel) -> None:
+    """Two cases the property check found (2026-12-07): the separating step's slack QP defeats daqp (and in the
+    second proxsuite); the command was the one nearest to rest with status "failed" / "infeasible". Now the next
+    back-end of the chain takes it (policy.py: SEPARATING_BACKENDS, then quadprog_solve): status "fallback", the
+    separating step, inside the box."""
+    from dualarm_control.qp import make_backend
+    from dualarm_control.solvers import policy
+    from dualarm_control.solvers.slack_qp import slack_qp
+
+    q, (position, linear, angular), cycles, config, failing = SEPARATING_CASES[case]
+    target = Target(np.array(position), np.eye(3), np.array(linear), np.array(angular))
+    controller = RelativeController(model, replace(CONFIGS[config], acceleration_limit=()))
+    problems = []
+    solve = controller.solver.solve
+
+    def recorded(problem):  # type: ignore[no-untyped-def]
+        problems.append(problem)
+        return solve(problem)
+
+    controller.solver.solve = recorded  # type: ignore[method-assign]
+    for _ in range(cycles):
+        out = controller.step(np.array(q), target)
+    assert out.result.status == "fallback" and "separating step used" in out.result.detail, out.result
+    assert_solver_kept_eq21_23(out.result, out.velocities, np.array(q), controller.limits,
+                               controller.solver.bound_tolerance)
+    problem = problems[-1]
+    rows = problem.limit_matrix()
+    qp = slack_qp(problem.jacobian, problem.reference, problem.equality_weights, problem.lower, problem.upper,
+                  policy.FALLBACK_DAMPING, rows, problem.limit_bound, np.full(rows.shape[0], policy.SEPARATING_WEIGHT))
+    # still cases where the first back-ends fail (else this test tests nothing)
+    assert [make_backend(name).solve(qp).x is None for name in policy.SEPARATING_BACKENDS[:failing]] == [True] * failing
+    step = policy.separating_step(problem)
+    assert step is not None and 0.0 <= step[1] < 0.01, step
+
+
 @pytest.mark.parametrize("config", list(CONFIGS))
 def test_solver_command_is_finite_and_inside_the_bounds(config: str, model: DualArmModel) -> None:
     """Solver.solve on random problems, every solver and back-end: its own result within its bound

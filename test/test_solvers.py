@@ -756,21 +756,23 @@ def test_quadprog_backend_gives_the_same_standard_qp() -> None:
 
 def test_a_solver_imports_what_its_cycles_need_when_built_and_never_scipy_optimize() -> None:
     """scipy.optimize cost every controller process 0.45-0.5 s of CPU to import (it was the fallback's BVLS);
-    the fallback is a daqp box QP now: a solver built and a fallback taken leave it unimported. scipy.linalg
-    (LAPACK's dposv, 0.3 s and 20 MiB) is imported when the solver is built, not in a first cycle (where the
-    soak saw it as a deadline burst and 14 % RSS growth); the simulator node never imports it."""
+    the fallback is a daqp box QP now: a solver built and a fallback taken leave it unimported. LAPACK's dposv
+    (scipy's extension module alone, without scipy.linalg's package: 0.02 s and 4 MiB, test_lapack.py) is loaded
+    when the solver is built, not in a first cycle (where the soak saw scipy.linalg's import as a deadline burst
+    and 14 % RSS growth); the simulator node loads neither."""
     import subprocess
     import sys
 
-    probe = ("import sys, numpy as np, dualarm_sim.sim_node; print('scipy.linalg' in sys.modules); "
+    probe = ("import sys, numpy as np, dualarm_sim.sim_node; "
+             "print('scipy.linalg._flapack' in sys.modules, 'scipy.linalg' in sys.modules); "
              "from dualarm_control.solvers import make_solver; "
              "from dualarm_control.solvers.policy import bounded_least_squares; make_solver('sparse_qp'); "
-             "print('scipy.linalg' in sys.modules); "
+             "print('scipy.linalg._flapack' in sys.modules, 'scipy.linalg' in sys.modules); "
              "qd = bounded_least_squares(np.ones((6, 14)), np.ones(6), -np.ones(14), np.ones(14)); "
              "print(qd is not None, 'scipy.optimize' in sys.modules)")
     lines = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True,
                            timeout=120).stdout.split()
-    assert lines[-4:] == ["False", "True", "True", "False"], lines
+    assert lines[-6:] == ["False", "False", "True", "False", "True", "False"], lines
 
 
 @pytest.mark.parametrize("seed", range(40))
@@ -838,3 +840,27 @@ def test_a_second_level_that_does_not_solve_leaves_the_primary_task(name: str, s
     assert res.status == "solved" and f"QP {status}; primary task only" in res.detail, res
     assert np.allclose(res.velocities, primary.velocities, atol=1e-12), (res.velocities, primary.velocities)
     assert np.all(res.velocities >= p.lower - 1e-12) and np.all(res.velocities <= p.upper + 1e-12)
+
+
+def test_quadprog_called_directly_solves_what_proxsuite_solves() -> None:
+    """The separating step's last back-end (policy.quadprog_solve: quadprog without qpsolvers) on 60 random QPs with
+    equality rows, two-sided and one-sided rows and a box: the same minimiser as proxsuite to 1e-7; an infeasible
+    one gives None."""
+    from dualarm_control.qp import QPProblem, make_backend
+    from dualarm_control.solvers.policy import quadprog_solve
+
+    rng = np.random.default_rng(0)
+    for k in range(60):
+        n, p, equalities = 8, 5, k % 3
+        m = rng.standard_normal((n, n))
+        a = rng.standard_normal((equalities, n)) if equalities else None
+        qp = QPProblem(H=m @ m.T + 0.1 * np.eye(n), g=rng.standard_normal(n), A=a,
+                       b=None if a is None else a @ rng.uniform(-0.1, 0.1, n), C=rng.standard_normal((p, n)),
+                       l=np.where(rng.random(p) < 0.5, -np.inf, -rng.random(p)), u=rng.random(p) + 0.1,
+                       lb=-np.ones(n), ub=np.ones(n))
+        x, reference = quadprog_solve(qp), make_backend("proxsuite").solve(qp).x
+        assert x is not None and reference is not None
+        np.testing.assert_allclose(x, reference, atol=1e-7)
+    infeasible = QPProblem(H=np.eye(2), g=np.zeros(2), C=np.array([[1.0, 0.0]]), l=np.array([2.0]), u=np.array([3.0]),
+                           lb=-np.ones(2), ub=np.ones(2))
+    assert quadprog_solve(infeasible) is None

@@ -34,13 +34,22 @@ FALLBACK_DAMPING = 1e-6
 among the least-squares ones and keeps the problem well posed at singular configurations."""
 
 
+SEPARATING_BACKENDS = ("daqp", "proxsuite")
+"""The back-ends :func:`separating_step` tries in turn, then quadprog called directly (:func:`quadprog_solve`; no
+qpsolvers import). The slack QP is badly conditioned (rho = 1e3 against a slack curvature of 1e-6) and degenerate
+where the rows just touch a narrow box: on cases of ``test_properties.py`` daqp's dual active set failed (144-154
+iterations), proxsuite called one "infeasible" (it is always feasible), and quadprog solved both."""
+
+
 def load_fallback() -> None:
-    """Import what :func:`bounded_least_squares` and :func:`separating_step` need (the daqp back-end).
+    """Import what :func:`bounded_least_squares` and :func:`separating_step` need (their back-ends).
 
     Called when a solver is built (:class:`~dualarm_control.solvers.base.Solver`), so that a
     first fallback inside the control loop never pays an import. The fallback needs no scipy:
     scipy.optimize cost every controller process 0.45-0.5 s of CPU to import (issue 38)."""
-    make_backend("daqp")
+    for name in SEPARATING_BACKENDS:
+        make_backend(name)
+    import quadprog  # noqa: F401  (0.6 ms)
 
 
 def fallback(problem: ControlProblem, qd: FloatArray | None, status: Status, detail: str) -> tuple[FloatArray, Status, str]:
@@ -94,10 +103,11 @@ def separating_step(problem: ControlProblem) -> tuple[FloatArray, float] | None:
     limit rows as its inequality rows and rho = :data:`SEPARATING_WEIGHT`): where the rows can be
     met inside the box, s = 0 and this is the task's best step that meets them; where they cannot,
     the rows are relaxed by the least slack: the pair moves apart as fast as the box allows (zero
-    approach where zero is all it allows: a stop). Solved by daqp.
+    approach where zero is all it allows: a stop). Solved by daqp, or where daqp fails by the next of
+    :data:`SEPARATING_BACKENDS`.
 
     Returns:
-        (qd [rad/s] (n,), inside the box, the largest slack [m/s]); None when the QP fails.
+        (qd [rad/s] (n,), inside the box, the largest slack [m/s]); None when every back-end fails.
     """
     rows = problem.limit_matrix()
     assert rows is not None and problem.limit_bound is not None
@@ -105,11 +115,45 @@ def separating_step(problem: ControlProblem) -> tuple[FloatArray, float] | None:
     qp = slack_qp(problem.jacobian, problem.reference, problem.equality_weights, problem.lower, problem.upper,
                   FALLBACK_DAMPING, rows, problem.limit_bound, np.full(m, SEPARATING_WEIGHT))
     n = problem.lower.shape[0]
-    solution = make_backend("daqp").solve(qp)
-    if solution.x is None or not math.isfinite(float(solution.x.sum())):
+    for name in SEPARATING_BACKENDS:
+        x = make_backend(name).solve(qp).x
+        if x is not None and math.isfinite(float(x.sum())):
+            break
+    else:
+        x = quadprog_solve(qp)
+        if x is None:
+            return None
+    qd = np.minimum(np.maximum(x[:n], problem.lower), problem.upper)
+    return qd, float(x[n:].max(initial=0.0))
+
+
+def quadprog_solve(qp: QPProblem) -> FloatArray | None:
+    """``qp`` (H positive definite) by quadprog's dual active set (Goldfarb-Idnani), called directly:
+    min 1/2 x^T H x + g^T x s.t. M^T x >= c, M's columns the equality rows A (the first ``meq``), then the rows C,
+    -C and the bounds +-I on their finite sides. None when quadprog refuses (ValueError: infeasible, H not
+    positive definite) or gives a non-finite x."""
+    import quadprog
+
+    n = qp.H.shape[0]
+    blocks, sides = [], []
+    if qp.A is not None and qp.b is not None:
+        blocks.append(qp.A)
+        sides.append(qp.b)
+    meq = 0 if not blocks else qp.A.shape[0]  # type: ignore[union-attr]
+    eye = np.eye(n)
+    for rows, low, high in ((qp.C, qp.l, qp.u), (eye, qp.lb, qp.ub)):
+        if rows is None:
+            continue
+        for sign, side in ((1.0, low), (-1.0, high)):
+            if side is not None:
+                finite = np.isfinite(side)
+                blocks.append(sign * rows[finite])
+                sides.append(sign * side[finite])
+    try:
+        x = quadprog.solve_qp(qp.H, -qp.g, np.vstack(blocks).T, np.concatenate(sides), meq)[0]
+    except ValueError:
         return None
-    qd = np.minimum(np.maximum(solution.x[:n], problem.lower), problem.upper)
-    return qd, float(solution.x[n:].max(initial=0.0))
+    return x if np.isfinite(x).all() else None
 
 
 def row_violation_text(problem: ControlProblem, qd: FloatArray, tolerance: float) -> str:
