@@ -155,7 +155,11 @@ class Solver:
         dposv()
 
     def reset(self) -> None:
-        """Forget warm-start memory (e.g. after a discontinuity)."""
+        """Forget every warm-start memory (e.g. after a discontinuity, or a failed solve): the second
+        priority's back-end's here, the solver's own in the subclass (which calls this). After it the
+        next result depends on the problem alone, as a new solver's would (``test_solvers.py``)."""
+        if self._priority_qp is not None:
+            self._priority_qp.reset()
 
     def seed(self, velocities: FloatArray) -> None:
         """Start from ``velocities`` [rad/s], (n,), the command of the cycle before, as if this
@@ -176,12 +180,6 @@ class Solver:
         if self._priority_qp is None:
             self._priority_qp = self._backend()
         return self._priority_qp
-
-    def _forget(self) -> None:
-        """After a failure: :meth:`reset` and the second priority's warm start."""
-        self.reset()
-        if self._priority_qp is not None:
-            self._priority_qp.reset()
 
     def _second_priority(self, problem: ControlProblem, qd1: FloatArray, status: Status, iters: int,
                          detail: str) -> tuple[FloatArray | None, Status, int, str]:
@@ -258,15 +256,15 @@ class Solver:
         excess = math.nan if qd is None else bound_excess(qd, problem.lower, problem.upper)
         rows_excess = 0.0 if qd is None or not problem.has_limit_rows else problem.limit_excess(qd)
         if qd is None or status in FALLBACK_TRIGGERS or not math.isfinite(excess):
-            self._forget()
+            self.reset()
             velocities, status, detail = fallback(problem, qd, status, detail)
         elif excess > self.box_tolerance(problem):
-            self._forget()
+            self.reset()
             velocities, status, detail = fallback(problem, qd, Status.BOUNDS_VIOLATED,
                                                   violation_text(qd, problem.lower, problem.upper,
                                                                  self.box_tolerance(problem)))
         elif rows_excess > 0.0 and rows_excess > self.row_tolerance(problem):
-            self._forget()
+            self.reset()
             velocities, status, detail = fallback(problem, qd, Status.BOUNDS_VIOLATED,
                                                   row_violation_text(problem, qd, self.row_tolerance(problem)))
         else:

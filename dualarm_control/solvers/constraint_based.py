@@ -86,6 +86,7 @@ class ConstraintBased(Solver):
         self.bound_tolerance = ROUND_OFF + self._qp.bound_tolerance  # u = x[:n], within the box to eps_abs
 
     def reset(self) -> None:
+        super().reset()
         self._qp.reset()
 
     def _solve(self, problem: ControlProblem) -> tuple[FloatArray | None, Status, int, str]:

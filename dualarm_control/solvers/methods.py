@@ -121,6 +121,7 @@ class _QPSolver(Solver):
         self.bound_tolerance = ROUND_OFF + self.tolerance_factor * self._qp.bound_tolerance
 
     def reset(self) -> None:
+        super().reset()
         self._qp.reset()
 
 
@@ -334,16 +335,13 @@ class HierarchicalSparseQP(Solver):
         self._identity = np.eye(0)  # H of eq (27), rebuilt only when n changes
 
     def reset(self) -> None:
-        self._primary.reset()
+        super().reset()
+        self._primary.reset()  # its second priority's QP too (the hierarchy's second level is QP1's solver's)
         self._secondary.reset()
 
     def seed(self, velocities: FloatArray) -> None:
         """QP1's proximal memory (QP2 has none: its optimum is unique)."""
         self._primary.seed(velocities)
-
-    def _forget(self) -> None:
-        super()._forget()
-        self._primary._forget()  # the second priority's QP is QP1's solver's
 
     def _identity_of(self, n: int) -> FloatArray:
         if self._identity.shape != (n, n):

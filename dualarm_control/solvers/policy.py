@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 
 from dualarm_control.arrays import add_diagonal
 from dualarm_control.qp import QPProblem, make_backend
@@ -32,6 +33,8 @@ some 1e3 ulp of them."""
 FALLBACK_DAMPING = 1e-6
 """Damping of :func:`bounded_least_squares` [(m/s)^2 per (rad/s)^2]: selects a small step
 among the least-squares ones and keeps the problem well posed at singular configurations."""
+FIXED_WIDTH = 1e-12
+"""A joint's box narrower than this [rad/s] is a single speed: :func:`fixed_joints` fixes it before a fallback QP."""
 
 
 SEPARATING_BACKENDS = ("daqp", "proxsuite")
@@ -103,18 +106,26 @@ def separating_step(problem: ControlProblem) -> tuple[FloatArray, float] | None:
     limit rows as its inequality rows and rho = :data:`SEPARATING_WEIGHT`): where the rows can be
     met inside the box, s = 0 and this is the task's best step that meets them; where they cannot,
     the rows are relaxed by the least slack: the pair moves apart as fast as the box allows (zero
-    approach where zero is all it allows: a stop). Solved by daqp, or where daqp fails by the next of
-    :data:`SEPARATING_BACKENDS`.
+    approach where zero is all it allows: a stop). Joints whose box is a single speed are fixed at it
+    first (:func:`fixed_joints`). Solved by daqp, or where daqp fails by the next of
+    :data:`SEPARATING_BACKENDS`, then by quadprog (:func:`quadprog_solve`).
 
     Returns:
         (qd [rad/s] (n,), inside the box, the largest slack [m/s]); None when every back-end fails.
     """
     rows = problem.limit_matrix()
     assert rows is not None and problem.limit_bound is not None
+    qd, free = fixed_joints(problem.lower, problem.upper)
+    fixed = ~free
+    bound = problem.limit_bound - rows[:, fixed] @ qd[fixed]
+    if not free.any():
+        return qd, float(np.maximum(rows @ qd - problem.limit_bound, 0.0).max(initial=0.0))
+    jacobian = problem.jacobian[:, free]
+    reference = problem.reference - problem.jacobian[:, fixed] @ qd[fixed]
     m = rows.shape[0]
-    qp = slack_qp(problem.jacobian, problem.reference, problem.equality_weights, problem.lower, problem.upper,
-                  FALLBACK_DAMPING, rows, problem.limit_bound, np.full(m, SEPARATING_WEIGHT))
-    n = problem.lower.shape[0]
+    qp = slack_qp(jacobian, reference, problem.equality_weights, problem.lower[free], problem.upper[free],
+                  FALLBACK_DAMPING, rows[:, free], bound, np.full(m, SEPARATING_WEIGHT))
+    k = int(free.sum())
     for name in SEPARATING_BACKENDS:
         x = make_backend(name).solve(qp).x
         if x is not None and math.isfinite(float(x.sum())):
@@ -123,8 +134,18 @@ def separating_step(problem: ControlProblem) -> tuple[FloatArray, float] | None:
         x = quadprog_solve(qp)
         if x is None:
             return None
-    qd = np.minimum(np.maximum(x[:n], problem.lower), problem.upper)
-    return qd, float(x[n:].max(initial=0.0))
+    qd[free] = x[:k]
+    return np.minimum(np.maximum(qd, problem.lower), problem.upper), float(x[k:].max(initial=0.0))
+
+
+def fixed_joints(lower: FloatArray, upper: FloatArray) -> tuple[FloatArray, npt.NDArray[np.bool_]]:
+    """The joints whose bounds (nearly) coincide, fixed before a fallback QP: (the command nearest to
+    rest, which holds those joints at their bounds [rad/s] (n,); the mask of the others, (n,)).
+
+    A box of zero width is two opposite rows on the same point: quadprog's dual active set calls them
+    inconsistent, and daqp and proxsuite failed such slack QPs too (a joint beyond its range whose box is
+    the single speed back); with those joints substituted, the QP has only the free ones."""
+    return rest_command(lower, upper), upper - lower > FIXED_WIDTH
 
 
 def quadprog_solve(qp: QPProblem) -> FloatArray | None:
@@ -223,8 +244,7 @@ def bounded_least_squares(jacobian: FloatArray, reference: FloatArray, lower: Fl
     Returns:
         qd [rad/s], (n,), finite and inside the bounds; None when the solve fails.
     """
-    qd = rest_command(lower, upper)
-    free = upper - lower > 1e-12
+    qd, free = fixed_joints(lower, upper)
     if not free.any():
         return qd
     j = jacobian[:, free]
