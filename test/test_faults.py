@@ -33,9 +33,6 @@ from dualarm_control.app.faults.run_all import run_matrix
 pytestmark = pytest.mark.realtime
 
 FAULT_MOVE = str(Path(__file__).parent / "data" / "fault_move.yaml")
-SLOW_KILL = "kill_controller_position_profile"
-"""``slow`` (5.5 s): the same kill on lbr_dual_position is asserted in the default run by
-``test_hardware_nodes.py::test_position_commands_hold_the_arms_after_the_controller_is_killed``."""
 Runs = dict[str, tuple[Path, dict[str, faults.Row], list[str]]]
 
 
@@ -109,8 +106,7 @@ def test_kill_controller_row(runs: Runs, tmp_path_factory: pytest.TempPathFactor
     assert stop["speed_at_kill"] > 0.01 and 0 <= stop["steps"] <= row_names.COMMAND_TIMEOUT_STEPS + 3
 
 
-@pytest.mark.parametrize("name", [pytest.param(name, marks=[pytest.mark.slow] if name == SLOW_KILL else [])
-                                  for name in row_names.PROFILE_KILLS])
+@pytest.mark.parametrize("name", list(row_names.PROFILE_KILLS))
 def test_kill_controller_on_each_shipped_profile(runs: Runs, tmp_path_factory: pytest.TempPathFactory,
                                                  name: str) -> None:
     """Issue 40 item 5: the controller killed mid-motion on ros2_control_velocity.yaml (a trajectory controller
