@@ -157,7 +157,7 @@ class Solver:
     def reset(self) -> None:
         """Forget every warm-start memory (e.g. after a discontinuity, or a failed solve): the second
         priority's back-end's here, the solver's own in the subclass (which calls this). After it the
-        next result depends on the problem alone, as a new solver's would (``test_solvers.py``)."""
+        next result depends on the problem alone, as a new solver's would (``test_priority.py``)."""
         if self._priority_qp is not None:
             self._priority_qp.reset()
 
