@@ -337,3 +337,21 @@ def test_a_bound_violation_in_the_control_cycle_gives_its_status_and_the_fallbac
     assert_inside_eq21_23(out.velocities, q, wrong.limits)
     upper = velocity_bounds(q, wrong.limits, PERIOD)[1]
     np.testing.assert_array_equal(out.result.raw_velocities, 1.5 * upper)  # what the solver returned, kept
+
+
+def test_a_daqp_result_beyond_the_box_by_its_own_tolerance_is_the_solvers_result(model: DualArmModel) -> None:
+    """A case a 6,000-example random run of the property check found (2026-12-07): the LWR4 stretched (q = 0), a
+    target 6.6 m away at 20 rad/s, the sparse QP on daqp, second cycle (the proximal term on): daqp's "solved" x
+    lay 1.04e-8 beyond the lasso box, 2.1x the solver's bound tolerance but within daqp's own tolerance in x
+    (primal_tol sqrt((H^-1)_ii), sqrt((H^-1)_ii) about 950 here), and the cycle was "bounds_violated", the
+    bounded least-squares step commanded. Now the back-end moves x onto the box (DaqpBackend.onto_box): "solved",
+    both cycles, and the command inside eq (21)-(23)."""
+    x = -6.5914579852220925
+    target = Target(np.array([x, 0.0, 0.0]), np.array([[1.0, 0.0, 1e-10], [0.0, 1.0, 0.0], [-1e-10, 0.0, 1.0]]),
+                    np.array([x, 0.0, 0.0]), np.array([x, 1e-10, -20.081740487149233]))
+    controller = RelativeController(model, replace(CONFIGS["sparse_qp | daqp"], acceleration_limit=()))
+    q = np.zeros(model.nq)
+    for _ in range(2):
+        out = controller.step(q, target)
+        assert out.result.status == "solved", out.result
+        assert_solver_kept_eq21_23(out.result, out.velocities, q, controller.limits, controller.solver.bound_tolerance)

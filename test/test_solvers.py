@@ -864,3 +864,32 @@ def test_quadprog_called_directly_solves_what_proxsuite_solves() -> None:
     infeasible = QPProblem(H=np.eye(2), g=np.zeros(2), C=np.array([[1.0, 0.0]]), l=np.array([2.0]), u=np.array([3.0]),
                            lb=-np.ones(2), ub=np.ones(2))
     assert quadprog_solve(infeasible) is None
+
+
+def test_daqp_is_held_to_its_own_tolerance_in_x_and_no_further() -> None:
+    """DaqpBackend.onto_box: daqp tests a bound in its normalised dual space, so in x a bound holds to
+    primal_tol sqrt((H^-1)_ii). Against an independent inverse (numpy's inv of H, not its Cholesky factor): an x
+    beyond the box within bound_tolerance * sqrt((H^-1)_ii) is moved onto it; one beyond that, or any x when H is
+    not positive definite, is returned as it is (the solver's bounds check reports it)."""
+    from dualarm_control.qp import DaqpBackend
+
+    backend = DaqpBackend(QPSettings())
+    rng = np.random.default_rng(7)
+    b = rng.standard_normal((6, 28))
+    h = b.T @ b + 1e-6 * np.eye(28)  # the sparse QP's lasso H with its proximal weight
+    scale = np.sqrt(np.diag(np.linalg.inv(h)))
+    assert scale.min() > 100.0, scale.min()  # ill-conditioned: daqp's tolerance in x is 100x its primal_tol and more
+    lower, upper = np.zeros(28), np.full(28, 2.0)
+    x = np.linspace(0.0, 2.0, 28)
+    inside = backend.onto_box(h, x, lower, upper)
+    assert inside is x  # within the plain tolerance: untouched, no work
+    near = x.copy()
+    near[5] = 2.0 + 0.5 * backend.bound_tolerance * scale[5]
+    near[9] = -0.5 * backend.bound_tolerance * scale[9]
+    moved = backend.onto_box(h, near, lower, upper)
+    assert moved[5] == 2.0 and moved[9] == 0.0 and np.array_equal(np.delete(moved, [5, 9]), np.delete(x, [5, 9]))
+    far = x.copy()
+    far[5] = 2.0 + 2.0 * backend.bound_tolerance * scale[5]
+    assert backend.onto_box(h, far, lower, upper) is far
+    singular = b.T @ b  # rank 6: the proximal loop's lasso, no tolerance to read off
+    assert backend.onto_box(singular, near, lower, upper) is near
