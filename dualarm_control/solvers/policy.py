@@ -116,10 +116,10 @@ def separating_step(problem: ControlProblem) -> tuple[FloatArray, float] | None:
     rows = problem.limit_matrix()
     assert rows is not None and problem.limit_bound is not None
     qd, free = fixed_joints(problem.lower, problem.upper)
-    fixed = ~free
-    bound = problem.limit_bound - rows[:, fixed] @ qd[fixed]
     if not free.any():
         return qd, float(np.maximum(rows @ qd - problem.limit_bound, 0.0).max(initial=0.0))
+    fixed = ~free
+    bound = problem.limit_bound - rows[:, fixed] @ qd[fixed]
     jacobian = problem.jacobian[:, free]
     reference = problem.reference - problem.jacobian[:, fixed] @ qd[fixed]
     m = rows.shape[0]
