@@ -38,22 +38,23 @@ lint: $(VENV)/.installed
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
 
-# The default run (docs/testing.md): the tests side by side on TEST_WORKERS pytest-xdist workers (whole
-# modules each), then the `realtime` tests (verdicts on the wall clock) alone at normal priority while the
-# `beside_realtime` tests (no ROS node, no wall-clock verdict) use the CPU they leave, at idle priority
-# (SCHED_IDLE: they run only when no other task wants the core; measured: the realtime phase leaves one of the
-# two cores idle); every test phase's duration in $(OUT)/test-durations*.txt (CI prints them).
+# The default run (docs/testing.md): the tests side by side on TEST_WORKERS pytest-xdist workers (whole modules
+# each) and, beside them at idle CPU priority (SCHED_IDLE: they run only when no other task wants a core), the
+# `background` tests (no ROS node, no wall-clock verdict); then the `realtime` tests (verdicts on the wall clock)
+# alone. Every test phase's duration in $(OUT)/test-durations*.txt (CI prints them).
 TEST_WORKERS ?= 2
 IDLE := $(shell chrt --idle 0 true >/dev/null 2>&1 && echo chrt --idle 0 || echo nice -n 19)
 test: lint bytecode
-	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile -m 'not slow and not realtime and not beside_realtime' --durations-file=$(OUT)/test-durations.txt
-	@mkdir -p $(OUT); echo "$(IDLE) pytest -m 'beside_realtime and not slow' (output in $(OUT)/test-beside-realtime.log), beside:"; \
-	$(IDLE) $(PY) -m pytest -q -m 'beside_realtime and not slow' --durations-file=$(OUT)/test-durations-beside-realtime.txt \
-	    >$(OUT)/test-beside-realtime.log 2>&1 & beside=$$!; trap 'kill -TERM $$beside 2>/dev/null' INT TERM; \
+	@mkdir -p $(OUT); echo "$(IDLE) $(PY) -m pytest -q -m 'background and not slow' >$(OUT)/test-background.log &"; \
+	$(IDLE) $(PY) -m pytest -q -m 'background and not slow' --durations-file=$(OUT)/test-durations-background.txt \
+	    >$(OUT)/test-background.log 2>&1 & background=$$!; trap 'kill -TERM $$background 2>/dev/null' INT TERM; \
+	echo "$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile -m 'not slow and not realtime and not background'"; \
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile -m 'not slow and not realtime and not background' \
+	    --durations-file=$(OUT)/test-durations.txt; parallel=$$?; \
+	wait $$background; background=$$?; echo "== $(OUT)/test-background.log"; cat $(OUT)/test-background.log; \
+	[ $$parallel = 0 ] && [ $$background = 0 ] || exit 1; \
 	echo "$(PY) -m pytest -q -m 'realtime and not slow'"; \
-	$(PY) -m pytest -q -m 'realtime and not slow' --durations-file=$(OUT)/test-durations-realtime.txt; realtime=$$?; \
-	wait $$beside; beside=$$?; echo "== $(OUT)/test-beside-realtime.log"; cat $(OUT)/test-beside-realtime.log; \
-	[ $$realtime = 0 ] && [ $$beside = 0 ]
+	$(PY) -m pytest -q -m 'realtime and not slow' --durations-file=$(OUT)/test-durations-realtime.txt
 
 test-slow: $(VENV)/.installed bytecode
 	$(PY) -m pytest -q -m slow

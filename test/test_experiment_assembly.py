@@ -23,8 +23,8 @@ from dualarm_control.app.record.report import (
     TRACKING_KEYS,
 )
 
-# no ROS node, no wall-clock verdict: make test runs it at idle priority beside the realtime tests (docs/testing.md)
-pytestmark = pytest.mark.beside_realtime
+# no ROS node, no wall-clock verdict: make test runs it at idle CPU priority beside the parallel tests (docs/testing.md)
+pytestmark = pytest.mark.background
 
 SOLVERS = ("standard_qp", "sparse_qp", "hierarchical_sparse_qp")
 FINAL_ERRORS = {"standard_qp": (6.4e-12, 3.7e-9), "sparse_qp": (1.6e-7, 1.3e-7), "hierarchical_sparse_qp": (1.6e-7, 1.3e-7)}

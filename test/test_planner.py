@@ -41,8 +41,8 @@ from dualarm_control.planning.path import CornerPath, SampledPath
 from dualarm_control.planning.plan_file import PLAN_FORMAT, load_plan
 from dualarm_control.scenario import load_scenario
 
-# no ROS node, no wall-clock verdict: make test runs it at idle priority beside the realtime tests (docs/testing.md)
-pytestmark = pytest.mark.beside_realtime
+# no ROS node, no wall-clock verdict: make test runs it at idle CPU priority beside the parallel tests (docs/testing.md)
+pytestmark = pytest.mark.background
 
 FD_STEP = 1e-6  # central differences: truncation ~1e-12 * |third derivative|, round-off ~1e-10
 

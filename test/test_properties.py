@@ -39,8 +39,8 @@ from dualarm_control.solvers import (
 from dualarm_control.solvers.base import LIMIT_ROWS_TOLERANCE_FACTOR
 from dualarm_control.solvers.policy import FALLBACK_DAMPING, ROUND_OFF, rest_command
 
-# no ROS node, no wall-clock verdict: make test runs it at idle priority beside the realtime tests (docs/testing.md)
-pytestmark = pytest.mark.beside_realtime
+# no ROS node, no wall-clock verdict: make test runs it at idle CPU priority beside the parallel tests (docs/testing.md)
+pytestmark = pytest.mark.background
 
 PERIOD = 0.005
 OWN_RESULT = ("solved", "scaled")
