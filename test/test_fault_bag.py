@@ -76,9 +76,13 @@ def test_arm_stop_counts_from_the_simulators_arrival_not_a_starved_recorders() -
 
 
 def test_arm_stop_never_at_rest() -> None:
+    """Never at rest: the row says how many states came after the last command and over how long, so that a
+    simulator that stopped stepping (one state in a second; seen 2026-12-07) reads apart from one still moving."""
     stamps = [k * 5 * MS for k in range(5)]
     rec = GraphStreams(state_stamp=stamps, state_speed=[0.2] * 5, pose_stamp=stamps[:2])
-    assert arm_stop(rec, 0).steps == -1
+    stop = arm_stop(rec, 0)
+    assert (stop.steps, stop.states_after, stop.span_ms) == (-1, 4, 15.0), stop
+    assert "in the 4 states recorded after its last command (15 ms of state stamps)" in stop.text(0.005)
 
 
 def test_completion_reads_the_last_cycle() -> None:

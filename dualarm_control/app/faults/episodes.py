@@ -116,11 +116,14 @@ class ArmStop:
     steps: int  # simulator steps from the last command's arrival to the first state at rest (-1: never)
     wall_ms: float  # the same span in the states' wall-clock stamps
     late_steps: int = 0  # steps from the last answered state to its command's arrival (the controller's lag)
+    states_after: int = 0  # states recorded from that arrival on (a simulator that stopped stepping: few)
+    span_ms: float = 0.0  # their stamps' span [ms]
 
     def text(self, period: float) -> str:
         if self.steps < 0:
             return (f"moving at {self.speed_at_last:.3f} rad/s when the controller died; never at rest (< "
-                    f"{STOPPED_SPEED:g} rad/s) in the states recorded after its last command")
+                    f"{STOPPED_SPEED:g} rad/s) in the {self.states_after} states recorded after its last command "
+                    f"({self.span_ms:.0f} ms of state stamps)")
         return (f"moving at {self.speed_at_last:.3f} rad/s when the controller died; at rest (< {STOPPED_SPEED:g} "
                 f"rad/s) {self.steps} steps = {self.steps * period * 1e3:.0f} ms sim time "
                 f"({self.wall_ms:.0f} ms wall) after its last command arrived ({self.late_steps} steps after the last "
@@ -154,7 +157,8 @@ def arm_stop(rec: GraphStreams, after_stamp: int) -> ArmStop:
     i0 = max(i_answered, int(np.searchsorted(stamps, command_arrival(rec))))
     rest = np.nonzero(speeds[i0:] < STOPPED_SPEED)[0]
     if not len(rest):
-        return ArmStop(float(speeds[i_answered]), -1, float("nan"), i0 - i_answered)
+        span_ms = (stamps[-1] - stamps[i0]) / 1e6 if i0 < len(stamps) else 0.0
+        return ArmStop(float(speeds[i_answered]), -1, float("nan"), i0 - i_answered, len(stamps) - i0, span_ms)
     k = int(rest[0])
     return ArmStop(float(speeds[i_answered]), k, (stamps[i0 + k] - stamps[i0]) / 1e6, i0 - i_answered)
 
