@@ -132,8 +132,10 @@ class ProfileStreams:
         return True
 
     def states(self, joint_names: Sequence[str]) -> list[State]:
-        """The joint states, in receive order: one topic's messages as they are, several topics'
-        assembled (names ``joint_names``, the description's order)."""
+        """The joint states: one topic's messages as they are, in receive order; several topics' assembled
+        (names ``joint_names``, the description's order) in the order of their stamps, so that the samples of
+        one stamp meet however the recorder received them (a starved recorder takes one topic's backlog,
+        then the other's: in receive order all but the last of those stamps were lost)."""
         key = tuple(joint_names)
         if key not in self._states:
             self._states[key] = self._assemble(key)
@@ -145,7 +147,7 @@ class ProfileStreams:
         if len(topics) == 1:
             return [(t, stamp_ns(m.header.stamp), list(names.description(m.name)), m) for t, m in self.raw[topics[0]]]
         merged = sorted(((t, i, topic, m) for topic in topics for i, (t, m) in enumerate(self.raw[topic])),
-                        key=lambda item: (item[0], item[1]))
+                        key=lambda item: (stamp_ns(item[3].header.stamp), item[0], item[1]))
         index = {name: i for i, name in enumerate(names.hardware(joint_names))}
         n = len(joint_names)
         assembler = StateAssembler(topics, n, round(float(self.topics.values["hardware.stamp_tolerance"]) * 1e9))
