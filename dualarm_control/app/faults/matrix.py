@@ -281,12 +281,19 @@ def loopback_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[
 # ---------------------------------------------------------------------------------- namespace runs
 
 
+def udp_only_env() -> dict[str, str]:
+    """Loopback discovery and every participant's user data over UDPv4 (``config/fastdds_udp.xml``): the
+    traffic goes through lo, where netem acts. ``FASTDDS_BUILTIN_TRANSPORTS=UDPv4`` would not do it: under
+    ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` rmw_fastrtps sets its own transports, shared memory included."""
+    return {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "FASTRTPS_DEFAULT_PROFILES_FILE": str(config_path("fastdds_udp.xml"))}
+
+
 def _ros_env(profile: bool, peer: str = "") -> dict[str, str]:
     """Environment of the processes of a namespace run. SUBNET and the link profile are set only
     for processes started inside this tool's own network namespaces (``ip netns exec``), whose
     veth pair and 10.231.x.x addresses exist nowhere else: no traffic can leave the machine."""
-    if not profile:  # one namespace, loopback only, UDP (shared memory would bypass lo and its netem)
-        return {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
+    if not profile:  # one namespace, loopback only, user data over UDP (shared memory would bypass lo and its netem)
+        return udp_only_env()
     return {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "ROS_STATIC_PEERS": peer,
             "FASTRTPS_DEFAULT_PROFILES_FILE": str(config_path("fastdds_link.xml"))}
 
