@@ -12,8 +12,10 @@ joins a running graph can lose the reply of a peer that discovered it at once (F
 2.14 sends its first announcement before it registers its receivers, and the peer does not
 answer its later announcements). The two then know of each other only at the peer's next
 periodic announcement: up to 3.3 s without the matching topics (docs/bench.md,
-"Start-up"). Fast DDS reads the variable when rclpy creates the participant, so this too
-must run before the first node.
+"Start-up"). The same profile sends every participant's user data over UDP, never through
+shared memory, where a peer SIGKILLed mid-message stalled its writers for seconds (docs/safety.md,
+"A peer killed mid-message"). Fast DDS reads the variable when rclpy creates the participant,
+so this too must run before the first node.
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ USER_DISCOVERY_SETTINGS = (
 
 
 def discovery_profile() -> Path:
-    """The package's Fast DDS participant profile (fast periodic announcements)."""
+    """The package's Fast DDS participant profile (fast periodic announcements, user data over UDP)."""
     return config_path("fastdds_discovery.xml")
 
 
