@@ -8,7 +8,7 @@ locator, so none announces a shared-memory one. ``FASTDDS_BUILTIN_TRANSPORTS=UDP
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` rmw_fastrtps installs its own shared-memory transport.
 
 Two processes exchange messages: under the package's default environment and under ``dualarm faults``'
-loopback-netem one (``matrix.udp_only_env``: netem on lo acts only on what goes through lo) they hear each
+loopback-netem one (``ros.env.udp_only_env``: netem on lo acts only on what goes through lo) they hear each
 other and neither maps a shared-memory port (``/dev/shm/fastrtps_port*``); under the same discovery settings
 with a profile that lacks the locator and ``FASTDDS_BUILTIN_TRANSPORTS=UDPv4`` (what the netem row set
 before) both map one (the check can fail).
@@ -24,11 +24,11 @@ from pathlib import Path
 import pytest
 from waiting import node_env
 
-from dualarm_control.app.faults.matrix import udp_only_env
 from dualarm_control.ros.env import (
     FASTDDS_USER_PROFILES,
     apply_discovery_profile,
     localhost_environment,
+    udp_only_env,
 )
 
 PEER = r"""

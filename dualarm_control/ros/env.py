@@ -45,6 +45,14 @@ def discovery_profile() -> Path:
     return config_path("fastdds_discovery.xml")
 
 
+def udp_only_env() -> dict[str, str]:
+    """Loopback discovery and every participant's user data over UDPv4, named explicitly (the package's profile, so
+    that no other profile brings shared memory back): what goes between the processes goes through lo, where netem
+    acts (``dualarm faults``' best_effort_loss row). ``FASTDDS_BUILTIN_TRANSPORTS=UDPv4`` would not do it: under
+    ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` rmw_fastrtps sets its own transports, shared memory included."""
+    return {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", FASTDDS_PROFILE_VARIABLE: str(discovery_profile())}
+
+
 def _is_package_profile(value: str) -> bool:
     try:
         return Path(value).resolve() == discovery_profile().resolve()

@@ -42,7 +42,7 @@ from dualarm_control.app.faults.rows import (
     PROFILE_KILLS,
 )
 from dualarm_control.paths import config_path
-from dualarm_control.ros.env import discovery_profile
+from dualarm_control.ros.env import udp_only_env
 
 PERIOD = 0.005
 STALE_TIMEOUT = 0.015  # controller defaults (nodes/controller_setup.py: NODE_PARAMETERS)
@@ -280,14 +280,6 @@ def loopback_rows(out: Path, scenario: str, only: Sequence[str], say: Callable[[
 
 
 # ---------------------------------------------------------------------------------- namespace runs
-
-
-def udp_only_env() -> dict[str, str]:
-    """Loopback discovery and every participant's user data over UDPv4 (the package's profile,
-    ``config/fastdds_discovery.xml``, named here so that no other profile brings shared memory back): the traffic
-    goes through lo, where netem acts. ``FASTDDS_BUILTIN_TRANSPORTS=UDPv4`` would not do it: under
-    ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` rmw_fastrtps sets its own transports, shared memory included."""
-    return {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "FASTRTPS_DEFAULT_PROFILES_FILE": str(discovery_profile())}
 
 
 def _ros_env(profile: bool, peer: str = "") -> dict[str, str]:
