@@ -233,6 +233,8 @@ REPORTED = (
     *(("sim_node", f) for f in ("13 values rejected", "NaN or inf")),
 )
 """(node, fragment): each rejection a node must report on /diagnostics."""
+READ_BY = {"sim_node": ("/velocity_controller/commands",), "controller_node": ("/joint_states", "/relative_target")}
+"""The topics of the fuzzed ones each node reads."""
 
 
 def test_garbled_cdr_and_bad_messages_on_running_nodes() -> None:
@@ -293,11 +295,31 @@ def test_garbled_cdr_and_bad_messages_on_running_nodes() -> None:
             for msg in bad_messages(names)[topic]:
                 pub.publish(msg)
                 spin(0.01)
-        future = convert.joint_state(names, time.time_ns() + 1000 * convert.NS, np.zeros(14), np.zeros(14))
-        pubs["/joint_states"].publish(future)
-        wait_until(lambda: all(any(f in m for n, m in diagnostics if n == node) for node, f in REPORTED), lambda: [
-            (node, f) for node, f in REPORTED if not any(f in m for n, m in diagnostics if n == node)],
-                   what="every rejection on /diagnostics", step=lambda: spin(0.1), gone=died)
+
+        def future() -> bytes:
+            return convert.joint_state(names, time.time_ns() + 1000 * convert.NS, np.zeros(14), np.zeros(14))
+
+        pubs["/joint_states"].publish(future())
+
+        def missing() -> list[tuple[str, str]]:
+            return [(node, f) for node, f in REPORTED if not any(f in m for n, m in diagnostics if n == node)]
+
+        def again() -> None:
+            """The bad samples whose rejection is not reported yet, once more: a node's subscription keeps its last
+            few samples (keep-last), and the node's own peer publishes on the same topic at 200 Hz (the controller
+            its commands, the simulator its states), so on a loaded machine a sample can be replaced before the
+            node takes it (seen beside stress-ng: the simulator never took the 13-value command). What is tested is
+            that each rejection is reported, not that every sample of a burst is delivered."""
+            gone = missing()
+            for topic in sorted({t for node, _ in gone for t in READ_BY[node]}):
+                pubs[topic].publish(garbled(rng, valid[topic]))
+                for msg in bad_messages(names)[topic]:
+                    pubs[topic].publish(msg)
+            if any(fragment == "time source restarted" for _, fragment in gone):
+                pubs["/joint_states"].publish(future())
+            spin(0.1)
+
+        wait_until(lambda: not missing(), missing, what="every rejection on /diagnostics", step=again, gone=died)
         after = time.monotonic()
         # still commanding after it all: 50 commands more (0.25 s at 200 Hz; the deadline is not a rate)
         wait_until(lambda: sum(t > after for t in commands) >= 50, lambda: f"{sum(t > after for t in commands)} "
