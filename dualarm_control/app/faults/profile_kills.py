@@ -40,9 +40,19 @@ def recorded_topics(profile: Path, scenario: str) -> tuple[str, ...]:
     return with_profile_topics(RECORDED, [str(profile)], load_scenario(scenario, robot).robot.joint_names)
 
 
+KILL_STALE_TIMEOUT = 0.05
+"""s: the controller's ``stale_timeout`` in these rows (default 0.015 s). The row is about the arms' stop after the
+kill, and it kills only while the controller is out of its safe state (``_kill_controller``); on a loaded 2-core
+machine (and on a slower one quiet, 2026-12-07) 15-30 ms gaps in the two joint-state topics of lbr_dual_position
+tripped the default watchdog 8-20 times in the 3.7 s move, and no 1.5 s window of motion was left to kill in (the
+same with either Fast DDS transport: 1 of 3 runs each). The watchdog itself has its own rows (``stale_states``)."""
+
+
 def kill_row(out: Path, scenario: str, name: str, profile: Path, steps: int, say: Callable[[str], None]) -> Row:
     """Row ``name``: the cell in real time on ``profile``, the controller killed mid-motion, at rest within ``steps``?"""
-    run = CellRun(out / name, scenario, ["--params-file", str(profile)], topics=recorded_topics(profile, scenario))
+    run = CellRun(out / name, scenario, ["--params-file", str(profile), "-p",
+                                         f"controller_node:stale_timeout:={KILL_STALE_TIMEOUT}"],
+                  topics=recorded_topics(profile, scenario))
     try:
         say(f"{name}: the cell on {profile.name}")
         run.start()
