@@ -156,6 +156,9 @@ def test_container_with_lockstep_parameter_exits_2() -> None:
     assert "lockstep:=true needs the nodes in separate processes" in out.stderr
 
 
+# the final error is a verdict on the wall clock: in the parallel run a loaded machine (218 of 231 deadlines missed,
+# 8 watchdog trips of 15-125 ms joint-state gaps) left 0.18 mm / 1.1 mrad at the scenario's end, 2026-12-07
+@pytest.mark.realtime
 @pytest.mark.parametrize("processes", [1, 2])
 def test_shared_process_runs_the_scenario_and_every_topic_reaches_a_recorder(tmp_path: Path, processes: int) -> None:
     """Real time, the recorder in its own process: the run completes, the bag holds each node's per-cycle
