@@ -12,6 +12,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
+# no ROS node, no wall-clock verdict: make test runs it at idle CPU priority beside the parallel tests (docs/testing.md)
+pytestmark = pytest.mark.background
+
 FIRST_GOAL = str(Path(__file__).parent / "data" / "collision_demo_first_goal.yaml")
 
 PAIR = """

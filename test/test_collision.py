@@ -34,6 +34,9 @@ from dualarm_control.robot_files import RobotError
 from dualarm_sim.cell import DualArmCell
 from dualarm_sim.cell_config import CellConfig
 
+# no ROS node, no wall-clock verdict: make test runs it at idle CPU priority beside the parallel tests (docs/testing.md)
+pytestmark = pytest.mark.background
+
 ROBOTS = ("lwr4_cell", "baxter")
 NEAR = 0.15
 """A pair is near contact below this distance [m]."""

@@ -20,6 +20,9 @@ from dualarm_control.scenario import (
 )
 from dualarm_control.status import Status
 
+# no ROS node, no wall-clock verdict: make test runs it at idle CPU priority beside the parallel tests (docs/testing.md)
+pytestmark = pytest.mark.background
+
 HELD = "held:held_object"
 
 

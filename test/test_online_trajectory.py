@@ -41,6 +41,9 @@ from dualarm_control.trajectory import (
     TargetSample,
 )
 
+# no ROS node, no wall-clock verdict: make test runs it at idle CPU priority beside the parallel tests (docs/testing.md)
+pytestmark = pytest.mark.background
+
 T = 0.005
 LIMITS = MotionLimits()
 P0 = np.array([0.0, 0.0, 0.15])

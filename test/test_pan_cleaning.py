@@ -24,6 +24,9 @@ from dualarm_control.params import read_params_file
 from dualarm_control.paths import config_path
 from dualarm_control.scenario import load_scenario, scenario_from_parameters
 
+# no ROS node, no wall-clock verdict: make test runs it at idle CPU priority beside the parallel tests (docs/testing.md)
+pytestmark = pytest.mark.background
+
 
 @pytest.fixture(scope="module")
 def scenario():

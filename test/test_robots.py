@@ -22,6 +22,9 @@ from dualarm_control.scenario import load_scenario
 from dualarm_sim.cell import DualArmCell
 from dualarm_sim.cell_config import CellConfig
 
+# no ROS node, no wall-clock verdict: make test runs it at idle CPU priority beside the parallel tests (docs/testing.md)
+pytestmark = pytest.mark.background
+
 REPO = Path(__file__).resolve().parents[1]
 DATA = Path(__file__).parent / "data"
 SHIPPED = ("lwr4_cell", "lwr4_pan_cell", "baxter", "panda_pair", "ur5_pair")
