@@ -1,6 +1,6 @@
 # Two commands do all the set-up on a fresh machine (Python 3.10+ with venv):
 #   make demo   - the assembly task, a bag and a report (creates .venv on first use)
-#   make test   - lint, type check and the test suite, 9-14 minutes on 2 cores (creates .venv on first use)
+#   make test   - lint, type check and the test suite, 9-15 minutes on 2 cores (creates .venv on first use)
 #   make test-slow - the long experiments left out of `make test` (pytest -m slow; docs/testing.md)
 PYTHON ?= python3
 VENV ?= .venv
