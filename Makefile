@@ -42,7 +42,7 @@ lint: $(VENV)/.installed
 # each) and, beside them at idle CPU priority (SCHED_IDLE: they run only when no other task wants a core), the
 # `background` tests (no ROS node, no wall-clock verdict); then the `realtime` tests (verdicts on the wall clock),
 # with what is left of the background run beside them at idle priority (SCHED_FIFO nodes are never preempted by
-# it). Every test phase's duration in $(OUT)/test-durations*.txt (CI prints them).
+# it). Every test phase's duration and CPU time in $(OUT)/test-durations*.txt (CI prints them).
 TEST_WORKERS ?= 2
 IDLE := $(shell chrt --idle 0 true >/dev/null 2>&1 && echo chrt --idle 0 || echo nice -n 19)
 test: lint bytecode

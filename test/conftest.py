@@ -17,6 +17,8 @@ from hypothesis import settings
 from dualarm_control.ros.env import apply_localhost_default
 from dualarm_control.solvers import unregister
 
+pytest_plugins = ("durations",)  # --durations-file: every phase's duration and CPU time (test/durations.py)
+
 apply_localhost_default()  # before rclpy.init; inherited by subprocesses
 # Always a private domain (not the user's interactive one, not another test process's: a lease held for
 # the session, test/domains.py), DUALARM_TEST_DOMAIN_ID if set.
@@ -32,35 +34,6 @@ settings.register_profile("local", deadline=None)
 settings.load_profile("ci" if os.environ.get("CI") else "local")
 
 
-def pytest_addoption(parser: pytest.Parser) -> None:
-    parser.addoption("--durations-file", default="", help="write every test phase's duration to this file, "
-                     "slowest first (make test writes out/test-durations-*.txt and CI prints them)")
-
-
-class DurationsFile:
-    """Every test phase's duration [s], slowest first, written to ``path`` when the session ends (in the
-    process that reports: the xdist controller gets its workers' reports)."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self.rows: list[tuple[float, str, str]] = []
-
-    def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
-        self.rows.append((report.duration, report.when, report.nodeid))
-
-    def pytest_sessionfinish(self) -> None:
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        total = sum(d for d, _, _ in self.rows)
-        self.path.write_text(f"# {len(self.rows)} test phases, {total:.1f} s in all (summed over workers)\n" + "".join(
-            f"{d:8.2f}s {when:<8} {nodeid}\n" for d, when, nodeid in sorted(self.rows, reverse=True)))
-        modules: dict[str, float] = {}
-        for d, _, nodeid in self.rows:
-            name = Path(nodeid.split("::")[0]).name
-            modules[name] = modules.get(name, 0.0) + d
-        self.path.with_suffix(".modules.json").write_text(json.dumps(
-            {k: round(v, 1) for k, v in sorted(modules.items(), key=lambda kv: -kv[1])}, indent=1) + "\n")
-
-
 MODULE_SECONDS = Path(__file__).with_name("module_seconds.json")
 """Each test module's seconds in a recent default run (the ``.modules.json`` that ``--durations-file``
 writes beside its file; copy it here when modules change much)."""
@@ -72,12 +45,6 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     than this order (432.4 against 453.3 s, docs/testing.md). A module not in :data:`MODULE_SECONDS` counts 5 s."""
     seconds = json.loads(MODULE_SECONDS.read_text()) if MODULE_SECONDS.exists() else {}
     items.sort(key=lambda item: -seconds.get(item.path.name, 5.0))
-
-
-def pytest_configure(config: pytest.Config) -> None:
-    path = config.getoption("--durations-file")
-    if path and not hasattr(config, "workerinput"):
-        config.pluginmanager.register(DurationsFile(Path(path)), "durations-file")
 
 
 PROCESS_HELPERS = ("multiprocessing.resource_tracker", "multiprocessing.forkserver")
