@@ -39,16 +39,26 @@ from std_msgs.msg import String
 rclpy.init()
 node = rclpy.create_node(f"udp_check_{os.getpid()}")
 pub = node.create_publisher(String, "/udp_profile_check", 10)
-heard = set()
-node.create_subscription(String, "/udp_profile_check",
-                         lambda m: heard.add(m.data) if m.data != str(os.getpid()) else None, 10)
-msg = String(data=str(os.getpid()))
-deadline = time.monotonic() + 30.0  # hang guard: discovery on a loaded machine
+heard, acked = set(), set()  # peers heard; peers that said they heard someone (a handshake: neither leaves early)
+
+
+def on_message(m):
+    pid, peer_heard = m.data.split()
+    if pid != str(os.getpid()):
+        heard.add(pid)
+        if peer_heard == "1":
+            acked.add(pid)
+
+
+node.create_subscription(String, "/udp_profile_check", on_message, 10)
+msg = String()
+deadline = time.monotonic() + 60.0  # hang guard: discovery on a loaded machine
 sent_after = 0
-while time.monotonic() < deadline and sent_after < 20:  # go on publishing a while after hearing the peer
+while time.monotonic() < deadline and sent_after < 20:  # go on publishing a while after the handshake
+    msg.data = f"{os.getpid()} {int(bool(heard))}"
     pub.publish(msg)
     rclpy.spin_once(node, timeout_sec=0.02)
-    sent_after += bool(heard)
+    sent_after += bool(acked)
 ports = sorted({line.split()[-1] for line in open("/proc/self/maps") if "/dev/shm/fastrtps_port" in line})
 print("heard", len(heard), "ports", " ".join(ports) or "-", flush=True)
 """
@@ -66,7 +76,7 @@ def _pair(env: Mapping[str, str]) -> list[str]:
     """Run two peers side by side under ``env``; their last lines ("heard N ports ...")."""
     procs = [subprocess.Popen([sys.executable, "-c", PEER], env=dict(env), stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE, text=True) for _ in range(2)]
-    outs = [p.communicate(timeout=60) for p in procs]
+    outs = [p.communicate(timeout=120) for p in procs]
     for p, (_, err) in zip(procs, outs):
         assert p.returncode == 0, err[-2000:]
     return [out.strip().splitlines()[-1] for out, _ in outs]
