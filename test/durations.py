@@ -22,7 +22,6 @@ import pytest
 
 CPU_KEY = "cpu_s"
 """The report's user property holding (own, children) CPU seconds of the phase."""
-_PHASE_START = pytest.StashKey[tuple[float, float]]()
 
 
 def cpu_seconds() -> tuple[float, float]:
@@ -36,28 +35,19 @@ class PhaseCpu:
     """Measures each phase's CPU in the process that runs it and puts it on the phase's report (a user
     property: xdist sends it to the controller with the report)."""
 
-    @pytest.hookimpl(hookwrapper=True)
-    def pytest_runtest_setup(self, item: pytest.Item) -> Generator[None, None, None]:
-        item.stash[_PHASE_START] = cpu_seconds()
-        yield
+    def __init__(self) -> None:
+        self._start = cpu_seconds()
+
+    def pytest_runtest_logstart(self) -> None:
+        """The item's first phase starts here (the phases follow each other: each starts where the last ended)."""
+        self._start = cpu_seconds()
 
     @pytest.hookimpl(hookwrapper=True)
-    def pytest_runtest_call(self, item: pytest.Item) -> Generator[None, None, None]:
-        item.stash[_PHASE_START] = cpu_seconds()
-        yield
-
-    @pytest.hookimpl(hookwrapper=True)
-    def pytest_runtest_teardown(self, item: pytest.Item) -> Generator[None, None, None]:
-        item.stash[_PHASE_START] = cpu_seconds()
-        yield
-
-    @pytest.hookimpl(hookwrapper=True)
-    def pytest_runtest_makereport(self, item: pytest.Item, call: pytest.CallInfo[Any]) -> Generator[None, Any, None]:
+    def pytest_runtest_makereport(self) -> Generator[None, Any, None]:
         end = cpu_seconds()
         outcome = yield
-        start = item.stash.get(_PHASE_START, None)
-        if start is not None:
-            outcome.get_result().user_properties.append((CPU_KEY, (end[0] - start[0], end[1] - start[1])))
+        start, self._start = self._start, end
+        outcome.get_result().user_properties.append((CPU_KEY, (end[0] - start[0], end[1] - start[1])))
 
 
 def phase_cpu(report: pytest.TestReport) -> tuple[float, float]:
