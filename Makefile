@@ -39,16 +39,20 @@ lint: $(VENV)/.installed
 	$(VENV)/bin/mypy
 
 # The default run (docs/testing.md): the tests side by side on TEST_WORKERS pytest-xdist workers (whole modules
-# each) and, beside them at idle CPU priority (SCHED_IDLE: they run only when no other task wants a core), the
-# `background` tests (no ROS node, no wall-clock verdict); then the `realtime` tests (verdicts on the wall clock),
+# each) and, beside them at idle CPU priority (SCHED_IDLE: they run only when no other task wants a core) on
+# BACKGROUND_WORKERS workers of their own, the `background` tests (no ROS node, no wall-clock verdict); then the `realtime` tests (verdicts on the wall clock),
 # with what is left of the background run beside them at idle priority (SCHED_FIFO nodes are never preempted by
 # it). Every test phase's duration and CPU time in $(OUT)/test-durations*.txt (CI prints them).
 TEST_WORKERS ?= 2
+BACKGROUND_WORKERS ?= 2
 IDLE := $(shell chrt --idle 0 true >/dev/null 2>&1 && echo chrt --idle 0 || echo nice -n 19)
+# the background run in a session of its own: Ctrl-C stops it and everything it started (planner workers too)
+SESSION := $(shell setsid true >/dev/null 2>&1 && echo setsid)
 test: lint bytecode
-	@mkdir -p $(OUT); echo "$(IDLE) $(PY) -m pytest -q -m 'background and not slow' >$(OUT)/test-background.log &"; \
-	$(IDLE) $(PY) -m pytest -q -m 'background and not slow' --durations-file=$(OUT)/test-durations-background.txt \
-	    >$(OUT)/test-background.log 2>&1 & background=$$!; trap 'kill -TERM $$background 2>/dev/null' INT TERM; \
+	@mkdir -p $(OUT); echo "$(IDLE) $(PY) -m pytest -q -n $(BACKGROUND_WORKERS) --dist loadfile -m 'background and not slow' >$(OUT)/test-background.log &"; \
+	$(IDLE) $(SESSION) $(PY) -m pytest -q -n $(BACKGROUND_WORKERS) --dist loadfile -m 'background and not slow' \
+	    --durations-file=$(OUT)/test-durations-background.txt \
+	    >$(OUT)/test-background.log 2>&1 & background=$$!; trap 'kill -TERM -$$background 2>/dev/null || kill -TERM $$background 2>/dev/null' INT TERM; \
 	echo "$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile -m 'not slow and not realtime and not background'"; \
 	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile -m 'not slow and not realtime and not background' \
 	    --durations-file=$(OUT)/test-durations.txt; parallel=$$?; realtime=1; \

@@ -98,19 +98,13 @@ LAUNCHER_PID_VARIABLE = "DUALARM_LAUNCHER_PID"
 
 def stop_with_launcher(environ: Mapping[str, str] | None = None) -> None:
     """Under ``dualarm launch``: get SIGTERM when the launcher dies, even by SIGKILL (Linux
-    ``PR_SET_PDEATHSIG``), so that no node outlives it and keeps publishing on the domain."""
-    import ctypes
-    import signal
+    ``PR_SET_PDEATHSIG``, :func:`~dualarm_control.lifetime.stop_with_parent`), so that no node outlives it and
+    keeps publishing on the domain."""
+    from dualarm_control.lifetime import stop_with_parent
 
     pid = (os.environ if environ is None else environ).get(LAUNCHER_PID_VARIABLE, "")
-    if not pid.isdigit():
-        return
-    try:
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG = 1
-    except (OSError, AttributeError):
-        return
-    if os.getppid() != int(pid):  # the launcher died before the request
-        os.kill(os.getpid(), signal.SIGTERM)
+    if pid.isdigit():
+        stop_with_parent(int(pid))
 
 RECORDER_NODE = "_dualarm_bag_recorder"
 """The recorder's node name (``dualarm bag record``): what a launch's trajectory node waits for (``start_after_reader``)."""

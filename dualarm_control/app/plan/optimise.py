@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from dualarm_control.kinematics import DualArmModel, FloatArray
+from dualarm_control.lifetime import stop_with_parent
 from dualarm_control.planning.baseline import BaselineResult, run_baseline
 from dualarm_control.planning.config import PlanConfig
 from dualarm_control.planning.global_opt import (
@@ -116,8 +117,10 @@ class PlanResult:
 _WORKER: dict[str, Any] = {}
 
 
-def _init_worker(config: PlanConfig) -> None:
-    """Pool initializer: model and sampled path for this worker process."""
+def _init_worker(config: PlanConfig, parent: int) -> None:
+    """Pool initializer: model and sampled path for this worker process, which stops when the planning
+    process ``parent`` (its pid) dies, even by SIGKILL (no worker left computing for nobody)."""
+    stop_with_parent(parent)
     _WORKER["model"] = DualArmModel(config.robot)
     _WORKER["path"] = config.corner.sample()
     _WORKER["config"] = config
@@ -214,7 +217,8 @@ def optimise(
 
     with _single_threaded_children():
         ctx = multiprocessing.get_context("spawn")
-        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(config,))
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_worker,
+                                   initargs=(config, os.getpid()))
         try:
             result = _both_stages(config, pool, tick, n_starts, n_inner, workers)
         finally:
