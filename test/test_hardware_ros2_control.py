@@ -115,6 +115,10 @@ FAKE_SEES_COMPLETE_S = 30.0
 /diagnostics and exit (a hang guard: it exits 0.5 s after it does)."""
 
 
+# the final error is a verdict on the wall clock (real time, a 15 ms stale-state watchdog): in a fresh clone's parallel
+# run on a slow, loaded hour the controller went to its safe state on 15-20 ms joint-state gaps again and again and the
+# 1.55 s scenario ended 2.0 mm from its target, 2026-12-08
+@pytest.mark.realtime
 def test_two_velocity_controllers_and_a_broadcaster_drive_the_cell(tmp_path: Path) -> None:
     """The targets start once the controller found the profile on the graph (hardware.startup_check); both
     controllers receive the commands and the scenario completes.
