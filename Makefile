@@ -40,11 +40,11 @@ lint: $(VENV)/.installed
 
 # The default run (docs/testing.md): the tests side by side on TEST_WORKERS pytest-xdist workers (whole modules
 # each) and, beside them at idle CPU priority (SCHED_IDLE: they run only when no other task wants a core) on
-# BACKGROUND_WORKERS workers of their own, the `background` tests (no ROS node, no wall-clock verdict); then the `realtime` tests (verdicts on the wall clock),
+# BACKGROUND_WORKERS xdist workers of their own (0: in one process; docs/testing.md), the `background` tests (no ROS node, no wall-clock verdict); then the `realtime` tests (verdicts on the wall clock),
 # with what is left of the background run beside them at idle priority (SCHED_FIFO nodes are never preempted by
 # it). Every test phase's duration and CPU time in $(OUT)/test-durations*.txt (CI prints them).
 TEST_WORKERS ?= 2
-BACKGROUND_WORKERS ?= 2
+BACKGROUND_WORKERS ?= 0
 IDLE := $(shell chrt --idle 0 true >/dev/null 2>&1 && echo chrt --idle 0 || echo nice -n 19)
 # the background run in a session of its own: Ctrl-C stops it and everything it started (planner workers too)
 SESSION := $(shell setsid true >/dev/null 2>&1 && echo setsid)
