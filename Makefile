@@ -40,7 +40,8 @@ lint: $(VENV)/.installed
 
 # The default run (docs/testing.md): the tests side by side on TEST_WORKERS pytest-xdist workers (whole modules
 # each) and, beside them at idle CPU priority (SCHED_IDLE: they run only when no other task wants a core) on
-# BACKGROUND_WORKERS xdist workers of their own (0: in one process; docs/testing.md), the `background` tests (no ROS node, no wall-clock verdict); then the `realtime` tests (verdicts on the wall clock),
+# BACKGROUND_WORKERS xdist workers of their own (0: in one process; docs/testing.md), the `background` tests (no
+# ROS node, no wall-clock verdict); then the `realtime` tests (verdicts on the wall clock),
 # with what is left of the background run beside them at idle priority (SCHED_FIFO nodes are never preempted by
 # it). Every test phase's duration and CPU time in $(OUT)/test-durations*.txt (CI prints them).
 TEST_WORKERS ?= 2

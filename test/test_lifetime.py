@@ -21,12 +21,12 @@ pytestmark = pytest.mark.background
 HANG_GUARD_S = 60.0
 T = TypeVar("T")
 
-STOP_AT_ONCE = ("import time; from dualarm_control.lifetime import stop_with_parent; stop_with_parent(1); "
-                "time.sleep(60); print('outlived')")
+STOP_AT_ONCE = ("import signal; from dualarm_control.lifetime import stop_with_parent; stop_with_parent(1); "
+                "signal.pause(); print('outlived')")
 """A child asking to stop with pid 1, which is not its parent (as if its parent had died before the request)."""
-CHILD = ("import os, time; from dualarm_control.lifetime import stop_with_parent; stop_with_parent(os.getppid()); "
-         "print(os.getpid(), flush=True); time.sleep(60)")
-PARENT = f"import subprocess, sys, time; subprocess.Popen([sys.executable, '-c', {CHILD!r}]); time.sleep(60)"
+CHILD = ("import os, signal; from dualarm_control.lifetime import stop_with_parent; stop_with_parent(os.getppid()); "
+         "print(os.getpid(), flush=True); signal.pause()")
+PARENT = f"import signal, subprocess, sys; subprocess.Popen([sys.executable, '-c', {CHILD!r}]); signal.pause()"
 """A parent that starts :data:`CHILD` (which prints its pid once it has asked to stop with its parent) and waits."""
 
 
