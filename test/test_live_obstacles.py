@@ -34,8 +34,8 @@ SCENE = (Sphere("ball", position=(0.5, -0.35, 1.15), radius=0.06),
 
 
 @functools.cache
-def static_model() -> CollisionModel:
-    m = DualArmModel("lwr4_cell")
+def static_model(robot: str = "lwr4_cell") -> CollisionModel:
+    m = DualArmModel(robot)
     return CollisionModel(m, allowed=m.description.collision_allowed, obstacles=SCENE)
 
 
@@ -44,10 +44,12 @@ def live_scene() -> list[LiveObstacle]:
             LiveObstacle.make("blk", coal.Box(0.1, 0.2, 0.3), np.eye(3), np.array([0.9, 0.3, 1.2]))]
 
 
-def test_live_pairs_are_the_static_pairs() -> None:
+@pytest.mark.parametrize("robot", ["lwr4_cell", "baxter"])
+def test_live_pairs_are_the_static_pairs(robot: str) -> None:
     """Random configurations: every (link, obstacle) pair within 0.1 m, its distance and its row, as the
-    collision model's static obstacle pairs give them (the same coal calls, the same conventions)."""
-    c = static_model()
+    collision model's static obstacle pairs give them (the same coal calls, the same conventions). On the
+    LWR4 cell each link has one shape, on Baxter several (each link's closest shape is the pair's)."""
+    c = static_model(robot)
     live = LiveDistances(c.model, c.geometry)
     rng = np.random.default_rng(0)
     m = c.kinematics

@@ -179,6 +179,7 @@ class LiveDistances:
         self._first = [self.names.index(name) for name in self.names]  # a link's first shape: its pairs' key
         # a link's shapes next to each other: the candidates (ascending) meet the pairs' keys in ascending order
         self._keys_ascending = all(a <= b for a, b in zip(self._first, self._first[1:]))
+        self._one_shape_each = self._first == list(range(len(self._first)))  # a pair is its own key (the LWR4 cell)
         self._geometries = [objects[k].geometry for k in self.shapes]
         spheres = [bounding_sphere(g) for g in self._geometries]
         self._centres = np.array([c for c, _ in spheres]).reshape(-1, 3)  # in each shape's frame
@@ -216,7 +217,8 @@ class LiveDistances:
         self._any_moving = False
         self._calls_table: list[tuple[Any, ...]] = []  # each entry's coal arguments, result and key
         # the last cycles' pair sets (table indices) -> their links, speed bounds (read-only) and labels
-        self._chosen: dict[tuple[int, ...], tuple[tuple[tuple[str, str], ...], FloatArray, tuple[str, ...]]] = {}
+        self._chosen: dict[tuple[int, ...], tuple[tuple[tuple[str, str], ...], FloatArray, tuple[str, ...],
+                                                  FloatArray]] = {}
 
     def _snapshot(self, obstacles: Sequence[LiveObstacle]) -> None:
         """The per-snapshot values (class docstring): known bounds forgotten, the (obstacle, shape) table,
@@ -278,46 +280,51 @@ class LiveDistances:
             if not candidates.size:
                 return LivePairs.empty(n)
         pin.updateGeometryPlacements(self.model, self.data, self.geometry, self.geometry_data)
-        best: dict[int, tuple[float, int]] = {}  # (obstacle, link) key -> d, table index
-        calls = self._calls_table
-        request = self.request
+        calls, request = self._calls_table, self.request
+        found: list[tuple[int, float, int]] = []  # (obstacle, link) key, d, table index of the pairs within
         for c in candidates.tolist():
             a, tf_a, b, tf_b, result, key = calls[c]
             result.clear()
             d = coal.distance(a, tf_a, b, tf_b, request, result)
-            if not -_FAILED < d < _FAILED:  # also NaN: GJK failed, the pair is left out this cycle
-                continue
-            known[c] = d - KNOWN_MARGIN
-            if d < within and (key not in best or d < best[key][0]):
-                best[key] = (d, c)
-        if not best:
+            if -_FAILED < d < _FAILED:  # not NaN either; where GJK failed, the pair is left out this cycle
+                known[c] = d - KNOWN_MARGIN
+                if d < within:
+                    found.append((key, d, c))
+        if not found:
             return LivePairs.empty(n)
+        if not self._one_shape_each:  # each key's closest shape, in the keys' order
+            best: dict[int, tuple[int, float, int]] = {}
+            for entry in found:
+                if entry[0] not in best or entry[1] < best[entry[0]][1]:
+                    best[entry[0]] = entry
+            found = list(best.values()) if self._keys_ascending else [best[key] for key in sorted(best)]
         table = self._table
-        # in the keys' order: that of insertion where the candidates meet them in ascending order
-        chosen = list(best.values()) if self._keys_ascending else [best[key] for key in sorted(best)]
-        pairs = tuple([c for _, c in chosen])
+        pairs = tuple([c for _, _, c in found])
         known_pairs = self._chosen.get(pairs)
         if known_pairs is None:  # a new set of pairs (the same set is common from one cycle to the next)
             entries = [table[c] for c in pairs]
             speed = self._reach.take([entry[6] for entry in entries], axis=0)
             speed.flags.writeable = False  # shared by the cycles with the same pairs
-            known_pairs = (tuple([entry[9] for entry in entries]), speed, tuple([entry[10] for entry in entries]))
+            still = np.zeros(len(pairs))
+            still.flags.writeable = False  # n^T v_B of still obstacles, shared as the speed bounds
+            known_pairs = (tuple([entry[9] for entry in entries]), speed, tuple([entry[10] for entry in entries]),
+                           still)
             if len(self._chosen) >= _CHOSEN_KEPT:
                 self._chosen.clear()
             self._chosen[pairs] = known_pairs
-        links, speed, labels = known_pairs
-        approach = np.zeros(len(pairs))
+        links, speed, labels, approach = known_pairs
         moving = False
         if self._any_moving:
             rows = [r for r, c in enumerate(pairs) if self._moving[table[c][7]]]
             if rows:  # n^T v_B
+                approach = np.zeros(len(pairs))
                 _, normals = self._witness([pairs[r] for r in rows])
                 velocities = np.array([obstacles[table[pairs[r]][7]].velocity for r in rows])
                 approach[rows] = np.einsum("mk,mk->m", normals, velocities)
                 moving = True
-        found = LivePairs(links, np.array([d for d, _ in chosen]), approach, moving, speed, pairs=pairs,
-                          call=self._calls, labels=labels)
-        return found if deferred else self.complete(found)
+        near = LivePairs(links, np.array([d for _, d, _ in found]), approach, moving, speed, pairs=pairs,
+                         call=self._calls, labels=labels)
+        return near if deferred else self.complete(near)
 
     def _witness(self, entries: Sequence[int]) -> tuple[FloatArray, FloatArray]:
         """Table entries' p_a (on the link), p_b (on the obstacle) [m], (2, m, 3), and unit n from A to B,
