@@ -43,6 +43,7 @@ from dualarm_control.collision.params import (
     SPHERE_BROADPHASE_MIN,
     distance_request,
 )
+from dualarm_control.collision.placements import JointFrames
 from dualarm_control.collision.shapes import bounding_sphere, farthest
 
 _CHOSEN_KEPT = 64
@@ -172,6 +173,7 @@ class LiveDistances:
     def __init__(self, model: pin.Model, geometry: pin.GeometryModel, gjk_tolerance: float = 1e-12) -> None:
         self.model, self.geometry = model, geometry
         self.data = model.createData()
+        self._frames = JointFrames(model, self.data)
         self.geometry_data = geometry.createData()
         objects = geometry.geometryObjects
         self.shapes = [k for k, obj in enumerate(objects) if obj.parentJoint != 0]
@@ -268,9 +270,7 @@ class LiveDistances:
         self._calls += 1  # data and the results change from here: earlier deferred pairs are gone
         pin.computeJointJacobians(self.model, self.data, q)  # data.oMi and data.J
         if candidates.size > SPHERE_BROADPHASE_MIN:  # coal on fewer costs less than the spheres
-            oMi = self.data.oMi
-            joints = np.array([oMi[j].homogeneous[:3] for j in self._joint.tolist()])  # (shapes, 3, 4)
-            centres = np.einsum("sij,sj->si", joints, self._centres_joint)  # the shapes' sphere centres, world
+            centres = self._frames.points(self._joint, self._centres_joint)  # the shapes' sphere centres, world
             obstacle, shape = np.divmod(candidates, len(self.shapes))
             offset = centres[shape] - self._obstacle_centres[obstacle]
             gaps = (np.sqrt(np.einsum("ck,ck->c", offset, offset))

@@ -56,6 +56,7 @@ from dualarm_control.collision.params import (
     WORLD_JOINT_DISTANCE,
     distance_request,
 )
+from dualarm_control.collision.placements import JointFrames
 from dualarm_control.collision.shapes import (
     bounding_sphere,
     end_effector_links,
@@ -152,7 +153,7 @@ class CollisionModel:
             self.pairs.append((self._bodies[a].name, self._bodies[b].name))
             self._pair_geometries.append((a, b, ids))
         self.geometry_pairs: int = len(self.geometry.collisionPairs)
-        self._joints = np.tile(np.eye(4), (self.model.njoints, 1, 1))  # oMi for the sphere bounds, (joints, 4, 4)
+        self._frames = JointFrames(self.model, self.data)  # oMi for the sphere bounds
         self.request = distance_request(gjk_tolerance)
         """The request of every shape pair (absolute tolerance, no warm start:
         :mod:`~dualarm_control.collision.distances`)."""
@@ -207,6 +208,7 @@ class CollisionModel:
         spheres = [bounding_sphere(obj.geometry) for obj in objects]
         self._centres = np.array([c for c, _ in spheres])  # in each shape's own frame, (shapes, 3)
         self._centres_joint = (self._place_rotation @ self._centres[:, :, None])[:, :, 0] + self._place_translation
+        self._centres_joint_h = np.hstack((self._centres_joint, np.ones((len(objects), 1))))  # homogeneous
         self._radii = np.array([r for _, r in spheres])
         self._shapes = [obj.geometry for obj in objects]
         self._hull_points: list[FloatArray | None] = [
@@ -444,7 +446,6 @@ class CollisionModel:
         if within is None or candidates.size <= SPHERE_BROADPHASE_MIN:
             active = candidates
         else:
-            self._joints = np.array([placement.homogeneous for placement in self.data.oMi])
             spheres = self._sphere_bounds(candidates)
             self._slack[candidates] = spheres
             active = candidates[spheres < within]
@@ -486,8 +487,7 @@ class CollisionModel:
         """Lower bounds [m] of the distance of ``shape_pairs`` at the last call's joint placements,
         (k,): ||c_a - c_b|| - r_a - r_b with c, r each shape's bounding sphere (centre in the world,
         from its centre in its joint's frame)."""
-        joints = self._joints[self._shape_joint]
-        centres = (joints[:, :3, :3] @ self._centres_joint[:, :, None])[:, :, 0] + joints[:, :3, 3]
+        centres = self._frames.points(self._shape_joint, self._centres_joint_h)
         a, b = self._shape_a[shape_pairs], self._shape_b[shape_pairs]
         gap = centres[a] - centres[b]  # its rows' norms as np.linalg.norm(gap, axis=1) sums them, without its checks
         return np.sqrt(np.add.reduce(gap * gap, axis=1)) - self._radii[a] - self._radii[b]
