@@ -210,6 +210,7 @@ class CollisionModel:
         self._centres_joint = (self._place_rotation @ self._centres[:, :, None])[:, :, 0] + self._place_translation
         self._centres_joint_h = np.hstack((self._centres_joint, np.ones((len(objects), 1))))  # homogeneous
         self._radii = np.array([r for _, r in spheres])
+        self._pair_radii = self._radii[self._shape_a] + self._radii[self._shape_b]  # r_a + r_b per shape pair
         self._shapes = [obj.geometry for obj in objects]
         self._hull_points: list[FloatArray | None] = [
             np.asarray(g.points()) if isinstance(g, coal.ConvexBase) else None for g in self._shapes]
@@ -490,7 +491,7 @@ class CollisionModel:
         centres = self._frames.points(self._shape_joint, self._centres_joint_h)
         a, b = self._shape_a[shape_pairs], self._shape_b[shape_pairs]
         gap = centres[a] - centres[b]  # its rows' norms as np.linalg.norm(gap, axis=1) sums them, without its checks
-        return np.sqrt(np.add.reduce(gap * gap, axis=1)) - self._radii[a] - self._radii[b]
+        return np.sqrt(np.add.reduce(gap * gap, axis=1)) - self._pair_radii[shape_pairs]
 
     def closest(self, q: FloatArray) -> PairDistance:
         """The pair with the smallest distance at q (ValueError when the model has no pair)."""
