@@ -16,6 +16,7 @@ import math
 
 import coal
 import numpy as np
+import pinocchio as pin
 import pybullet as p
 import pytest
 
@@ -27,6 +28,7 @@ from dualarm_control.collision import (
     PairDistance,
     velocity_damper_rows,
 )
+from dualarm_control.collision.shapes import bounding_sphere
 from dualarm_control.errors import ParameterError
 from dualarm_control.kinematics import DualArmModel
 from dualarm_control.qp import QPProblem, make_backend
@@ -636,3 +638,33 @@ def test_deferred_rows_are_the_rows_computed_at_once(robot: str) -> None:
                      p.point_b.tolist(), p.normal.tolist(), p.dd_dq.tolist()) for p in near.pair_distances()]
 
         assert fields(c.complete(later)) == fields(now)
+
+
+@pytest.mark.parametrize("robot", ["lwr4_cell", "baxter"])
+def test_sphere_bounds_are_the_spheres_gaps_and_below_coals_distances(robot: str) -> None:
+    """The broadphase's bound of every shape pair (one matrix product on the joints' frames) equals
+    ||c_a - c_b|| - r_a - r_b with each shape's bounding sphere placed by pinocchio's oMg (another path), and is
+    below coal's distance of the pair, on random configurations."""
+    c = collision_model(robot)
+    m = c.kinematics
+    objects = c.geometry.geometryObjects
+    spheres = [bounding_sphere(obj.geometry) for obj in objects]
+    pairs = [(cp.first, cp.second) for cp in c.geometry.collisionPairs]
+    all_pairs = np.arange(len(pairs))
+    rng = np.random.default_rng(3)
+    request, below = coal.DistanceRequest(), 0
+    for _ in range(30):
+        q = rng.uniform(m.q_min, m.q_max)
+        pin.computeJointJacobians(c.model, c.data, q)
+        pin.updateGeometryPlacements(c.model, c.data, c.geometry, c.geometry_data)
+        bounds = c._sphere_bounds(all_pairs)
+        placed = c.geometry_data.oMg
+        centres = [placed[k].act(spheres[k][0]) for k in range(len(objects))]
+        gaps = np.array([np.linalg.norm(centres[a] - centres[b]) - spheres[a][1] - spheres[b][1] for a, b in pairs])
+        np.testing.assert_allclose(bounds, gaps, rtol=0.0, atol=1e-12)
+        for k, (a, b) in enumerate(pairs):
+            d = coal.distance(objects[a].geometry, coal.Transform3s(placed[a]), objects[b].geometry,
+                              coal.Transform3s(placed[b]), request, coal.DistanceResult())
+            assert bounds[k] <= d + 1e-9, (c.geometry.geometryObjects[a].name, objects[b].name, bounds[k], d)
+            below += 1
+    assert below == 30 * len(pairs)

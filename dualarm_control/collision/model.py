@@ -211,6 +211,12 @@ class CollisionModel:
         self._centres_joint_h = np.hstack((self._centres_joint, np.ones((len(objects), 1))))  # homogeneous
         self._radii = np.array([r for _, r in spheres])
         self._pair_radii = self._radii[self._shape_a] + self._radii[self._shape_b]  # r_a + r_b per shape pair
+        # c_a - c_b = M @ frames.reshape(joints * 4, 3): row p holds [c_a, 1] at a's joint, -[c_b, 1] at b's
+        self._pair_centres = np.zeros((len(shapes), self.model.njoints, 4))
+        for p, (a, b) in enumerate(zip(self._shape_a_list, self._shape_b_list)):
+            self._pair_centres[p, self._shape_joint[a]] += self._centres_joint_h[a]
+            self._pair_centres[p, self._shape_joint[b]] -= self._centres_joint_h[b]
+        self._pair_centres = self._pair_centres.reshape(len(shapes), -1)
         self._shapes = [obj.geometry for obj in objects]
         self._hull_points: list[FloatArray | None] = [
             np.asarray(g.points()) if isinstance(g, coal.ConvexBase) else None for g in self._shapes]
@@ -488,10 +494,11 @@ class CollisionModel:
         """Lower bounds [m] of the distance of ``shape_pairs`` at the last call's joint placements,
         (k,): ||c_a - c_b|| - r_a - r_b with c, r each shape's bounding sphere (centre in the world,
         from its centre in its joint's frame)."""
-        centres = self._frames.points(self._shape_joint, self._centres_joint_h)
-        a, b = self._shape_a[shape_pairs], self._shape_b[shape_pairs]
-        gap = centres[a] - centres[b]  # its rows' norms as np.linalg.norm(gap, axis=1) sums them, without its checks
-        return np.sqrt(np.add.reduce(gap * gap, axis=1)) - self._pair_radii[shape_pairs]
+        # c_a - c_b of every shape pair at once, one matrix product on the joints' frames (joints * 4, 3): c = [c_j, 1] @
+        # frames[j] (JointFrames) is linear in the frames, so is c_a - c_b; cheaper than placing the centres and
+        # gathering the pairs asked for (226 shape pairs on the LWR4 cell: 20 us)
+        gap = self._pair_centres @ self._frames.frames().reshape(-1, 3)
+        return (np.sqrt(np.einsum("pk,pk->p", gap, gap)) - self._pair_radii)[shape_pairs]
 
     def closest(self, q: FloatArray) -> PairDistance:
         """The pair with the smallest distance at q (ValueError when the model has no pair)."""
