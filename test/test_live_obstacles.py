@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import coal
 import numpy as np
+import pinocchio as pin
 import pytest
 
 from dualarm_control.collision import CollisionModel, CollisionParams
@@ -220,3 +221,48 @@ def test_slots_parameter_is_validated() -> None:
         CollisionParams(live_obstacles=10_000)
     model = DualArmModel("lwr4_cell")
     assert RelativeController(model, ControllerParams()).limit("live_obstacles") is None  # off by default
+
+
+@pytest.mark.parametrize("seed", [4, 5])
+def test_new_snapshots_keep_what_is_known_and_change_no_distance(seed: int) -> None:
+    """Snapshots whose obstacles move, turn, change shape, come, go and change places while the arms move: one
+    LiveDistances kept along (its table entries and known bounds carried from snapshot to snapshot) gives at every
+    step the pairs and distances of a fresh one, bit for bit; and a snapshot that only moved obstacles keeps bounds."""
+    c = static_model()
+    m = c.kinematics
+    kept = LiveDistances(c.model, c.geometry)
+    rng = np.random.default_rng(seed)
+    kinds = [lambda: coal.Sphere(0.06), lambda: coal.Box(0.05, 0.1, 0.6), lambda: coal.Cylinder(0.04, 0.5),
+             lambda: coal.Capsule(0.05, 0.2)]
+    scene: dict[str, list] = {f"o{k}": [kinds[k % 4](), np.eye(3), rng.uniform([0.3, -0.6, 0.9], [1.3, 0.6, 1.8])]
+                              for k in range(6)}
+    q = (m.q_min + m.q_max) / 2
+    kept_bounds = compared = 0
+    for step in range(400):
+        q = np.clip(q + rng.normal(scale=0.03, size=q.shape), m.q_min, m.q_max)
+        event = rng.uniform()
+        name = f"o{rng.integers(8)}"
+        if event < 0.05:  # a new shape object, or a new obstacle
+            scene[name] = [kinds[rng.integers(4)](), np.eye(3), rng.uniform([0.3, -0.6, 0.9], [1.3, 0.6, 1.8])]
+        elif event < 0.08 and len(scene) > 2:  # one goes
+            scene.pop(next(iter(scene)))
+        elif event < 0.20 and name in scene:  # turns
+            scene[name][1] = pin.exp3(rng.normal(size=3)) @ scene[name][1]
+        elif event < 0.23:  # the order changes
+            scene = dict(reversed(list(scene.items())))
+        moved_only = event >= 0.23
+        for entry in scene.values():  # everything drifts a little
+            entry[2] = entry[2] + rng.normal(scale=0.004, size=3)
+        snapshot = tuple(LiveObstacle.make(n, shape, r, p) for n, (shape, r, p) in scene.items())
+        known_before = kept._known.copy()
+        got = kept.near(q, snapshot, 0.12)
+        if moved_only and np.isfinite(known_before).any():
+            assert np.isfinite(kept._known).any(), f"step {step}: a snapshot of moves forgot every bound"
+            kept_bounds += 1
+        want = LiveDistances(c.model, c.geometry).near(q, snapshot, 0.12)
+        assert got.links == want.links, f"step {step}"
+        assert np.array_equal(got.distance, want.distance), f"step {step}"
+        assert np.array_equal(got.rows, want.rows), f"step {step}"
+        compared += len(got)
+    print(f"{compared} pairs compared, bounds kept over {kept_bounds} snapshots")
+    assert compared > 200 and kept_bounds > 150

@@ -11,9 +11,11 @@ import numpy as np
 import pytest
 
 from dualarm_control.app.bench.obstacles import (
+    MOVE_AMPLITUDE,
     NEAR,
     bench_cloud,
     format_obstacle_bench,
+    moving_snapshots,
     scattered_obstacles,
 )
 from dualarm_control.collision import CollisionModel
@@ -31,6 +33,27 @@ def test_scattered_obstacles_keep_their_clearance() -> None:
     for q in path[::20]:
         pairs = distances.near(q, tuple(obstacles), NEAR)
         assert not len(pairs) or pairs.distance.min() >= NEAR
+
+
+def test_moving_snapshots_swing_the_same_shapes_with_their_velocities() -> None:
+    """The moving scene: one snapshot per cycle, the same names and shape objects (as the intake keeps them), each
+    within the amplitude of its place, its velocity the derivative of its position (central differences)."""
+    m = DualArmModel("lwr4_cell")
+    c = CollisionModel(m, allowed=m.description.collision_allowed)
+    path = np.asarray(m.description.ready, dtype=float)[None, :]
+    obstacles = scattered_obstacles(4, LiveDistances(c.model, c.geometry), path, clearance=NEAR)
+    period = 0.005
+    snapshots = moving_snapshots(obstacles, 400, period)
+    assert len(snapshots) == 400
+    for snapshot in snapshots:
+        assert [o.name for o in snapshot] == [o.name for o in obstacles]
+        assert all(a.shape is b.shape for a, b in zip(snapshot, obstacles))
+        assert all(np.linalg.norm(a.position - b.position) <= MOVE_AMPLITUDE + 1e-12 for a, b in zip(snapshot, obstacles))
+    swing = max(np.linalg.norm(a.position - b.position) for s in snapshots for a, b in zip(s, obstacles))
+    assert swing > 0.9 * MOVE_AMPLITUDE
+    for k in range(1, 399):
+        for before, now, after in zip(snapshots[k - 1], snapshots[k], snapshots[k + 1]):
+            np.testing.assert_allclose(now.velocity, (after.position - before.position) / (2 * period), atol=1e-5)
 
 
 def test_cloud_intake_is_timed_in_periods() -> None:

@@ -115,6 +115,33 @@ def test_every_marker_type_and_action(tmp_path: Path) -> None:
     assert names(target) == []
 
 
+def test_a_marker_that_only_moves_keeps_its_shape_object(tmp_path: Path) -> None:
+    """The intake builds a marker's shape once per (type, scale, mesh): a moved marker's obstacle holds the same coal
+    shape object, so the controller's limit keeps its table entries and known bounds (LiveDistances); another scale,
+    type or mesh builds another."""
+    from test_obstacles import OCTAHEDRON
+
+    mesh = tmp_path / "part.obj"
+    mesh.write_text(OCTAHEDRON)
+    target, logged = intake()
+
+    def shape_of(name: str) -> object:
+        return next(o for o in target.scene.feed.snapshot() if o.name == name).shape
+
+    send(target, marker("box", Marker.CUBE, (0.1, 0.2, 0.3), (0.9, 0.3, 1.2)),
+         marker("part", Marker.MESH_RESOURCE, (0.05, 0.05, 0.05), (0.6, 0.0, 1.3), mesh=f"file://{mesh}"))
+    box, part = shape_of("box"), shape_of("part")
+    send(target, marker("box", Marker.CUBE, (0.1, 0.2, 0.3), (0.9, 0.32, 1.2)),
+         marker("part", Marker.MESH_RESOURCE, (0.05, 0.05, 0.05), (0.6, 0.05, 1.3), mesh=f"file://{mesh}"))
+    assert shape_of("box") is box and shape_of("part") is part
+    assert np.allclose(next(o for o in target.scene.feed.snapshot() if o.name == "box").position[1], 0.32)
+    send(target, marker("box", Marker.CUBE, (0.1, 0.2, 0.4), (0.9, 0.32, 1.2)))
+    assert shape_of("box") is not box and shape_of("box").halfSide[2] == pytest.approx(0.2)
+    send(target, marker("box", Marker.SPHERE, (0.1, 0.2, 0.4), (0.9, 0.32, 1.2)))
+    assert isinstance(shape_of("box"), coal.Ellipsoid)
+    assert not logged, logged
+
+
 @pytest.mark.parametrize(("bad", "words"), [
     ({"position": (math.nan, 0.0, 1.0)}, "position (nan, 0.0, 1.0) is not finite"),
     ({"quaternion": (0.0, 0.0, 0.0, 0.0)}, "is not a rotation"),

@@ -146,6 +146,29 @@ class LivePairs:
                    np.zeros((0, 3)))
 
 
+@dataclass(slots=True)
+class _Block:
+    """One obstacle's entries of :class:`LiveDistances`' table, kept from one snapshot to the next while the
+    obstacle keeps its name, shape (the same object) and place in the snapshot: a move only updates coal's
+    transform, which the entries share, and the bounding sphere's centre.
+
+    Attributes:
+        shape: the obstacle's shape. sphere: its bounding sphere's centre (the same array object) and radius.
+        index: its place j in the snapshot.
+        rotation: its rotation's bytes. position: its position [m], (3,). transform: coal's transform of both.
+        centre: its bounding sphere's centre in the world [m], (3,). entries: its table entries, one per arm shape.
+    """
+
+    shape: coal.CollisionGeometry
+    sphere: tuple[FloatArray, float]
+    index: int
+    rotation: bytes
+    position: FloatArray
+    transform: coal.Transform3s
+    centre: FloatArray
+    entries: list[tuple[Any, ...]]
+
+
 class LiveDistances:
     """Distances of every shape an arm joint moves to live obstacles (module docstring).
 
@@ -153,13 +176,15 @@ class LiveDistances:
     distance less :data:`~dualarm_control.collision.params.KNOWN_MARGIN` is kept as a lower bound,
     moved to the next q by d(q) >= d(q') - sum_j c_j |q_j - q'_j| (c_j the reach of the shape about
     joint j: the joint offsets down the chain plus the shape's extent, a bound on how far a point of
-    the shape moves per radian of joint j; 1 for a prismatic joint). The bounds hold while the
-    obstacles are the same snapshot (the same tuple object: the feed swaps a new one whenever something
-    moves or comes or goes); a pair whose bound is at least the influence distance costs no kinematics
-    and no coal call.
+    the shape moves per radian of joint j; 1 for a prismatic joint). A new snapshot (the feed swaps a new
+    tuple whenever something moves or comes or goes) keeps the bounds of each obstacle that kept its
+    name, shape object, place in the snapshot and rotation, less how far it moved, ||p - p'|| (a
+    translation moves every point of it by that much); the others' are forgotten. A pair whose bound is
+    at least the influence distance costs no kinematics and no coal call.
 
     Cost (issue 42): per snapshot, a table of coal's arguments for every (obstacle, shape) pair (the
-    shapes' placements by reference, as the collision model's); per cycle, the known bounds moved (one
+    shapes' placements by reference, as the collision model's), built only for the obstacles that are new
+    or changed shape or place (a moved one updates its transform: :class:`_Block`); per cycle, the known bounds moved (one
     matrix-vector product), the kinematics when a pair may be in reach (``computeJointJacobians``, 3 us),
     one ``coal.distance`` per candidate pair, and the witness points, normals and rows only when asked
     for (:meth:`complete`; a moving obstacle's normal at once, for n^T v_B).
@@ -207,7 +232,7 @@ class LiveDistances:
         self._reach = reach
         self.request = distance_request(gjk_tolerance)
         self._calls = 0  # near() calls that computed kinematics (a deferred pair's call)
-        self._known: FloatArray = np.zeros((0, 0))  # (obstacles, shapes) lower bounds [m] ...
+        self._known: FloatArray = np.zeros((0, len(self.shapes)))  # (obstacles, shapes) lower bounds [m] ...
         self._known_q: FloatArray | None = None  # ... at these joint positions ...
         self._below = np.zeros(0, dtype=bool)
         self._known_flat = self._known.reshape(-1)
@@ -221,33 +246,67 @@ class LiveDistances:
         # the last cycles' pair sets (table indices) -> their links, speed bounds (read-only) and labels
         self._chosen: dict[tuple[int, ...], tuple[tuple[tuple[str, str], ...], FloatArray, tuple[str, ...],
                                                   FloatArray]] = {}
+        self._blocks: dict[str, _Block] = {}  # the last snapshot's obstacles' table entries, by name
 
-    def _snapshot(self, obstacles: Sequence[LiveObstacle]) -> None:
-        """The per-snapshot values (class docstring): known bounds forgotten, the (obstacle, shape) table,
-        entry j * shapes + i: coal's four arguments (the octree first), its result, the (obstacle, link)
-        key, i, j, whether the obstacle is an octree, the pair's (link, ``obstacle:<name>``) and its label."""
+    def _snapshot(self, obstacles: Sequence[LiveObstacle], carry: bool) -> None:
+        """The per-snapshot values (class docstring): the known bounds (``carry``: those of the obstacles that
+        only moved, less how far, else all forgotten), and the (obstacle, shape) table, entry j * shapes + i:
+        coal's four arguments (the octree first), its result, the (obstacle, link) key, i, j, whether the
+        obstacle is an octree, the pair's (link, ``obstacle:<name>``) and its label."""
         count, shapes = len(obstacles), len(self.shapes)
-        self._known = np.full((count, shapes), -np.inf)
-        self._known_flat = self._known.reshape(-1)  # a view: the updates are in place
-        self._below = np.zeros(count * shapes, dtype=bool)  # the known bounds' test, preallocated
-        self._known_for = obstacles if isinstance(obstacles, tuple) else None
-        self._obstacle_centres = np.array([o.rotation @ o.centre + o.position for o in obstacles])
-        self._obstacle_radii = np.array([o.radius for o in obstacles])
-        placed = self.geometry_data.oMg  # references: they follow updateGeometryPlacements
-        self._table = []
+        shifts = np.full(count, np.inf)  # how far each obstacle moved, inf: its bounds forgotten
+        blocks: list[_Block] = []
+        rebuilt = count != len(self._blocks)
         for j, o in enumerate(obstacles):
-            tf, octree = coal.Transform3s(o.rotation, o.position), isinstance(o.shape, coal.OcTree)
-            label = o.label
-            for i, k in enumerate(self.shapes):
-                # coal answers an octree pair with the octree's point first, n from it: asked octree first, swapped back
-                call = ((o.shape, tf, self._geometries[i], placed[k]) if octree
-                        else (self._geometries[i], placed[k], o.shape, tf))
-                self._table.append((*call, coal.DistanceResult(), j * shapes + self._first[i], i, j, octree,
-                                    (self.names[i], label), f"{self.names[i]} – {label}"))
-        self._calls_table = [entry[:6] for entry in self._table]
-        self._chosen = {}
-        self._moving = [bool(np.any(o.velocity)) for o in obstacles]
+            block = self._blocks.get(o.name)
+            if (block is None or block.shape is not o.shape or block.index != j or block.sphere[0] is not o.centre
+                    or block.sphere[1] != o.radius):
+                blocks.append(self._block(o, j))
+                rebuilt = True
+                continue
+            turned = o.rotation.tobytes() != block.rotation
+            shift = math.dist(o.position.tolist(), block.position.tolist())
+            if turned:
+                block.transform.setRotation(o.rotation)
+                block.rotation = o.rotation.tobytes()
+            if shift:
+                block.transform.setTranslation(o.position)
+                block.position = o.position.copy()
+            if turned or shift:
+                block.centre = o.rotation @ o.centre + o.position
+            if carry and not turned:
+                shifts[j] = shift
+            blocks.append(block)
+        self._blocks = {o.name: block for o, block in zip(obstacles, blocks)}
+        known = np.full((count, shapes), -np.inf)
+        kept = min(count, self._known.shape[0])  # a reused block keeps its place j: its bounds are row j
+        known[:kept] = self._known[:kept] - shifts[:kept, None]
+        self._known = known
+        self._known_flat = known.reshape(-1)  # a view: the updates are in place
+        self._known_for = obstacles if isinstance(obstacles, tuple) else None
+        self._obstacle_centres = np.array([block.centre for block in blocks])
+        if rebuilt:
+            self._table = [entry for block in blocks for entry in block.entries]
+            self._calls_table = [entry[:6] for entry in self._table]
+            self._below = np.zeros(count * shapes, dtype=bool)  # the known bounds' test, preallocated
+            self._obstacle_radii = np.array([o.radius for o in obstacles])  # a reused block keeps its radius
+            self._chosen = {}
+        self._moving = [bool(o.velocity.any()) for o in obstacles]
         self._any_moving = any(self._moving)
+
+    def _block(self, o: LiveObstacle, j: int) -> _Block:
+        """Obstacle ``o``'s table entries at place j of the snapshot (:meth:`_snapshot`)."""
+        shapes, placed = len(self.shapes), self.geometry_data.oMg  # references: they follow updateGeometryPlacements
+        tf, octree, label = coal.Transform3s(o.rotation, o.position), isinstance(o.shape, coal.OcTree), o.label
+        entries = []
+        for i, k in enumerate(self.shapes):
+            # coal answers an octree pair with the octree's point first, n from it: asked octree first, swapped back
+            call = ((o.shape, tf, self._geometries[i], placed[k]) if octree
+                    else (self._geometries[i], placed[k], o.shape, tf))
+            entries.append((*call, coal.DistanceResult(), j * shapes + self._first[i], i, j, octree,
+                            (self.names[i], label), f"{self.names[i]} – {label}"))
+        return _Block(o.shape, (o.centre, o.radius), j, o.rotation.tobytes(), o.position.copy(), tf,
+                      o.rotation @ o.centre + o.position, entries)
 
     def near(self, q: FloatArray, obstacles: Sequence[LiveObstacle], within: float, deferred: bool = False) -> LivePairs:
         """The (link, obstacle) pairs closer than ``within`` [m] at q [rad] (n,), each link's closest
@@ -256,10 +315,14 @@ class LiveDistances:
         n = self.model.nv
         if not obstacles or not self.shapes:
             return LivePairs.empty(n)
-        if obstacles is not self._known_for or self._known_q is None or not math.isfinite(sum(q.tolist())):
-            self._snapshot(obstacles)
-        else:
-            moved = q - self._known_q
+        known_q = self._known_q
+        carry = known_q is not None and math.isfinite(sum(q.tolist()))  # a non-finite q forgets them all
+        if obstacles is not self._known_for:
+            self._snapshot(obstacles, carry)
+        elif not carry:
+            self._known.fill(-np.inf)
+        if carry and known_q is not None:
+            moved = q - known_q
             self._known -= self._reach @ np.abs(moved, out=moved)
         self._known_q = q.copy()
         known = self._known_flat  # a view, (obstacle, shape) obstacle-major

@@ -39,7 +39,7 @@ from dualarm_control.collision.cloud import (
     voxel_sphere,
     voxelise,
 )
-from dualarm_control.collision.live import LiveObstacle
+from dualarm_control.collision.live import LiveObstacle, shape_sphere
 from dualarm_control.collision.live_feed import LiveObstacleFeed, LiveScene
 from dualarm_control.errors import InputRejected
 from dualarm_control.params import ParamSpec, non_negative, positive
@@ -117,9 +117,34 @@ def marker_shape(marker: Any) -> coal.CollisionGeometry:
     return mesh.convex
 
 
-def marker_obstacle(marker: Any, frames: dict[str, tuple[FloatArray, FloatArray]], now: float) -> LiveObstacle:
+ShapeCache = dict[tuple[Any, ...], tuple[coal.CollisionGeometry, tuple[FloatArray, float]]]
+"""Marker shapes already built, with their bounding spheres, by (type, scale, mesh_resource)."""
+
+SHAPES_KEPT = 256
+"""Entries a :data:`ShapeCache` holds at most (emptied past this many)."""
+
+
+def cached_marker_shape(marker: Any, shapes: ShapeCache) -> tuple[coal.CollisionGeometry, tuple[FloatArray, float]]:
+    """:func:`marker_shape` and its bounding sphere, built once per (type, scale, mesh_resource): a marker that only
+    moves keeps its shape object, so the controller's live obstacle limit keeps its table entries and known bounds
+    (:class:`~dualarm_control.collision.live.LiveDistances`), and a mesh is read once per path and scale."""
+    s = marker.scale
+    key = (int(marker.type), float(s.x), float(s.y), float(s.z), str(marker.mesh_resource))
+    found = shapes.get(key)
+    if found is None:  # a NaN scale never matches: marker_shape refuses it
+        shape = marker_shape(marker)
+        found = (shape, shape_sphere(shape))
+        if len(shapes) >= SHAPES_KEPT:
+            shapes.clear()
+        shapes[key] = found
+    return found
+
+
+def marker_obstacle(marker: Any, frames: dict[str, tuple[FloatArray, FloatArray]], now: float,
+                    shapes: ShapeCache | None = None) -> LiveObstacle:
     """A marker (ADD) as a live obstacle in the world, expiring ``lifetime`` after ``now`` [s, the
-    feed's clock]; InputRejected naming the marker and the bad field."""
+    feed's clock]; InputRejected naming the marker and the bad field. ``shapes``: the shapes already built
+    (:func:`cached_marker_shape`), None to build this one."""
     name = marker_name(marker)
     frame = frames.get(str(marker.header.frame_id))
     if frame is None:
@@ -133,11 +158,11 @@ def marker_obstacle(marker: Any, frames: dict[str, tuple[FloatArray, FloatArray]
     if not np.isfinite(rotation).all():
         raise InputRejected(f"marker {name!r}: orientation ({o.x}, {o.y}, {o.z}, {o.w}) is not a rotation",
                             "pose", (o.x, o.y, o.z, o.w))
-    shape = marker_shape(marker)
+    shape, sphere = cached_marker_shape(marker, {} if shapes is None else shapes)
     lifetime = marker.lifetime.sec + marker.lifetime.nanosec * 1e-9
     base_r, base_p = frame
     return LiveObstacle.make(name, shape, base_r @ rotation, base_r @ np.array(position) + base_p,
-                             expires=now + lifetime if lifetime > 0.0 else math.inf)
+                             expires=now + lifetime if lifetime > 0.0 else math.inf, sphere=sphere)
 
 
 class ObstacleIntake:
@@ -155,6 +180,7 @@ class ObstacleIntake:
                  log: Callable[[str], None], deserialize: Callable[[bytes, str], Any], voxel: float = DEFAULT_VOXEL,
                  max_points: int = DEFAULT_MAX_POINTS, cloud_lifetime: float = 1.0) -> None:
         self.scene = LiveScene(feed)
+        self.shapes: ShapeCache = {}
         self.frames, self.log, self.deserialize = frames, log, deserialize
         self.voxel, self.max_points, self.cloud_lifetime = voxel, max_points, cloud_lifetime
         self._markers: collections.deque[bytes] = collections.deque(maxlen=MARKER_QUEUE)
@@ -240,7 +266,7 @@ class ObstacleIntake:
                 self.scene.delete(name)
                 continue
             try:
-                obstacle = marker_obstacle(marker, self.frames, now)
+                obstacle = marker_obstacle(marker, self.frames, now, self.shapes)
             except InputRejected as exc:
                 self.warn("markers_refused", "live obstacle refused: " + exc.reason)
                 continue

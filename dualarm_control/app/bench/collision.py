@@ -30,15 +30,18 @@ OFF = CollisionParams(enabled=False)
 
 
 def interleaved_cycles(on: RelativeController, off: RelativeController, cases: Sequence[tuple[Any, Any]],
-                       limit: str) -> tuple[FloatArray, FloatArray, FloatArray]:
+                       limit: str, before: Callable[[int], None] | None = None) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Each case (q, target) cycled through ``on`` and ``off``, the order alternating case by case (a drift of the
     machine's speed falls on both alike): the cycle times [s] with and without, (N,) each, and the rows the limit
-    named ``limit`` gave each cycle of ``on``, (N,)."""
+    named ``limit`` gave each cycle of ``on``, (N,). ``before(k)``, untimed, before case k's cycle of ``on`` (e.g. a
+    new snapshot of live obstacles, which a node's intake thread would publish)."""
     times = {True: np.empty(len(cases)), False: np.empty(len(cases))}
     rows = np.zeros(len(cases))
     for k, (q, target) in enumerate(cases):
         for enabled in ((True, False) if k % 2 == 0 else (False, True)):
             controller = on if enabled else off
+            if enabled and before is not None:
+                before(k)
             start = time.perf_counter()
             cycle = controller.step(q, target)
             times[enabled][k] = time.perf_counter() - start

@@ -4,9 +4,11 @@
 * Cycle: the assembly task is run once in one process; its recorded joint states and targets are
   replayed through two controllers per solver, one with N live obstacles (spheres, boxes and
   cylinders scattered around the arms' path) and one without, interleaved case by case (the order
-  alternating), so both see the same machine at the same moment; p50/p99 and their ratios. Two
+  alternating), so both see the same machine at the same moment; p50/p99 and their ratios. Three
   scenes: the obstacles at least 3.5 cm from every link along the path (about 6 pairs within d_i
-  every cycle: what avoiding them costs) and at least 12 cm (none in reach: what having them costs).
+  every cycle: what avoiding them costs), at least 12 cm (none in reach: what having them costs), and
+  the first scene's obstacles swinging 1 cm, a new snapshot every cycle (what moving obstacles cost:
+  markers that move, as a node's intake publishes them, untimed, before each cycle).
 * Cloud: a 100,000-point PointCloud2 (a table top and three boxes seen from above, 2 cm voxels)
   taken in by the intake's worker from its CDR bytes (read, voxelise, octree): p50/p99 over
   repetitions, in control periods, wall clock and the worker thread's CPU time (the wall clock
@@ -16,6 +18,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import replace
@@ -38,6 +41,8 @@ NEAR, FAR = 0.035, 0.12
 pairs within the influence distance d_i (0.10 m + 2 shape margins) every cycle (the limit's rows, its
 coal calls); FAR, none within d_i (what having them costs when they are out of reach)."""
 CLOUD_POINTS = 100_000
+MOVE_AMPLITUDE, MOVE_PERIOD = 0.01, 2.0
+"""m, s: the moving scene's obstacles swing 1 cm about their places (still >= 2.5 cm from the path), every 2 s."""
 
 
 def scattered_obstacles(count: int, distances: LiveDistances, path: np.ndarray, seed: int = 0,
@@ -60,7 +65,8 @@ def scattered_obstacles(count: int, distances: LiveDistances, path: np.ndarray, 
     return out
 
 
-def interleaved(on: RelativeController, off: RelativeController, cases: Sequence[tuple[Any, Any]]) -> dict[str, Any]:
+def interleaved(on: RelativeController, off: RelativeController, cases: Sequence[tuple[Any, Any]],
+                before: Callable[[int], None] | None = None) -> dict[str, Any]:
     """Each case's cycle through ``on`` (with live obstacles) and ``off``, the order alternating: p50/p99 [ms],
     their ratios, the median of the per-cycle ratios (each case with over without: the same cycle, paired), the live
     obstacle rows per cycle.
@@ -68,7 +74,7 @@ def interleaved(on: RelativeController, off: RelativeController, cases: Sequence
     The two ratios differ where the cycle without obstacles is bimodal (the assembly's: 39 % of its cycles have no
     collision row, 0.07 against 0.19 ms): the ratio of the p50s then moves with where the p50 falls between the two
     modes (1.30-1.47 in four passes of one process), the paired median does not (1.29-1.30)."""
-    with_obstacles, without, near = interleaved_cycles(on, off, cases, "live_obstacles")
+    with_obstacles, without, near = interleaved_cycles(on, off, cases, "live_obstacles", before)
     (on50, on99), (off50, off99) = percentiles(with_obstacles), percentiles(without)
     return {"cycles": len(cases), "rows_mean": float(near.mean()), "cycles_with_rows": int(np.count_nonzero(near)),
             "with_p50_ms": on50 * 1e3, "with_p99_ms": on99 * 1e3, "without_p50_ms": off50 * 1e3,
@@ -86,19 +92,39 @@ def bench_live_obstacles(count: int, solvers: Sequence[str], progress: Callable[
     cases = replay_cases(scenario, model)
     rows: dict[str, dict[str, Any]] = {}
     for solver in solvers:
-        for clearance in (NEAR, FAR):
+        for clearance, moving in ((NEAR, False), (FAR, False), (NEAR, True)):
             params = scenario.controller_params(ControllerParams(solver=solver))
             on = RelativeController(model, replace(params, collision=replace(params.collision, live_obstacles=count)))
             off = RelativeController(model, params)
             limit: Any = on.limit("live_obstacles")
             obstacles = scattered_obstacles(count, limit.distances, np.array([q for q, _ in cases]), clearance=clearance)
             limit.feed.publish(tuple(obstacles))
+            snapshots = moving_snapshots(obstacles, len(cases), params.period) if moving else None
+            scene = f">= {clearance * 100:g} cm" + (", moving" if moving else "")
             if progress:
-                progress(f"obstacles: {solver}, {len(cases)} cycles with {count} live obstacles >= {clearance * 100:g} cm "
-                         "from the path and without")
-            rows[f"{solver} | >= {clearance * 100:g} cm"] = {"obstacles": count, "clearance_m": clearance,
-                                                               **interleaved(on, off, cases)}
+                progress(f"obstacles: {solver}, {len(cases)} cycles with {count} live obstacles {scene} from the path "
+                         "and without")
+            before = None if snapshots is None else (lambda k, s=snapshots, f=limit.feed: f.publish(s[k]))
+            rows[f"{solver} | {scene}"] = {"obstacles": count, "clearance_m": clearance, "moving": moving,
+                                           **interleaved(on, off, cases, before)}
     return rows
+
+
+def moving_snapshots(obstacles: Sequence[LiveObstacle], cycles: int, period: float, amplitude: float = MOVE_AMPLITUDE,
+                     seconds: float = MOVE_PERIOD) -> list[tuple[LiveObstacle, ...]]:
+    """One snapshot per cycle: each obstacle swinging about its place along its own random direction, ``amplitude``
+    [m] over ``seconds`` [s], with its velocity [m/s] (what a node's intake publishes for markers that move every
+    cycle: the same shape objects, new poses)."""
+    rng = np.random.default_rng(1)
+    directions = rng.normal(size=(len(obstacles), 3))
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    omega = 2.0 * np.pi / seconds
+    out = []
+    for k in range(cycles):
+        phase = omega * k * period
+        out.append(tuple(o.moved(o.position + amplitude * math.sin(phase) * d,
+                                 amplitude * omega * math.cos(phase) * d) for o, d in zip(obstacles, directions)))
+    return out
 
 
 def cloud_bytes(points: int = CLOUD_POINTS, seed: int = 0) -> bytes:
