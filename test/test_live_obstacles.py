@@ -266,3 +266,23 @@ def test_new_snapshots_keep_what_is_known_and_change_no_distance(seed: int) -> N
         compared += len(got)
     print(f"{compared} pairs compared, bounds kept over {kept_bounds} snapshots")
     assert compared > 200 and kept_bounds > 150
+
+
+def test_a_non_finite_q_forgets_what_is_known_and_the_next_q_finds_every_pair() -> None:
+    """near() at a NaN configuration gives no pair and forgets the known bounds; the next finite configuration gives
+    the pairs of a fresh LiveDistances (a NaN kept as the bounds' configuration would blind every later call)."""
+    c = static_model()
+    m = c.kinematics
+    scene = tuple(live_scene())
+    kept = LiveDistances(c.model, c.geometry)
+    rng = np.random.default_rng(2)
+    found = 0
+    for _ in range(30):
+        q = rng.uniform(m.q_min, m.q_max)
+        kept.near(q, scene, 0.2)
+        assert not len(kept.near(np.full_like(q, np.nan), scene, 0.2))
+        q = rng.uniform(m.q_min, m.q_max)
+        got, want = kept.near(q, scene, 0.2), LiveDistances(c.model, c.geometry).near(q, scene, 0.2)
+        assert got.links == want.links and np.array_equal(got.distance, want.distance)
+        found += len(got)
+    assert found > 10

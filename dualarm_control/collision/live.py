@@ -315,8 +315,8 @@ class LiveDistances:
         n = self.model.nv
         if not obstacles or not self.shapes:
             return LivePairs.empty(n)
-        known_q = self._known_q
-        carry = known_q is not None and math.isfinite(sum(q.tolist()))  # a non-finite q forgets them all
+        known_q, finite = self._known_q, math.isfinite(sum(q.tolist()))
+        carry = finite and known_q is not None  # a non-finite q forgets them all, and is not kept
         if obstacles is not self._known_for:
             self._snapshot(obstacles, carry)
         elif not carry:
@@ -324,7 +324,7 @@ class LiveDistances:
         if carry and known_q is not None:
             moved = q - known_q
             self._known -= self._reach @ np.abs(moved, out=moved)
-        self._known_q = q.copy()
+        self._known_q = q.copy() if finite else None
         known = self._known_flat  # a view, (obstacle, shape) obstacle-major
         np.less(known, within, out=self._below)
         candidates = self._below.nonzero()[0]  # (flatnonzero would ravel and check again: 1 us more)
