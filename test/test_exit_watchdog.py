@@ -80,3 +80,22 @@ def test_a_timer_that_fires_before_the_constructor_returns_still_exits(monkeypat
     ExitWatchdog(0.05, exit=lambda code: (codes.append(code), done.set()), stage="teardown")
     assert done.wait(30.0), "the watchdog did not fire within 30 s"
     assert codes == [0]
+
+
+def test_a_way_out_stuck_in_a_c_call_holding_the_gil_still_ends() -> None:
+    """A process whose way out is stuck in a C call that holds the GIL (the watchdog's thread cannot run; here a
+    regular expression backtracking for ever) is ended from C after the watchdog's time: exit 1, every stack on
+    stderr (without it, the process would run until killed)."""
+    import subprocess
+    import sys
+
+    child = ("from dualarm_control.ros.node_exit import ExitWatchdog\n"
+             "import re\n"
+             "ExitWatchdog(0.2, stage='teardown')\n"
+             "re.match(r'(a+)+$', 'a' * 64 + 'b')\n")
+    try:
+        done = subprocess.run([sys.executable, "-c", child], check=False, capture_output=True, text=True, timeout=30)
+    except subprocess.TimeoutExpired as exc:
+        pytest.fail(f"the stuck process was still running 30 s later: {exc.stderr!r}")
+    assert done.returncode == 1, (done.returncode, done.stderr[-2000:])
+    assert "most recent call first" in done.stderr, done.stderr[-2000:]

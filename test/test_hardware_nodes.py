@@ -7,6 +7,7 @@ final error is below 1 mm, and no position command is farther than v_max T from 
 
 from __future__ import annotations
 
+import subprocess
 from pathlib import Path
 from typing import Any
 
@@ -295,7 +296,15 @@ def test_position_commands_hold_the_arms_after_the_controller_is_killed(tmp_path
         for p in procs:
             if p.poll() is None:
                 p.terminate()
-        codes = [p.wait(timeout=30) for p in procs]
+        codes, stuck = [], []
+        for name, p in zip(names, procs, strict=False):
+            try:
+                codes.append(p.wait(timeout=30))
+            except subprocess.TimeoutExpired:  # killed, and named below with its output
+                p.kill()
+                codes.append(p.wait(timeout=30))
+                stuck.append(name)
+    assert not stuck, f"still running 30 s after SIGTERM (then killed): {stuck}\n{nodes_text()}"
     assert drift < 1e-4, f"the arms drifted {drift:.2e} rad in the second after the controller was killed"
     assert codes[0] == 0 and codes[2] == 0, f"exit codes {codes}\n{nodes_text()}"
 

@@ -84,21 +84,22 @@ class ExitWatchdog:
 
 
 C_DUMP_DELAY_S = 1.0
-"""After the watchdog's own time, Python's faulthandler dumps every thread's stack from C: it needs no GIL,
-so it also shows a way out stuck in a C call that holds it (then the watchdog's thread cannot run: under
-stress a real-time controller_node logged its summary and was SIGTERMed 20 s later, no watchdog line)."""
+"""After the watchdog's own time, Python's faulthandler dumps every thread's stack from C and ends the process
+(exit 1): it needs no GIL, so it also ends a way out stuck in a C call that holds it (then the watchdog's thread
+cannot run: under stress a real-time controller_node logged its summary and was SIGTERMed 20 s later, no watchdog
+line; in a loaded test run a real-time trajectory_node was still there 40 s after its SIGTERM)."""
 
 
 def _dump_stacks_later(seconds: float) -> bool:
-    """faulthandler's C-level dump of every stack to the process's stderr (fd 2) after ``seconds``; False
-    when there is no such stream."""
+    """faulthandler's C-level dump of every stack to the process's stderr (fd 2) after ``seconds``, then exit 1;
+    False when there is no such stream."""
     import faulthandler
 
     stream = sys.__stderr__
     if stream is None:
         return False
     try:
-        faulthandler.dump_traceback_later(seconds, exit=False, file=stream)
+        faulthandler.dump_traceback_later(seconds, exit=True, file=stream)
     except (AttributeError, ValueError, OSError):  # no real stderr (closed, or no fileno)
         return False
     return True
