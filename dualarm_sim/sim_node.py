@@ -73,6 +73,7 @@ from dualarm_control.ros.local_bus import (
     publish_if_subscribed,
 )
 from dualarm_control.ros.node import Tick, run, usage
+from dualarm_control.ros.node_exit import exit_process
 from dualarm_control.ros.obstacle_markers import ObstacleTopics
 from dualarm_control.ros.priority import (
     log_priority,
@@ -395,4 +396,4 @@ def main(args: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    exit_process(main())

@@ -99,3 +99,27 @@ def test_a_way_out_stuck_in_a_c_call_holding_the_gil_still_ends() -> None:
         pytest.fail(f"the stuck process was still running 30 s later: {exc.stderr!r}")
     assert done.returncode == 1, (done.returncode, done.stderr[-2000:])
     assert "most recent call first" in done.stderr, done.stderr[-2000:]
+
+
+def test_a_node_process_ends_without_the_interpreters_finalization() -> None:
+    """``exit_process``: the code given, what was printed flushed (stdout to a pipe is block-buffered), and no
+    finalization (here an atexit handler that would hang for ever, as a middleware destructor did: without it the
+    process would not end); every node module's ``__main__`` ends with it (``--help`` through a pipe)."""
+    import subprocess
+    import sys
+
+    child = ("import atexit, time, sys\n"
+             "from dualarm_control.ros.node_exit import exit_process\n"
+             "atexit.register(lambda: time.sleep(3600))\n"
+             "print('last words', end='')\n"
+             "exit_process(3)\n")
+    try:
+        done = subprocess.run([sys.executable, "-c", child], check=False, capture_output=True, text=True, timeout=30)
+    except subprocess.TimeoutExpired:
+        pytest.fail("the process ran its finalization (an atexit handler that hangs): still there 30 s later")
+    assert (done.returncode, done.stdout) == (3, "last words")
+    for module in ("dualarm_control.nodes.controller_node", "dualarm_control.nodes.trajectory_node",
+                   "dualarm_sim.sim_node", "dualarm_control.nodes.container"):
+        shown = subprocess.run([sys.executable, "-m", module, "--help"], check=False, capture_output=True, text=True,
+                               timeout=60)
+        assert shown.returncode == 0 and "usage:" in shown.stdout, (module, shown.returncode, shown.stderr[-500:])

@@ -27,6 +27,7 @@ from dualarm_control.errors import DualArmError
 from dualarm_control.references.base import JOINT_REFERENCE, RELATIVE_TARGET, WRENCH
 from dualarm_control.ros.local_bus import LocalBus
 from dualarm_control.ros.node import run
+from dualarm_control.ros.node_exit import exit_process
 from dualarm_control.ros.priority import node_scheduling
 
 NODE_TOPICS = {
@@ -105,4 +106,4 @@ def main(args: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    exit_process(main())

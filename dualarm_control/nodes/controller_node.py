@@ -72,7 +72,7 @@ from dualarm_control.nodes.task_clock import TaskClock
 from dualarm_control.references.base import WRENCH, Tracker
 from dualarm_control.references.held import tuned
 from dualarm_control.references.plan import PlanSource
-from dualarm_control.ros import convert, inputs, local_bus, priority
+from dualarm_control.ros import convert, inputs, local_bus, node_exit, priority
 from dualarm_control.ros import node as shell
 from dualarm_control.ros.cell_topic import CellPublisher
 from dualarm_control.ros.hardware_check import check_graph
@@ -296,4 +296,4 @@ def main(args: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    node_exit.exit_process(main())

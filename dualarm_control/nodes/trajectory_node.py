@@ -56,6 +56,7 @@ from dualarm_control.ros.hardware_io import JointStates, declare_with_profile
 from dualarm_control.ros.inputs import StampGate, Throttle
 from dualarm_control.ros.local_bus import LocalBus, local_publisher
 from dualarm_control.ros.node import Tick, clock_ns, declare, run, usage
+from dualarm_control.ros.node_exit import exit_process
 from dualarm_control.ros.priority import (
     log_priority,
     node_scheduling,
@@ -305,4 +306,4 @@ def main(args: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    exit_process(main())

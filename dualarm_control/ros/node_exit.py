@@ -8,7 +8,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, NoReturn
 
 EXIT_OK = 0
 EXIT_ERROR = 1
@@ -31,6 +31,23 @@ EXIT_STUCK_S = ACK_TIMEOUT_S + 3.0
 """How long a node's way out (``close``, the lockstep flush, destroying the nodes, rclpy's shutdown) may take
 before :class:`ExitWatchdog` ends the process: below the launcher's grace before SIGTERM
 (``app.run.launcher.STOP_GRACE_S``)."""
+
+
+def exit_process(code: int) -> NoReturn:
+    """End a node's process with ``code`` once :func:`~dualarm_control.ros.node.run` has returned (rclpy shut down,
+    the nodes destroyed): stdout and stderr flushed, then ``os._exit``, without the interpreter's finalization,
+    whose C++ destructors (the middleware's) can hang with no watchdog left: in a loaded test run a lockstep
+    sim_node that had logged its last line and returned was still there 20 s later, and the launcher's SIGTERM
+    ended it (exit -15, the launch failed). The node modules' ``__main__`` ends with it."""
+    import os
+
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            if stream is not None:
+                stream.flush()
+        except (OSError, ValueError):  # a closed or broken stream: nothing more can be written
+            pass
+    os._exit(code)
 
 
 class ExitWatchdog:
