@@ -34,7 +34,7 @@ from dualarm_control.ros.drive import FieldError, parse_values, set_message_fiel
 DUALARM = str(Path(sys.executable).with_name("dualarm"))
 
 SUBSCRIBER = r'''
-import json, sys
+import json, os, sys
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -82,6 +82,7 @@ try:
     rclpy.spin(node)
 except (KeyboardInterrupt, ExternalShutdownException):
     pass
+os._exit(0)  # no interpreter finalization: rclpy's and Fast DDS's teardown can hang at exit (not under test)
 '''
 
 

@@ -35,6 +35,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 # A plain rclpy publisher: nothing from this package.
 PUBLISHER = r'''
+import os
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from builtin_interfaces.msg import Time
@@ -62,6 +63,7 @@ try:
     rclpy.spin(node)
 except (KeyboardInterrupt, ExternalShutdownException):
     pass
+os._exit(0)  # no interpreter finalization: rclpy's and Fast DDS's teardown can hang at exit (not under test)
 '''
 
 
