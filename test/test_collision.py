@@ -657,7 +657,7 @@ def test_sphere_bounds_are_the_spheres_gaps_and_below_coals_distances(robot: str
         q = rng.uniform(m.q_min, m.q_max)
         pin.computeJointJacobians(c.model, c.data, q)
         pin.updateGeometryPlacements(c.model, c.data, c.geometry, c.geometry_data)
-        bounds = c._sphere_bounds(all_pairs)
+        bounds = c._spheres.bounds(all_pairs)
         placed = c.geometry_data.oMg
         centres = [placed[k].act(spheres[k][0]) for k in range(len(objects))]
         gaps = np.array([np.linalg.norm(centres[a] - centres[b]) - spheres[a][1] - spheres[b][1] for a, b in pairs])

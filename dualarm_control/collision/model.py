@@ -56,7 +56,7 @@ from dualarm_control.collision.params import (
     WORLD_JOINT_DISTANCE,
     distance_request,
 )
-from dualarm_control.collision.placements import JointFrames
+from dualarm_control.collision.placements import JointFrames, SphereGaps
 from dualarm_control.collision.shapes import (
     bounding_sphere,
     end_effector_links,
@@ -208,15 +208,9 @@ class CollisionModel:
         spheres = [bounding_sphere(obj.geometry) for obj in objects]
         self._centres = np.array([c for c, _ in spheres])  # in each shape's own frame, (shapes, 3)
         self._centres_joint = (self._place_rotation @ self._centres[:, :, None])[:, :, 0] + self._place_translation
-        self._centres_joint_h = np.hstack((self._centres_joint, np.ones((len(objects), 1))))  # homogeneous
         self._radii = np.array([r for _, r in spheres])
-        self._pair_radii = self._radii[self._shape_a] + self._radii[self._shape_b]  # r_a + r_b per shape pair
-        # c_a - c_b = M @ frames.reshape(joints * 4, 3): row p holds [c_a, 1] at a's joint, -[c_b, 1] at b's
-        self._pair_centres = np.zeros((len(shapes), self.model.njoints, 4))
-        for p, (a, b) in enumerate(zip(self._shape_a_list, self._shape_b_list)):
-            self._pair_centres[p, self._shape_joint[a]] += self._centres_joint_h[a]
-            self._pair_centres[p, self._shape_joint[b]] -= self._centres_joint_h[b]
-        self._pair_centres = self._pair_centres.reshape(len(shapes), -1)
+        self._spheres = SphereGaps(self._frames, self._shape_joint, self._centres_joint, self._radii, self._shape_a,
+                                   self._shape_b)  # the broadphase's sphere bounds
         self._shapes = [obj.geometry for obj in objects]
         self._hull_points: list[FloatArray | None] = [
             np.asarray(g.points()) if isinstance(g, coal.ConvexBase) else None for g in self._shapes]
@@ -453,7 +447,7 @@ class CollisionModel:
         if within is None or candidates.size <= SPHERE_BROADPHASE_MIN:
             active = candidates
         else:
-            spheres = self._sphere_bounds(candidates)
+            spheres = self._spheres.bounds(candidates)
             self._slack[candidates] = spheres
             active = candidates[spheres < within]
         return active
@@ -489,16 +483,6 @@ class CollisionModel:
         """Shape ``index``'s placement in the world at the last :meth:`distances` call that computed a
         distance (pinocchio's ``oMg``: oMi * the shape's placement in its joint's frame)."""
         return pin.SE3(self.geometry_data.oMg[index])
-
-    def _sphere_bounds(self, shape_pairs: npt.NDArray[np.intp]) -> FloatArray:
-        """Lower bounds [m] of the distance of ``shape_pairs`` at the last call's joint placements,
-        (k,): ||c_a - c_b|| - r_a - r_b with c, r each shape's bounding sphere (centre in the world,
-        from its centre in its joint's frame)."""
-        # c_a - c_b of every shape pair at once, one matrix product on the joints' frames (joints * 4, 3): c = [c_j, 1] @
-        # frames[j] (JointFrames) is linear in the frames, so is c_a - c_b; cheaper than placing the centres and
-        # gathering the pairs asked for (226 shape pairs on the LWR4 cell: 20 us)
-        gap = self._pair_centres @ self._frames.frames().reshape(-1, 3)
-        return (np.sqrt(np.einsum("pk,pk->p", gap, gap)) - self._pair_radii)[shape_pairs]
 
     def closest(self, q: FloatArray) -> PairDistance:
         """The pair with the smallest distance at q (ValueError when the model has no pair)."""

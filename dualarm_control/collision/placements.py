@@ -76,3 +76,36 @@ class JointFrames:
         """Points given in their joints' frames, in the world [m], (m, 3): ``local`` (m, 4) homogeneous [m],
         ``joints`` (m,) their joint indices."""
         return np.einsum("mk,mkd->md", local, self.frames()[joints])
+
+
+class SphereGaps:
+    """Lower bounds [m] of shape pairs' distances at the last pass: ||c_a - c_b|| - r_a - r_b, with c, r each shape's
+    bounding sphere (the broadphase of :class:`~dualarm_control.collision.CollisionModel`).
+
+    c_a - c_b of every pair at once is one matrix product on the joints' frames, (joints * 4, 3): a centre c_s given in
+    its joint j's frame is ``[c_s, 1] @ frames[j]``, linear in the frames, so row p of M holds [c_a, 1] at a's joint and
+    -[c_b, 1] at b's. Cheaper than placing the centres and gathering the pairs asked for (the LWR4 cell's 226 shape
+    pairs: 10 against 20 us).
+
+    Args:
+        frames: the joints' placements. shape_joint: each shape's joint, (shapes,).
+        centres: each shape's sphere centre in its joint's frame [m], (shapes, 3). radii: their radii [m], (shapes,).
+        shape_a, shape_b: each pair's two shapes, (pairs,).
+    """
+
+    def __init__(self, frames: JointFrames, shape_joint: np.ndarray, centres: FloatArray, radii: FloatArray,
+                 shape_a: np.ndarray, shape_b: np.ndarray) -> None:
+        self.frames = frames
+        homogeneous = np.hstack((centres, np.ones((len(centres), 1))))
+        matrix = np.zeros((len(shape_a), len(frames.data.oMi), 4))
+        for p, (a, b) in enumerate(zip(shape_a.tolist(), shape_b.tolist())):
+            matrix[p, shape_joint[a]] += homogeneous[a]
+            matrix[p, shape_joint[b]] -= homogeneous[b]
+        self._matrix = matrix.reshape(len(shape_a), -1)
+        self._radii = radii[shape_a] + radii[shape_b]  # r_a + r_b per pair
+
+    def bounds(self, pairs: np.ndarray) -> FloatArray:
+        """The bounds [m] of ``pairs`` (indices, (k,)) at the last pass on the frames' data, (k,)."""
+        gap = self._matrix @ self.frames.frames().reshape(-1, 3)
+        result: FloatArray = (np.sqrt(np.einsum("pk,pk->p", gap, gap)) - self._radii)[pairs]
+        return result
