@@ -39,7 +39,7 @@ def _strided_view(model: pin.Model, data: pin.Data) -> FloatArray | None:
     expected (checked on addresses, then on values after a pass at a configuration with every joint turned)."""
     placements = list(data.oMi)
     first = placements[0].rotation
-    if first.dtype != np.float64 or first.strides != (_DOUBLE, 3 * _DOUBLE) or len(placements) < 1:
+    if first.dtype != np.float64 or first.strides != (_DOUBLE, 3 * _DOUBLE):  # (the universe joint is always there)
         return None
     base = _address(first)
     stride = _address(placements[1].rotation) - base if len(placements) > 1 else 12 * _DOUBLE
